@@ -1,0 +1,242 @@
+r"""GTSAM factors for Doppler-only tracking: thin wrappers over :mod:`fgdoppler.models`.
+
+Every factor's error is the *unwhitened* residual; GTSAM whitens it with the
+factor's noise model.
+
+``doppler_factor``
+    :class:`gtsam.CustomFactor` on one state key holding *all* measurements
+    taken at that state (one Python callback per state, not per measurement):
+    :math:`\mathbf e = \mathbf h_{\mathcal P}(\mathbf x_k) - \mathbf z_k`.
+``motion_factor``
+    Native linear factor between consecutive states,
+    :math:`\mathbf e = \mathbf x_{k+1} - \mathbf F(dt)\,\mathbf x_k`, whitened by the
+    full-rank continuous-white-noise :math:`\mathbf Q(dt)` (see
+    :mod:`fgdoppler.models.motion`).  The model is linear, so a
+    :class:`gtsam.JacobianFactor` wrapped in a :class:`gtsam.LinearContainerFactor`
+    linearised at zero is exact and costs no Python callback.
+``batch_factor``
+    The paper's window map on one initial-state key,
+    :math:`\mathbf e = \mathbf g(\mathbf x_0) - \mathbf Z` with Jacobian :math:`\mathbf J(\mathbf x_0)`.
+``linear_doppler_factor``
+    A Doppler factor linearised in numpy at a given point, as a native
+    linear factor.  Long-running graphs (iSAM2, offline reconstruction) use it
+    because GTSAM copies the whole ``Values`` into Python for every
+    ``CustomFactor`` callback, which makes callbacks cost O(number of states).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from functools import partial
+
+import gtsam
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fgdoppler.geometry import Geometry
+from fgdoppler.models.doppler import (
+    BatchTimes,
+    _batch,
+    bistatic_doppler,
+    bistatic_doppler_and_jacobian,
+)
+from fgdoppler.models.motion import ConstantVelocity
+
+__all__ = [
+    "X",
+    "batch_factor",
+    "doppler_factor",
+    "linear_doppler_factor",
+    "motion_factor",
+    "noise_model",
+    "prior_factor",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+def X(k: int) -> int:
+    """GTSAM key of the ``k``-th state (symbol ``x``)."""
+    return int(gtsam.symbol("x", int(k)))
+
+
+def noise_model(sigma: ArrayLike, huber_k: float | None = None) -> gtsam.noiseModel.Base:
+    """Diagonal noise model, optionally wrapped in a Huber robust estimator.
+
+    Parameters
+    ----------
+    sigma
+        Standard deviations, one per error component.
+    huber_k
+        Huber threshold in whitened units (e.g. 1.345); ``None`` for Gaussian.
+    """
+    s = np.asarray(sigma, dtype=float).reshape(-1)
+    if not np.all(np.isfinite(s) & (s > 0)):
+        raise ValueError(f"sigmas must be finite and > 0, got {s}")
+    base = gtsam.noiseModel.Diagonal.Sigmas(s)
+    if huber_k is None:
+        return base
+    if not huber_k > 0:
+        raise ValueError(f"huber_k must be > 0, got {huber_k}")
+    return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(huber_k), base)
+
+
+def _checked(jac: FloatArray, rows: int, cols: int, what: str) -> FloatArray:
+    # A wrong-shaped Jacobian handed to GTSAM crashes the interpreter; fail in Python.
+    out = np.ascontiguousarray(jac, dtype=float)
+    if out.shape != (rows, cols):
+        raise RuntimeError(f"{what}: Jacobian shape {out.shape}, expected {(rows, cols)}")
+    if not np.all(np.isfinite(out)):
+        raise RuntimeError(f"{what}: non-finite Jacobian")
+    return out
+
+
+def _doppler_error(
+    geometry: Geometry,
+    pairs: NDArray[np.intp],
+    z: FloatArray,
+    this: gtsam.CustomFactor,
+    values: gtsam.Values,
+    jacobians: list[FloatArray] | None,
+) -> FloatArray:
+    x = values.atVector(this.keys()[0])
+    if jacobians is None:
+        return bistatic_doppler(x, geometry)[pairs] - z
+    h, H = bistatic_doppler_and_jacobian(x, geometry)
+    jacobians[0] = _checked(H[pairs], pairs.size, 4, "doppler_factor")
+    return h[pairs] - z
+
+
+def doppler_factor(
+    key: int,
+    geometry: Geometry,
+    pairs: ArrayLike,
+    doppler: ArrayLike,
+    sigma: ArrayLike,
+    *,
+    huber_k: float | None = None,
+) -> gtsam.CustomFactor:
+    """All Doppler measurements taken at one state, as one factor.
+
+    Parameters
+    ----------
+    key
+        The state key.
+    geometry
+        Sensor pairs.
+    pairs, doppler, sigma
+        Pair index, measured Doppler (m/s) and its standard deviation, one
+        entry per measurement at this state.
+    huber_k
+        Optional Huber threshold (robust to outliers).
+    """
+    p = np.asarray(pairs, dtype=np.intp).reshape(-1)
+    z = np.asarray(doppler, dtype=float).reshape(-1)
+    if p.size == 0 or p.size != z.size:
+        raise ValueError(f"need one or more measurements with matching pairs, got {p.size} and {z.size}")
+    if p.max() >= geometry.n_pairs or p.min() < 0:
+        raise ValueError(f"pair index out of range for a geometry of {geometry.n_pairs} pairs")
+    return gtsam.CustomFactor(
+        noise_model(np.broadcast_to(sigma, z.shape), huber_k),
+        [int(key)],
+        partial(_doppler_error, geometry, p, z.copy()),
+    )
+
+
+def motion_factor(key1: int, key2: int, dt: float, model: ConstantVelocity) -> gtsam.LinearContainerFactor:
+    r"""Constant-velocity factor :math:`\mathbf x_2 - \mathbf F(dt)\mathbf x_1 \sim \mathcal N(0, \mathbf Q(dt))`.
+
+    Native and exact (the model is linear).  Raises :class:`ValueError` if
+    ``Q(dt)`` is singular (``dt <= 0``, ``q = 0`` or the paper's rank-2 form).
+    """
+    R = model.sqrt_information(dt)
+    jf = gtsam.JacobianFactor(
+        int(key1), -R @ model.F(dt), int(key2), R, np.zeros(4), gtsam.noiseModel.Unit.Create(4)
+    )
+    return _absolute(jf, (key1, key2))
+
+
+def _absolute(jf: gtsam.JacobianFactor, keys: Sequence[int]) -> gtsam.LinearContainerFactor:
+    # Linearised at zero, so the factor's error is its linear residual in absolute coordinates.
+    lin = gtsam.Values()
+    for k in keys:
+        lin.insert(int(k), np.zeros(4))
+    return gtsam.LinearContainerFactor(jf, lin)
+
+
+def prior_factor(key: int, mean: ArrayLike, covariance: ArrayLike) -> gtsam.PriorFactorVector:
+    """Gaussian prior on one state."""
+    cov = np.asarray(covariance, dtype=float)
+    if cov.shape != (4, 4) or not np.all(np.isfinite(cov)):
+        raise ValueError(f"prior covariance must be a finite 4x4 matrix, got shape {cov.shape}")
+    try:
+        np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError:
+        raise ValueError("prior covariance must be positive definite") from None
+    return gtsam.PriorFactorVector(int(key), np.asarray(mean, dtype=float), gtsam.noiseModel.Gaussian.Covariance(cov))
+
+
+def _batch_error(
+    geometry: Geometry,
+    times: BatchTimes,
+    z: FloatArray,
+    this: gtsam.CustomFactor,
+    values: gtsam.Values,
+    jacobians: list[FloatArray] | None,
+) -> FloatArray:
+    x0 = values.atVector(this.keys()[0])
+    g, J, _ = _batch(x0, geometry, times, jacobian=jacobians is not None)
+    if jacobians is not None:
+        assert J is not None
+        jacobians[0] = _checked(J, z.size, 4, "batch_factor")
+    return g - z
+
+
+def batch_factor(
+    key: int,
+    geometry: Geometry,
+    times: Sequence[ArrayLike] | BatchTimes,
+    doppler: ArrayLike,
+    sigma: ArrayLike,
+) -> gtsam.CustomFactor:
+    r"""The paper's window factor :math:`\mathbf g(\mathbf x_0) - \mathbf Z` on one initial-state key.
+
+    ``times`` are relative to the time of :math:`\mathbf x_0`, one array per pair
+    (or a :class:`~fgdoppler.models.BatchTimes`); ``doppler`` and ``sigma`` are
+    stacked in the same order.
+    """
+    bt = times if isinstance(times, BatchTimes) else BatchTimes.from_per_pair(times)
+    bt.check(geometry)
+    z = np.asarray(doppler, dtype=float).reshape(-1)
+    if z.size != bt.size or z.size == 0:
+        raise ValueError(f"{z.size} measurements for {bt.size} batch times")
+    return gtsam.CustomFactor(
+        noise_model(np.broadcast_to(sigma, z.shape)), [int(key)], partial(_batch_error, geometry, bt, z.copy())
+    )
+
+
+def linear_doppler_factor(
+    key: int,
+    H: ArrayLike,
+    residual: ArrayLike,
+    x_lin: ArrayLike,
+    sigma: ArrayLike,
+) -> gtsam.LinearContainerFactor:
+    r"""A Doppler factor linearised at ``x_lin``, as a native linear factor.
+
+    With :math:`\mathbf r = \mathbf z - \mathbf h(\bar{\mathbf x})` and
+    :math:`\mathbf H = \partial\mathbf h/\partial\mathbf x|_{\bar{\mathbf x}}`, the
+    linearised error :math:`\mathbf H(\mathbf x-\bar{\mathbf x}) - \mathbf r` is
+    stored in absolute coordinates as
+    :math:`\mathbf H\mathbf x - (\mathbf r + \mathbf H\bar{\mathbf x})`, whitened by ``sigma``.
+    Use :func:`fgdoppler.models.bistatic_doppler_and_jacobian` to compute
+    ``H`` and the prediction for many states at once.
+    """
+    H = np.atleast_2d(np.asarray(H, dtype=float))
+    r = np.asarray(residual, dtype=float).reshape(-1)
+    s = np.broadcast_to(np.asarray(sigma, dtype=float), r.shape)
+    H = _checked(H, r.size, 4, "linear_doppler_factor")
+    W = 1.0 / s
+    b = (r + H @ np.asarray(x_lin, dtype=float)) * W
+    jf = gtsam.JacobianFactor(int(key), H * W[:, None], b, gtsam.noiseModel.Unit.Create(r.size))
+    return _absolute(jf, (key,))

@@ -1,0 +1,289 @@
+"""Sensor geometry: bistatic Tx–Rx pairs, the paper's configurations, ellipse helpers.
+
+A bistatic pair is a transmitter and a receiver at fixed positions in the
+plane (metres).  The locus of points with a constant bistatic range
+``r_T + r_R`` is the *bistatic ellipse* with foci at Tx and Rx; a target moving
+along it produces zero bistatic Doppler, which is the paper's source of
+unobservability (Section 4).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+__all__ = [
+    "BistaticPair",
+    "Geometry",
+    "bistatic_range",
+    "ellipse_tangent",
+    "paper_geometry",
+]
+
+#: Distance (m) below which a point counts as being at a sensor.
+SENSOR_EPS = 1e-6
+
+
+def _point(value: ArrayLike, name: str) -> tuple[float, float]:
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (2,):
+        raise ValueError(f"{name} must be a 2-vector (x, y) in metres, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must have finite coordinates, got {tuple(arr)}")
+    return (float(arr[0]), float(arr[1]))
+
+
+@dataclass(frozen=True)
+class BistaticPair:
+    """One transmitter–receiver pair.
+
+    Parameters
+    ----------
+    tx, rx
+        Transmitter and receiver positions ``(x, y)`` in metres.  They must be
+        finite and distinct.
+    """
+
+    tx: tuple[float, float]
+    rx: tuple[float, float]
+
+    def __init__(self, tx: ArrayLike, rx: ArrayLike) -> None:
+        t = _point(tx, "tx")
+        r = _point(rx, "rx")
+        if np.hypot(t[0] - r[0], t[1] - r[1]) <= SENSOR_EPS:
+            raise ValueError(f"tx and rx of a bistatic pair must differ, both are at {t}")
+        object.__setattr__(self, "tx", t)
+        object.__setattr__(self, "rx", r)
+
+    @property
+    def baseline(self) -> float:
+        """Tx–Rx distance ``L`` in metres."""
+        return float(np.hypot(self.tx[0] - self.rx[0], self.tx[1] - self.rx[1]))
+
+    def swapped(self) -> BistaticPair:
+        """The same pair with the roles of Tx and Rx exchanged."""
+        return BistaticPair(tx=self.rx, rx=self.tx)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Geometry:
+    """A set of bistatic pairs observing the same target.
+
+    Parameters
+    ----------
+    pairs
+        One or more :class:`BistaticPair`.  Pair ``i`` is addressed by the
+        0-based index ``i`` in measurement files.
+    name
+        Optional label (e.g. ``"a"`` for the paper's case (a)).
+    """
+
+    pairs: tuple[BistaticPair, ...]
+    name: str = ""
+    _tx: NDArray[np.float64] = field(init=False, repr=False, compare=False)
+    _rx: NDArray[np.float64] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        pairs = tuple(self.pairs)
+        if len(pairs) == 0:
+            raise ValueError("a Geometry needs at least one bistatic pair")
+        for i, p in enumerate(pairs):
+            if not isinstance(p, BistaticPair):
+                raise TypeError(f"pair {i} is {type(p).__name__}, expected BistaticPair")
+        object.__setattr__(self, "pairs", pairs)
+        tx = np.array([p.tx for p in pairs], dtype=float)
+        rx = np.array([p.rx for p in pairs], dtype=float)
+        tx.setflags(write=False)
+        rx.setflags(write=False)
+        object.__setattr__(self, "_tx", tx)
+        object.__setattr__(self, "_rx", rx)
+
+    @property
+    def n_pairs(self) -> int:
+        """Number of bistatic pairs."""
+        return len(self.pairs)
+
+    @property
+    def tx(self) -> NDArray[np.float64]:
+        """Transmitter positions, shape ``(n_pairs, 2)`` (read-only)."""
+        return self._tx
+
+    @property
+    def rx(self) -> NDArray[np.float64]:
+        """Receiver positions, shape ``(n_pairs, 2)`` (read-only)."""
+        return self._rx
+
+    def sensors(self) -> NDArray[np.float64]:
+        """Distinct sensor positions (Tx and Rx), shape ``(n_sensors, 2)``."""
+        return np.unique(np.vstack([self._tx, self._rx]), axis=0)
+
+    def mirrored_x(self, x_mirror: float) -> Geometry:
+        """The geometry reflected about the vertical line ``x = x_mirror``."""
+        return Geometry(
+            pairs=tuple(
+                BistaticPair(
+                    tx=(2 * x_mirror - p.tx[0], p.tx[1]), rx=(2 * x_mirror - p.rx[0], p.rx[1])
+                )
+                for p in self.pairs
+            ),
+            name=self.name,
+        )
+
+    # -- TOML -----------------------------------------------------------------
+    def to_toml(self, path: str | Path) -> None:
+        """Write the geometry as TOML (atomically: temporary file, then rename).
+
+        The format is::
+
+            name = "a"
+            [[pair]]
+            tx = [50000.0, 0.0]
+            rx = [0.0, 0.0]
+        """
+        import tomli_w
+
+        from fgdoppler._io import atomic_write_text
+
+        doc: dict[str, object] = {}
+        if self.name:
+            doc["name"] = self.name
+        doc["pair"] = [{"tx": list(p.tx), "rx": list(p.rx)} for p in self.pairs]
+        atomic_write_text(Path(path), tomli_w.dumps(doc))
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> Geometry:
+        """Read a geometry written by :meth:`to_toml`.
+
+        Raises
+        ------
+        ValueError
+            Naming the file and the problem if the file is not valid TOML or
+            does not describe at least one valid pair.
+        """
+        path = Path(path)
+        try:
+            doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"{path}: not valid TOML: {exc}") from exc
+        raw = doc.get("pair")
+        if not isinstance(raw, list) or not raw:
+            raise ValueError(f"{path}: expected one or more [[pair]] tables with tx and rx")
+        pairs = []
+        for i, item in enumerate(raw):
+            if not isinstance(item, dict) or "tx" not in item or "rx" not in item:
+                raise ValueError(f"{path}: pair {i} needs both tx and rx")
+            try:
+                pairs.append(BistaticPair(tx=item["tx"], rx=item["rx"]))
+            except (ValueError, TypeError) as exc:
+                raise ValueError(f"{path}: pair {i}: {exc}") from exc
+        name = doc.get("name", "")
+        return cls(pairs=tuple(pairs), name=str(name))
+
+
+def paper_geometry(case: str) -> Geometry:
+    """The sensor positions of the paper's Table 1.
+
+    Parameters
+    ----------
+    case
+        ``"a"``: two transmitters, one receiver — Tx1 (50 km, 0), Tx2 (50 km, 1 km),
+        Rx (0, 0); pairs are (Tx1, Rx) and (Tx2, Rx).
+        ``"b"``: one transmitter, two receivers — Tx (50 km, 0), Rx1 (0, 0),
+        Rx2 (0, 1 km); pairs are (Tx, Rx1) and (Tx, Rx2).
+    """
+    key = case.lower().strip()
+    if key == "a":
+        pairs = (
+            BistaticPair(tx=(50e3, 0.0), rx=(0.0, 0.0)),
+            BistaticPair(tx=(50e3, 1e3), rx=(0.0, 0.0)),
+        )
+    elif key == "b":
+        pairs = (
+            BistaticPair(tx=(50e3, 0.0), rx=(0.0, 0.0)),
+            BistaticPair(tx=(50e3, 0.0), rx=(0.0, 1e3)),
+        )
+    else:
+        raise ValueError(f"unknown paper geometry {case!r}: expected 'a' or 'b'")
+    return Geometry(pairs=pairs, name=key)
+
+
+def resolve_geometry(spec: str | Path | Geometry) -> Geometry:
+    """A geometry from a preset name (``"a"``, ``"b"``), a TOML path, or itself."""
+    if isinstance(spec, Geometry):
+        return spec
+    text = str(spec)
+    if text.lower() in ("a", "b"):
+        return paper_geometry(text)
+    path = Path(text)
+    if not path.exists():
+        raise ValueError(f"geometry {text!r} is neither a preset ('a', 'b') nor an existing file")
+    return Geometry.from_toml(path)
+
+
+def bistatic_range(points: ArrayLike, geometry: Geometry) -> NDArray[np.float64]:
+    r"""Bistatic range :math:`r_T + r_R` of points for every pair.
+
+    .. math:: r_i(\mathbf p) = \lVert \mathbf p - \mathbf t_i\rVert + \lVert \mathbf p - \mathbf r_i\rVert
+
+    Parameters
+    ----------
+    points
+        Positions, shape ``(..., 2)`` (extra trailing state entries are ignored
+        if the last axis has length 4).
+
+    Returns
+    -------
+    ndarray, shape ``(..., n_pairs)``
+    """
+    p = np.asarray(points, dtype=float)[..., None, :2]
+    return np.linalg.norm(p - geometry.tx, axis=-1) + np.linalg.norm(p - geometry.rx, axis=-1)
+
+
+def ellipse_tangent(points: ArrayLike, geometry: Geometry) -> NDArray[np.float64]:
+    r"""Unit tangent of each pair's bistatic ellipse through the given points.
+
+    The gradient of the bistatic range is :math:`\mathbf u_T + \mathbf u_R`
+    (sum of the unit vectors from Tx and from Rx to the point); the tangent is
+    that gradient rotated by +90°.  On the baseline segment between Tx and Rx
+    the gradient vanishes (the ellipse degenerates to the segment); there the
+    tangent is taken along the baseline.
+
+    Returns
+    -------
+    ndarray, shape ``(..., n_pairs, 2)``
+
+    Raises
+    ------
+    ValueError
+        If a point coincides with a sensor.
+    """
+    p = np.asarray(points, dtype=float)[..., None, :2]
+    dt = p - geometry.tx
+    dr = p - geometry.rx
+    nt = np.linalg.norm(dt, axis=-1, keepdims=True)
+    nr = np.linalg.norm(dr, axis=-1, keepdims=True)
+    if np.any(nt <= SENSOR_EPS) or np.any(nr <= SENSOR_EPS):
+        raise ValueError("a point coincides with a sensor: the bistatic ellipse is undefined there")
+    grad = dt / nt + dr / nr
+    gnorm = np.linalg.norm(grad, axis=-1, keepdims=True)
+    baseline = geometry.rx - geometry.tx
+    base_dir = np.broadcast_to(baseline / np.linalg.norm(baseline, axis=-1, keepdims=True), grad.shape)
+    tangent = np.stack([-grad[..., 1], grad[..., 0]], axis=-1)
+    degenerate = gnorm < 1e-12
+    safe = np.where(degenerate, 1.0, gnorm)
+    return np.where(degenerate, base_dir, tangent / safe)
+
+
+def pairs_from_arrays(tx: Iterable[Sequence[float]], rx: Iterable[Sequence[float]]) -> Geometry:
+    """A geometry from parallel lists of Tx and Rx positions."""
+    return Geometry(pairs=tuple(BistaticPair(tx=t, rx=r) for t, r in zip(tx, rx, strict=True)))

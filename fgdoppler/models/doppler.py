@@ -1,0 +1,266 @@
+r"""Bistatic Doppler (range-rate) model and its analytic Jacobians.
+
+For a target state :math:`\mathbf x = [x, y, \dot x, \dot y]'` and a pair with
+transmitter :math:`\mathbf t` and receiver :math:`\mathbf r`, the bistatic
+Doppler in m/s is the sum of the range rates to Tx and to Rx (paper Eq. 8–10):
+
+.. math::
+
+    h(\mathbf x) = \dot r^T + \dot r^R, \qquad
+    \dot r^S = \frac{\Delta\mathbf p_S \cdot \mathbf v}{r_S}, \qquad
+    \Delta\mathbf p_S = \mathbf p - \mathbf s,\; r_S = \lVert\Delta\mathbf p_S\rVert .
+
+Its Jacobian (paper Appendix A with :math:`t = 0`):
+
+.. math::
+
+    \frac{\partial h}{\partial \mathbf p} = \sum_{S\in\{T,R\}}
+        \frac{r_S\,\mathbf v - \dot r^S\,\Delta\mathbf p_S}{r_S^2},
+    \qquad
+    \frac{\partial h}{\partial \mathbf v} = \sum_{S\in\{T,R\}} \frac{\Delta\mathbf p_S}{r_S}.
+
+The *batch map* of the paper's Section 3 evaluates :math:`h` along a
+constant-velocity trajectory from an initial state :math:`\mathbf x_0`:
+:math:`g_j(\mathbf x_0) = h_{i_j}(\mathbf p_0 + t_j \mathbf v, \mathbf v)`, with
+Jacobian :math:`\partial g/\partial\mathbf p_0 = \partial h/\partial\mathbf p`
+and :math:`\partial g/\partial\mathbf v = t_j\,\partial h/\partial\mathbf p + \partial h/\partial\mathbf v`.
+
+A target at a sensor position is a singularity of the model; every public
+function raises :class:`ValueError` there rather than return NaN or inf.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fgdoppler.geometry import SENSOR_EPS, Geometry
+
+__all__ = [
+    "BatchTimes",
+    "batch_doppler",
+    "batch_doppler_and_jacobian",
+    "batch_doppler_jacobian",
+    "bistatic_doppler",
+    "bistatic_doppler_and_jacobian",
+    "bistatic_doppler_jacobian",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+def _as_states(states: ArrayLike) -> FloatArray:
+    x = np.asarray(states, dtype=float)
+    if x.ndim == 0 or x.shape[-1] != 4:
+        raise ValueError(f"states must have shape (..., 4) = [x, y, vx, vy], got {x.shape}")
+    return x
+
+
+def _singular_error(mask: NDArray[np.bool_]) -> ValueError:
+    n = int(np.count_nonzero(mask))
+    return ValueError(
+        f"{n} target position(s) coincide with a sensor (distance <= {SENSOR_EPS} m): "
+        "the bistatic Doppler is undefined there"
+    )
+
+
+def _terms(
+    pos: FloatArray,
+    vel: FloatArray,
+    tx: FloatArray,
+    rx: FloatArray,
+    *,
+    jacobian: bool,
+    singular: str = "raise",
+) -> tuple[FloatArray, FloatArray | None, FloatArray | None, NDArray[np.bool_] | None]:
+    """Doppler and its partial derivatives for broadcastable pos/vel/tx/rx (..., 2).
+
+    Returns ``(h, dh_dp, dh_dv, singular_mask)``.  With ``singular="mask"``
+    singular entries are evaluated at a harmless placeholder distance and
+    reported in the mask instead of raising (used by the grid search, which
+    gives such candidates infinite cost).
+    """
+    dT = pos - tx
+    dR = pos - rx
+    rT = np.sqrt(dT[..., 0] ** 2 + dT[..., 1] ** 2)
+    rR = np.sqrt(dR[..., 0] ** 2 + dR[..., 1] ** 2)
+    bad = (rT <= SENSOR_EPS) | (rR <= SENSOR_EPS)
+    mask: NDArray[np.bool_] | None = None
+    if np.any(bad):
+        if singular == "raise":
+            raise _singular_error(bad)
+        rT = np.where(rT <= SENSOR_EPS, 1.0, rT)
+        rR = np.where(rR <= SENSOR_EPS, 1.0, rR)
+        mask = bad
+    vx = vel[..., 0]
+    vy = vel[..., 1]
+    rdT = (dT[..., 0] * vx + dT[..., 1] * vy) / rT
+    rdR = (dR[..., 0] * vx + dR[..., 1] * vy) / rR
+    h = rdT + rdR
+    if not jacobian:
+        return h, None, None, mask
+    uT = dT / rT[..., None]
+    uR = dR / rR[..., None]
+    # (r v - rdot d) / r^2 = (v - rdot u) / r
+    dh_dp = (vel - rdT[..., None] * uT) / rT[..., None] + (vel - rdR[..., None] * uR) / rR[..., None]
+    dh_dv = uT + uR
+    return h, dh_dp, dh_dv, mask
+
+
+def bistatic_doppler(states: ArrayLike, geometry: Geometry) -> FloatArray:
+    """Bistatic Doppler (m/s) of every state for every pair.
+
+    Parameters
+    ----------
+    states
+        Target states ``[x, y, vx, vy]``, shape ``(..., 4)``.
+    geometry
+        The sensor pairs.
+
+    Returns
+    -------
+    ndarray, shape ``(..., n_pairs)``
+
+    Raises
+    ------
+    ValueError
+        If a state's position coincides with a sensor.
+    """
+    x = _as_states(states)[..., None, :]
+    h, _, _, _ = _terms(x[..., :2], x[..., 2:], geometry.tx, geometry.rx, jacobian=False)
+    return h
+
+
+def bistatic_doppler_and_jacobian(
+    states: ArrayLike, geometry: Geometry
+) -> tuple[FloatArray, FloatArray]:
+    """Doppler ``(..., n_pairs)`` and its Jacobian ``(..., n_pairs, 4)`` in one pass."""
+    x = _as_states(states)[..., None, :]
+    h, dp, dv, _ = _terms(x[..., :2], x[..., 2:], geometry.tx, geometry.rx, jacobian=True)
+    assert dp is not None and dv is not None
+    return h, np.concatenate([dp, dv], axis=-1)
+
+
+def bistatic_doppler_jacobian(states: ArrayLike, geometry: Geometry) -> FloatArray:
+    r"""Analytic Jacobian :math:`\partial h_i/\partial\mathbf x`, shape ``(..., n_pairs, 4)``."""
+    return bistatic_doppler_and_jacobian(states, geometry)[1]
+
+
+@dataclass(frozen=True, kw_only=True)
+class BatchTimes:
+    """Measurement times of a batch, flattened in the paper's order.
+
+    The paper stacks all of pair 1's measurements, then all of pair 2's
+    (Eq. 11).  ``pair[j]`` and ``t[j]`` give the pair index and the time
+    (relative to the time of :math:`\\mathbf x_0`) of the ``j``-th entry.
+    """
+
+    pair: NDArray[np.intp]
+    t: FloatArray
+
+    def __post_init__(self) -> None:
+        pair = np.asarray(self.pair, dtype=np.intp).reshape(-1)
+        t = np.asarray(self.t, dtype=float).reshape(-1)
+        if pair.shape != t.shape:
+            raise ValueError(f"pair and t must have the same length, got {pair.size} and {t.size}")
+        if not np.all(np.isfinite(t)):
+            raise ValueError("batch times must be finite")
+        if np.any(pair < 0):
+            raise ValueError("pair indices must be non-negative")
+        object.__setattr__(self, "pair", pair)
+        object.__setattr__(self, "t", t)
+
+    @classmethod
+    def from_per_pair(cls, times: Sequence[ArrayLike]) -> BatchTimes:
+        """From one array of times per pair (pair ``i`` gets ``times[i]``)."""
+        ts = [np.atleast_1d(np.asarray(t, dtype=float)).reshape(-1) for t in times]
+        pair = np.concatenate([np.full(t.size, i, dtype=np.intp) for i, t in enumerate(ts)])
+        return cls(pair=pair, t=np.concatenate(ts) if ts else np.zeros(0))
+
+    @property
+    def size(self) -> int:
+        """Number of measurements :math:`n_Z`."""
+        return int(self.t.size)
+
+    def check(self, geometry: Geometry) -> None:
+        """Raise if a pair index is out of range for ``geometry``."""
+        if self.size and int(self.pair.max()) >= geometry.n_pairs:
+            raise ValueError(
+                f"pair index {int(self.pair.max())} out of range for a geometry of "
+                f"{geometry.n_pairs} pair(s)"
+            )
+
+
+def _batch_times(times: Sequence[ArrayLike] | BatchTimes, geometry: Geometry) -> BatchTimes:
+    bt = times if isinstance(times, BatchTimes) else BatchTimes.from_per_pair(times)
+    bt.check(geometry)
+    return bt
+
+
+def _batch(
+    x0: ArrayLike,
+    geometry: Geometry,
+    times: Sequence[ArrayLike] | BatchTimes,
+    *,
+    jacobian: bool,
+    singular: str = "raise",
+) -> tuple[FloatArray, FloatArray | None, NDArray[np.bool_] | None]:
+    x = _as_states(x0)
+    bt = _batch_times(times, geometry)
+    t = bt.t[:, None]
+    vel = x[..., None, 2:]
+    pos = x[..., None, :2] + t * vel
+    h, dp, dv, mask = _terms(
+        pos, vel, geometry.tx[bt.pair], geometry.rx[bt.pair], jacobian=jacobian, singular=singular
+    )
+    if not jacobian:
+        return h, None, mask
+    assert dp is not None and dv is not None
+    return h, np.concatenate([dp, t * dp + dv], axis=-1), mask
+
+
+def batch_doppler(
+    x0: ArrayLike, geometry: Geometry, times: Sequence[ArrayLike] | BatchTimes
+) -> FloatArray:
+    r"""The paper's batch map :math:`\mathbf g(\mathbf x_0)` for a constant-velocity target.
+
+    Parameters
+    ----------
+    x0
+        Initial states, shape ``(..., 4)``; any leading shape is evaluated at once.
+    geometry
+        The sensor pairs.
+    times
+        One array of measurement times per pair, relative to the time of
+        ``x0`` (pair ``i`` gets ``times[i]``), or a :class:`BatchTimes`.
+
+    Returns
+    -------
+    ndarray, shape ``(..., n_Z)``
+        Predicted Doppler, pair 0's times first (the paper's Eq. 11 order).
+    """
+    return _batch(x0, geometry, times, jacobian=False)[0]
+
+
+def batch_doppler_and_jacobian(
+    x0: ArrayLike, geometry: Geometry, times: Sequence[ArrayLike] | BatchTimes
+) -> tuple[FloatArray, FloatArray]:
+    r""":math:`\mathbf g(\mathbf x_0)` ``(..., n_Z)`` and :math:`\mathbf J(\mathbf x_0)` ``(..., n_Z, 4)``."""
+    g, jac, _ = _batch(x0, geometry, times, jacobian=True)
+    assert jac is not None
+    return g, jac
+
+
+def batch_doppler_jacobian(
+    x0: ArrayLike, geometry: Geometry, times: Sequence[ArrayLike] | BatchTimes
+) -> FloatArray:
+    r"""The paper's Jacobian :math:`\mathbf J(\mathbf x_0) = \partial\mathbf g/\partial\mathbf x_0` (Eq. 15, Appendix A).
+
+    Returns
+    -------
+    ndarray, shape ``(..., n_Z, 4)``
+    """
+    return batch_doppler_and_jacobian(x0, geometry, times)[1]

@@ -1,0 +1,119 @@
+r"""Nearly constant velocity (NCV) motion model, paper Eq. 2–6.
+
+.. math::
+
+    \mathbf x_{k} = \mathbf F(T)\,\mathbf x_{k-1} + \mathbf w_{k-1},\qquad
+    \mathbf F(T) = \begin{bmatrix} \mathbf I & T\mathbf I\\ \mathbf 0 & \mathbf I\end{bmatrix}.
+
+Two process-noise forms are provided (per axis, ``q`` the noise level):
+
+``"discrete"`` — the paper's discrete white-noise acceleration,
+:math:`\mathbf Q = \boldsymbol\Gamma\mathbf q\boldsymbol\Gamma'` with
+:math:`\boldsymbol\Gamma = [T^2/2,\; T]'` per axis and ``q`` the acceleration
+variance (m²/s⁴).  It has rank 2, so it cannot be the covariance of a
+4-dimensional Gaussian factor: whitening by its inverse square root gives NaN.
+
+``"continuous"`` — continuous white-noise acceleration with power spectral
+density ``q`` (m²/s³),
+
+.. math::
+
+    \mathbf Q(T) = q \begin{bmatrix} T^3/3 & T^2/2\\ T^2/2 & T\end{bmatrix}\otimes\mathbf I_2,
+
+which has full rank for :math:`T > 0`.  The factor graph, the EKF and the
+simulator all use this form by default, so every estimator shares one
+well-posed model; the discrete form is kept for comparison with the paper.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["ConstantVelocity"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True, kw_only=True)
+class ConstantVelocity:
+    """Nearly constant velocity model in 2-D with state ``[x, y, vx, vy]``.
+
+    Parameters
+    ----------
+    q
+        Process-noise level: power spectral density in m²/s³ for
+        ``form="continuous"``, acceleration variance in m²/s⁴ for
+        ``form="discrete"``.  Zero gives a deterministic model (allowed for
+        simulation, rejected by :meth:`sqrt_information`).
+    form
+        ``"continuous"`` (full rank, default) or ``"discrete"`` (the paper's
+        rank-2 :math:`\\Gamma q \\Gamma'`).
+    """
+
+    q: float = 1e-2
+    form: Literal["continuous", "discrete"] = "continuous"
+
+    def __post_init__(self) -> None:
+        if not np.isfinite(self.q) or self.q < 0:
+            raise ValueError(f"process noise q must be finite and >= 0, got {self.q}")
+        if self.form not in ("continuous", "discrete"):
+            raise ValueError(f"form must be 'continuous' or 'discrete', got {self.form!r}")
+
+    @staticmethod
+    def F(dt: ArrayLike) -> FloatArray:
+        """State transition matrix, shape ``(..., 4, 4)`` for ``dt`` of shape ``(...)``."""
+        dt = np.asarray(dt, dtype=float)
+        out = np.broadcast_to(np.eye(4), (*dt.shape, 4, 4)).copy()
+        out[..., 0, 2] = dt
+        out[..., 1, 3] = dt
+        return out
+
+    def Q(self, dt: ArrayLike) -> FloatArray:
+        """Process-noise covariance, shape ``(..., 4, 4)`` for ``dt`` of shape ``(...)``."""
+        dt = np.asarray(dt, dtype=float)
+        if self.form == "continuous":
+            a, b, c = dt**3 / 3.0, dt**2 / 2.0, dt
+        else:
+            a, b, c = dt**4 / 4.0, dt**3 / 2.0, dt**2
+        out = np.zeros((*dt.shape, 4, 4))
+        for i in range(2):
+            out[..., i, i] = a
+            out[..., i, i + 2] = b
+            out[..., i + 2, i] = b
+            out[..., i + 2, i + 2] = c
+        return self.q * out
+
+    def propagate(self, states: ArrayLike, dt: ArrayLike) -> FloatArray:
+        """Noise-free prediction ``F(dt) x`` for states ``(..., 4)``."""
+        x = np.asarray(states, dtype=float)
+        dt = np.asarray(dt, dtype=float)[..., None]
+        return np.concatenate([x[..., :2] + dt * x[..., 2:], x[..., 2:]], axis=-1)
+
+    def sqrt_information(self, dt: float) -> FloatArray:
+        r"""Square-root information :math:`\mathbf R = \mathbf L^{-1}` (:math:`\mathbf Q = \mathbf L\mathbf L'`), so :math:`\mathbf R'\mathbf R = \mathbf Q(dt)^{-1}`.
+
+        Raises
+        ------
+        ValueError
+            If ``Q(dt)`` is singular (the discrete form, ``q = 0`` or ``dt <= 0``).
+        """
+        if self.form != "continuous" or self.q <= 0 or not dt > 0:
+            raise ValueError(
+                "a motion factor needs a full-rank Q: use form='continuous' with q > 0 and dt > 0 "
+                f"(got form={self.form!r}, q={self.q}, dt={dt})"
+            )
+        L = np.linalg.cholesky(self.Q(dt))
+        return np.linalg.inv(L)
+
+    def sample_noise(self, dt: float, rng: np.random.Generator, size: int | None = None) -> FloatArray:
+        """Draw process noise ``w ~ N(0, Q(dt))`` (works for the rank-2 form too)."""
+        Q = self.Q(dt)
+        w, V = np.linalg.eigh(Q)
+        A = V * np.sqrt(np.clip(w, 0.0, None))
+        n = 1 if size is None else size
+        out = rng.standard_normal((n, 4)) @ A.T
+        return out[0] if size is None else out

@@ -1,0 +1,239 @@
+"""Scenarios and measurement simulation, including the paper's six test trajectories.
+
+The paper (Section 5) simulates targets starting at (5 | 25 | 45 km, 2 km) with
+velocity (10, -100) m/s for 30 s, sampled every 0.5 s, with Doppler noise
+σ = 1 m/s for both pairs.  In case (a) one receiver serves both pairs, so the
+two pairs are synchronous.  In case (b) the two receivers are "not necessarily
+time synchronized"; the paper gives no offset, so :func:`paper_scenario` uses
+half a sampling interval (0.25 s) for pair 2 — the largest possible stagger,
+which makes every measurement time distinct.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fgdoppler._io import atomic_open
+from fgdoppler.geometry import Geometry, paper_geometry
+from fgdoppler.measurements import Measurements, MeasurementError
+from fgdoppler.models.doppler import bistatic_doppler
+from fgdoppler.models.motion import ConstantVelocity
+
+__all__ = [
+    "PAPER_CASE_B_OFFSET",
+    "PAPER_START_X",
+    "Scenario",
+    "Simulation",
+    "Trajectory",
+    "paper_scenario",
+    "paper_scenarios",
+    "simulate",
+]
+
+#: Start x-positions (m) of the paper's three trajectories per case.
+PAPER_START_X: tuple[float, float, float] = (5e3, 25e3, 45e3)
+#: Time offset (s) of pair 2 in case (b), our choice (the paper gives none).
+PAPER_CASE_B_OFFSET = 0.25
+
+
+@dataclass(frozen=True, kw_only=True)
+class Trajectory:
+    """States ``(n, 4)`` at times ``(n,)``: the truth of a simulation or an estimate."""
+
+    times: NDArray[np.float64]
+    states: NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.times, dtype=float).reshape(-1)
+        x = np.asarray(self.states, dtype=float).reshape(-1, 4) if np.size(self.states) else np.zeros((0, 4))
+        if x.shape[0] != t.size:
+            raise ValueError(f"{t.size} times but {x.shape[0]} states")
+        object.__setattr__(self, "times", t)
+        object.__setattr__(self, "states", x)
+
+    def at(self, times: ArrayLike) -> NDArray[np.float64]:
+        """States at the given times (which must be among ``self.times``)."""
+        t = np.asarray(times, dtype=float)
+        idx = np.searchsorted(self.times, t)
+        idx = np.clip(idx, 0, self.times.size - 1)
+        if not np.allclose(self.times[idx], t, rtol=0, atol=1e-9):
+            raise ValueError("requested times are not on the trajectory's time grid")
+        return self.states[idx]
+
+    def to_csv(self, path: str | Path) -> None:
+        """Write ``time,x,y,vx,vy`` atomically."""
+        with atomic_open(Path(path)) as fh:
+            w = csv.writer(fh, lineterminator="\n")
+            w.writerow(("time", "x", "y", "vx", "vy"))
+            for t, s in zip(self.times, self.states, strict=True):
+                w.writerow((repr(float(t)), *(repr(float(v)) for v in s)))
+
+    @classmethod
+    def from_csv(cls, path: str | Path) -> Trajectory:
+        """Read a file written by :meth:`to_csv`."""
+        path = Path(path)
+        rows = [r for r in csv.reader(path.read_text(encoding="utf-8").splitlines()) if r]
+        if not rows or [c.strip() for c in rows[0]] != ["time", "x", "y", "vx", "vy"]:
+            raise MeasurementError(f"{path}:1: expected header time,x,y,vx,vy")
+        vals = np.empty((len(rows) - 1, 5))
+        for i, r in enumerate(rows[1:]):
+            try:
+                vals[i] = [float(c) for c in r]
+            except ValueError:
+                raise MeasurementError(f"{path}:{i + 2}: expected 5 numbers, got {r}") from None
+        if not np.all(np.isfinite(vals)):
+            raise MeasurementError(f"{path}: non-finite value")
+        return cls(times=vals[:, 0], states=vals[:, 1:])
+
+
+@dataclass(frozen=True, kw_only=True)
+class Scenario:
+    """A simulated encounter: geometry, initial truth, sampling and noise.
+
+    Parameters
+    ----------
+    geometry
+        Sensor pairs.
+    x0
+        True state ``[x, y, vx, vy]`` at time 0.
+    duration, dt
+        Pair ``i`` measures at ``offset_i + k dt`` for all ``k >= 0`` up to ``duration``.
+    sigma
+        Doppler noise standard deviation (m/s), one value or one per pair.
+    time_offsets
+        Per-pair time offsets (s) for asynchronous receivers; default all 0.
+    process_noise
+        If given, the truth follows this NCV model with random accelerations;
+        otherwise it moves at exactly constant velocity (the paper's truth).
+    name
+        Label used in reports.
+    """
+
+    geometry: Geometry
+    x0: tuple[float, float, float, float]
+    duration: float = 30.0
+    dt: float = 0.5
+    sigma: float | tuple[float, ...] = 1.0
+    time_offsets: tuple[float, ...] | None = None
+    process_noise: ConstantVelocity | None = None
+    name: str = ""
+    _sigmas: NDArray[np.float64] = field(init=False, repr=False, compare=False)
+    _offsets: NDArray[np.float64] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        x0 = tuple(float(v) for v in np.asarray(self.x0, dtype=float).reshape(-1))
+        if len(x0) != 4 or not np.all(np.isfinite(x0)):
+            raise ValueError(f"x0 must be 4 finite numbers [x, y, vx, vy], got {self.x0}")
+        object.__setattr__(self, "x0", x0)
+        if not (self.dt > 0 and np.isfinite(self.dt)):
+            raise ValueError(f"dt must be > 0, got {self.dt}")
+        if not (self.duration >= 0 and np.isfinite(self.duration)):
+            raise ValueError(f"duration must be >= 0, got {self.duration}")
+        n = self.geometry.n_pairs
+        sig = np.broadcast_to(np.asarray(self.sigma, dtype=float), (n,)).copy()
+        if not np.all(np.isfinite(sig) & (sig > 0)):
+            raise ValueError(f"sigma must be > 0, got {self.sigma}")
+        off = np.zeros(n) if self.time_offsets is None else np.asarray(self.time_offsets, dtype=float)
+        if off.shape != (n,) or not np.all(np.isfinite(off)) or np.any(off < 0):
+            raise ValueError(f"time_offsets must be {n} finite non-negative numbers, got {self.time_offsets}")
+        object.__setattr__(self, "_sigmas", sig)
+        object.__setattr__(self, "_offsets", off)
+
+    @property
+    def sigmas(self) -> NDArray[np.float64]:
+        """Noise standard deviation per pair, shape ``(n_pairs,)``."""
+        return self._sigmas.copy()
+
+    def measurement_times(self) -> list[NDArray[np.float64]]:
+        """Measurement times of each pair."""
+        out = []
+        for off in self._offsets:
+            k = np.arange(int(np.floor((self.duration - off) / self.dt + 1e-9)) + 1)
+            out.append(off + k * self.dt)
+        return out
+
+    def truth_times(self) -> NDArray[np.float64]:
+        """All distinct measurement times, sorted (where the truth is reported)."""
+        return np.unique(np.concatenate(self.measurement_times()))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Simulation:
+    """Output of :func:`simulate`: noisy measurements and the true trajectory."""
+
+    scenario: Scenario
+    measurements: Measurements
+    truth: Trajectory
+
+
+def simulate(scenario: Scenario, rng: np.random.Generator) -> Simulation:
+    """Simulate the truth and noisy Doppler measurements of a scenario.
+
+    Parameters
+    ----------
+    scenario
+        What to simulate.
+    rng
+        The only source of randomness.
+
+    Returns
+    -------
+    Simulation
+        Measurements ``z = h(x(t)) + w``, ``w ~ N(0, sigma_i^2)``, and the truth
+        at every measurement time.
+    """
+    times = scenario.truth_times()
+    x0 = np.asarray(scenario.x0)
+    if scenario.process_noise is None or scenario.process_noise.q == 0:
+        states = np.concatenate([x0[:2] + times[:, None] * x0[2:], np.broadcast_to(x0[2:], (times.size, 2))], axis=1)
+    else:
+        states = np.empty((times.size, 4))
+        x = x0.copy()
+        t_prev = 0.0
+        for k, t in enumerate(times):
+            dt = t - t_prev
+            if dt > 0:
+                x = scenario.process_noise.propagate(x, dt) + scenario.process_noise.sample_noise(dt, rng)
+            states[k] = x
+            t_prev = t
+    truth = Trajectory(times=times, states=states)
+    per_pair = scenario.measurement_times()
+    t_all = np.concatenate(per_pair)
+    p_all = np.concatenate([np.full(t.size, i, dtype=np.intp) for i, t in enumerate(per_pair)])
+    order = np.lexsort((p_all, t_all))
+    t_all, p_all = t_all[order], p_all[order]
+    idx = np.searchsorted(times, t_all)
+    clean = bistatic_doppler(states[idx], scenario.geometry)[np.arange(t_all.size), p_all]
+    sig = scenario.sigmas[p_all]
+    z = clean + sig * rng.standard_normal(t_all.size)
+    meas = Measurements(time=t_all, pair=p_all, doppler=z, sigma=sig)
+    return Simulation(scenario=scenario, measurements=meas, truth=truth)
+
+
+def paper_scenario(case: str, start_x: float, *, sigma: float = 1.0) -> Scenario:
+    """One of the paper's six test trajectories (Section 5, Fig. 9).
+
+    Start ``(start_x, 2 km)``, velocity ``(10, -100)`` m/s, 30 s sampled every
+    0.5 s, σ = 1 m/s.  Case (b) staggers pair 2 by :data:`PAPER_CASE_B_OFFSET`.
+    """
+    geom = paper_geometry(case)
+    offsets = (0.0, PAPER_CASE_B_OFFSET) if geom.name == "b" else (0.0, 0.0)
+    return Scenario(
+        geometry=geom,
+        x0=(float(start_x), 2e3, 10.0, -100.0),
+        duration=30.0,
+        dt=0.5,
+        sigma=sigma,
+        time_offsets=offsets,
+        name=f"case {geom.name}, start {start_x / 1e3:g} km",
+    )
+
+
+def paper_scenarios() -> list[Scenario]:
+    """All six paper scenarios: cases (a), (b) × starts 5, 25, 45 km."""
+    return [paper_scenario(c, x) for c in ("a", "b") for x in PAPER_START_X]

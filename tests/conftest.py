@@ -1,0 +1,42 @@
+"""Shared fixtures: geometries and random states away from the sensors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import fgdoppler as fd
+
+
+def random_geometry(rng: np.random.Generator, n_pairs: int | None = None) -> fd.Geometry:
+    """A random geometry of 1–4 pairs with sensors in a 60 km box."""
+    n = int(rng.integers(1, 5)) if n_pairs is None else n_pairs
+    pairs = []
+    while len(pairs) < n:
+        tx, rx = rng.uniform(-30e3, 30e3, 2), rng.uniform(-30e3, 30e3, 2)
+        if np.linalg.norm(tx - rx) > 1e3:
+            pairs.append(fd.BistaticPair(tx=tx, rx=rx))
+    return fd.Geometry(pairs=tuple(pairs))
+
+
+def random_states(rng: np.random.Generator, geometry: fd.Geometry, n: int, min_dist: float = 500.0) -> np.ndarray:
+    """``n`` states with positions at least ``min_dist`` from every sensor."""
+    out = np.empty((0, 4))
+    sensors = geometry.sensors()
+    while out.shape[0] < n:
+        pos = rng.uniform([-40e3, -40e3], [70e3, 40e3], size=(4 * n, 2))
+        d = np.linalg.norm(pos[:, None, :] - sensors[None], axis=-1).min(axis=1)
+        pos = pos[d > min_dist]
+        vel = rng.uniform(-300, 300, size=(pos.shape[0], 2))
+        out = np.vstack([out, np.hstack([pos, vel])])
+    return out[:n]
+
+
+@pytest.fixture(params=["a", "b"])
+def paper_geom(request: pytest.FixtureRequest) -> fd.Geometry:
+    return fd.paper_geometry(request.param)
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(20260621)

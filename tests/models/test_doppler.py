@@ -1,0 +1,166 @@
+"""The Doppler model: analytic Jacobians vs central differences, invariances, references."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import fgdoppler as fd
+from tests.conftest import random_geometry, random_states
+
+
+def _central_diff(fun, x: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """Central-difference Jacobian of fun: (..., 4) -> (..., m) at many states at once."""
+    cols = []
+    for j in range(4):
+        e = np.zeros(4)
+        e[j] = steps[j]
+        cols.append((fun(x + e) - fun(x - e)) / (2 * steps[j]))
+    return np.stack(cols, axis=-1)
+
+
+def _rel_err(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    num = np.linalg.norm(a - b, axis=(-2, -1))
+    den = np.linalg.norm(b, axis=(-2, -1))
+    return num / den
+
+
+STEPS = np.array([1e-2, 1e-2, 1e-4, 1e-4])
+
+
+def _geometries(rng: np.random.Generator) -> list[fd.Geometry]:
+    return [fd.paper_geometry("a"), fd.paper_geometry("b")] + [random_geometry(rng) for _ in range(4)]
+
+
+def test_single_state_jacobian_matches_central_differences(rng: np.random.Generator) -> None:
+    n_total = 0
+    for g in _geometries(rng):
+        x = random_states(rng, g, 250)
+        J = fd.bistatic_doppler_jacobian(x, g)
+        Jfd = _central_diff(lambda s, g=g: fd.bistatic_doppler(s, g), x, STEPS)
+        assert J.shape == (250, g.n_pairs, 4)
+        assert np.max(_rel_err(J, Jfd)) <= 1e-6
+        n_total += x.shape[0]
+    assert n_total >= 1000
+
+
+def test_batch_jacobian_matches_central_differences(rng: np.random.Generator) -> None:
+    n_total = 0
+    for g in _geometries(rng):
+        times = [np.arange(10) * 0.5 + 0.1 * i for i in range(g.n_pairs)]
+        # keep the whole 5 s trajectory away from the sensors
+        x = random_states(rng, g, 250, min_dist=3e3)
+        J = fd.batch_doppler_jacobian(x, g, times)
+        Jfd = _central_diff(lambda s, g=g: fd.batch_doppler(s, g, times), x, STEPS)
+        assert J.shape == (250, 10 * g.n_pairs, 4)
+        assert np.max(_rel_err(J, Jfd)) <= 1e-6
+        n_total += x.shape[0]
+    assert n_total >= 1000
+
+
+def test_paper_appendix_formula_for_batch_jacobian(rng: np.random.Generator) -> None:
+    """The Appendix A expressions, written out term by term, equal J(x0)."""
+    g = fd.paper_geometry("a")
+    x0 = random_states(rng, g, 50, min_dist=3e3)
+    times = [np.arange(10) * 0.5, np.arange(10) * 0.5]
+    J = fd.batch_doppler_jacobian(x0, g, times)
+    col = 0
+    for i in range(2):
+        for t in times[i]:
+            x, y, vx, vy = x0.T
+            rows = np.zeros((x0.shape[0], 4))
+            for s in (g.tx[i], g.rx[i]):
+                dx, dy = x + t * vx - s[0], y + t * vy - s[1]
+                r = np.hypot(dx, dy)
+                rd = (dx * vx + dy * vy) / r
+                rows[:, 0] += (r * vx - rd * dx) / r**2
+                rows[:, 1] += (r * vy - rd * dy) / r**2
+                rows[:, 2] += (r * (dx + t * vx) - t * dx * rd) / r**2
+                rows[:, 3] += (r * (dy + t * vy) - t * dy * rd) / r**2
+            np.testing.assert_allclose(J[:, col], rows, rtol=1e-12, atol=1e-15)
+            col += 1
+
+
+def test_doppler_is_time_derivative_of_bistatic_range(rng: np.random.Generator) -> None:
+    """Independent reference: d/dt (r_T + r_R) along the velocity, by central difference."""
+    g = random_geometry(rng, 3)
+    x = random_states(rng, g, 300)
+    eps = 1e-3
+    plus = fd.bistatic_range(x[:, :2] + eps * x[:, 2:], g)
+    minus = fd.bistatic_range(x[:, :2] - eps * x[:, 2:], g)
+    np.testing.assert_allclose(fd.bistatic_doppler(x, g), (plus - minus) / (2 * eps), rtol=1e-6, atol=1e-6)
+
+
+def test_hand_computed_value() -> None:
+    # Target straight above Rx at 3 km moving north at 100 m/s: Rx range rate 100,
+    # Tx range rate 100 * 3 / sqrt(50^2 + 3^2).
+    g = fd.paper_geometry("a")
+    h = fd.bistatic_doppler([0.0, 3e3, 0.0, 100.0], g)
+    assert h[0] == pytest.approx(100 + 100 * 3 / np.hypot(50, 3), rel=1e-14)
+
+
+def test_swapping_tx_and_rx_leaves_doppler_unchanged(rng: np.random.Generator) -> None:
+    g = random_geometry(rng, 3)
+    swapped = fd.Geometry(pairs=tuple(p.swapped() for p in g.pairs))
+    x = random_states(rng, g, 500)
+    np.testing.assert_allclose(fd.bistatic_doppler(x, swapped), fd.bistatic_doppler(x, g), rtol=1e-13, atol=1e-12)
+
+
+def test_mirror_of_case_a_is_case_b(rng: np.random.Generator) -> None:
+    # Reflecting case (a) about x = 25 km maps Tx1, Tx2, Rx to (0,0), (0,1km), (50km,0):
+    # pairs (Tx=(0,0), Rx=(50km,0)) and (Tx=(0,1km), Rx=(50km,0)), which are case (b)'s
+    # pairs with Tx and Rx swapped. Doppler is swap-invariant, so
+    # h_a(x, y, vx, vy) = h_b(50km - x, y, -vx, vy).
+    a, b = fd.paper_geometry("a"), fd.paper_geometry("b")
+    x = random_states(rng, a, 500)
+    xm = x * [-1, 1, -1, 1] + [50e3, 0, 0, 0]
+    np.testing.assert_allclose(fd.bistatic_doppler(x, a), fd.bistatic_doppler(xm, b), rtol=1e-12, atol=1e-10)
+    mirrored = a.mirrored_x(25e3)
+    np.testing.assert_allclose(fd.bistatic_doppler(xm, mirrored), fd.bistatic_doppler(xm, b), rtol=1e-12, atol=1e-10)
+
+
+def test_motion_along_baseline_gives_zero_doppler_for_that_pair() -> None:
+    g = fd.paper_geometry("a")
+    xs = np.linspace(1e3, 49e3, 30)
+    states = np.stack([xs, np.zeros_like(xs), np.full_like(xs, 100.0), np.zeros_like(xs)], axis=1)
+    h = fd.bistatic_doppler(states, g)
+    np.testing.assert_allclose(h[:, 0], 0.0, atol=1e-12)
+    assert np.all(np.abs(h[:, 1]) > 0)
+
+
+def test_any_leading_shape(rng: np.random.Generator) -> None:
+    g = fd.paper_geometry("b")
+    x = random_states(rng, g, 24).reshape(2, 3, 4, 4)
+    h, J = fd.bistatic_doppler_and_jacobian(x, g)
+    assert h.shape == (2, 3, 4, 2) and J.shape == (2, 3, 4, 2, 4)
+    np.testing.assert_allclose(h.reshape(-1, 2), fd.bistatic_doppler(x.reshape(-1, 4), g))
+
+
+def test_batch_map_equals_doppler_along_cv_trajectory(rng: np.random.Generator) -> None:
+    g = fd.paper_geometry("b")
+    x0 = random_states(rng, g, 20, min_dist=3e3)
+    times = [np.arange(10) * 0.5, 0.25 + np.arange(10) * 0.5]
+    gx = fd.batch_doppler(x0, g, times)
+    for i, ts in enumerate(times):
+        for j, t in enumerate(ts):
+            xt = x0 + t * np.concatenate([x0[:, 2:], np.zeros((20, 2))], axis=1)
+            np.testing.assert_allclose(gx[:, 10 * i + j], fd.bistatic_doppler(xt, g)[:, i], rtol=1e-13)
+
+
+def test_sensor_singularity_raises() -> None:
+    g = fd.paper_geometry("a")
+    with pytest.raises(ValueError, match="coincide with a sensor"):
+        fd.bistatic_doppler([0.0, 0.0, 1.0, 1.0], g)
+    with pytest.raises(ValueError, match="coincide with a sensor"):
+        fd.bistatic_doppler_jacobian([50e3, 1e3, 1.0, 1.0], g)
+    # a trajectory that reaches the receiver at t = 1 s
+    with pytest.raises(ValueError, match="coincide with a sensor"):
+        fd.batch_doppler([-100.0, 0.0, 100.0, 0.0], g, [[0.0, 1.0], [0.0]])
+
+
+def test_bad_inputs() -> None:
+    g = fd.paper_geometry("a")
+    with pytest.raises(ValueError, match=r"\(\.\.\., 4\)"):
+        fd.bistatic_doppler([1.0, 2.0, 3.0], g)
+    with pytest.raises(ValueError, match="out of range"):
+        fd.batch_doppler([1e3, 2e3, 1.0, 1.0], g, [[0.0], [0.0], [0.0]])

@@ -1,0 +1,127 @@
+"""GTSAM factors equal the numpy models they wrap."""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+import pytest
+
+import fgdoppler as fd
+from fgdoppler import factors
+from fgdoppler.factors import X
+from tests.conftest import random_states
+
+
+def _values(**states: np.ndarray) -> gtsam.Values:
+    v = gtsam.Values()
+    for k, x in states.items():
+        v.insert(X(int(k[1:])), np.asarray(x, dtype=float))
+    return v
+
+
+def test_doppler_factor_linearize_equals_model(rng: np.random.Generator, paper_geom: fd.Geometry) -> None:
+    for x in random_states(rng, paper_geom, 20):
+        pairs = np.array([1, 0])
+        z = rng.normal(0, 50, 2)
+        sigma = np.array([0.5, 2.0])
+        f = factors.doppler_factor(X(3), paper_geom, pairs, z, sigma)
+        lin = f.linearize(_values(x3=x))
+        A, b = lin.jacobian()
+        h, H = fd.bistatic_doppler_and_jacobian(x, paper_geom)
+        np.testing.assert_allclose(A, H[pairs] / sigma[:, None], rtol=1e-12)
+        np.testing.assert_allclose(b, -(h[pairs] - z) / sigma, rtol=1e-12, atol=1e-12)
+        assert f.error(_values(x3=x)) == pytest.approx(0.5 * np.sum(((h[pairs] - z) / sigma) ** 2), rel=1e-12)
+
+
+def test_error_only_call_computes_no_jacobian(monkeypatch: pytest.MonkeyPatch) -> None:
+    g = fd.paper_geometry("a")
+    f = factors.doppler_factor(X(0), g, [0, 1], [1.0, 2.0], 1.0)
+    bf = factors.batch_factor(X(0), g, [[0.0, 0.5], [0.0, 0.5]], [1.0, 2.0, 3.0, 4.0], 1.0)
+    v = _values(x0=[25e3, 2e3, 10.0, -100.0])
+
+    def boom(*args: object, **kwargs: object) -> None:
+        raise AssertionError("Jacobian computed in an error-only call")
+
+    monkeypatch.setattr(factors, "bistatic_doppler_and_jacobian", boom)
+    assert np.isfinite(f.error(v))
+    real_batch = factors._batch
+
+    def batch_no_jac(*args: object, jacobian: bool, **kwargs: object):
+        if jacobian:
+            raise AssertionError("Jacobian computed in an error-only call")
+        return real_batch(*args, jacobian=jacobian, **kwargs)
+
+    monkeypatch.setattr(factors, "_batch", batch_no_jac)
+    assert np.isfinite(bf.error(v))
+
+
+def test_batch_factor_equals_g_and_J(rng: np.random.Generator, paper_geom: fd.Geometry) -> None:
+    times = [np.arange(10) * 0.5, 0.25 + np.arange(10) * 0.5]
+    for x0 in random_states(rng, paper_geom, 10, min_dist=3e3):
+        Z = rng.normal(0, 30, 20)
+        f = factors.batch_factor(X(0), paper_geom, times, Z, 1.5)
+        A, b = f.linearize(_values(x0=x0)).jacobian()
+        g, J = fd.batch_doppler_and_jacobian(x0, paper_geom, times)
+        np.testing.assert_allclose(A, J / 1.5, rtol=1e-12)
+        np.testing.assert_allclose(b, -(g - Z) / 1.5, rtol=1e-12, atol=1e-12)
+
+
+def test_motion_factor_is_exact_and_finite(rng: np.random.Generator) -> None:
+    m = fd.ConstantVelocity(q=0.01)
+    for dt in (0.01, 0.5, 7.0):
+        x1, x2 = rng.normal(0, 1e3, 4), rng.normal(0, 1e3, 4)
+        f = factors.motion_factor(X(0), X(1), dt, m)
+        v = _values(x0=x1, x1=x2)
+        r = x2 - m.F(dt) @ x1
+        assert f.error(v) == pytest.approx(0.5 * r @ np.linalg.solve(m.Q(dt), r), rel=1e-9)
+        lin = f.linearize(v)
+        A, b = lin.jacobian()
+        assert np.all(np.isfinite(A)) and np.all(np.isfinite(b))
+        # Information of the factor equals [F' ; -I] Q^{-1} [F, -I]
+        G = np.hstack([-m.F(dt), np.eye(4)])
+        np.testing.assert_allclose(A.T @ A, G.T @ np.linalg.solve(m.Q(dt), G), rtol=1e-8, atol=1e-8 * np.abs(A.T @ A).max())
+
+
+def test_motion_factor_rejects_singular_Q() -> None:
+    # The paper's rank-2 Q would give NaN in a Gaussian noise model: refuse it clearly.
+    with pytest.raises(ValueError, match="full-rank"):
+        factors.motion_factor(X(0), X(1), 0.5, fd.ConstantVelocity(q=0.01, form="discrete"))
+
+
+def test_linear_doppler_factor_matches_custom_factor_at_lin_point(rng: np.random.Generator) -> None:
+    g = fd.paper_geometry("b")
+    x = random_states(rng, g, 1)[0]
+    z, s = np.array([3.0, -4.0]), np.array([1.0, 0.7])
+    h, H = fd.bistatic_doppler_and_jacobian(x, g)
+    lf = factors.linear_doppler_factor(X(0), H, z - h, x, s)
+    cf = factors.doppler_factor(X(0), g, [0, 1], z, s)
+    v = _values(x0=x)
+    A1, b1 = lf.linearize(v).jacobian()
+    A2, b2 = cf.linearize(v).jacobian()
+    np.testing.assert_allclose(A1, A2, rtol=1e-12)
+    np.testing.assert_allclose(b1, b2, rtol=1e-8, atol=1e-9)
+    assert lf.error(v) == pytest.approx(cf.error(v), rel=1e-8)
+
+
+def test_factor_input_validation() -> None:
+    g = fd.paper_geometry("a")
+    with pytest.raises(ValueError, match="out of range"):
+        factors.doppler_factor(X(0), g, [2], [1.0], 1.0)
+    with pytest.raises(ValueError):
+        factors.doppler_factor(X(0), g, [0], [1.0], 0.0)
+    with pytest.raises(ValueError, match="measurements for"):
+        factors.batch_factor(X(0), g, [[0.0], [0.0]], [1.0], 1.0)
+    with pytest.raises(ValueError, match="positive definite"):
+        factors.prior_factor(X(0), np.zeros(4), np.diag([1.0, 1.0, 0.0, 1.0]))
+
+
+def test_huber_noise_model_downweights_outliers() -> None:
+    g = fd.paper_geometry("a")
+    x = np.array([25e3, 2e3, 10.0, -100.0])
+    h = fd.bistatic_doppler(x, g)
+    v = _values(x0=x)
+    robust = factors.doppler_factor(X(0), g, [0], [h[0] + 50.0], 1.0, huber_k=1.345)
+    plain = factors.doppler_factor(X(0), g, [0], [h[0] + 50.0], 1.0)
+    # Huber loss for |r| = 50 > k: k |r| - k^2 / 2
+    assert robust.error(v) == pytest.approx(1.345 * 50 - 1.345**2 / 2, rel=1e-9)
+    assert plain.error(v) == pytest.approx(0.5 * 50**2, rel=1e-12)

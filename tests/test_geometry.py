@@ -1,0 +1,91 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import fgdoppler as fd
+from fgdoppler.geometry import resolve_geometry
+
+
+def test_paper_table1_positions() -> None:
+    a = fd.paper_geometry("a")
+    np.testing.assert_array_equal(a.tx, [[50e3, 0], [50e3, 1e3]])
+    np.testing.assert_array_equal(a.rx, [[0, 0], [0, 0]])
+    b = fd.paper_geometry("B")
+    np.testing.assert_array_equal(b.tx, [[50e3, 0], [50e3, 0]])
+    np.testing.assert_array_equal(b.rx, [[0, 0], [0, 1e3]])
+    with pytest.raises(ValueError, match="unknown paper geometry"):
+        fd.paper_geometry("c")
+
+
+@pytest.mark.parametrize(
+    ("tx", "rx", "msg"),
+    [((0, 0), (0, 0), "must differ"), ((np.nan, 0), (1, 0), "finite"), ((0, 0, 0), (1, 0), "2-vector")],
+)
+def test_pair_validation(tx: tuple, rx: tuple, msg: str) -> None:
+    with pytest.raises(ValueError, match=msg):
+        fd.BistaticPair(tx=tx, rx=rx)
+
+
+def test_geometry_validation() -> None:
+    with pytest.raises(ValueError, match="at least one"):
+        fd.Geometry(pairs=())
+    with pytest.raises(TypeError):
+        fd.Geometry(pairs=((0, 0),))  # type: ignore[arg-type]
+
+
+def test_bistatic_range_and_tangent_closed_form() -> None:
+    g = fd.paper_geometry("a")
+    # A point above Rx at height 3 km: r_R = 3 km, r_T = sqrt(50^2 + 3^2) km.
+    p = np.array([0.0, 3e3])
+    r = fd.bistatic_range(p, g)
+    assert r[0] == pytest.approx(3e3 + np.hypot(50e3, 3e3), rel=1e-14)
+    # The tangent is orthogonal to the gradient u_T + u_R and has unit length.
+    t = fd.ellipse_tangent(p, g)
+    grad = (p - g.tx) / np.linalg.norm(p - g.tx, axis=1)[:, None] + (p - g.rx) / np.linalg.norm(p - g.rx, axis=1)[:, None]
+    np.testing.assert_allclose(np.einsum("ij,ij->i", t, grad), 0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(t, axis=1), 1, rtol=1e-12)
+    # Moving along the tangent leaves the bistatic range unchanged to first order.
+    eps = 1.0
+    dr = fd.bistatic_range(p + eps * t[0], g)[0] - fd.bistatic_range(p - eps * t[0], g)[0]
+    assert abs(dr) < 1e-6
+
+
+def test_tangent_on_baseline_is_along_baseline() -> None:
+    g = fd.paper_geometry("a")
+    t = fd.ellipse_tangent(np.array([20e3, 0.0]), g)
+    assert abs(t[0] @ np.array([1.0, 0.0])) == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="sensor"):
+        fd.ellipse_tangent(np.array([0.0, 0.0]), g)
+
+
+def test_toml_round_trip(tmp_path) -> None:
+    g = fd.paper_geometry("b")
+    path = tmp_path / "g.toml"
+    g.to_toml(path)
+    back = fd.Geometry.from_toml(path)
+    assert back == g
+    assert resolve_geometry(str(path)) == g
+    assert resolve_geometry("a") == fd.paper_geometry("a")
+
+
+@pytest.mark.parametrize(
+    ("text", "msg"),
+    [
+        ("not toml [", "not valid TOML"),
+        ("name = 'x'\n", "one or more"),
+        ("[[pair]]\ntx = [0.0, 0.0]\n", "needs both"),
+        ("[[pair]]\ntx = [0.0, 0.0]\nrx = [0.0, 0.0]\n", "must differ"),
+    ],
+)
+def test_toml_errors_name_the_file(tmp_path, text: str, msg: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=msg) as info:
+        fd.Geometry.from_toml(path)
+    assert str(path) in str(info.value)
+
+
+def test_resolve_geometry_unknown() -> None:
+    with pytest.raises(ValueError, match="neither a preset"):
+        resolve_geometry("no-such-file.toml")

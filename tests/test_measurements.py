@@ -1,0 +1,122 @@
+"""Measurement container and CSV: validation errors name file and line; writes are atomic."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fgdoppler as fd
+from fgdoppler.measurements import MeasurementError
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+GOOD = "time,pair,doppler,sigma\n0.0,0,1.5,1.0\n0.0,1,2.5,1.0\n0.5,0,1.25,0.5\n"
+
+
+def test_round_trip_is_exact(tmp_path: Path, rng: np.random.Generator) -> None:
+    n = 200
+    m = fd.Measurements.from_arrays(
+        np.sort(rng.uniform(0, 30, n)), rng.integers(0, 3, n), rng.normal(0, 100, n), rng.uniform(0.1, 3, n)
+    )
+    m.to_csv(tmp_path / "m.csv")
+    back = fd.Measurements.from_csv(tmp_path / "m.csv")
+    for name in ("time", "pair", "doppler", "sigma"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(m, name))
+
+
+def test_reads_good_file_and_default_sigma(tmp_path: Path) -> None:
+    m = fd.Measurements.from_csv(_write(tmp_path / "m.csv", GOOD), geometry=fd.paper_geometry("a"))
+    assert len(m) == 3
+    np.testing.assert_array_equal(m.pair, [0, 1, 0])
+    no_sigma = _write(tmp_path / "n.csv", "time,pair,doppler\n0,0,1\n1,1,2\n")
+    m2 = fd.Measurements.from_csv(no_sigma, default_sigma=2.0)
+    np.testing.assert_array_equal(m2.sigma, [2.0, 2.0])
+    with pytest.raises(MeasurementError, match="no sigma column"):
+        fd.Measurements.from_csv(no_sigma)
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "msg"),
+    [
+        ("", None, "empty file"),
+        ("\n\n", None, "empty file"),
+        ("time,pair,doppler,sigma\n", None, "no measurement rows"),
+        ("t,p,d,s\n0,0,1,1\n", 1, "bad header"),
+        ("time,pair,doppler,sigma\n0,0,abc,1\n", 2, "doppler is not a number"),
+        ("time,pair,doppler,sigma\n0,0,1,1\n0.5,0,nan,1\n", 3, "doppler is not finite"),
+        ("time,pair,doppler,sigma\n0,0,1,1\ninf,0,1,1\n", 3, "time is not finite"),
+        ("time,pair,doppler,sigma\n0,0,1,0\n", 2, "sigma must be > 0"),
+        ("time,pair,doppler,sigma\n0,0,1,-1\n", 2, "sigma must be > 0"),
+        ("time,pair,doppler,sigma\n0,2,1,1\n", 2, "unknown pair index 2"),
+        ("time,pair,doppler,sigma\n0,0.5,1,1\n", 2, "non-negative integer"),
+        ("time,pair,doppler,sigma\n0,-1,1,1\n", 2, "non-negative integer"),
+        ("time,pair,doppler,sigma\n0,0,1,1\n0,1,1,1\n0,0,2,1\n", 4, "duplicate measurement"),
+        ("time,pair,doppler,sigma\n1,0,1,1\n0.5,0,1,1\n", 3, "earlier than the previous"),
+        ("time,pair,doppler,sigma\n0,0,1\n", 2, "expected 4 fields"),
+    ],
+)
+def test_malformed_csv(tmp_path: Path, text: str, line: int | None, msg: str) -> None:
+    path = _write(tmp_path / "bad.csv", text)
+    with pytest.raises(MeasurementError, match=msg) as info:
+        fd.Measurements.from_csv(path, geometry=fd.paper_geometry("a"))
+    where = f"{path}:{line}" if line is not None else str(path)
+    assert where in str(info.value)
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    with pytest.raises(MeasurementError, match="cannot read"):
+        fd.Measurements.from_csv(tmp_path / "nope.csv")
+
+
+def test_container_validation() -> None:
+    with pytest.raises(MeasurementError, match="time order"):
+        fd.Measurements.from_arrays([1.0, 0.0], [0, 0], [1.0, 1.0], 1.0)
+    with pytest.raises(MeasurementError, match="duplicate"):
+        fd.Measurements.from_arrays([0.0, 0.0], [1, 1], [1.0, 1.0], 1.0)
+    with pytest.raises(MeasurementError, match="sigma"):
+        fd.Measurements.from_arrays([0.0], [0], [1.0], -1.0)
+    m = fd.Measurements.from_arrays([1.0, 0.0], [0, 0], [1.0, 2.0], 1.0, sort=True)
+    np.testing.assert_array_equal(m.doppler, [2.0, 1.0])
+    with pytest.raises(MeasurementError, match="not in the geometry"):
+        fd.Measurements.from_arrays([0.0], [3], [1.0], 1.0).check(fd.paper_geometry("a"))
+
+
+def test_failed_write_leaves_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    m = fd.Measurements.from_arrays(np.arange(10.0), np.zeros(10, int), np.ones(10), 1.0)
+    target = tmp_path / "out.csv"
+    calls = {"n": 0}
+    real_writer = csv.writer
+
+    class Failing:
+        def __init__(self, fh: object, **kw: object) -> None:
+            self._w = real_writer(fh, **kw)
+
+        def writerow(self, row: object) -> None:
+            calls["n"] += 1
+            if calls["n"] > 3:
+                raise OSError("disk full")
+            self._w.writerow(row)
+
+    monkeypatch.setattr(csv, "writer", Failing)
+    with pytest.raises(OSError, match="disk full"):
+        m.to_csv(target)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_scans_and_windows() -> None:
+    m = fd.Measurements.from_arrays([0, 0, 0.25, 0.5, 0.5], [1, 0, 1, 0, 1], [1, 2, 3, 4, 5], 1.0)
+    scans = list(m.scans())
+    assert [s.time for s in scans] == [0.0, 0.25, 0.5]
+    np.testing.assert_array_equal(scans[0].pair, [0, 1])
+    np.testing.assert_array_equal(scans[0].doppler, [2, 1])
+    first = m.first_per_pair(1)
+    np.testing.assert_array_equal(first.time, [0, 0])
+    np.testing.assert_array_equal(m.between(0.2, 0.5).time, [0.25, 0.5, 0.5])
+    np.testing.assert_array_equal(m.pair[m.batch_order()], [0, 0, 1, 1, 1])
