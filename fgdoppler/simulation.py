@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler._io import atomic_open
 from fgdoppler.geometry import Geometry, paper_geometry
-from fgdoppler.measurements import Measurements, MeasurementError
+from fgdoppler.measurements import MeasurementError, Measurements
 from fgdoppler.models.doppler import bistatic_doppler
 from fgdoppler.models.motion import ConstantVelocity
 

@@ -51,7 +51,7 @@ def test_batch_jacobian_matches_central_differences(rng: np.random.Generator) ->
         # keep the whole 5 s trajectory away from the sensors
         x = random_states(rng, g, 250, min_dist=3e3)
         J = fd.batch_doppler_jacobian(x, g, times)
-        Jfd = _central_diff(lambda s, g=g: fd.batch_doppler(s, g, times), x, STEPS)
+        Jfd = _central_diff(lambda s, g=g, times=times: fd.batch_doppler(s, g, times), x, STEPS)
         assert J.shape == (250, 10 * g.n_pairs, 4)
         assert np.max(_rel_err(J, Jfd)) <= 1e-6
         n_total += x.shape[0]

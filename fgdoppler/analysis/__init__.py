@@ -1,0 +1,1 @@
+"""Analysis: observability, bounds, metrics and Monte Carlo studies."""

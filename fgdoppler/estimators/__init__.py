@@ -1,0 +1,1 @@
+"""Estimators: initiation, EKF, iSAM2, fixed-lag and offline smoothers."""

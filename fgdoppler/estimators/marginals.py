@@ -1,0 +1,96 @@
+"""Marginal covariances from GTSAM graphs, with indeterminate systems reported, not raised.
+
+:class:`gtsam.Marginals` always factorises by Cholesky, which rejects the
+information matrices of these graphs as "indeterminate" although they are
+positive definite (condition numbers of 1e12 are common near the baseline).
+The linearised graph is therefore eliminated here with Householder QR
+(``gtsam.EliminateQR``) into a Bayes tree, whose marginals are then read;
+QR works on the square-root information and does not square the condition
+number.
+
+GTSAM signals a singular or numerically indefinite information matrix with a
+plain :class:`RuntimeError` ("Indeterminant linear system").  These helpers
+turn that, and any non-finite or non-positive-definite result, into a status
+string that callers can report.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["MarginalResult", "marginal_covariances"]
+
+Status = Literal["ok", "indeterminate"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class MarginalResult:
+    """Marginal covariances of some keys, or why they could not be computed.
+
+    Attributes
+    ----------
+    covariances
+        ``(n_keys, d, d)`` when ``status == "ok"``, otherwise ``None``.
+    status
+        ``"ok"`` or ``"indeterminate"`` (singular or numerically indefinite).
+    message
+        Empty when ok; otherwise what went wrong.
+    """
+
+    covariances: NDArray[np.float64] | None
+    status: Status
+    message: str = ""
+
+    @property
+    def ok(self) -> bool:
+        """True when the covariances are available."""
+        return self.status == "ok"
+
+
+def check_covariances(covs: NDArray[np.float64]) -> str:
+    """Empty string if every matrix is finite, symmetric and positive definite, else the problem."""
+    if not np.all(np.isfinite(covs)):
+        return "non-finite covariance"
+    sym = 0.5 * (covs + np.swapaxes(covs, -1, -2))
+    try:
+        np.linalg.cholesky(sym)
+    except np.linalg.LinAlgError:
+        return "covariance not positive definite (information matrix numerically singular)"
+    return ""
+
+
+def marginal_covariances(
+    graph: gtsam.NonlinearFactorGraph | gtsam.GaussianFactorGraph,
+    values: gtsam.Values | gtsam.VectorValues,
+    keys: Sequence[int],
+) -> MarginalResult:
+    """Marginal covariances of ``keys`` from a nonlinear graph at ``values`` (or a linear graph).
+
+    The graph is linearised at ``values`` (unless already linear) and
+    eliminated by QR.  Never raises for a singular system: returns
+    ``status="indeterminate"`` with GTSAM's message instead.
+    """
+    try:
+        gfg = graph if isinstance(graph, gtsam.GaussianFactorGraph) else graph.linearize(values)
+        tree = gfg.eliminateMultifrontal(gtsam.Ordering.ColamdGaussianFactorGraph(gfg), gtsam.EliminateQR)
+        covs = np.array([tree.marginalCovariance(int(k)) for k in keys])
+    except RuntimeError as exc:
+        return MarginalResult(covariances=None, status="indeterminate", message=_short(exc))
+    problem = check_covariances(covs)
+    if problem:
+        return MarginalResult(covariances=None, status="indeterminate", message=problem)
+    return MarginalResult(covariances=covs, status="ok")
+
+
+def _short(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    first = text[0] if text else type(exc).__name__
+    if "indetermin" in str(exc).lower():
+        return "indeterminate linear system (singular information matrix): " + first
+    return first

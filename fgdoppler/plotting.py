@@ -1,0 +1,177 @@
+"""Matplotlib figures.  Every function takes ``ax=None`` (a new figure) and returns the axes.
+
+Nothing here calls ``plt.show()``; use :func:`save` to write a figure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from fgdoppler.geometry import Geometry, bistatic_range
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
+    from fgdoppler.analysis.observability import ObservabilityMap, ObservabilityReport
+
+__all__ = [
+    "plot_geometry",
+    "plot_observability_map",
+    "plot_observability_slice",
+    "plot_report_std",
+    "save",
+]
+
+
+def _axes(ax: Axes | None, figsize: tuple[float, float] = (6.4, 4.2)) -> Axes:
+    if ax is not None:
+        return ax
+    import matplotlib.pyplot as plt
+
+    _, new = plt.subplots(figsize=figsize, layout="constrained")
+    return new
+
+
+def save(ax: Axes, path: str | Path, *, dpi: int = 120) -> Path:
+    """Write the axes' figure to ``path`` (folders created) and close it."""
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig = ax.figure
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)  # type: ignore[arg-type]
+    return path
+
+
+def ellipse_points(geometry: Geometry, pair: int, point: ArrayLike, n: int = 361) -> np.ndarray:
+    """Points ``(n, 2)`` of the bistatic ellipse of ``pair`` through ``point``.
+
+    Foci at Tx and Rx; semi-major axis ``a = (r_T + r_R) / 2``, focal half
+    distance ``c = L / 2``, semi-minor ``b = sqrt(a^2 - c^2)``.
+    """
+    tx, rx = geometry.tx[pair], geometry.rx[pair]
+    R = float(bistatic_range(np.asarray(point, dtype=float), geometry)[pair])
+    a = R / 2
+    c = np.linalg.norm(rx - tx) / 2
+    b = np.sqrt(max(a * a - c * c, 0.0))
+    th = np.linspace(0, 2 * np.pi, n)
+    ang = np.arctan2(*(rx - tx)[::-1])
+    rot = np.array([[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]])
+    pts = np.stack([a * np.cos(th), b * np.sin(th)], axis=1) @ rot.T
+    return pts + (tx + rx) / 2
+
+
+def plot_geometry(
+    geometry: Geometry,
+    ax: Axes | None = None,
+    *,
+    groups: Mapping[str, ArrayLike] | None = None,
+    ellipse_through: ArrayLike | None = None,
+    trajectories: Sequence[ArrayLike] = (),
+    km: bool = True,
+) -> Axes:
+    """Sensors, baselines, optional evaluation points, ellipses through a point, trajectories.
+
+    Parameters
+    ----------
+    groups
+        Label -> points ``(n, 2)`` drawn as markers (paper Fig. 3).
+    ellipse_through
+        A point; each pair's bistatic ellipse through it is drawn (Fig. 7a).
+    trajectories
+        Position sequences ``(n, >=2)`` drawn as lines (Fig. 9).
+    """
+    ax = _axes(ax)
+    s = 1e-3 if km else 1.0
+    unit = "km" if km else "m"
+    colours = ["tab:blue", "tab:orange", "tab:green", "tab:purple"]
+    for i, p in enumerate(geometry.pairs):
+        c = colours[i % len(colours)]
+        ax.plot([p.tx[0] * s, p.rx[0] * s], [p.tx[1] * s, p.rx[1] * s], "-", color=c, lw=1, alpha=0.6,
+                label=f"baseline {i + 1}")
+        if ellipse_through is not None:
+            e = ellipse_points(geometry, i, ellipse_through) * s
+            ax.plot(e[:, 0], e[:, 1], "--", color=c, lw=1, label=f"ellipse {i + 1}")
+    tx = np.unique(geometry.tx, axis=0) * s
+    rx = np.unique(geometry.rx, axis=0) * s
+    ax.plot(tx[:, 0], tx[:, 1], "^", color="k", ms=9, label="Tx")
+    ax.plot(rx[:, 0], rx[:, 1], "s", color="k", mfc="w", ms=8, label="Rx")
+    markers = ["o", "^", "x", "d"]
+    for j, (label, pts) in enumerate((groups or {}).items()):
+        q = np.asarray(pts, dtype=float) * s
+        ax.plot(q[:, 0], q[:, 1], markers[j % len(markers)], ms=3, label=label)
+    for j, tr in enumerate(trajectories):
+        q = np.asarray(tr, dtype=float)[:, :2] * s
+        ax.plot(q[:, 0], q[:, 1], "-", lw=1.5, label=f"trajectory {j + 1}")
+        ax.plot(q[0, 0], q[0, 1], "o", color=ax.lines[-1].get_color(), ms=4)
+    if ellipse_through is not None:
+        pt = np.asarray(ellipse_through, dtype=float) * s
+        ax.plot(pt[0], pt[1], "*", color="r", ms=12, label="point")
+    ax.set_xlabel(f"x ({unit})")
+    ax.set_ylabel(f"y ({unit})")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize="small", loc="best")
+    return ax
+
+
+def plot_observability_map(m: ObservabilityMap, ax: Axes | None = None, *, title: str | None = None) -> Axes:
+    """Heat map of O over initial x × heading; the −40 floor is drawn black and labelled."""
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
+
+    from fgdoppler.analysis.observability import O_FLOOR
+
+    ax = _axes(ax)
+    O = np.ma.masked_less_equal(m.O, O_FLOOR)
+    cmap = plt.get_cmap("viridis").copy()
+    cmap.set_bad("black")
+    mesh = ax.pcolormesh(m.x * 1e-3, m.heading_deg, O.T, cmap=cmap, shading="nearest")
+    ax.figure.colorbar(mesh, ax=ax, label="O = log10 det(J'J)")
+    if np.any(m.unobservable):
+        ax.legend(handles=[Patch(color="black", label="O = -40 (unobservable)")], loc="upper right",
+                  fontsize="small")
+    ax.set_xlabel("initial x (km)")
+    ax.set_ylabel("heading (deg, clockwise from +y)")
+    ax.set_title(title or f"y = {m.y / 1e3:g} km, speed {m.speed:g} m/s; {m.batch.describe()}", fontsize="small")
+    return ax
+
+
+def plot_observability_slice(
+    curves: Mapping[str, tuple[ArrayLike, ArrayLike]], ax: Axes | None = None, *, heading_deg: float | None = None
+) -> Axes:
+    """O versus initial x (paper Fig. 8): ``curves`` maps a label to ``(x, O)``."""
+    ax = _axes(ax)
+    for label, (x, O) in curves.items():
+        ax.plot(np.asarray(x) * 1e-3, O, "-o", ms=2, label=label)
+    ax.set_xlabel("initial x (km)")
+    ax.set_ylabel("O = log10 det(J'J)")
+    if heading_deg is not None:
+        ax.set_title(f"heading {heading_deg:g} deg", fontsize="small")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize="small")
+    return ax
+
+
+def plot_report_std(report: ObservabilityReport, ax: Axes | None = None) -> Axes:
+    """Position standard deviations over time from an observability report."""
+    ax = _axes(ax)
+    if report.pos_std is None or report.weakest_std is None:
+        ax.text(0.5, 0.5, f"indeterminate: {report.message}", ha="center", va="center", transform=ax.transAxes,
+                wrap=True)
+        return ax
+    ax.semilogy(report.times, report.pos_std[:, 0], label="σx")
+    ax.semilogy(report.times, report.pos_std[:, 1], label="σy")
+    ax.semilogy(report.times, report.weakest_std, "k--", label="weakest direction")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("standard deviation (m)")
+    ax.set_title(f"O(x0) = {report.O_x0:.2f}, cond(J'J) = {report.cond_JtJ:.2g}", fontsize="small")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize="small")
+    return ax
