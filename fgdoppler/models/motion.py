@@ -88,10 +88,11 @@ class ConstantVelocity:
         return self.q * out
 
     def propagate(self, states: ArrayLike, dt: ArrayLike) -> FloatArray:
-        """Noise-free prediction ``F(dt) x`` for states ``(..., 4)``."""
+        """Noise-free prediction ``F(dt) x``; ``states (..., 4)`` and ``dt`` broadcast."""
         x = np.asarray(states, dtype=float)
         dt = np.asarray(dt, dtype=float)[..., None]
-        return np.concatenate([x[..., :2] + dt * x[..., 2:], x[..., 2:]], axis=-1)
+        pos = x[..., :2] + dt * x[..., 2:]
+        return np.concatenate([pos, np.broadcast_to(x[..., 2:], pos.shape)], axis=-1)
 
     def sqrt_information(self, dt: float) -> FloatArray:
         r"""Square-root information :math:`\mathbf R = \mathbf L^{-1}` (:math:`\mathbf Q = \mathbf L\mathbf L'`), so :math:`\mathbf R'\mathbf R = \mathbf Q(dt)^{-1}`.
