@@ -249,6 +249,119 @@ def _observability_report(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- track --------------------------------------------------------------------------
+ESTIMATORS = ("init", "ekf", "isam2", "fixed-lag", "batch")
+
+
+def _add_track(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "track",
+        help="initiate and track/smooth a recorded measurement CSV",
+        description="Read FILE (CSV time,pair,doppler,sigma), initiate from the first --init-per-pair "
+        "measurements of each pair (multi-start grid + refinement), then run the chosen estimator.",
+    )
+    p.add_argument("file", type=Path, metavar="FILE", help="measurement CSV")
+    p.add_argument("--geometry", default="a", help="a, b or a geometry TOML file (default a)")
+    p.add_argument("--estimator", choices=ESTIMATORS, default="init", help="what to run (default init)")
+    p.add_argument("--sigma", type=float, default=None, help="default Doppler sigma when FILE has no sigma column")
+    p.add_argument("--init-method", choices=("lm", "ils", "grid"), default="lm", help="initiation refinement (default lm)")
+    p.add_argument("--init-per-pair", type=int, default=10, help="initiation window: measurements per pair (default 10)")
+    p.add_argument("--k-best", type=int, default=5, help="grid candidates to refine (default 5)")
+    p.add_argument("--no-weak-prior", action="store_true", help="initiation without the weak search-region prior")
+    p.add_argument("--half-plane", type=float, nargs=4, metavar=("PX", "PY", "NX", "NY"), default=None,
+                   help="target known to satisfy (NX, NY) . (p - (PX, PY)) >= 0, e.g. 0 0 0 1 for y >= 0")
+    p.add_argument("--q", type=float, default=None, help="process noise PSD in m^2/s^3 (default 1e-3)")
+    p.add_argument("--lag", type=float, default=5.0, help="fixed-lag smoother lag in s (default 5)")
+    p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy) for --plot and errors")
+    p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
+    p.add_argument("--json", action="store_true", help="machine-readable result on stdout")
+    p.add_argument("--plot", type=Path, default=None, metavar="PATH", help="write a figure")
+    p.set_defaults(handler=_run_track)
+
+
+def _initiation_settings(args: argparse.Namespace) -> Any:
+    from fgdoppler.estimators.grid import HalfPlane
+    from fgdoppler.estimators.initiation import InitiationSettings
+    from fgdoppler.models.motion import ConstantVelocity
+
+    hp = None
+    if args.half_plane is not None:
+        px, py, nx, ny = args.half_plane
+        hp = HalfPlane(point=(px, py), normal=(nx, ny))
+    kw: dict[str, Any] = {}
+    if args.q is not None:
+        kw["motion"] = ConstantVelocity(q=args.q)
+    return InitiationSettings(method=args.init_method, k_best=args.k_best, weak_prior=not args.no_weak_prior,
+                              half_plane=hp, **kw)
+
+
+def _run_track(args: argparse.Namespace) -> int:
+    from fgdoppler.estimators.initiation import initiate
+    from fgdoppler.geometry import resolve_geometry
+    from fgdoppler.measurements import Measurements
+    from fgdoppler.simulation import Trajectory
+
+    geom = resolve_geometry(args.geometry)
+    meas = Measurements.from_csv(args.file, geometry=geom, default_sigma=args.sigma)
+    truth = Trajectory.from_csv(args.truth) if args.truth else None
+    if args.init_per_pair < 3:
+        raise CLIError("--init-per-pair must be >= 3")
+    window = meas.first_per_pair(args.init_per_pair)
+    init = initiate(window, geom, _initiation_settings(args))
+    if args.estimator == "init":
+        return _report_initiation(args, init, window, geom, truth)
+    return _run_tracker(args, init, meas, geom, truth)
+
+
+def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: Any, truth: Any) -> int:
+    if args.out is not None:
+        from fgdoppler._io import atomic_write_text
+
+        atomic_write_text(args.out, json.dumps(init.to_dict(), indent=1))
+    if args.json:
+        _emit_json(init.to_dict())
+    else:
+        print(f"initiation ({init.method}) from {init.n_measurements} measurements, "
+              f"t = {init.t_start:g}..{init.t_end:g} s, {init.wall_time * 1e3:.0f} ms")
+        print(f"  state at t_end: x = {init.x_end[0]:.1f} m, y = {init.x_end[1]:.1f} m, "
+              f"vx = {init.x_end[2]:.2f} m/s, vy = {init.x_end[3]:.2f} m/s")
+        if init.P_end is not None:
+            sd = np.sqrt(np.diag(init.P_end))
+            print(f"  std: {sd[0]:.1f} m, {sd[1]:.1f} m, {sd[2]:.2f} m/s, {sd[3]:.2f} m/s")
+        else:
+            print(f"  covariance indeterminate: {init.covariance_message}")
+        verdict = "passes" if init.passes_chi2 else "FAILS"
+        print(f"  cost {init.cost:.2f} {verdict} the chi-square test ({init.chi2_threshold:.2f}, {init.dof} dof)")
+        if init.ambiguous:
+            print(f"  AMBIGUOUS: {len(init.alternatives)} other solution(s) pass the test:")
+            for a in init.alternatives:
+                print(f"    x0 = {np.round(a.state, 1).tolist()} cost {a.cost:.2f}")
+        for n in init.notes:
+            print(f"  note: {n}")
+        if truth is not None:
+            err = init.x_end - truth.at([init.t_end])[0]
+            print(f"  error at t_end: position {np.hypot(err[0], err[1]):.1f} m, velocity {np.hypot(err[2], err[3]):.2f} m/s")
+    if args.plot:
+        from fgdoppler import plotting
+        from fgdoppler.estimators.initiation import residual_landscape
+
+        xs = np.arange(1e3, 49e3 + 1, 250.0)
+        hs = np.arange(0.0, 360.0, 2.0)
+        speed = float(np.hypot(*init.x_start[2:]))
+        cost = residual_landscape(window, geom, x=xs, heading_deg=hs, y0=float(init.x_start[1]), speed=speed)
+        others = [c.state for c in init.candidates[1:]] + [a.state for a in init.alternatives]
+        t0 = truth.at([init.t_start])[0] if truth is not None else None
+        ax = plotting.plot_landscape(xs, hs, cost, best=init.x_start, others=others, truth=t0)
+        ax.set_title(f"residual over x0 x heading at y0 = {init.x_start[1] / 1e3:.2f} km, speed {speed:.0f} m/s",
+                     fontsize="small")
+        plotting.save(ax, args.plot)
+    return 0
+
+
+def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, geom: Any, truth: Any) -> int:
+    raise CLIError(f"estimator {args.estimator!r} is not available yet")
+
+
 # -- entry point ----------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand."""
@@ -264,7 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-_SUBCOMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_simulate, _add_observability]
+_SUBCOMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_simulate, _add_observability, _add_track]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -274,6 +387,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     handler: Handler = args.handler
     try:
         return handler(args)
+    except BrokenPipeError:  # e.g. piped into `head`
+        sys.stderr.close()
+        return 0
     except (CLIError, ValueError, OSError) as exc:
         print(f"fgdoppler {args.command}: error: {exc}", file=sys.stderr)
         return 2

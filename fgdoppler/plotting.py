@@ -175,3 +175,43 @@ def plot_report_std(report: ObservabilityReport, ax: Axes | None = None) -> Axes
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize="small")
     return ax
+
+
+def plot_landscape(
+    x: ArrayLike,
+    heading_deg: ArrayLike,
+    cost: ArrayLike,
+    ax: Axes | None = None,
+    *,
+    best: ArrayLike | None = None,
+    others: Sequence[ArrayLike] = (),
+    truth: ArrayLike | None = None,
+) -> Axes:
+    """Residual landscape over initial x × heading (paper Fig. 2) with optima and truth marked.
+
+    ``best``, ``others`` and ``truth`` are states ``[x, y, vx, vy]``; their
+    heading is ``atan2(vx, vy)``.
+    """
+    import matplotlib.colors as mcolors
+
+    ax = _axes(ax)
+    c = np.asarray(cost, dtype=float)
+    finite = c[np.isfinite(c)]
+    norm = mcolors.LogNorm(vmin=max(finite.min(), 1e-3), vmax=finite.max()) if finite.size else None
+    mesh = ax.pcolormesh(np.asarray(x) * 1e-3, heading_deg, c.T, shading="nearest", norm=norm, cmap="magma_r")
+    ax.figure.colorbar(mesh, ax=ax, label="weighted residual")
+
+    def hd(s: ArrayLike) -> tuple[float, float]:
+        s = np.asarray(s, dtype=float)
+        return s[0] * 1e-3, float(np.rad2deg(np.arctan2(s[2], s[3])) % 360)
+
+    for i, o in enumerate(others):
+        ax.plot(*hd(o), "o", color="tab:blue", ms=7, label="local optima" if i == 0 else None)
+    if best is not None:
+        ax.plot(*hd(best), "o", color="red", ms=9, label="global optimum")
+    if truth is not None:
+        ax.plot(*hd(truth), "x", color="lime", ms=10, mew=2, label="truth")
+    ax.set_xlabel("initial x (km)")
+    ax.set_ylabel("heading (deg)")
+    ax.legend(fontsize="small", loc="upper right")
+    return ax

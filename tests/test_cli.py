@@ -39,3 +39,56 @@ def test_simulate_bad_geometry_exits_2(tmp_path: Path, capsys: pytest.CaptureFix
     assert main(["simulate", "--case", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "o")]) == 2
     assert "error" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_observability_cli_json_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["observability", "--group", "1", "--json", "--plot", str(tmp_path / "m.png")]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert len(d["x"]) == 97 and len(d["heading_deg"]) == 36 and d["min"] == -40.0
+    assert (tmp_path / "m.png").stat().st_size > 0
+    assert main(["observability", "--table", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["rows"]
+    assert len(rows) == 8 and all(abs(r["max"] - r["paper_max"]) <= 0.05 for r in rows)
+    assert main(["observability", "--slice", "180", "--json"]) == 0
+    assert set(json.loads(capsys.readouterr().out)["curves"]) == {"group 2", "group 4"}
+    assert main(["observability", "--report", "45000", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["status"] == "ok"
+
+
+def test_observability_cli_bad_grid(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["observability", "--x", "5000", "1000", "500"]) == 2
+    assert "bad grid" in capsys.readouterr().err
+
+
+def test_track_init_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "sim"
+    main(["simulate", "--case", "b", "--start-x", "5000", "--out", str(out)])
+    capsys.readouterr()
+    args = ["track", str(out / "measurements.csv"), "--geometry", str(out / "geometry.toml"), "--estimator", "init"]
+    assert main([*args, "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["n_measurements"] == 20 and len(d["x_end"]) == 4 and d["method"] == "lm"
+    assert main([*args, "--truth", str(out / "truth.csv"), "--plot", str(tmp_path / "land.png")]) == 0
+    assert "error at t_end" in capsys.readouterr().out
+    assert (tmp_path / "land.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    ("content", "msg"),
+    [
+        ("time,pair,doppler,sigma\n0,0,abc,1\n", ":2: doppler is not a number"),
+        ("time,pair,doppler,sigma\n0,5,1,1\n", ":2: unknown pair index 5"),
+        ("", "empty file"),
+    ],
+)
+def test_track_malformed_input_exits_2_and_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], content: str, msg: str
+) -> None:
+    bad = tmp_path / "bad.csv"
+    bad.write_text(content)
+    out = tmp_path / "track.csv"
+    assert main(["track", str(bad), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and msg in err
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv"]

@@ -534,3 +534,25 @@ def _inverse(info: FloatArray) -> tuple[FloatArray | None, str, str]:
     except np.linalg.LinAlgError:
         return None, "indeterminate", "covariance not positive definite"
     return P, "ok", ""
+
+
+def residual_landscape(
+    measurements: Measurements,
+    geometry: Geometry,
+    *,
+    x: NDArray[np.float64],
+    heading_deg: NDArray[np.float64],
+    y0: float,
+    speed: float,
+) -> NDArray[np.float64]:
+    """Weighted residual cost over an initial-x × heading slice at fixed y0 and speed.
+
+    Returns the cost, shape ``(x.size, heading_deg.size)`` — the landscape of
+    the paper's Fig. 2 (many local optima; the start decides which is found).
+    """
+    from fgdoppler.analysis.observability import grid_states
+    from fgdoppler.estimators.grid import grid_costs
+
+    w = _Window.build(measurements, geometry)
+    states = grid_states(x, y0, speed, heading_deg).reshape(-1, 4)
+    return grid_costs(geometry, w.bt, w.z, w.sigma, states).reshape(np.size(x), np.size(heading_deg))

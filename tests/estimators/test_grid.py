@@ -1,0 +1,117 @@
+"""Grid search: chunking invariance, agreement of kernels, distinct optima, the speed bound."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import fgdoppler as fd
+from fgdoppler.estimators.grid import (
+    GridSpec,
+    HalfPlane,
+    grid_costs,
+    grid_search,
+    speed_lower_bound,
+)
+from tests.conftest import random_geometry, random_states
+
+
+def _window(case: str = "a", x: float = 45e3, seed: int = 1):
+    sim = fd.simulate(fd.paper_scenario(case, x), np.random.default_rng(seed))
+    w = sim.measurements.first_per_pair(10)
+    o = w.batch_order()
+    return sim, fd.BatchTimes(pair=w.pair[o], t=w.time[o] - w.time[0]), w.doppler[o], w.sigma[o]
+
+
+SMALL = GridSpec(x=(40e3, 48e3, 1e3), y=(0.0, 4e3, 1e3), heading_deg=(0.0, 340.0, 20.0), speed_max=150.0)
+
+
+def test_chunked_and_unchunked_costs_identical() -> None:
+    sim, bt, z, s = _window("b", 5e3)
+    spec = GridSpec(x=(2e3, 12e3, 1e3), y=(-2e3, 3e3, 1e3))
+    a = grid_search(sim.scenario.geometry, bt, z, s, spec, k_best=20, chunk=37)
+    b = grid_search(sim.scenario.geometry, bt, z, s, spec, k_best=20, chunk=10**8)
+    np.testing.assert_array_equal(a.costs, b.costs)
+    np.testing.assert_array_equal(a.states, b.states)
+    # the generic per-state evaluation, chunked or not, agrees with the product kernel
+    c1 = grid_costs(sim.scenario.geometry, bt, z, s, a.states, chunk=1)
+    c2 = grid_costs(sim.scenario.geometry, bt, z, s, a.states, chunk=10**6)
+    np.testing.assert_array_equal(c1, c2)
+    np.testing.assert_allclose(c1, a.costs, rtol=1e-12)
+
+
+def test_candidates_are_distinct_local_minima() -> None:
+    sim, bt, z, s = _window("a", 25e3)
+    r = grid_search(sim.scenario.geometry, bt, z, s, k_best=8)
+    assert np.all(np.diff(r.costs) >= 0)
+    xs, ys, speeds, heads = GridSpec().axes(r.speed_min)
+    # each returned candidate is no worse than every one of its 80 grid neighbours
+    for st_, c in zip(r.states, r.costs, strict=True):
+        sp = np.hypot(st_[2], st_[3])
+        hd = np.arctan2(st_[2], st_[3]) % (2 * np.pi)
+        i = np.argmin(abs(xs - st_[0]))
+        j = np.argmin(abs(ys - st_[1]))
+        k = np.argmin(abs(speeds - sp))
+        m = np.argmin(abs((heads - hd + np.pi) % (2 * np.pi) - np.pi))
+        nb = []
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                for dk in (-1, 0, 1):
+                    for dm in (-1, 0, 1):
+                        ii, jj, kk = np.clip([i + di, j + dj, k + dk], 0, [xs.size - 1, ys.size - 1, speeds.size - 1])
+                        h = heads[(m + dm) % heads.size]
+                        nb.append([xs[ii], ys[jj], speeds[kk] * np.sin(h), speeds[kk] * np.cos(h)])
+        costs = grid_costs(sim.scenario.geometry, bt, z, s, np.array(nb))
+        assert c <= costs.min() + 1e-9
+    # and no two are grid neighbours of each other: they are separated optima
+    steps = np.array([1e3, 1e3])
+    for a in range(len(r.states)):
+        for b in range(a + 1, len(r.states)):
+            same_pos = np.all(np.abs(r.states[a, :2] - r.states[b, :2]) <= steps)
+            same_vel = np.linalg.norm(r.states[a, 2:] - r.states[b, 2:]) < 1e-6
+            assert not (same_pos and same_vel)
+
+
+def test_truth_is_near_the_best_candidate_noise_free() -> None:
+    sc = fd.paper_scenario("a", 45e3)
+    sim = fd.simulate(sc, np.random.default_rng(0))
+    w = sim.measurements.first_per_pair(10)
+    o = w.batch_order()
+    bt = fd.BatchTimes(pair=w.pair[o], t=w.time[o] - w.time[0])
+    clean = fd.batch_doppler(np.array(sc.x0), sc.geometry, bt)
+    r = grid_search(sc.geometry, bt, clean, 1.0, SMALL, k_best=3)
+    assert np.linalg.norm(r.best[:2] - np.array(sc.x0[:2])) <= 1.5e3
+
+
+def test_half_plane_excludes_candidates() -> None:
+    sim, bt, z, s = _window("a", 45e3)
+    hp = HalfPlane(point=(0.0, 0.0), normal=(0.0, -1.0))  # south of the baseline only
+    r = grid_search(sim.scenario.geometry, bt, z, s, k_best=5, half_plane=hp)
+    assert np.all(r.states[:, 1] <= 0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_speed_bound_never_excludes_the_truth(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    g = random_geometry(rng)
+    x = random_states(rng, g, 1, min_dist=10.0)[0]
+    h = fd.bistatic_doppler(x, g)
+    speed = np.hypot(x[2], x[3])
+    assert speed_lower_bound(h, 1.0, n_sigma=0.0) <= speed * (1 + 1e-12)
+    # noise up to n_sigma standard deviations cannot push the bound above the truth
+    sigma = rng.uniform(0.1, 5.0, h.shape)
+    noise = rng.uniform(-1, 1, h.shape) * 5.0 * sigma
+    assert speed_lower_bound(h + noise, sigma, n_sigma=5.0) <= speed * (1 + 1e-12)
+
+
+def test_speed_bound_is_attained_beyond_the_sensors() -> None:
+    # On the baseline extension both unit vectors align, |h| = 2 |v|: the bound is tight.
+    g = fd.paper_geometry("a")
+    x = np.array([-5e3, 0.0, -80.0, 0.0])
+    h = fd.bistatic_doppler(x, g)
+    assert abs(h[0]) == np.float64(160.0) or abs(abs(h[0]) - 160.0) < 1e-9
+    assert speed_lower_bound(h, 1.0, n_sigma=0.0) == np.max(np.abs(h)) / 2
+    # the paper's bound (max |Z|) would exclude the true speed 80 m/s here
+    assert np.max(np.abs(h)) > 80.0
