@@ -34,12 +34,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.geometry import Geometry
-from fgdoppler.models.doppler import (
-    BatchTimes,
-    _batch,
-    bistatic_doppler,
-    bistatic_doppler_and_jacobian,
-)
+from fgdoppler.models.doppler import BatchTimes, _batch
+from fgdoppler.models.measurement import DopplerModel, MeasurementModel
 from fgdoppler.models.motion import ConstantVelocity
 
 __all__ = [
@@ -47,6 +43,7 @@ __all__ = [
     "batch_factor",
     "doppler_factor",
     "linear_doppler_factor",
+    "measurement_factor",
     "motion_factor",
     "noise_model",
     "prior_factor",
@@ -91,20 +88,46 @@ def _checked(jac: FloatArray, rows: int, cols: int, what: str) -> FloatArray:
     return out
 
 
-def _doppler_error(
-    geometry: Geometry,
-    pairs: NDArray[np.intp],
+def _measurement_error(
+    model: MeasurementModel,
+    channels: NDArray[np.intp],
     z: FloatArray,
     this: gtsam.CustomFactor,
     values: gtsam.Values,
     jacobians: list[FloatArray] | None,
 ) -> FloatArray:
-    x = values.atVector(this.keys()[0])
+    x = np.broadcast_to(values.atVector(this.keys()[0]), (channels.size, 4))
     if jacobians is None:
-        return bistatic_doppler(x, geometry)[pairs] - z
-    h, H = bistatic_doppler_and_jacobian(x, geometry)
-    jacobians[0] = _checked(H[pairs], pairs.size, 4, "doppler_factor")
-    return h[pairs] - z
+        return model.predict(x, channels) - z
+    h, H = model.predict_and_jacobian(x, channels)
+    jacobians[0] = _checked(H, channels.size, 4, "measurement factor")
+    return h - z
+
+
+def measurement_factor(
+    key: int,
+    model: MeasurementModel,
+    channels: ArrayLike,
+    values: ArrayLike,
+    sigma: ArrayLike,
+    *,
+    huber_k: float | None = None,
+) -> gtsam.CustomFactor:
+    """All scalar measurements of any :class:`~fgdoppler.models.measurement.MeasurementModel` at one state.
+
+    Error ``h(x)[channels] - z``; one Python callback per state.
+    """
+    c = np.asarray(channels, dtype=np.intp).reshape(-1)
+    z = np.asarray(values, dtype=float).reshape(-1)
+    if c.size == 0 or c.size != z.size:
+        raise ValueError(f"need one or more measurements with matching channels, got {c.size} and {z.size}")
+    if c.max() >= model.n_channels or c.min() < 0:
+        raise ValueError(f"pair index out of range for a model of {model.n_channels} channel(s)")
+    return gtsam.CustomFactor(
+        noise_model(np.broadcast_to(sigma, z.shape), huber_k),
+        [int(key)],
+        partial(_measurement_error, model, c, z.copy()),
+    )
 
 
 def doppler_factor(
@@ -130,17 +153,7 @@ def doppler_factor(
     huber_k
         Optional Huber threshold (robust to outliers).
     """
-    p = np.asarray(pairs, dtype=np.intp).reshape(-1)
-    z = np.asarray(doppler, dtype=float).reshape(-1)
-    if p.size == 0 or p.size != z.size:
-        raise ValueError(f"need one or more measurements with matching pairs, got {p.size} and {z.size}")
-    if p.max() >= geometry.n_pairs or p.min() < 0:
-        raise ValueError(f"pair index out of range for a geometry of {geometry.n_pairs} pairs")
-    return gtsam.CustomFactor(
-        noise_model(np.broadcast_to(sigma, z.shape), huber_k),
-        [int(key)],
-        partial(_doppler_error, geometry, p, z.copy()),
-    )
+    return measurement_factor(key, DopplerModel(geometry=geometry), pairs, doppler, sigma, huber_k=huber_k)
 
 
 def motion_factor(key1: int, key2: int, dt: float, model: ConstantVelocity) -> gtsam.LinearContainerFactor:

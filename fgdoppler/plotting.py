@@ -130,8 +130,7 @@ def plot_observability_map(m: ObservabilityMap, ax: Axes | None = None, *, title
 
     ax = _axes(ax)
     O = np.ma.masked_less_equal(m.O, O_FLOOR)
-    cmap = plt.get_cmap("viridis").copy()
-    cmap.set_bad("black")
+    cmap = plt.get_cmap("viridis").with_extremes(bad="black")
     mesh = ax.pcolormesh(m.x * 1e-3, m.heading_deg, O.T, cmap=cmap, shading="nearest")
     ax.figure.colorbar(mesh, ax=ax, label="O = log10 det(J'J)")
     if np.any(m.unobservable):

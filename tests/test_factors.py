@@ -9,6 +9,7 @@ import pytest
 import fgdoppler as fd
 from fgdoppler import factors
 from fgdoppler.factors import X
+from fgdoppler.models.measurement import DopplerModel
 from tests.conftest import random_states
 
 
@@ -42,7 +43,7 @@ def test_error_only_call_computes_no_jacobian(monkeypatch: pytest.MonkeyPatch) -
     def boom(*args: object, **kwargs: object) -> None:
         raise AssertionError("Jacobian computed in an error-only call")
 
-    monkeypatch.setattr(factors, "bistatic_doppler_and_jacobian", boom)
+    monkeypatch.setattr(DopplerModel, "predict_and_jacobian", boom)
     assert np.isfinite(f.error(v))
     real_batch = factors._batch
 
@@ -53,6 +54,18 @@ def test_error_only_call_computes_no_jacobian(monkeypatch: pytest.MonkeyPatch) -
 
     monkeypatch.setattr(factors, "_batch", batch_no_jac)
     assert np.isfinite(bf.error(v))
+    # and the linearising call does use the Jacobian path
+    monkeypatch.undo()
+    calls = {"n": 0}
+    real = DopplerModel.predict_and_jacobian
+
+    def counting(self: DopplerModel, *a: object, **k: object):
+        calls["n"] += 1
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(DopplerModel, "predict_and_jacobian", counting)
+    f.linearize(v)
+    assert calls["n"] == 1
 
 
 def test_batch_factor_equals_g_and_J(rng: np.random.Generator, paper_geom: fd.Geometry) -> None:

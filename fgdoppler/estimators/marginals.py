@@ -24,7 +24,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["MarginalResult", "marginal_covariances"]
+__all__ = ["MarginalResult", "chain_solve", "marginal_covariances"]
 
 Status = Literal["ok", "indeterminate"]
 
@@ -94,3 +94,64 @@ def _short(exc: BaseException) -> str:
     if "indetermin" in str(exc).lower():
         return "indeterminate linear system (singular information matrix): " + first
     return first
+
+
+def chain_solve(
+    gfg: gtsam.GaussianFactorGraph, keys: Sequence[int], *, covariances: bool = True
+) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    r"""Solve a chain-structured linear graph and read every marginal covariance, in O(N).
+
+    The graph is eliminated by QR in the order of ``keys`` (no fill-in on a
+    chain), giving conditionals
+    :math:`\mathbf R_k\mathbf x_k + \mathbf S_k\mathbf x_{k+1} = \mathbf d_k`.
+    Marginals follow from the backward recursion
+
+    .. math:: \boldsymbol\Sigma_k = \mathbf R_k^{-1}\mathbf R_k^{-\top}
+              + \mathbf T_k\boldsymbol\Sigma_{k+1}\mathbf T_k^\top,\qquad
+              \mathbf T_k = \mathbf R_k^{-1}\mathbf S_k,
+
+    which needs only triangular solves (no Cholesky, so it survives the
+    conditioning that makes ``gtsam.Marginals`` give up).
+
+    Returns
+    -------
+    (solution, covariances)
+        ``(n, d)`` and ``(n, d, d)`` (``None`` unless requested).
+
+    Raises
+    ------
+    RuntimeError
+        If elimination fails or a diagonal block of R is singular.
+    ValueError
+        If the graph is not a chain in the order of ``keys``.
+    """
+    from scipy.linalg import solve_triangular
+
+    ordering = gtsam.Ordering()
+    for k in keys:
+        ordering.push_back(int(k))
+    bn = gfg.eliminateSequential(ordering, gtsam.EliminateQR)
+    vv = bn.optimize()
+    sol = np.array([vv.at(int(k)) for k in keys])
+    if not covariances:
+        return sol, None
+    n = len(keys)
+    d = sol.shape[1]
+    covs = np.empty((n, d, d))
+    eye = np.eye(d)
+    for i in range(n - 1, -1, -1):
+        c = bn.at(i)
+        ck = list(c.keys())
+        R = np.asarray(c.R())
+        if np.any(np.abs(np.diag(R)) <= 1e-300 * max(1.0, np.abs(R).max())):
+            raise RuntimeError(f"singular conditional for key {ck[0]}: indeterminate system")
+        Ri = solve_triangular(R, eye)
+        covs[i] = Ri @ Ri.T
+        if i < n - 1:
+            if ck[1:] != [int(keys[i + 1])]:
+                raise ValueError("chain_solve needs a chain: each state may depend only on the next one")
+            T = Ri @ np.asarray(c.S())
+            covs[i] += T @ covs[i + 1] @ T.T
+        elif len(ck) > 1:
+            raise ValueError("chain_solve: the last key must have no parents")
+    return sol, covs

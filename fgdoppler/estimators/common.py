@@ -1,0 +1,159 @@
+"""Settings and helpers shared by the trackers (EKF, iSAM2, fixed-lag, batch).
+
+Every tracker starts from an :class:`~fgdoppler.estimators.initiation.Initiation`
+of the same recording.  The *window* is every measurement at or before the
+initiation's ``t_end``; the *stream* is everything after it.  The EKF starts
+from the initiation's end state and covariance and processes the stream; the
+graph-based estimators re-use the window's measurements in their graphs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2
+
+from fgdoppler.estimators.grid import GridSpec
+from fgdoppler.measurements import Measurements
+from fgdoppler.models.measurement import MeasurementModel
+from fgdoppler.models.motion import ConstantVelocity
+
+__all__ = ["Scans", "TrackerSettings", "huber_weights", "region_prior", "split_window"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackerSettings:
+    """Settings shared by all trackers.
+
+    Parameters
+    ----------
+    motion
+        NCV model (the same in the EKF and every graph; full-rank Q).
+    gate_probability
+        NIS gate: a measurement whose normalised innovation exceeds the
+        χ²₁ quantile at this probability is rejected (and reported).
+        ``None`` disables gating.  Used by the EKF, iSAM2 and the fixed-lag
+        smoother (against the predicted state); the batch smoother has no
+        prediction and relies on ``huber_k``.
+    huber_k
+        If set, graph estimators use a Huber robust loss with this threshold
+        (whitened units) on every Doppler residual.
+    weak_prior
+        Include the initiation's weak search-region prior on the first
+        state in the graph estimators (as the LM initiation does).
+    grid
+        The search region the weak prior is built from.
+    relinearize_position, relinearize_velocity
+        iSAM2: a Doppler factor is relinearised when its state has moved
+        more than this (m, m/s) from the linearisation point.  With the
+        Doppler curvature of these geometries (|∂²h/∂p²| ≲ v/r² ≈ 3e-5 s⁻¹ m⁻¹
+        at 2 km) a 10 m move changes the linearisation by ~1e-3 m/s, far
+        below σ.
+    relinearize_window
+        iSAM2: how many of the most recent scans are checked for
+        relinearisation at every update (older states barely move).  All
+        are relinearised to convergence at the end.
+    lag
+        Fixed-lag smoother lag in seconds.
+    max_iterations
+        Cap for batch LM iterations and iSAM2's final relinearisation passes.
+    smoothed_covariances
+        Compute per-time marginal covariances of smoothed trajectories.
+    """
+
+    motion: ConstantVelocity = field(default_factory=lambda: ConstantVelocity(q=1e-3))
+    gate_probability: float | None = 0.9999
+    huber_k: float | None = None
+    weak_prior: bool = True
+    grid: GridSpec = field(default_factory=GridSpec)
+    relinearize_position: float = 10.0
+    relinearize_velocity: float = 0.1
+    relinearize_window: int = 20
+    lag: float = 5.0
+    max_iterations: int = 100
+    smoothed_covariances: bool = True
+
+    def __post_init__(self) -> None:
+        if self.gate_probability is not None and not 0 < self.gate_probability < 1:
+            raise ValueError(f"gate_probability must be in (0, 1) or None, got {self.gate_probability}")
+        if self.huber_k is not None and not self.huber_k > 0:
+            raise ValueError(f"huber_k must be > 0, got {self.huber_k}")
+        if not (self.relinearize_position > 0 and self.relinearize_velocity > 0):
+            raise ValueError("relinearisation thresholds must be > 0")
+        if self.relinearize_window < 1 or self.max_iterations < 1:
+            raise ValueError("relinearize_window and max_iterations must be >= 1")
+        if not self.lag > 0:
+            raise ValueError(f"lag must be > 0 s, got {self.lag}")
+
+    @property
+    def gate(self) -> float:
+        """NIS threshold (``inf`` when gating is off)."""
+        return float(chi2.ppf(self.gate_probability, 1)) if self.gate_probability is not None else np.inf
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        d = dataclasses.asdict(self)
+        d["motion"] = {"q": self.motion.q, "form": self.motion.form}
+        return d
+
+
+@dataclass(frozen=True, kw_only=True)
+class Scans:
+    """Measurements grouped by distinct time: ``times (n,)`` and per scan the row slice."""
+
+    times: FloatArray
+    bounds: NDArray[np.intp]
+    meas: Measurements
+
+    @classmethod
+    def of(cls, meas: Measurements) -> Scans:
+        times, inv = meas.scan_index()
+        return cls(times=times, bounds=np.searchsorted(inv, np.arange(times.size + 1)).astype(np.intp), meas=meas)
+
+    def __len__(self) -> int:
+        return int(self.times.size)
+
+    def rows(self, k: int) -> slice:
+        """Rows of scan ``k`` in ``meas``."""
+        return slice(int(self.bounds[k]), int(self.bounds[k + 1]))
+
+    @property
+    def scan_of(self) -> NDArray[np.intp]:
+        """Scan index of every measurement row."""
+        return np.repeat(np.arange(len(self)), np.diff(self.bounds))
+
+
+def split_window(meas: Measurements, t_end: float) -> tuple[Measurements, Measurements]:
+    """(window, stream): measurements at or before ``t_end`` and after it."""
+    return meas.subset(meas.time <= t_end), meas.subset(meas.time > t_end)
+
+
+def region_prior(grid: GridSpec) -> tuple[FloatArray, FloatArray]:
+    """Mean and covariance of the weak prior spanning the search region.
+
+    Centre of the position box and zero velocity; standard deviations equal
+    to the box half-widths (at least 1 m) and ``speed_max`` per velocity axis.
+    """
+    centre = np.array([(grid.x[0] + grid.x[1]) / 2, (grid.y[0] + grid.y[1]) / 2, 0.0, 0.0])
+    half = np.array([(grid.x[1] - grid.x[0]) / 2, (grid.y[1] - grid.y[0]) / 2, grid.speed_max, grid.speed_max])
+    return centre, np.diag(np.maximum(half, 1.0) ** 2)
+
+
+def huber_weights(whitened: FloatArray, k: float | None) -> FloatArray:
+    r"""IRLS weights of the Huber loss: :math:`w = \min(1, k/|r|)` for whitened residuals ``r``."""
+    r = np.abs(np.asarray(whitened, dtype=float))
+    if k is None:
+        return np.ones_like(r)
+    return np.minimum(1.0, k / np.maximum(r, 1e-300))
+
+
+def check_model(model: MeasurementModel, meas: Measurements) -> None:
+    """Raise if a measurement's channel is outside the model."""
+    if len(meas) and int(meas.pair.max()) >= model.n_channels:
+        raise ValueError(f"pair index {int(meas.pair.max())} outside a model of {model.n_channels} channel(s)")

@@ -1,0 +1,76 @@
+r"""Scalar measurement models for the estimators.
+
+Every estimator (EKF, iSAM2, fixed-lag, batch) consumes a
+:class:`MeasurementModel`: for states ``(n, 4)`` and one channel index per
+state (the bistatic pair for Doppler), it returns the predicted measurement
+``(n,)`` and, on request, its Jacobian ``(n, 4)``.  :class:`DopplerModel` is
+the bistatic Doppler of :mod:`fgdoppler.models.doppler`; other models (e.g. a
+linear-Gaussian surrogate in tests) plug into the same machinery.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fgdoppler.geometry import Geometry
+from fgdoppler.models.doppler import _as_states, _terms
+
+__all__ = ["DopplerModel", "MeasurementModel"]
+
+FloatArray = NDArray[np.float64]
+
+
+@runtime_checkable
+class MeasurementModel(Protocol):
+    """A scalar measurement per (state, channel)."""
+
+    @property
+    def n_channels(self) -> int:
+        """Number of channels (valid channel indices are ``0 .. n_channels - 1``)."""
+        ...
+
+    def predict(self, states: ArrayLike, channels: ArrayLike) -> FloatArray:
+        """Predicted measurements ``(n,)`` for states ``(n, 4)`` and channels ``(n,)``."""
+        ...
+
+    def predict_and_jacobian(self, states: ArrayLike, channels: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Predictions ``(n,)`` and Jacobians ``(n, 4)``."""
+        ...
+
+
+@dataclass(frozen=True, kw_only=True)
+class DopplerModel:
+    """Bistatic Doppler of pair ``channels[j]`` at ``states[j]`` (one pair per row, no waste)."""
+
+    geometry: Geometry
+
+    @property
+    def n_channels(self) -> int:
+        """Number of pairs."""
+        return self.geometry.n_pairs
+
+    def _check(self, states: ArrayLike, channels: ArrayLike) -> tuple[FloatArray, NDArray[np.intp]]:
+        x = _as_states(states).reshape(-1, 4)
+        c = np.asarray(channels, dtype=np.intp).reshape(-1)
+        if c.shape[0] != x.shape[0]:
+            raise ValueError(f"{x.shape[0]} states but {c.shape[0]} channels")
+        if c.size and (c.min() < 0 or c.max() >= self.geometry.n_pairs):
+            raise ValueError(f"pair index out of range for a geometry of {self.geometry.n_pairs} pair(s)")
+        return x, c
+
+    def predict(self, states: ArrayLike, channels: ArrayLike) -> FloatArray:
+        """Doppler ``(n,)``; raises :class:`ValueError` at a sensor position."""
+        x, c = self._check(states, channels)
+        h, _, _, _ = _terms(x[:, :2], x[:, 2:], self.geometry.tx[c], self.geometry.rx[c], jacobian=False)
+        return h
+
+    def predict_and_jacobian(self, states: ArrayLike, channels: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Doppler ``(n,)`` and Jacobian ``(n, 4)``."""
+        x, c = self._check(states, channels)
+        h, dp, dv, _ = _terms(x[:, :2], x[:, 2:], self.geometry.tx[c], self.geometry.rx[c], jacobian=True)
+        assert dp is not None and dv is not None
+        return h, np.concatenate([dp, dv], axis=-1)
