@@ -102,6 +102,7 @@ class _Problem:
         if self.prior is not None:
             diag[0] += np.sum(self.prior[0] ** 2, axis=0)
         damp = np.sqrt(lam * np.maximum(diag, 1e-12))
+        self._damp = damp
         gfg = gtsam.GaussianFactorGraph()
         bounds = self.scans.bounds
         for k in range(self.n):
@@ -124,6 +125,14 @@ class _Problem:
             gfg.add(gtsam.JacobianFactor(X(k - 1), A_prev, X(k), A_next, bb,
                                          gtsam.noiseModel.Unit.Create(bb.size)))
         return gfg
+
+    def model_cost(self, gfg: gtsam.GaussianFactorGraph, dx: FloatArray, lam: float) -> float:
+        """Cost predicted by the undamped linear model for step ``dx``."""
+        vv = gtsam.VectorValues()
+        for k in range(self.n):
+            vv.insert(X(k), dx[k])
+        damped = 2.0 * gfg.error(vv)
+        return damped - float(np.sum(self._damp**2 * dx**2))
 
     def solve(self, gfg: gtsam.GaussianFactorGraph, covariances: bool = False) -> tuple[FloatArray, FloatArray | None]:
         return chain_solve(gfg, [X(k) for k in range(self.n)], covariances=covariances)
@@ -164,31 +173,42 @@ def solve_batch(
         raise ValueError(f"{x.shape[0]} initial states for {prob.n} measurement times")
     warnings: list[str] = []
     cost = prob.cost(x)
-    lam = 1e-4
+    # Nielsen's damping update driven by the gain ratio rho = actual / predicted decrease.
+    lam, nu = 1e-6, 2.0
     converged = False
     it = 0
     for it in range(1, settings.max_iterations + 1):
         try:
-            dx, _ = prob.solve(prob.system(x, lam))
+            gfg = prob.system(x, lam)
+            dx, _ = prob.solve(gfg)
         except RuntimeError as exc:
-            lam *= 10.0
+            lam *= nu
+            nu *= 2.0
             warnings.append(f"iteration {it}: linear solve failed ({str(exc).strip().splitlines()[0]}); damping raised")
             continue
+        predicted = cost - prob.model_cost(gfg, dx, lam)
         try:
             new_cost = prob.cost(x + dx)
         except ValueError:  # stepped onto a sensor
             new_cost = np.inf
-        if new_cost <= cost:
-            rel = (cost - new_cost) / max(cost, 1e-300)
+        rho = (cost - new_cost) / predicted if predicted > 0 else -1.0
+        if rho > 0:
             x = x + dx
+            decrease = cost - new_cost
             cost = new_cost
-            lam = max(lam / 10.0, 1e-12)
-            if rel < 1e-12 or np.max(np.abs(dx)) < 1e-9:
+            lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = 2.0
+            # converged when the model predicts (and we got) a negligible decrease
+            if predicted <= 1e-12 * max(cost, 1.0) or decrease <= 1e-13 * max(cost, 1.0):
                 converged = True
                 break
         else:
-            lam *= 10.0
-            if lam > 1e12:
+            if predicted <= 1e-12 * max(cost, 1.0):
+                converged = True  # at the optimum up to round-off
+                break
+            lam *= nu
+            nu *= 2.0
+            if lam > 1e16:
                 warnings.append("LM stopped: no step reduces the cost (damping exhausted)")
                 converged = True
                 break

@@ -1,0 +1,279 @@
+r"""Fixed-lag smoother: ``gtsam.IncrementalFixedLagSmoother`` over the tracking graph.
+
+States older than ``lag`` seconds are marginalised out, so the graph (and
+every ``CustomFactor`` callback's copy of ``Values``) stays bounded and the
+cost per scan is flat.  After each scan the estimate and marginal covariance
+of the newest state (``"filtered"``) are recorded, together with the
+estimate of the oldest state still in the window — the state about ``lag``
+seconds back, as smoothed by everything up to now (``"lagged"``, the
+fixed-lag smoothed track).  States that leave the window before the end are
+reported from the last scan at which they were in it; at the end the whole
+remaining window is reported.
+
+Known marginalisation failures of GTSAM's fixed-lag smoothers (an
+"indeterminant linear system" during marginalisation, or a key that is
+requested after it was marginalised) surface as :class:`RuntimeError`.  They
+are caught: the smoother is rebuilt from the last good estimate and
+covariance of the newest state as a Gaussian prior, the event is reported in
+``warnings``, and processing continues.
+"""
+
+from __future__ import annotations
+
+import time
+
+import gtsam
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fgdoppler.estimators.common import Scans, TrackerSettings, check_model, region_prior, split_window
+from fgdoppler.estimators.initiation import Initiation
+from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
+from fgdoppler.measurements import Measurements
+from fgdoppler.models.measurement import MeasurementModel
+
+__all__ = ["FixedLagTracker", "run_fixed_lag"]
+
+FloatArray = NDArray[np.float64]
+
+
+def _params() -> gtsam.ISAM2Params:
+    p = gtsam.ISAM2Params()
+    p.setFactorization("QR")
+    p.setRelinearizeThreshold(1e-6)
+    p.relinearizeSkip = 1
+    return p
+
+
+class FixedLagTracker:
+    """Streaming fixed-lag smoother.
+
+    Parameters
+    ----------
+    model
+        Measurement model.
+    settings
+        Lag, motion model, gate, Huber threshold.
+    prior
+        Optional ``(mean, covariance)`` on the first state.
+    """
+
+    def __init__(self, model: MeasurementModel, settings: TrackerSettings | None = None,
+                 prior: tuple[ArrayLike, ArrayLike] | None = None) -> None:
+        self.model = model
+        self.settings = settings or TrackerSettings()
+        self.smoother = gtsam.IncrementalFixedLagSmoother(self.settings.lag, _params())
+        self.prior = prior
+        self.times: list[float] = []
+        self.nis: list[tuple[float, int, float, bool]] = []
+        self.warnings: list[tuple[float, str]] = []
+        self.lagged: dict[int, tuple[FloatArray, FloatArray | None]] = {}
+        self._first_live = 0
+        self._last: tuple[FloatArray, FloatArray | None] | None = None
+        self._gate = self.settings.gate
+        self.failures = 0
+
+    def _factors(self, k: int, t: float, c: NDArray[np.intp], z: FloatArray, s: FloatArray,
+                 graph: gtsam.NonlinearFactorGraph) -> None:
+        if c.size:
+            graph.add(measurement_factor(X(k), self.model, c, z, s, huber_k=self.settings.huber_k))
+        if k > self._first_live:
+            graph.add(motion_factor(X(k - 1), X(k), t - self.times[k - 1], self.settings.motion))
+
+    def add_scans(self, times: ArrayLike, channels: list[ArrayLike], z: list[ArrayLike], sigma: list[ArrayLike],
+                  guesses: ArrayLike | None = None, *, gate: bool = True) -> tuple[FloatArray, FloatArray | None]:
+        """Add one or more scans in one smoother update; returns the newest ``(x, P)``.
+
+        Raises
+        ------
+        ValueError
+            If a scan is not after the previous one (out of order).
+        """
+        ts = np.asarray(times, dtype=float).reshape(-1)
+        g = None if guesses is None else np.asarray(guesses, dtype=float).reshape(-1, 4)
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        stamps: dict[int, float] = {}
+        m = self.settings.motion
+        for j, t in enumerate(ts):
+            t = float(t)
+            if self.times and not t > self.times[-1]:
+                raise ValueError(f"scan at t = {t} is not after the previous scan at t = {self.times[-1]}: out of order")
+            k = len(self.times)
+            cc = np.asarray(channels[j], dtype=np.intp).reshape(-1)
+            zz = np.asarray(z[j], dtype=float).reshape(-1)
+            ss = np.broadcast_to(np.asarray(sigma[j], dtype=float), zz.shape).copy()
+            if g is not None:
+                x_pred = g[j]
+            elif self._last is not None:
+                x_pred = m.propagate(self._last[0], t - self.times[-1])
+            else:
+                raise ValueError("the first scan needs an initial guess")
+            if gate and self._last is not None and self._last[1] is not None and cc.size:
+                dt = t - self.times[-1]
+                P_pred = m.F(dt) @ self._last[1] @ m.F(dt).T + m.Q(dt)
+                h, H = self.model.predict_and_jacobian(np.broadcast_to(x_pred, (cc.size, 4)), cc)
+                nis = (zz - h) ** 2 / (np.einsum("ij,jk,ik->i", H, P_pred, H) + ss**2)
+                keep = nis <= self._gate
+                for ch, v, ok in zip(cc, nis, keep, strict=True):
+                    self.nis.append((t, int(ch), float(v), bool(ok)))
+                    if not ok:
+                        self.warnings.append((t, f"pair {ch}: NIS {v:.1f} > gate {self._gate:.1f}, measurement rejected"))
+                cc, zz, ss = cc[keep], zz[keep], ss[keep]
+            self.times.append(t)
+            if k == 0 and self.prior is not None:
+                graph.add(prior_factor(X(0), *self.prior))
+            self._factors(k, t, cc, zz, ss, graph)
+            values.insert(X(k), np.asarray(x_pred, dtype=float))
+            stamps[X(k)] = t
+            self._last = (np.asarray(x_pred, dtype=float), None if self._last is None else self._last[1])
+        return self._update(graph, values, stamps)
+
+    def _update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
+                stamps: dict[int, float]) -> tuple[FloatArray, FloatArray | None]:
+        k = len(self.times) - 1
+        t = self.times[-1]
+        before = self._live_estimates()
+        try:
+            self.smoother.update(graph, values, stamps)
+            est = self.smoother.calculateEstimate()
+            x = np.asarray(est.atVector(X(k)), dtype=float)
+            P = np.asarray(self.smoother.marginalCovariance(X(k)), dtype=float)
+            if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
+                raise RuntimeError("non-finite estimate")
+        except RuntimeError as exc:
+            self.failures += 1
+            msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            self.warnings.append((t, f"fixed-lag update failed ({msg}); smoother rebuilt from the last good estimate"))
+            return self._rebuild(k, t, graph, values, stamps, before)
+        self._record(est)
+        self._last = (x, P)
+        return x, P
+
+    def finish(self, *, tol: float = 1e-10) -> None:
+        """Iterate the smoother (empty updates: relinearise + Gauss–Newton) until the window converges.
+
+        iSAM2 takes one Gauss–Newton step per update, so the last window is
+        not at its optimum after the last scan; this brings it there (with a
+        lag longer than the track, to the batch solution).
+        """
+        if not self.times:
+            return
+        prev = self._live_estimates()
+        for _ in range(self.settings.max_iterations):
+            try:
+                self.smoother.update()
+            except RuntimeError as exc:
+                self.warnings.append((self.times[-1], f"final fixed-lag iteration failed: {str(exc).strip().splitlines()[0]}"))
+                return
+            cur = self._live_estimates()
+            diff = max((float(np.max(np.abs(cur[j] - prev[j]) / (1.0 + np.abs(prev[j])))) for j in cur if j in prev),
+                       default=0.0)
+            prev = cur
+            if diff < tol:
+                break
+        else:
+            self.warnings.append((self.times[-1], "final fixed-lag iterations did not converge"))
+        self._record(self.smoother.calculateEstimate())
+
+    def _live_estimates(self) -> dict[int, FloatArray]:
+        try:
+            est = self.smoother.calculateEstimate()
+        except RuntimeError:
+            return {}
+        return {j: np.asarray(est.atVector(X(j))) for j in range(self._first_live, len(self.times)) if est.exists(X(j))}
+
+    def _record(self, est: gtsam.Values) -> None:
+        # Every state still in the window is reported as of now; a state reported earlier and
+        # since marginalised keeps its last in-window estimate (``lag`` seconds back at most).
+        live = [j for j in range(self._first_live, len(self.times)) if est.exists(X(j))]
+        for j in live:
+            try:
+                P = np.asarray(self.smoother.marginalCovariance(X(j)), dtype=float)
+            except RuntimeError:
+                P = None
+            self.lagged[j] = (np.asarray(est.atVector(X(j)), dtype=float), P)
+        if live:
+            self._first_live = live[0]
+
+    def _rebuild(self, k: int, t: float, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
+                 stamps: dict[int, float], before: dict[int, FloatArray]) -> tuple[FloatArray, FloatArray | None]:
+        # Restart from the newest good estimate as a prior; the current scan's measurement
+        # factors are re-added on top of it (motion factors to dead keys are dropped).
+        if self._last is None or self._last[1] is None:
+            raise RuntimeError(f"fixed-lag smoother failed at t = {t} before any good estimate") from None
+        x_prev, P_prev = self._last
+        t_prev = self.times[-2] if len(self.times) > 1 else t
+        m = self.settings.motion
+        dt = t - t_prev
+        x0 = m.propagate(x_prev, dt) if dt > 0 else x_prev
+        P0 = m.F(dt) @ P_prev @ m.F(dt).T + m.Q(dt) if dt > 0 else P_prev
+        self.smoother = gtsam.IncrementalFixedLagSmoother(self.settings.lag, _params())
+        self._first_live = k
+        g2 = gtsam.NonlinearFactorGraph()
+        g2.add(prior_factor(X(k), x0, 0.5 * (P0 + P0.T)))
+        for i in range(graph.size()):
+            f = graph.at(i)
+            if all(int(key) == X(k) for key in f.keys()) and not isinstance(f, gtsam.PriorFactorVector):
+                g2.add(f)
+        v2 = gtsam.Values()
+        v2.insert(X(k), x0)
+        self.smoother.update(g2, v2, {X(k): t})
+        est = self.smoother.calculateEstimate()
+        x = np.asarray(est.atVector(X(k)), dtype=float)
+        P = np.asarray(self.smoother.marginalCovariance(X(k)), dtype=float)
+        self._record(est)
+        self._last = (x, P)
+        return x, P
+
+
+def run_fixed_lag(
+    measurements: Measurements,
+    model: MeasurementModel,
+    init: Initiation,
+    settings: TrackerSettings | None = None,
+) -> TrackResult:
+    """Fixed-lag smoothing of a recording: the initiation window in one update, then one update per scan.
+
+    ``filtered``: newest state after each update (from the window's end on).
+    ``lagged``: every state as estimated when it was ``lag`` seconds old (or
+    at the end of the recording); this is the primary output.
+    """
+    settings = settings or TrackerSettings()
+    check_model(model, measurements)
+    t_begin = time.perf_counter()
+    prior = region_prior(settings.grid) if settings.weak_prior else None
+    tr = FixedLagTracker(model, settings, prior)
+    window, stream = split_window(measurements, init.t_end)
+    times, states, covs = [], [], []
+    ws = Scans.of(window)
+    if len(ws):
+        rows = [ws.rows(k) for k in range(len(ws))]
+        x, P = tr.add_scans(ws.times, [window.pair[r] for r in rows], [window.doppler[r] for r in rows],
+                            [window.sigma[r] for r in rows],
+                            settings.motion.propagate(init.x_start, ws.times - init.t_start), gate=False)
+        times.append(float(ws.times[-1]))
+        states.append(x)
+        covs.append(P)
+    ss = Scans.of(stream)
+    for k in range(len(ss)):
+        sl = ss.rows(k)
+        x, P = tr.add_scans([ss.times[k]], [stream.pair[sl]], [stream.doppler[sl]], [stream.sigma[sl]])
+        times.append(float(ss.times[k]))
+        states.append(x)
+        covs.append(P)
+    tr.finish()
+    idx = sorted(tr.lagged)
+    lagged = Estimates.from_lists([tr.times[j] for j in idx], [tr.lagged[j][0] for j in idx],
+                                  [tr.lagged[j][1] for j in idx])
+    s = settings.to_dict()
+    return TrackResult(
+        estimator="fixed-lag",
+        settings=s,
+        estimates={"lagged": lagged, "filtered": Estimates.from_lists(times, states, covs)},
+        primary="lagged",
+        nis=np.array(tr.nis, dtype=float).reshape(-1, 4),
+        warnings=tuple(tr.warnings),
+        wall_time=time.perf_counter() - t_begin,
+    )
