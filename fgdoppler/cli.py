@@ -359,7 +359,43 @@ def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: A
 
 
 def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, geom: Any, truth: Any) -> int:
-    raise CLIError(f"estimator {args.estimator!r} is not available yet")
+    from fgdoppler.estimators import run_estimator
+    from fgdoppler.estimators.common import TrackerSettings
+    from fgdoppler.models.measurement import DopplerModel
+    from fgdoppler.models.motion import ConstantVelocity
+
+    kw: dict[str, Any] = {"lag": args.lag, "weak_prior": not args.no_weak_prior}
+    if args.q is not None:
+        kw["motion"] = ConstantVelocity(q=args.q)
+    settings = TrackerSettings(**kw)
+    result = run_estimator(args.estimator, meas, DopplerModel(geometry=geom), init, settings)
+    if args.out is not None:
+        result.to_csv(args.out)
+        result.to_json(args.out.with_suffix(".json"))
+    if args.json:
+        _emit_json(result.to_dict(all_estimates=False))
+    else:
+        e = result.main
+        print(f"{args.estimator}: {len(e)} states ({result.primary}), t = {e.times[0]:g}..{e.times[-1]:g} s, "
+              f"{result.wall_time * 1e3:.0f} ms; {len(result.warnings)} warning(s)")
+        print(f"  last state: x = {e.states[-1, 0]:.1f} m, y = {e.states[-1, 1]:.1f} m, "
+              f"vx = {e.states[-1, 2]:.2f} m/s, vy = {e.states[-1, 3]:.2f} m/s")
+        for t, w in result.warnings[:10]:
+            print(f"  warning at t = {t:g}: {w}")
+        if truth is not None:
+            err = e.states - truth.at(e.times)
+            rmse = float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1))))
+            print(f"  position RMSE vs truth: {rmse:.1f} m; final error {np.hypot(*err[-1, :2]):.1f} m")
+        if args.out is not None:
+            print(f"  wrote {args.out} and {args.out.with_suffix('.json')}")
+    if args.plot:
+        from fgdoppler import plotting
+
+        e = result.main
+        ax = plotting.plot_track(e.times, e.states, geom, covariances=e.covariances, cov_ok=e.cov_ok,
+                                 truth=None if truth is None else truth.states, label=f"{args.estimator} ({result.primary})")
+        plotting.save(ax, args.plot)
+    return 0
 
 
 # -- entry point ----------------------------------------------------------------

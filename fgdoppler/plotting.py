@@ -214,3 +214,47 @@ def plot_landscape(
     ax.set_ylabel("heading (deg)")
     ax.legend(fontsize="small", loc="upper right")
     return ax
+
+
+def covariance_ellipse(mean: ArrayLike, cov: ArrayLike, n_sigma: float = 2.0, n: int = 64) -> np.ndarray:
+    """Points ``(n, 2)`` of the ``n_sigma`` ellipse of a 2-D Gaussian."""
+    w, V = np.linalg.eigh(np.asarray(cov, dtype=float)[:2, :2])
+    th = np.linspace(0, 2 * np.pi, n)
+    circle = np.stack([np.cos(th), np.sin(th)], axis=1)
+    return np.asarray(mean, dtype=float)[:2] + n_sigma * (circle * np.sqrt(np.clip(w, 0, None))) @ V.T
+
+
+def plot_track(
+    times: ArrayLike,
+    states: ArrayLike,
+    geometry: Geometry,
+    ax: Axes | None = None,
+    *,
+    covariances: ArrayLike | None = None,
+    cov_ok: ArrayLike | None = None,
+    truth: ArrayLike | None = None,
+    label: str = "estimate",
+    n_ellipses: int = 12,
+) -> Axes:
+    """Estimated track with 2σ position ellipses, the truth (if given) and the sensors (km)."""
+    ax = plot_geometry(geometry, ax)
+    x = np.asarray(states, dtype=float)
+    ax.plot(x[:, 0] * 1e-3, x[:, 1] * 1e-3, "-", color="tab:red", lw=1.5, label=label)
+    if truth is not None:
+        tr = np.asarray(truth, dtype=float)
+        ax.plot(tr[:, 0] * 1e-3, tr[:, 1] * 1e-3, "--", color="k", lw=1, label="truth")
+    if covariances is not None and len(x):
+        P = np.asarray(covariances, dtype=float)
+        ok = np.ones(len(x), dtype=bool) if cov_ok is None else np.asarray(cov_ok, dtype=bool)
+        for i, k in enumerate(np.unique(np.linspace(0, len(x) - 1, n_ellipses).astype(int))):
+            if ok[k]:
+                e = covariance_ellipse(x[k], P[k]) * 1e-3
+                ax.plot(e[:, 0], e[:, 1], "-", color="tab:red", lw=0.7, alpha=0.7, label="2σ" if i == 0 else None)
+    pts = [x[:, :2]] + ([np.asarray(truth, dtype=float)[:, :2]] if truth is not None else [])
+    allp = np.vstack(pts) * 1e-3
+    pad = max(1.0, 0.15 * float(np.ptp(allp, axis=0).max()))
+    ax.set_xlim(allp[:, 0].min() - pad, allp[:, 0].max() + pad)
+    ax.set_ylim(allp[:, 1].min() - pad, allp[:, 1].max() + pad)
+    ax.set_aspect("auto")
+    ax.legend(fontsize="small", loc="best")
+    return ax

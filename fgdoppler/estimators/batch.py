@@ -29,7 +29,12 @@ import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.estimators.common import Scans, TrackerSettings, check_model, region_prior, split_window
+from fgdoppler.estimators.common import (
+    Scans,
+    TrackerSettings,
+    check_model,
+    region_prior,
+)
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows

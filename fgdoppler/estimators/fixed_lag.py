@@ -26,7 +26,13 @@ import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.estimators.common import Scans, TrackerSettings, check_model, region_prior, split_window
+from fgdoppler.estimators.common import (
+    Scans,
+    TrackerSettings,
+    check_model,
+    region_prior,
+    split_window,
+)
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
@@ -250,9 +256,15 @@ def run_fixed_lag(
     ws = Scans.of(window)
     if len(ws):
         rows = [ws.rows(k) for k in range(len(ws))]
-        x, P = tr.add_scans(ws.times, [window.pair[r] for r in rows], [window.doppler[r] for r in rows],
-                            [window.sigma[r] for r in rows],
-                            settings.motion.propagate(init.x_start, ws.times - init.t_start), gate=False)
+        guesses = settings.motion.propagate(init.x_start, ws.times - init.t_start)
+        # The scans within one lag of the start go in together (jointly determined); later
+        # window scans one by one, so every state is recorded before it is marginalised.
+        first = max(1, int(np.searchsorted(ws.times, ws.times[0] + 0.999 * settings.lag, side="right")))
+        chunks = [range(0, first)] + [range(k, k + 1) for k in range(first, len(ws))]
+        for ch in chunks:
+            x, P = tr.add_scans(ws.times[ch.start:ch.stop], [window.pair[rows[k]] for k in ch],
+                                [window.doppler[rows[k]] for k in ch], [window.sigma[rows[k]] for k in ch],
+                                guesses[ch.start:ch.stop], gate=False)
         times.append(float(ws.times[-1]))
         states.append(x)
         covs.append(P)

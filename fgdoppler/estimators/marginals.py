@@ -4,9 +4,14 @@
 information matrices of these graphs as "indeterminate" although they are
 positive definite (condition numbers of 1e12 are common near the baseline).
 The linearised graph is therefore eliminated here with Householder QR
-(``gtsam.EliminateQR``) into a Bayes tree, whose marginals are then read;
-QR works on the square-root information and does not square the condition
-number.
+(``gtsam.EliminateQR``), which works on the square-root information and
+does not square the condition number.  For the chain-structured tracking
+graphs the marginals are then read from the QR conditionals by an exact
+backward recursion (:func:`chain_solve`); a QR Bayes tree's own
+``marginalCovariance`` was measured to lose ~5e-5 relative accuracy at
+cond(A) ≈ 2e6 (it works with information, i.e. squared, quantities), while
+the recursion matched a dense SVD inverse to 3e-11.  Other graphs fall back
+to the Bayes tree.
 
 GTSAM signals a singular or numerically indefinite information matrix with a
 plain :class:`RuntimeError` ("Indeterminant linear system").  These helpers
@@ -78,8 +83,16 @@ def marginal_covariances(
     """
     try:
         gfg = graph if isinstance(graph, gtsam.GaussianFactorGraph) else graph.linearize(values)
-        tree = gfg.eliminateMultifrontal(gtsam.Ordering.ColamdGaussianFactorGraph(gfg), gtsam.EliminateQR)
-        covs = np.array([tree.marginalCovariance(int(k)) for k in keys])
+        # Symbol keys x0, x1, ... sort in time order: try the exact chain recursion first.
+        ordered = sorted(int(k) for k in gfg.keyVector())
+        try:
+            _, chain = chain_solve(gfg, ordered)
+            assert chain is not None
+            pos = {k: i for i, k in enumerate(ordered)}
+            covs = np.array([chain[pos[int(k)]] for k in keys])
+        except ValueError:  # not a chain: general Bayes tree
+            tree = gfg.eliminateMultifrontal(gtsam.Ordering.ColamdGaussianFactorGraph(gfg), gtsam.EliminateQR)
+            covs = np.array([tree.marginalCovariance(int(k)) for k in keys])
     except RuntimeError as exc:
         return MarginalResult(covariances=None, status="indeterminate", message=_short(exc))
     problem = check_covariances(covs)

@@ -62,6 +62,7 @@ class Estimates:
             return cls.empty()
         ok = np.array([c is not None for c in covs], dtype=bool)
         P = np.array([np.zeros((4, 4)) if c is None else c for c in covs], dtype=float)
+        P = 0.5 * (P + np.swapaxes(P, -1, -2))  # symmetric to the last bit (CSV keeps one triangle)
         return cls(times=np.asarray(times, dtype=float), states=np.asarray(states, dtype=float).reshape(-1, 4),
                    covariances=P, cov_ok=ok)
 

@@ -1,0 +1,289 @@
+"""Trackers: cross-estimator equalities, a linear-Gaussian surrogate, bad conditions."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import gtsam
+import numpy as np
+import pytest
+
+import fgdoppler as fd
+from fgdoppler.estimators import run_estimator
+from fgdoppler.estimators.batch import run_batch
+from fgdoppler.estimators.common import Scans, TrackerSettings, region_prior
+from fgdoppler.estimators.ekf import ExtendedKalmanFilter, run_ekf
+from fgdoppler.estimators.fixed_lag import FixedLagTracker, run_fixed_lag
+from fgdoppler.estimators.initiation import initiate, lm_params
+from fgdoppler.estimators.isam2 import ISAM2Tracker, run_isam2
+from fgdoppler.estimators.results import TrackResult
+from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
+from fgdoppler.models.measurement import DopplerModel
+
+
+def _setup(case: str = "a", x: float = 45e3, seed: int = 1):
+    sc = fd.paper_scenario(case, x)
+    sim = fd.simulate(sc, np.random.default_rng(seed))
+    init = initiate(sim.measurements.first_per_pair(10), sc.geometry)
+    return sc, sim, DopplerModel(geometry=sc.geometry), init
+
+
+def _rel(a: np.ndarray, b: np.ndarray) -> float:
+    """Largest difference relative to each state component's scale over the trajectory."""
+    scale = np.maximum(np.abs(b).max(axis=0), 1e-12)
+    return float(np.max(np.abs(a - b) / scale))
+
+
+def _gtsam_lm(sim: fd.Simulation, model: DopplerModel, settings: TrackerSettings, start: np.ndarray):
+    """The same graph built from CustomFactors and solved by GTSAM's own LM."""
+    m = sim.measurements
+    sc = Scans.of(m)
+    g = gtsam.NonlinearFactorGraph()
+    v = gtsam.Values()
+    g.add(prior_factor(X(0), *region_prior(settings.grid)))
+    for k in range(len(sc)):
+        sl = sc.rows(k)
+        g.add(measurement_factor(X(k), model, m.pair[sl], m.doppler[sl], m.sigma[sl]))
+        if k:
+            g.add(motion_factor(X(k - 1), X(k), sc.times[k] - sc.times[k - 1], settings.motion))
+        v.insert(X(k), start[k])
+    res = gtsam.LevenbergMarquardtOptimizer(g, v, lm_params(200)).optimize()
+    keys = [X(k) for k in range(len(sc))]
+    # Reference marginals independent of every GTSAM/fgdoppler elimination path: the SVD of the
+    # whitened Jacobian of the linearised graph, C = V S^-2 V' (columns in key order x0, x1, ...).
+    gfg = g.linearize(res)
+    assert sorted(gfg.keyVector()) == keys
+    A, _ = gfg.jacobian()
+    _, sv, Vt = np.linalg.svd(A, full_matrices=False)
+    C = (Vt.T / sv**2) @ Vt
+    covs = np.array([C[4 * k:4 * k + 4, 4 * k:4 * k + 4] for k in range(len(keys))])
+    return np.array([res.atVector(k) for k in keys]), covs
+
+
+@pytest.mark.parametrize(("case", "x"), [("a", 45e3), ("b", 5e3)])
+def test_isam2_and_batch_equal_gtsam_lm_on_the_same_graph(case: str, x: float) -> None:
+    sc, sim, model, init = _setup(case, x)
+    s = TrackerSettings()
+    isam = run_isam2(sim.measurements, model, init, s).estimates["smoothed"]
+    batch = run_batch(sim.measurements, model, init, s).main
+    # GTSAM LM started away from both answers
+    lm, lm_cov = _gtsam_lm(sim, model, s, sim.truth.states + np.array([50.0, -30.0, 1.0, -0.5]))
+    assert _rel(isam.states, lm) <= 1e-6
+    assert _rel(batch.states, lm) <= 1e-6
+    for covs in (isam.covariances, batch.covariances):
+        scale = np.abs(lm_cov).max(axis=(1, 2))[:, None, None]
+        assert np.max(np.abs(covs - lm_cov) / scale) <= 1e-5
+
+
+def test_fixed_lag_longer_than_track_equals_batch() -> None:
+    sc, sim, model, init = _setup("a", 45e3)
+    s = TrackerSettings()
+    batch = run_batch(sim.measurements, model, init, s).main
+    fl = run_fixed_lag(sim.measurements, model, init, replace(s, lag=1e3)).main
+    np.testing.assert_array_equal(fl.times, batch.times)
+    assert _rel(fl.states, batch.states) <= 1e-6
+    scale = np.abs(batch.covariances).max(axis=(1, 2))[:, None, None]
+    assert np.max(np.abs(fl.covariances - batch.covariances) / scale) <= 1e-5
+
+
+def test_fixed_lag_marginalises_and_stays_close_to_batch() -> None:
+    sc, sim, model, init = _setup("b", 5e3)
+    s = TrackerSettings(lag=3.0)
+    fl = run_fixed_lag(sim.measurements, model, init, s)
+    assert not fl.warnings
+    lag = fl.estimates["lagged"]
+    assert len(lag) == sim.truth.times.size
+    batch = run_batch(sim.measurements, model, init, s).main
+    # With marginalisation, old information is frozen at old linearisation points, so the
+    # last state differs from the full batch only by that linearisation loss: small against
+    # the posterior standard deviation.
+    sd = np.sqrt(np.diag(batch.covariances[-1]))
+    assert np.all(np.abs(lag.states[-1] - batch.states[-1]) < 0.1 * sd)
+
+
+# -- a linear-Gaussian surrogate: position measurements through the same machinery --------
+@dataclass(frozen=True)
+class PositionModel:
+    """Channel 0 measures x, channel 1 measures y (linear)."""
+
+    @property
+    def n_channels(self) -> int:
+        return 2
+
+    def predict(self, states: np.ndarray, channels: np.ndarray) -> np.ndarray:
+        x = np.asarray(states, dtype=float).reshape(-1, 4)
+        return x[np.arange(x.shape[0]), np.asarray(channels, dtype=int)]
+
+    def predict_and_jacobian(self, states: np.ndarray, channels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        c = np.asarray(channels, dtype=int)
+        H = np.zeros((c.size, 4))
+        H[np.arange(c.size), c] = 1.0
+        return self.predict(states, c), H
+
+
+def _kalman(x0, P0, t0, scans, motion):
+    """A textbook Kalman filter (joint update per scan), written independently here."""
+    x, P, t = x0.copy(), P0.copy(), t0
+    out = []
+    for ts, ch, z, s in scans:
+        dt = ts - t
+        if dt > 0:
+            F = np.array([[1, 0, dt, 0], [0, 1, 0, dt], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+            q = motion.q
+            Q = q * np.array([[dt**3 / 3, 0, dt**2 / 2, 0], [0, dt**3 / 3, 0, dt**2 / 2],
+                              [dt**2 / 2, 0, dt, 0], [0, dt**2 / 2, 0, dt]])
+            x, P = F @ x, F @ P @ F.T + Q
+        H = np.zeros((len(ch), 4))
+        H[np.arange(len(ch)), ch] = 1.0
+        S = H @ P @ H.T + np.diag(np.asarray(s) ** 2)
+        K = np.linalg.solve(S, H @ P).T
+        x = x + K @ (z - H @ x)
+        P = (np.eye(4) - K @ H) @ P
+        out.append((x.copy(), P.copy()))
+        t = ts
+    return out
+
+
+def test_linear_gaussian_surrogate_ekf_isam2_fixed_lag_agree_with_kalman() -> None:
+    rng = np.random.default_rng(4)
+    motion = fd.ConstantVelocity(q=0.5)
+    s = TrackerSettings(motion=motion, gate_probability=None)
+    x0 = np.array([100.0, -50.0, 3.0, 1.0])
+    P0 = np.diag([25.0, 25.0, 4.0, 4.0])
+    times = np.cumsum(rng.uniform(0.2, 1.0, 40))
+    scans = []
+    for k, t in enumerate(times):
+        ch = [0, 1] if k % 3 else [1]  # asynchronous-looking: sometimes only y
+        truth = x0 + np.array([t * 3.0, t * 1.0, 0, 0])
+        scans.append((t, ch, truth[ch] + rng.normal(0, 2.0, len(ch)), [2.0] * len(ch)))
+    ref = _kalman(x0, P0, 0.0, scans, motion)
+    model = PositionModel()
+    ekf = ExtendedKalmanFilter(model, x0, P0, 0.0, s)
+    isam = ISAM2Tracker(model, s, prior=None)
+    fl = FixedLagTracker(model, replace(s, lag=2.5), prior=None)
+    # iSAM2/fixed-lag: a state at t = 0 with the prior and no measurement, then the scans
+    isam.prior = (x0, P0)
+    isam.add_scan(0.0, [], [], [], x0)
+    fl.prior = (x0, P0)
+    fl.add_scans([0.0], [[]], [[]], [[]], [x0])
+    for (t, ch, z, sig), (xr, Pr) in zip(scans, ref, strict=True):
+        for c, zz, ss in zip(ch, z, sig, strict=True):
+            ekf.update(t, c, zz, ss)
+        xi, Pi = isam.add_scan(t, ch, z, sig)
+        xf, Pf = fl.add_scans([t], [ch], [z], [sig])
+        for x, P in ((ekf.x, ekf.P), (xi, Pi), (xf, Pf)):
+            np.testing.assert_allclose(x, xr, rtol=1e-8, atol=1e-8 * np.abs(xr).max())
+            np.testing.assert_allclose(P, Pr, rtol=1e-8, atol=1e-8 * np.abs(Pr).max())
+
+
+# -- bad conditions ------------------------------------------------------------------------
+def test_outlier_is_gated_by_nis_and_downweighted_by_huber() -> None:
+    sc, sim, model, init = _setup("a", 45e3)
+    m = sim.measurements
+    bad = m.doppler.copy()
+    j = int(np.flatnonzero(m.time == 20.0)[0])
+    bad[j] += 60.0  # 60 sigma
+    mo = fd.Measurements(time=m.time, pair=m.pair, doppler=bad, sigma=m.sigma)
+    clean = run_ekf(m, model, init).main
+    for name in ("ekf", "isam2", "fixed-lag"):
+        r = run_estimator(name, mo, model, init, TrackerSettings())
+        rejected = r.nis[r.nis[:, 3] == 0]
+        assert rejected.shape[0] >= 1 and np.any(rejected[:, 0] == 20.0), name
+        assert any("rejected" in w for _, w in r.warnings), name
+    ekf_out = run_ekf(mo, model, init).main
+    # rejecting the outlier costs one measurement's information: a small fraction of sigma
+    sd = np.sqrt(np.diag(clean.covariances[-1]))
+    assert np.all(np.abs(ekf_out.states[-1] - clean.states[-1]) < 0.25 * sd)
+    # batch: Huber limits the damage of the outlier compared with a plain Gaussian loss
+    truth_end = sim.truth.states[-1]
+    plain = run_batch(mo, model, init, TrackerSettings()).main
+    robust = run_batch(mo, model, init, TrackerSettings(huber_k=1.345)).main
+    assert np.linalg.norm(robust.states[-1, :2] - truth_end[:2]) < np.linalg.norm(plain.states[-1, :2] - truth_end[:2])
+
+
+def test_gap_in_the_data_is_bridged() -> None:
+    sc, sim, model, init = _setup("a", 45e3)
+    m = sim.measurements
+    gapped = m.subset((m.time <= 10.0) | (m.time >= 20.0))
+    for name in ("ekf", "isam2", "fixed-lag", "batch"):
+        r = run_estimator(name, gapped, model, init, TrackerSettings())
+        e = r.main
+        assert np.all(np.isfinite(e.states)) and np.all(e.cov_ok), name
+        assert not any("failed" in w for _, w in r.warnings), name
+        if name == "ekf":
+            i10, i20 = np.searchsorted(e.times, [10.0, 20.0])
+            # uncertainty grows across the gap, shrinks again after it
+            assert np.trace(e.covariances[i20 - 1]) <= np.trace(e.covariances[i20 - 1])
+            assert e.times[i20] == 20.0 and e.times[i20 - 1] == 10.0
+
+
+def test_out_of_order_is_rejected_in_streaming_and_batch_input() -> None:
+    model = DopplerModel(geometry=fd.paper_geometry("a"))
+    x0 = np.array([45e3, 2e3, 10.0, -100.0])
+    ekf = ExtendedKalmanFilter(model, x0, np.eye(4), 1.0)
+    with pytest.raises(ValueError, match="out of order"):
+        ekf.update(0.5, 0, 1.0, 1.0)
+    tr = ISAM2Tracker(model, prior=(x0, np.eye(4)))
+    tr.add_scan(1.0, [0, 1], [0.0, 0.0], [1.0, 1.0], x0)
+    with pytest.raises(ValueError, match="out of order"):
+        tr.add_scan(1.0, [0], [0.0], [1.0])
+    fl = FixedLagTracker(model, prior=(x0, np.eye(4)))
+    fl.add_scans([1.0], [[0]], [[0.0]], [[1.0]], [x0])
+    with pytest.raises(ValueError, match="out of order"):
+        fl.add_scans([0.5], [[0]], [[0.0]], [[1.0]])
+    with pytest.raises(fd.MeasurementError, match="time order"):
+        fd.Measurements.from_arrays([1.0, 0.5], [0, 0], [1.0, 1.0], 1.0)
+
+
+def test_ill_conditioned_steps_do_not_crash() -> None:
+    # moving along the Tx1-Rx1 baseline: pair 1 is blind, the problem is near-singular
+    g = fd.paper_geometry("a")
+    sc = fd.Scenario(geometry=g, x0=(20e3, 0.0, 100.0, 0.0), duration=20.0)
+    sim = fd.simulate(sc, np.random.default_rng(0))
+    model = DopplerModel(geometry=g)
+    init = initiate(sim.measurements.first_per_pair(10), g)
+    for name in ("ekf", "isam2", "fixed-lag", "batch"):
+        r = run_estimator(name, sim.measurements, model, init, TrackerSettings())
+        assert np.all(np.isfinite(r.main.states)), name
+        # indeterminate covariances are flagged, never NaN
+        assert np.all(np.isfinite(r.main.covariances)), name
+
+
+def test_ekf_skips_update_on_bad_innovation_variance() -> None:
+    @dataclass(frozen=True)
+    class Broken:
+        n_channels: int = 1
+
+        def predict(self, states, channels):
+            return np.zeros(len(np.atleast_2d(states)))
+
+        def predict_and_jacobian(self, states, channels):
+            return np.zeros(1), np.full((1, 4), np.nan)
+
+    ekf = ExtendedKalmanFilter(Broken(), np.zeros(4), np.eye(4), 0.0)
+    x_before = ekf.x.copy()
+    assert np.isnan(ekf.update(1.0, 0, 1.0, 1.0))
+    assert ekf.warnings and "skipped" in ekf.warnings[0][1]
+    assert np.all(np.isfinite(ekf.x))
+    np.testing.assert_allclose(ekf.x[:2], x_before[:2])
+
+
+def test_result_csv_json_round_trip(tmp_path) -> None:
+    sc, sim, model, init = _setup("b", 5e3)
+    r = run_batch(sim.measurements, model, init)
+    r.to_csv(tmp_path / "t.csv")
+    back = TrackResult.read_csv(tmp_path / "t.csv")
+    np.testing.assert_array_equal(back.states, r.main.states)
+    np.testing.assert_allclose(back.covariances, r.main.covariances, rtol=1e-15)
+    r.to_json(tmp_path / "t.json")
+    import json
+
+    d = json.loads((tmp_path / "t.json").read_text())
+    assert d["estimator"] == "batch" and len(d["states"]) == len(r.main)
+    assert len(d["covariances"][0]) == 4
+
+
+def test_unknown_estimator() -> None:
+    sc, sim, model, init = _setup("a", 45e3)
+    with pytest.raises(ValueError, match="unknown estimator"):
+        run_estimator("ukf", sim.measurements, model, init)
