@@ -278,7 +278,7 @@ class ISAM2Tracker:
         (at most ``settings.max_iterations``).
         """
         n = len(self.times)
-        for it in range(self.settings.max_iterations):
+        for _ in range(self.settings.max_iterations):
             graph = gtsam.NonlinearFactorGraph()
             owners: list[int] = []
             remove: list[int] = []
