@@ -292,6 +292,7 @@ def run_batch(
         estimates={"smoothed": Estimates.from_lists(list(sol.times), list(sol.states), covs)},
         primary="smoothed",
         relinearizations=np.array([sol.iterations], dtype=np.int64),
+        cost=sol.cost,
         warnings=tuple((t_last, w) for w in sol.warnings),
         wall_time=time.perf_counter() - t_begin,
     )

@@ -64,6 +64,9 @@ class ExtendedKalmanFilter:
         self._gate = self.settings.gate
         self.nis: list[tuple[float, int, float, bool]] = []
         self.warnings: list[tuple[float, str]] = []
+        #: Cumulative predictive log-likelihood of all measurements (gated ones
+        #: included), sum of -0.5 (log(2 pi S) + NIS).
+        self.log_likelihood = 0.0
 
     def predict(self, t: float) -> None:
         """Propagate to time ``t`` (no-op if ``t`` equals the current time).
@@ -100,6 +103,9 @@ class ExtendedKalmanFilter:
             self.warnings.append((self.t, f"update skipped: innovation variance {S}"))
             return float("nan")
         nis = r * r / S
+        # Every measurement counts in the likelihood, gated or not: a hypothesis must not
+        # gain by rejecting the data that contradict it.
+        self.log_likelihood -= 0.5 * (np.log(2 * np.pi * S) + nis)
         accepted = nis <= self._gate
         self.nis.append((self.t, int(channel), nis, bool(accepted)))
         if not accepted:
@@ -145,25 +151,28 @@ def run_ekf(
                                      "from a broad covariance"))
     ekf = ExtendedKalmanFilter(model, init.x_end, P0, init.t_end, settings)
     _, stream = split_window(measurements, init.t_end)
-    times, states, covs = [init.t_end], [ekf.x.copy()], [ekf.P.copy()]
+    times, states, covs, loglik = [init.t_end], [ekf.x.copy()], [ekf.P.copy()], [0.0]
     t_prev = None
     for t, p, z, s in zip(stream.time, stream.pair, stream.doppler, stream.sigma, strict=True):
         if t_prev is not None and t != t_prev:
             times.append(t_prev)
             states.append(ekf.x.copy())
             covs.append(ekf.P.copy())
+            loglik.append(ekf.log_likelihood)
         ekf.update(float(t), int(p), float(z), float(s))
         t_prev = t
     if t_prev is not None:
         times.append(t_prev)
         states.append(ekf.x.copy())
         covs.append(ekf.P.copy())
+        loglik.append(ekf.log_likelihood)
     return TrackResult(
         estimator="ekf",
         settings=settings.to_dict(),
         estimates={"filtered": Estimates.from_lists(times, states, covs)},
         primary="filtered",
         nis=np.array(ekf.nis, dtype=float).reshape(-1, 4),
+        log_likelihood=np.array(loglik),
         warnings=tuple(warnings + ekf.warnings),
         wall_time=time.perf_counter() - t_begin,
     )

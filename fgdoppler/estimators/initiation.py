@@ -59,7 +59,7 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.doppler import BatchTimes, batch_doppler, batch_doppler_and_jacobian
 from fgdoppler.models.motion import ConstantVelocity
 
-__all__ = ["Candidate", "Initiation", "InitiationSettings", "initiate", "lm_params"]
+__all__ = ["Candidate", "Initiation", "InitiationSettings", "hypotheses", "initiate", "lm_params"]
 
 FloatArray = NDArray[np.float64]
 Method = Literal["lm", "ils", "grid"]
@@ -137,10 +137,13 @@ class Candidate:
     state: FloatArray
     cost: float
     passes_chi2: bool = False
+    #: Covariance of ``state`` (window Fisher information inverted), where computed.
+    covariance: FloatArray | None = None
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready form."""
-        return {"state": self.state.tolist(), "cost": self.cost, "passes_chi2": self.passes_chi2}
+        return {"state": self.state.tolist(), "cost": self.cost, "passes_chi2": self.passes_chi2,
+                "covariance": None if self.covariance is None else self.covariance.tolist()}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -496,6 +499,15 @@ def initiate(
             if c.passes_chi2 and not _same(c.state, x0, settings):
                 alternatives.append(c)
 
+    # Each alternative gets the covariance of the deterministic window fit at its state, so a
+    # tracker can follow it as a hypothesis (see :func:`hypotheses`).
+    with_cov = []
+    for a in alternatives:
+        _, J = batch_doppler_and_jacobian(a.state, geometry, w.bt)
+        Jw = J / w.sigma[:, None]
+        P_alt, _, _ = _inverse(Jw.T @ Jw)
+        with_cov.append(Candidate(state=a.state, cost=a.cost, passes_chi2=a.passes_chi2, covariance=P_alt))
+    alternatives = with_cov
     passes = bool(cost <= threshold)
     if not passes:
         notes.append(f"final cost {cost:.2f} fails the {settings.confidence:.0%} chi-square test ({threshold:.2f}, {dof} dof)")
@@ -556,3 +568,25 @@ def residual_landscape(
     w = _Window.build(measurements, geometry)
     states = grid_states(x, y0, speed, heading_deg).reshape(-1, 4)
     return grid_costs(geometry, w.bt, w.z, w.sigma, states).reshape(np.size(x), np.size(heading_deg))
+
+
+def hypotheses(init: Initiation) -> list[Initiation]:
+    """The initiation and one unambiguous copy per alternative (best first).
+
+    Each copy starts from the alternative's state and covariance at the
+    window start, propagated to the window end.  Alternatives without a
+    determinate covariance are skipped.
+    """
+    from dataclasses import replace
+
+    out = [replace(init, alternatives=(), ambiguous=False)]
+    F = ConstantVelocity.F(init.t_end - init.t_start)
+    for a in init.alternatives:
+        if a.covariance is None:
+            continue
+        out.append(replace(
+            init, x_start=a.state, x_end=F @ a.state, P_start=a.covariance, P_end=F @ a.covariance @ F.T,
+            cost=a.cost, passes_chi2=a.passes_chi2, covariance_status="ok", covariance_message="",
+            alternatives=(), ambiguous=False, notes=(*init.notes, "hypothesis from an ambiguous initiation"),
+        ))
+    return out

@@ -66,7 +66,7 @@ def check_covariances(covs: NDArray[np.float64]) -> str:
     try:
         np.linalg.cholesky(sym)
     except np.linalg.LinAlgError:
-        return "covariance not positive definite (information matrix numerically singular)"
+        return "indeterminate: covariance not positive definite (information matrix numerically singular)"
     return ""
 
 

@@ -101,6 +101,13 @@ class TrackResult:
         ``(time, message)`` of every problem handled.
     wall_time
         Seconds.
+    log_likelihood
+        EKF: cumulative predictive log-likelihood at each filtered time.
+    cost
+        Batch: final sum of squared whitened residuals.
+    hypothesis
+        Index of the initiation hypothesis reported at each primary time
+        (all zero unless the initiation was ambiguous).
     """
 
     estimator: str
@@ -111,6 +118,9 @@ class TrackResult:
     relinearizations: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     warnings: tuple[tuple[float, str], ...] = ()
     wall_time: float = 0.0
+    log_likelihood: FloatArray = field(default_factory=lambda: np.zeros(0))
+    cost: float | None = None
+    hypothesis: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     def __post_init__(self) -> None:
         if self.primary not in self.estimates:
@@ -130,6 +140,9 @@ class TrackResult:
         d["nis"] = [{"time": float(t), "pair": int(p), "nis": float(v), "accepted": bool(a)} for t, p, v, a in self.nis]
         d["relinearizations"] = self.relinearizations.tolist()
         d["warnings"] = [{"time": t, "message": m} for t, m in self.warnings]
+        d["hypothesis"] = self.hypothesis.tolist()
+        if self.cost is not None:
+            d["cost"] = self.cost
         d["wall_time"] = self.wall_time
         return d
 
