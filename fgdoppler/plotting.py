@@ -258,3 +258,47 @@ def plot_track(
     ax.set_aspect("auto")
     ax.legend(fontsize="small", loc="best")
     return ax
+
+
+def plot_rmse(
+    times: ArrayLike,
+    curves: Mapping[str, ArrayLike],
+    ax: Axes | None = None,
+    *,
+    bounds: Mapping[str, ArrayLike] | None = None,
+    ylabel: str = "position RMSE (m)",
+    title: str | None = None,
+) -> Axes:
+    """RMSE versus time per estimator (log scale), with bounds (e.g. CRLB) dashed."""
+    ax = _axes(ax)
+    t = np.asarray(times, dtype=float)
+    for label, y in curves.items():
+        ax.semilogy(t, np.asarray(y, dtype=float), label=label, lw=1.3)
+    for label, y in (bounds or {}).items():
+        ax.semilogy(t, np.asarray(y, dtype=float), "k--", lw=1, label=label)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title, fontsize="small")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize="x-small", ncol=2)
+    return ax
+
+
+def plot_nees(
+    times: ArrayLike, curves: Mapping[str, ArrayLike], band: tuple[float, float], ax: Axes | None = None,
+    *, title: str | None = None,
+) -> Axes:
+    """Run-averaged NEES versus time with the 95 % χ² band shaded."""
+    ax = _axes(ax)
+    t = np.asarray(times, dtype=float)
+    ax.axhspan(band[0], band[1], color="tab:green", alpha=0.2, label="95 % band")
+    for label, y in curves.items():
+        ax.semilogy(t, np.asarray(y, dtype=float), label=label, lw=1.3)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("average NEES")
+    if title:
+        ax.set_title(title, fontsize="small")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize="x-small")
+    return ax

@@ -402,7 +402,11 @@ def _same(a: FloatArray, b: FloatArray, settings: InitiationSettings) -> bool:
 
 
 def initiate(
-    measurements: Measurements, geometry: Geometry, settings: InitiationSettings | None = None
+    measurements: Measurements,
+    geometry: Geometry,
+    settings: InitiationSettings | None = None,
+    *,
+    grid_result: GridResult | None = None,
 ) -> Initiation:
     """Estimate the state of a constant-velocity target from a window of Doppler measurements.
 
@@ -415,6 +419,9 @@ def initiate(
         Sensor pairs.
     settings
         Method and grid; defaults follow the paper with LM refinement.
+    grid_result
+        A grid search already run on this window with these settings (lets
+        several refinement methods share one search).
 
     Returns
     -------
@@ -436,8 +443,9 @@ def initiate(
     w = _Window.build(measurements, geometry)
     dof = len(measurements) - 4
     threshold = float(chi2.ppf(settings.confidence, dof))
-    grid = grid_search(geometry, w.bt, w.z, w.sigma, settings.grid, k_best=settings.k_best,
-                       half_plane=settings.half_plane)
+    grid = grid_result if grid_result is not None else grid_search(
+        geometry, w.bt, w.z, w.sigma, settings.grid, k_best=settings.k_best, half_plane=settings.half_plane
+    )
     candidates = tuple(
         Candidate(state=s, cost=float(c), passes_chi2=bool(c <= threshold))
         for s, c in zip(grid.states, grid.costs, strict=True)
@@ -590,3 +598,11 @@ def hypotheses(init: Initiation) -> list[Initiation]:
             alternatives=(), ambiguous=False, notes=(*init.notes, "hypothesis from an ambiguous initiation"),
         ))
     return out
+
+
+def window_grid(measurements: Measurements, geometry: Geometry, settings: InitiationSettings | None = None) -> GridResult:
+    """The grid search of :func:`initiate` alone (to share between refinement methods)."""
+    settings = settings or InitiationSettings()
+    w = _Window.build(measurements, geometry)
+    return grid_search(geometry, w.bt, w.z, w.sigma, settings.grid, k_best=settings.k_best,
+                       half_plane=settings.half_plane)

@@ -134,23 +134,39 @@ class ISAM2Tracker:
                 self.scans[k].factor = int(idx)
 
     def _relinearize(self, candidates: range, scale: float, graph: gtsam.NonlinearFactorGraph,
-                     owners: list[int], remove: list[int]) -> int:
-        n = 0
-        for j in candidates:
-            sd = self.scans[j]
-            if sd.lin is None:
-                continue
-            xj = self._estimate(j)
-            if self._moved(xj, sd.lin, scale):
-                f = self._meas_factor(j, xj)
-                if f is None:
-                    continue
-                remove.append(sd.factor)
-                graph.add(f)
-                owners.append(j)
-                sd.lin = xj
-                n += 1
-        return n
+                     owners: list[int], remove: list[int], estimates: gtsam.Values | None = None) -> int:
+        """Replace the factors of the states in ``candidates`` that moved; vectorised over all of them."""
+        js = [j for j in candidates if self.scans[j].lin is not None and self.scans[j].channels.size]
+        if not js:
+            return 0
+        keys = [X(j) for j in js]
+        est = estimates if estimates is not None else self.isam.calculateEstimate(keys)
+        xs = np.array([est.atVector(k) for k in keys])
+        lin = np.array([self.scans[j].lin for j in js])
+        d = np.abs(xs - lin)
+        st = self.settings
+        moved = np.any(d[:, :2] > st.relinearize_position * scale, axis=1) | np.any(
+            d[:, 2:] > st.relinearize_velocity * scale, axis=1)
+        sel = [j for j, mv in zip(js, moved, strict=True) if mv]
+        if not sel:
+            return 0
+        xsel = xs[moved]
+        ch = np.concatenate([self.scans[j].channels for j in sel])
+        z = np.concatenate([self.scans[j].z for j in sel])
+        sg = np.concatenate([self.scans[j].sigma for j in sel])
+        counts = [self.scans[j].channels.size for j in sel]
+        owner = np.repeat(np.arange(len(sel)), counts)
+        rows = linearize_rows(self.model, xsel[owner], ch, z, sg, st.huber_k)
+        start = 0
+        for i, j in enumerate(sel):
+            sl = slice(start, start + counts[i])
+            start += counts[i]
+            A, b = rows.A[sl], rows.b[sl]
+            remove.append(self.scans[j].factor)
+            graph.add(_absolute_linear([X(j)], [A], b + A @ xsel[i]))
+            owners.append(j)
+            self.scans[j].lin = xsel[i].copy()
+        return len(sel)
 
     # -- public -------------------------------------------------------------------
     def add_window(self, times: ArrayLike, channels: list[ArrayLike], z: list[ArrayLike], sigma: list[ArrayLike],
@@ -282,22 +298,8 @@ class ISAM2Tracker:
             graph = gtsam.NonlinearFactorGraph()
             owners: list[int] = []
             remove: list[int] = []
-            best = self.isam.calculateBestEstimate()
-            cnt = 0
-            for j in range(n):
-                sd = self.scans[j]
-                if sd.lin is None:
-                    continue
-                xj = best.atVector(X(j))
-                if self._moved(xj, sd.lin, tol_scale):
-                    f = self._meas_factor(j, xj)
-                    if f is None:
-                        continue
-                    remove.append(sd.factor)
-                    graph.add(f)
-                    owners.append(j)
-                    sd.lin = xj
-                    cnt += 1
+            cnt = self._relinearize(range(n), tol_scale, graph, owners, remove,
+                                    estimates=self.isam.calculateBestEstimate())
             if cnt == 0:
                 break
             self._update(graph, gtsam.Values(), remove, owners)

@@ -1,0 +1,329 @@
+"""Monte Carlo studies: scenarios × estimators × runs, on any ``concurrent.futures.Executor``.
+
+Each (scenario, run) pair gets its own random stream from
+``numpy.random.SeedSequence(seed).spawn``, indexed by position, so results do
+not depend on the number of workers or the order in which runs finish.
+Workers receive only picklable descriptions (scenarios, settings) and build
+every GTSAM graph themselves (``CustomFactor`` callbacks cannot be pickled).
+GTSAM holds the GIL, so processes, not threads, give the speed-up; a Dask
+``distributed`` cluster works too (``fgdoppler[distributed]``).
+
+Estimators
+    ``"grid"``, ``"ils"``, ``"lm"``: initiation only; the estimate at time
+    *t* is the constant-velocity extrapolation of the initiation's initial
+    state (the paper's "batch initial estimate").
+    ``"ekf"``, ``"isam2"`` (filtered), ``"fixed-lag"`` (each state when it is
+    ``lag`` seconds old), ``"batch"`` (smoothed): see :mod:`fgdoppler.estimators`.
+    ``"lag:<seconds>"``: the fixed-lag smoother with that lag (for lag sweeps).
+
+Per run and estimator the squared position and velocity errors and the NEES
+are stored on the scenario's truth time grid (NaN where there is no estimate).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from concurrent.futures import Executor, ProcessPoolExecutor
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fgdoppler._io import atomic_write_text
+from fgdoppler.analysis.metrics import errors, nees, nees_band, rmse
+from fgdoppler.estimators.common import TrackerSettings
+from fgdoppler.estimators.initiation import InitiationSettings
+from fgdoppler.simulation import Scenario, simulate
+
+__all__ = ["INIT_METHODS", "MonteCarloResult", "MonteCarloSpec", "run_monte_carlo"]
+
+FloatArray = NDArray[np.float64]
+
+#: Initiation-only "estimators".
+INIT_METHODS = ("grid", "ils", "lm")
+#: Default estimator set of the paper study.
+DEFAULT_ESTIMATORS = ("grid", "ils", "lm", "ekf", "isam2", "fixed-lag", "batch")
+
+
+@dataclass(frozen=True, kw_only=True)
+class MonteCarloSpec:
+    """What to run.
+
+    Parameters
+    ----------
+    scenarios
+        The scenarios (each simulated ``runs`` times).
+    estimators
+        Names (see module docstring).
+    runs
+        Monte Carlo runs per scenario.
+    seed
+        Root of the ``SeedSequence``.
+    init_per_pair
+        Initiation window: the first measurements of each pair (paper: 10).
+    initiation, tracker
+        Settings of the initiation and the trackers.
+    """
+
+    scenarios: tuple[Scenario, ...]
+    estimators: tuple[str, ...] = DEFAULT_ESTIMATORS
+    runs: int = 100
+    seed: int = 2026
+    init_per_pair: int = 10
+    initiation: InitiationSettings = field(default_factory=InitiationSettings)
+    tracker: TrackerSettings = field(default_factory=TrackerSettings)
+
+    def __post_init__(self) -> None:
+        if self.runs < 1:
+            raise ValueError(f"runs must be >= 1, got {self.runs}")
+        if not self.scenarios:
+            raise ValueError("need at least one scenario")
+        for e in self.estimators:
+            if e not in DEFAULT_ESTIMATORS and not e.startswith("lag:"):
+                raise ValueError(f"unknown estimator {e!r}")
+
+
+def _run_one(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.random.SeedSequence) -> dict[str, Any]:
+    """One simulated run of one scenario through every estimator (executed in a worker)."""
+    from fgdoppler.estimators import run_estimator
+    from fgdoppler.estimators.initiation import initiate, window_grid
+    from fgdoppler.models.measurement import DopplerModel
+
+    scen = spec.scenarios[s_idx]
+    sim = simulate(scen, np.random.default_rng(seq))
+    meas = sim.measurements
+    truth_t = sim.truth.times
+    truth_x = sim.truth.states
+    window = meas.first_per_pair(spec.init_per_pair)
+    model = DopplerModel(geometry=scen.geometry)
+    grid = window_grid(window, scen.geometry, spec.initiation)
+    inits = {}
+    n_t = truth_t.size
+    out: dict[str, Any] = {}
+    timing: dict[str, float] = {}
+    lm_init = None
+    for name in spec.estimators:
+        t_begin = time.perf_counter()
+        est = np.full((n_t, 4), np.nan)
+        cov = np.full((n_t, 4, 4), np.nan)
+        if name in INIT_METHODS or lm_init is None:
+            method = name if name in INIT_METHODS else "lm"
+            if method not in inits:
+                inits[method] = initiate(window, scen.geometry, replace(spec.initiation, method=method),
+                                         grid_result=grid)
+            lm_init = inits.get("lm", lm_init)
+        if name in INIT_METHODS:
+            ini = inits[name]
+            F = scen.process_noise.F(truth_t - ini.t_start) if scen.process_noise else _F(truth_t - ini.t_start)
+            est = F @ ini.x_start
+            if ini.P_start is not None:
+                cov = F @ ini.P_start @ np.swapaxes(F, -1, -2)
+        else:
+            if lm_init is None:
+                lm_init = initiate(window, scen.geometry, replace(spec.initiation, method="lm"), grid_result=grid)
+                inits["lm"] = lm_init
+            estimator, settings = name, spec.tracker
+            if name.startswith("lag:"):
+                estimator, settings = "fixed-lag", replace(spec.tracker, lag=float(name[4:]))
+            res = run_estimator(estimator, meas, model, lm_init, settings).main
+            idx = np.searchsorted(truth_t, res.times)
+            est[idx] = res.states
+            cov[idx] = np.where(res.cov_ok[:, None, None], res.covariances, np.nan)
+        pe, ve = errors(est, truth_x)
+        with np.errstate(invalid="ignore"):
+            ne = np.full(n_t, np.nan)
+            ok = np.all(np.isfinite(cov), axis=(1, 2)) & np.all(np.isfinite(est), axis=1)
+            if np.any(ok):
+                ne[ok] = nees(est[ok], cov[ok], truth_x[ok])
+        out[name] = (pe, ve, ne)
+        timing[name] = time.perf_counter() - t_begin
+    return {"s": s_idx, "r": r_idx, "data": out, "timing": timing,
+            "ambiguous": bool(inits["lm"].ambiguous) if "lm" in inits else False}
+
+
+def _F(dt: FloatArray) -> FloatArray:
+    from fgdoppler.models.motion import ConstantVelocity
+
+    return ConstantVelocity.F(dt)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MonteCarloResult:
+    """Errors of every estimator in every run, and summaries.
+
+    ``pos_se[s][name]``, ``vel_se[s][name]`` and ``nees[s][name]`` are
+    ``(runs, n_times)`` arrays for scenario index ``s``; ``times[s]`` the
+    scenario's truth times.
+    """
+
+    scenario_names: tuple[str, ...]
+    estimators: tuple[str, ...]
+    runs: int
+    seed: int
+    times: tuple[FloatArray, ...]
+    pos_se: tuple[dict[str, FloatArray], ...]
+    vel_se: tuple[dict[str, FloatArray], ...]
+    nees: tuple[dict[str, FloatArray], ...]
+    ambiguous: FloatArray
+    wall_time: float
+    workers: int
+    timing: dict[str, float]
+
+    def pos_rmse(self, s: int, name: str) -> FloatArray:
+        """Position RMSE over runs at each time of scenario ``s``."""
+        return rmse(self.pos_se[s][name])
+
+    def vel_rmse(self, s: int, name: str) -> FloatArray:
+        """Velocity RMSE over runs at each time of scenario ``s``."""
+        return rmse(self.vel_se[s][name])
+
+    def mean_nees(self, s: int, name: str) -> FloatArray:
+        """Run-averaged NEES at each time (NaN where no run has one)."""
+        x = self.nees[s][name]
+        with np.errstate(invalid="ignore"):
+            return np.nanmean(np.where(np.isfinite(x), x, np.nan), axis=0) if np.any(np.isfinite(x)) else np.full(x.shape[1], np.nan)
+
+    def nees_band(self) -> tuple[float, float]:
+        """95 % band of the run-averaged NEES."""
+        return nees_band(self.runs)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready summary: time-averaged RMSE per scenario and estimator, and settings."""
+        rows = []
+        for s, name in enumerate(self.scenario_names):
+            for e in self.estimators:
+                r = self.pos_rmse(s, e)
+                rows.append({"scenario": name, "estimator": e,
+                             "pos_rmse_mean": _nanmean(r), "pos_rmse_final": float(r[-1]) if np.isfinite(r[-1]) else None,
+                             "vel_rmse_mean": _nanmean(self.vel_rmse(s, e))})
+        return {"runs": self.runs, "seed": self.seed, "workers": self.workers, "wall_time": self.wall_time,
+                "scenarios": list(self.scenario_names), "estimators": list(self.estimators),
+                "ambiguous_fraction": self.ambiguous.tolist(), "timing_per_run": self.timing, "rows": rows}
+
+    def save(self, path: str | Path) -> tuple[Path, Path]:
+        """Write ``path.npz`` (all arrays) and ``path.json`` (summary); returns both paths."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        arrays: dict[str, FloatArray] = {}
+        for s in range(len(self.scenario_names)):
+            arrays[f"times_{s}"] = self.times[s]
+            for e in self.estimators:
+                arrays[f"pos_{s}_{e}"] = self.pos_se[s][e]
+                arrays[f"vel_{s}_{e}"] = self.vel_se[s][e]
+                arrays[f"nees_{s}_{e}"] = self.nees[s][e]
+        arrays["ambiguous"] = self.ambiguous
+        npz = path.with_suffix(".npz")
+        tmp = npz.with_name(f".{npz.name}.tmp.npz")
+        np.savez_compressed(tmp, **arrays)
+        os.replace(tmp, npz)
+        meta = {"scenario_names": list(self.scenario_names), "estimators": list(self.estimators), "runs": self.runs,
+                "seed": self.seed, "wall_time": self.wall_time, "workers": self.workers, "timing": self.timing,
+                "summary": self.summary()}
+        js = path.with_suffix(".json")
+        atomic_write_text(js, json.dumps(meta, indent=1, allow_nan=False, default=_json_default))
+        return npz, js
+
+    @classmethod
+    def load(cls, path: str | Path) -> MonteCarloResult:
+        """Reload a result written by :meth:`save` (no re-running)."""
+        path = Path(path)
+        meta = json.loads(path.with_suffix(".json").read_text())
+        data = np.load(path.with_suffix(".npz"))
+        n = len(meta["scenario_names"])
+        ests = tuple(meta["estimators"])
+        return cls(
+            scenario_names=tuple(meta["scenario_names"]), estimators=ests, runs=int(meta["runs"]),
+            seed=int(meta["seed"]), times=tuple(data[f"times_{s}"] for s in range(n)),
+            pos_se=tuple({e: data[f"pos_{s}_{e}"] for e in ests} for s in range(n)),
+            vel_se=tuple({e: data[f"vel_{s}_{e}"] for e in ests} for s in range(n)),
+            nees=tuple({e: data[f"nees_{s}_{e}"] for e in ests} for s in range(n)),
+            ambiguous=data["ambiguous"], wall_time=float(meta["wall_time"]), workers=int(meta["workers"]),
+            timing=dict(meta["timing"]),
+        )
+
+
+def _nanmean(x: FloatArray) -> float | None:
+    f = x[np.isfinite(x)]
+    return float(f.mean()) if f.size else None
+
+
+def _json_default(o: object) -> object:
+    if isinstance(o, np.generic):
+        return o.item()
+    raise TypeError(type(o).__name__)
+
+
+def run_monte_carlo(
+    spec: MonteCarloSpec,
+    *,
+    executor: Executor | None = None,
+    workers: int = 1,
+    progress: bool | None = None,
+) -> MonteCarloResult:
+    """Run a Monte Carlo study.
+
+    Parameters
+    ----------
+    spec
+        What to run.
+    executor
+        Any ``concurrent.futures.Executor`` (e.g. a Dask ``distributed``
+        client's ``get_executor()``).  Default: a process pool of ``workers``
+        processes, or in-process when ``workers == 1``.
+    workers
+        Process count of the default pool.
+    progress
+        Show a tqdm bar (default: only on a terminal).
+    """
+    from tqdm import tqdm
+
+    t_begin = time.perf_counter()
+    n_s = len(spec.scenarios)
+    seqs = np.random.SeedSequence(spec.seed).spawn(n_s * spec.runs)
+    tasks = [(s, r, seqs[s * spec.runs + r]) for s in range(n_s) for r in range(spec.runs)]
+    show = sys.stderr.isatty() if progress is None else progress
+    own = None
+    if executor is None and workers > 1:
+        own = ProcessPoolExecutor(max_workers=workers)
+        executor = own
+    records: list[dict[str, Any]] = []
+    try:
+        with tqdm(total=len(tasks), desc="Monte Carlo", unit="run", disable=not show, leave=False) as bar:
+            if executor is None:
+                for s, r, q in tasks:
+                    records.append(_run_one(spec, s, r, q))
+                    bar.update(1)
+            else:
+                futures = [executor.submit(_run_one, spec, s, r, q) for s, r, q in tasks]
+                for f in futures:
+                    records.append(f.result())
+                    bar.update(1)
+    finally:
+        if own is not None:
+            own.shutdown()
+    times = []
+    pos, vel, nes = [], [], []
+    amb = np.zeros(n_s)
+    timing: dict[str, float] = {e: 0.0 for e in spec.estimators}
+    for s in range(n_s):
+        recs = sorted((x for x in records if x["s"] == s), key=lambda x: x["r"])
+        times.append(spec.scenarios[s].truth_times())
+        pos.append({e: np.array([x["data"][e][0] for x in recs]) for e in spec.estimators})
+        vel.append({e: np.array([x["data"][e][1] for x in recs]) for e in spec.estimators})
+        nes.append({e: np.array([x["data"][e][2] for x in recs]) for e in spec.estimators})
+        amb[s] = np.mean([x["ambiguous"] for x in recs])
+        for x in recs:
+            for e, v in x["timing"].items():
+                timing[e] += v / len(records)
+    return MonteCarloResult(
+        scenario_names=tuple(sc.name for sc in spec.scenarios), estimators=spec.estimators, runs=spec.runs,
+        seed=spec.seed, times=tuple(times), pos_se=tuple(pos), vel_se=tuple(vel), nees=tuple(nes), ambiguous=amb,
+        wall_time=time.perf_counter() - t_begin, workers=workers if executor is None or own is not None else -1,
+        timing=timing,
+    )
+

@@ -1,0 +1,260 @@
+"""One-command reproduction of the paper, plus the studies that go beyond it.
+
+:func:`reproduce` writes every artefact into one folder with a ``report.md``
+that puts the paper's values beside ours and marks each of the paper's
+claims as reproduced or not:
+
+* Table 2 and Figs. 3–8 (observability), via :mod:`fgdoppler.analysis.artefacts`;
+* Figs. 10–11: position RMSE versus time over Monte Carlo runs of the six
+  scenarios for the grid-only, ILS and LM initiations, the EKF, iSAM2
+  (filtered), the fixed-lag smoother and the full smoother, with the
+  Cramér–Rao bounds (filtering and smoothing) on the same axes;
+* beyond the paper: a lag sweep, NEES consistency, and the observability
+  report of every scenario.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from concurrent.futures import Executor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from fgdoppler import plotting
+from fgdoppler._io import atomic_write_text
+from fgdoppler.analysis import artefacts
+from fgdoppler.analysis.bounds import crlb_deterministic
+from fgdoppler.analysis.montecarlo import MonteCarloResult, MonteCarloSpec, run_monte_carlo
+from fgdoppler.analysis.observability import observability_report
+from fgdoppler.simulation import Scenario, paper_scenarios, simulate
+
+__all__ = ["ReproduceSettings", "reproduce"]
+
+TRACKERS = ("ekf", "isam2", "fixed-lag", "batch")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ReproduceSettings:
+    """Settings of :func:`reproduce`.
+
+    Parameters
+    ----------
+    runs
+        Monte Carlo runs per scenario (the paper uses 100).
+    workers
+        Worker processes (ignored when an executor is given).
+    seed
+        Root seed of all Monte Carlo runs.
+    lag_sweep_lags
+        Lags (s) of the lag sweep; the sweep uses ``max(4, runs // 4)`` runs.
+    """
+
+    runs: int = 100
+    workers: int = 2
+    seed: int = 2026
+    lag_sweep_lags: tuple[float, ...] = (0.5, 1.0, 2.0, 5.0, 10.0, 30.0)
+    well_observed: tuple[str, ...] = field(default=("case a, start 45 km", "case b, start 5 km"))
+
+
+def _bounds(scen: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    """Deterministic-CV CRLB of the position (sqrt of the trace) for filtering and smoothing."""
+    sim = simulate(scen, np.random.default_rng(0))
+    t = sim.truth.times
+    f = crlb_deterministic(scen.geometry, scen.x0, sim.measurements, t)
+    s = crlb_deterministic(scen.geometry, scen.x0, sim.measurements, t, smoothing=True)
+
+    def pos(P: np.ndarray) -> np.ndarray:
+        return np.sqrt(P[:, 0, 0] + P[:, 1, 1])
+
+    return pos(f), pos(s)
+
+
+def _mean_after(x: np.ndarray, t: np.ndarray, t0: float) -> float:
+    sel = (t >= t0) & np.isfinite(x)
+    return float(np.mean(x[sel])) if np.any(sel) else float("nan")
+
+
+def reproduce(
+    out: str | Path, settings: ReproduceSettings | None = None, *, executor: Executor | None = None,
+    progress: bool | None = None,
+) -> Path:
+    """Run every study and write ``report.md`` (returned) and the artefacts into ``out``."""
+    settings = settings or ReproduceSettings()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    t_begin = time.perf_counter()
+    arts = [artefacts.fig3_geometry(out), artefacts.fig7a_ellipses(out)]
+    maps_art, _ = artefacts.figs4_7_maps(out)
+    arts.append(maps_art)
+    arts.append(artefacts.fig8_slices(out))
+    table_art, table = artefacts.table2(out)
+    arts.append(table_art)
+    t_obs = time.perf_counter() - t_begin
+
+    scenarios = tuple(paper_scenarios())
+    spec = MonteCarloSpec(scenarios=scenarios, runs=settings.runs, seed=settings.seed)
+    mc = run_monte_carlo(spec, executor=executor, workers=settings.workers, progress=progress)
+    mc.save(out / "montecarlo")
+    t_mc = time.perf_counter() - t_begin - t_obs
+
+    sweep_runs = max(4, settings.runs // 4)
+    sweep_scen = scenarios[[s.name for s in scenarios].index("case b, start 5 km")]
+    sweep_spec = MonteCarloSpec(scenarios=(sweep_scen,), runs=sweep_runs, seed=settings.seed + 1,
+                                estimators=(*(f"lag:{lag:g}" for lag in settings.lag_sweep_lags), "ekf", "batch"))
+    sweep = run_monte_carlo(sweep_spec, executor=executor, workers=settings.workers, progress=progress)
+    sweep.save(out / "lag_sweep")
+
+    mc_claims, mc_lines, figs = _monte_carlo_section(mc, scenarios, out, settings)
+    sweep_lines, sweep_fig = _lag_sweep_section(sweep, out)
+    obs_lines = _report_section(scenarios)
+    wall = time.perf_counter() - t_begin
+
+    lines = [
+        "# fgdoppler: reproduction of Yang, Leung & Bar-Shalom (FUSION 2026)",
+        "",
+        f"Runs per scenario: {settings.runs}, workers: {mc.workers}, seed {settings.seed}. "
+        f"Wall time {wall:.1f} s (observability {t_obs:.1f} s, Monte Carlo {t_mc:.1f} s).",
+        "",
+        "## Claims",
+        "",
+        "| artefact | claim | reproduced |",
+        "|---|---|---|",
+    ]
+    for a in arts:
+        for claim, ok in a.claims.items():
+            lines.append(f"| {a.name} | {claim} | {'yes' if ok else '**no**'} |")
+    for (name, claim), ok in mc_claims.items():
+        lines.append(f"| {name} | {claim} | {'yes' if ok else '**no**'} |")
+    lines += ["", "## Table 2 (observability vs speed)", "", table.to_markdown(), ""]
+    lines += ["## Observability figures", ""]
+    for a in arts:
+        for f in a.files:
+            if f.suffix == ".png":
+                lines.append(f"![{a.name}]({f.name})")
+    lines += [""] + mc_lines + [""] + [f"![figures 10-11]({f.name})" for f in figs]
+    lines += ["", *sweep_lines, f"![lag sweep]({sweep_fig.name})", "", *obs_lines]
+    lines += ["", "## Files", "", "`montecarlo.npz`/`.json` and `lag_sweep.npz`/`.json` reload with "
+              "`fgdoppler.analysis.montecarlo.MonteCarloResult.load` (no re-running)."]
+    report = out / "report.md"
+    atomic_write_text(report, "\n".join(lines) + "\n")
+    summary = {"claims": {f"{a.name}: {c}": ok for a in arts for c, ok in a.claims.items()}
+               | {f"{n}: {c}": ok for (n, c), ok in mc_claims.items()}, "wall_time": wall}
+    atomic_write_text(out / "claims.json", json.dumps(summary, indent=1))
+    return report
+
+
+def _monte_carlo_section(mc: MonteCarloResult, scenarios: tuple[Scenario, ...], out: Path,
+                         settings: ReproduceSettings) -> tuple[dict[tuple[str, str], bool], list[str], list[Path]]:
+    import matplotlib.pyplot as plt
+
+    names = list(mc.scenario_names)
+    claims: dict[tuple[str, str], bool] = {}
+    lines = ["## Figs. 10–11: position RMSE (time average after the initiation window, m)", ""]
+    header = "| scenario | " + " | ".join(mc.estimators) + " | CRLB filt. | CRLB smooth. |"
+    lines += [header, "|" + "---|" * (len(mc.estimators) + 3)]
+    avg: dict[str, dict[str, float]] = {}
+    crlbs = {}
+    figs = []
+    t_init = 4.75  # the 10-per-pair window ends by 4.75 s in every paper scenario
+    for s, scen in enumerate(scenarios):
+        t = mc.times[s]
+        cf, cs = _bounds(scen)
+        crlbs[scen.name] = (cf, cs)
+        avg[scen.name] = {e: _mean_after(mc.pos_rmse(s, e), t, t_init) for e in mc.estimators}
+        lines.append(f"| {scen.name} | " + " | ".join(f"{avg[scen.name][e]:.0f}" for e in mc.estimators)
+                     + f" | {_mean_after(cf, t, t_init):.0f} | {_mean_after(cs, t, t_init):.0f} |")
+    for fig_no, case in ((10, "a"), (11, "b")):
+        fig, axes = plt.subplots(1, 3, figsize=(15, 4.2), layout="constrained", sharey=True)
+        for ax, x in zip(axes, ("5", "25", "45"), strict=True):
+            name = f"case {case}, start {x} km"
+            s = names.index(name)
+            cf, cs = crlbs[name]
+            plotting.plot_rmse(mc.times[s], {e: mc.pos_rmse(s, e) for e in mc.estimators}, ax,
+                               bounds={"CRLB (filtering)": cf}, title=name)
+            ax.semilogy(mc.times[s], cs, ":", color="k", lw=1, label="CRLB (smoothing)")
+            ax.legend(fontsize="x-small", ncol=2)
+        figs.append(plotting.save(axes[0], out / f"fig{fig_no}_rmse_case_{case}.png"))
+    ekf = {n: avg[n]["ekf"] for n in names}
+    claims[("Fig. 10", "case (a): 45 km best, 25 km worst (EKF)")] = bool(
+        ekf["case a, start 45 km"] < ekf["case a, start 5 km"] < ekf["case a, start 25 km"])
+    claims[("Fig. 11", "case (b): 5 km best, 25 km worst (EKF)")] = bool(
+        ekf["case b, start 5 km"] < ekf["case b, start 45 km"] < ekf["case b, start 25 km"])
+    # beyond the paper
+    lines += ["", "## Smoother vs EKF vs CRLB", ""]
+    for name in names:
+        s = names.index(name)
+        t = mc.times[s]
+        after = t >= t_init
+        sm, ek, gr = mc.pos_rmse(s, "batch"), mc.pos_rmse(s, "ekf"), mc.pos_rmse(s, "grid")
+        worse_than_ekf = np.flatnonzero(after & (sm > ek))
+        ok = worse_than_ekf.size == 0
+        claims[("smoother", f"{name}: smoother no worse than the EKF at every time after initiation")] = ok
+        if not ok:
+            lines.append(f"- {name}: the smoother is worse than the EKF at {worse_than_ekf.size} of "
+                         f"{int(after.sum())} times (max ratio {np.max(sm[after] / ek[after]):.2f}).")
+        worse_than_grid = after & (sm > gr)
+        if np.any(worse_than_grid):
+            lines.append(f"- {name}: the smoother is worse than the grid-only estimate at "
+                         f"{int(worse_than_grid.sum())} of {int(after.sum())} times — the paper's poor-"
+                         "observability finding (a grid estimate extrapolated at constant velocity can beat "
+                         "estimators that linearise an ill-conditioned problem; here the smoother also pays "
+                         "for runs that settle in the wrong basin).")
+        if name in settings.well_observed:
+            _, cs = crlbs[name]
+            sel = t >= 10.0
+            ratio = float(np.max(sm[sel] / cs[sel]))
+            claims[("smoother", f"{name}: full smoother RMSE within 1.1x the smoothing CRLB for t >= 10 s "
+                                f"(max ratio {ratio:.2f})")] = ratio <= 1.1
+    band = mc.nees_band()
+    lines += ["", f"## NEES (95 % band for {mc.runs} runs: [{band[0]:.2f}, {band[1]:.2f}])", "",
+              "| scenario | " + " | ".join(TRACKERS) + " |", "|---|" + "---|" * len(TRACKERS)]
+    fig, axes = plt.subplots(2, 3, figsize=(15, 7.5), layout="constrained")
+    for ax, name in zip(axes.ravel(), names, strict=True):
+        s = names.index(name)
+        t = mc.times[s]
+        curves = {e: mc.mean_nees(s, e) for e in TRACKERS}
+        lines.append(f"| {name} | " + " | ".join(f"{_mean_after(curves[e], t, 10.0):.2f}" for e in TRACKERS) + " |")
+        plotting.plot_nees(t, curves, band, ax, title=name)
+    figs.append(plotting.save(axes.ravel()[0], out / "nees.png"))
+    lines.append("")
+    lines.append("(average NEES over t >= 10 s)")
+    return claims, lines, figs
+
+
+def _lag_sweep_section(sweep: MonteCarloResult, out: Path) -> tuple[list[str], Path]:
+    t = sweep.times[0]
+    lags = [e for e in sweep.estimators if e.startswith("lag:")]
+    values = {e: _mean_after(sweep.pos_rmse(0, e), t, 4.75) for e in sweep.estimators}
+    lines = [f"## Lag sweep ({sweep.scenario_names[0]}, {sweep.runs} runs): position RMSE vs lag", "",
+             "| lag (s) | RMSE (m) |", "|---|---|"]
+    lines += [f"| {e[4:]} | {values[e]:.1f} |" for e in lags]
+    lines += [f"| EKF (lag 0) | {values['ekf']:.1f} |", f"| full smoother | {values['batch']:.1f} |", ""]
+    ax = plotting._axes(None)
+    x = [float(e[4:]) for e in lags]
+    ax.semilogx(x, [values[e] for e in lags], "-o", label="fixed-lag")
+    ax.axhline(values["ekf"], color="tab:red", ls="--", label="EKF")
+    ax.axhline(values["batch"], color="k", ls=":", label="full smoother")
+    ax.set_xlabel("lag (s)")
+    ax.set_ylabel("position RMSE, time average (m)")
+    ax.legend(fontsize="small")
+    return lines, plotting.save(ax, out / "lag_sweep.png")
+
+
+def _report_section(scenarios: tuple[Scenario, ...]) -> list[str]:
+    lines = ["## Observability report of each scenario (graph linearised at the truth, deterministic CV)", "",
+             "| scenario | O(x0) | cond(J'J) | σ pos at 5 s (m) | σ pos at 30 s (m) | min angle to ellipse (deg) |",
+             "|---|---|---|---|---|---|"]
+    for scen in scenarios:
+        sim = simulate(scen, np.random.default_rng(0))
+        rep = observability_report(scen.geometry, sim.truth, sim.measurements)
+        if rep.pos_std is None:
+            lines.append(f"| {scen.name} | {rep.O_x0:.2f} | {rep.cond_JtJ:.3g} | {rep.status} | | |")
+            continue
+        i5 = int(np.searchsorted(rep.times, 5.0))
+        sd = np.hypot(rep.pos_std[:, 0], rep.pos_std[:, 1])
+        lines.append(f"| {scen.name} | {rep.O_x0:.2f} | {rep.cond_JtJ:.3g} | {sd[i5]:.0f} | {sd[-1]:.0f} | "
+                     f"{rep.tangent_angle_deg.min():.1f} |")
+    return lines
