@@ -398,6 +398,124 @@ def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, geom: Any, trut
     return 0
 
 
+# -- montecarlo / reproduce ------------------------------------------------------------
+def _executor(args: argparse.Namespace) -> tuple[Any, Any]:
+    """(executor, client) for ``--scheduler`` (Dask distributed), or (None, None)."""
+    if not getattr(args, "scheduler", None):
+        return None, None
+    try:
+        from distributed import Client
+    except ImportError as exc:
+        raise CLIError("--scheduler needs the optional extra: pip install 'fgdoppler[distributed]'") from exc
+    client = Client(args.scheduler)
+    return client.get_executor(), client
+
+
+def _add_montecarlo(sub: argparse._SubParsersAction) -> None:
+    from fgdoppler.analysis.montecarlo import DEFAULT_ESTIMATORS
+
+    p = sub.add_parser(
+        "montecarlo",
+        help="Monte Carlo RMSE / NEES study of paper scenarios",
+        description="Simulate paper scenarios --runs times each and run every estimator; writes "
+        "OUT.npz and OUT.json (reloadable) and prints time-averaged RMSE.",
+    )
+    p.add_argument("--case", choices=("a", "b", "all"), default="all", help="paper geometry (default all)")
+    p.add_argument("--start-x", type=float, nargs="+", default=None, metavar="M",
+                   help="start x positions in m (default 5000 25000 45000)")
+    p.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS),
+                   help=f"estimators (default: {' '.join(DEFAULT_ESTIMATORS)}; also lag:SECONDS)")
+    p.add_argument("--runs", type=int, default=100, help="runs per scenario (default 100)")
+    p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+    p.add_argument("--seed", type=int, default=2026, help="root seed (default 2026)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS", help="Dask scheduler address (optional extra)")
+    p.add_argument("--out", type=Path, default=Path("output/montecarlo/montecarlo"), help="output path stem")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--plot", type=Path, default=None, metavar="PATH", help="RMSE-vs-time figure of the first scenario")
+    p.set_defaults(handler=_run_montecarlo)
+
+
+def _run_montecarlo(args: argparse.Namespace) -> int:
+    from fgdoppler.analysis.montecarlo import MonteCarloSpec, run_monte_carlo
+    from fgdoppler.simulation import PAPER_START_X, paper_scenario
+
+    cases = ("a", "b") if args.case == "all" else (args.case,)
+    starts = tuple(args.start_x) if args.start_x else PAPER_START_X
+    scen = tuple(paper_scenario(c, x) for c in cases for x in starts)
+    try:
+        spec = MonteCarloSpec(scenarios=scen, estimators=tuple(args.estimators), runs=args.runs, seed=args.seed)
+    except ValueError as exc:
+        raise CLIError(str(exc)) from exc
+    executor, client = _executor(args)
+    try:
+        res = run_monte_carlo(spec, executor=executor, workers=args.workers)
+    finally:
+        if client is not None:
+            client.close()
+    npz, js = res.save(args.out)
+    summ = res.summary()
+    if args.json:
+        _emit_json(summ)
+    else:
+        print(f"{res.runs} runs x {len(scen)} scenarios in {res.wall_time:.1f} s; wrote {npz} and {js}")
+        print(f"{'scenario':22s} " + " ".join(f"{e:>10s}" for e in res.estimators))
+        for s, name in enumerate(res.scenario_names):
+            vals = [r["pos_rmse_mean"] for r in summ["rows"] if r["scenario"] == name]
+            print(f"{name:22s} " + " ".join(f"{v:10.1f}" if v is not None else f"{'-':>10s}" for v in vals))
+    if args.plot:
+        from fgdoppler import plotting
+
+        ax = plotting.plot_rmse(res.times[0], {e: res.pos_rmse(0, e) for e in res.estimators},
+                                title=res.scenario_names[0])
+        plotting.save(ax, args.plot)
+    return 0
+
+
+def _add_reproduce(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "reproduce",
+        help="every table and figure of the paper plus the new studies, with report.md",
+        description="Reproduce Table 2, Figs 3-8 and 10-11 of the paper, the lag sweep, NEES and "
+        "observability reports into --out, with report.md comparing the paper's values and ours.",
+    )
+    p.add_argument("--quick", action="store_true", help="few runs (5 per scenario): under a minute")
+    p.add_argument("--runs", type=int, default=None, help="runs per scenario (default 100; 5 with --quick)")
+    p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+    p.add_argument("--seed", type=int, default=2026, help="root seed (default 2026)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS", help="Dask scheduler address (optional extra)")
+    p.add_argument("--out", type=Path, default=Path("output/reproduce"), help="output folder (default output/reproduce)")
+    p.add_argument("--json", action="store_true", help="print the claims as JSON")
+    p.set_defaults(handler=_run_reproduce)
+
+
+def _run_reproduce(args: argparse.Namespace) -> int:
+    import os
+
+    from fgdoppler.analysis.reproduce import ReproduceSettings, reproduce
+
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    runs = args.runs if args.runs is not None else (5 if args.quick else 100)
+    if runs < 1:
+        raise CLIError("--runs must be >= 1")
+    executor, client = _executor(args)
+    try:
+        report = reproduce(args.out, ReproduceSettings(runs=runs, workers=args.workers, seed=args.seed),
+                           executor=executor)
+    finally:
+        if client is not None:
+            client.close()
+    claims = json.loads((args.out / "claims.json").read_text())
+    if args.json:
+        _emit_json(claims)
+    else:
+        n_ok = sum(claims["claims"].values())
+        print(f"wrote {report} ({runs} runs per scenario, {claims['wall_time']:.1f} s)")
+        print(f"{n_ok} of {len(claims['claims'])} claims reproduced:")
+        for c, ok in claims["claims"].items():
+            print(f"  [{'yes' if ok else 'NO '}] {c}")
+    return 0
+
+
 # -- entry point ----------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand."""
@@ -413,7 +531,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-_SUBCOMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_simulate, _add_observability, _add_track]
+_SUBCOMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_simulate, _add_observability, _add_track, _add_montecarlo, _add_reproduce]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -185,8 +185,10 @@ class MonteCarloResult:
     def mean_nees(self, s: int, name: str) -> FloatArray:
         """Run-averaged NEES at each time (NaN where no run has one)."""
         x = self.nees[s][name]
-        with np.errstate(invalid="ignore"):
-            return np.nanmean(np.where(np.isfinite(x), x, np.nan), axis=0) if np.any(np.isfinite(x)) else np.full(x.shape[1], np.nan)
+        ok = np.isfinite(x)
+        n = ok.sum(axis=0)
+        total = np.where(ok, x, 0.0).sum(axis=0)
+        return np.where(n > 0, total / np.maximum(n, 1), np.nan)
 
     def nees_band(self) -> tuple[float, float]:
         """95 % band of the run-averaged NEES."""

@@ -211,7 +211,7 @@ def _monte_carlo_section(mc: MonteCarloResult, scenarios: tuple[Scenario, ...], 
     band = mc.nees_band()
     lines += ["", f"## NEES (95 % band for {mc.runs} runs: [{band[0]:.2f}, {band[1]:.2f}])", "",
               "| scenario | " + " | ".join(TRACKERS) + " |", "|---|" + "---|" * len(TRACKERS)]
-    fig, axes = plt.subplots(2, 3, figsize=(15, 7.5), layout="constrained")
+    _, axes = plt.subplots(2, 3, figsize=(15, 7.5), layout="constrained")
     for ax, name in zip(axes.ravel(), names, strict=True):
         s = names.index(name)
         t = mc.times[s]

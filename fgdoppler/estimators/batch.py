@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import gtsam
 import numpy as np
+from scipy.stats import chi2
 from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.estimators.common import (
@@ -42,7 +43,7 @@ from fgdoppler.estimators.marginals import chain_solve, check_covariances
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.factors import X
 from fgdoppler.measurements import Measurements
-from fgdoppler.models.measurement import MeasurementModel
+from fgdoppler.models.measurement import DopplerModel, MeasurementModel
 
 __all__ = ["BatchSolution", "initial_trajectory", "rts_smooth", "run_batch", "solve_batch"]
 
@@ -272,18 +273,53 @@ def initial_trajectory(measurements: Measurements, model: MeasurementModel, init
     return out
 
 
+def _reinitiate(measurements: Measurements, model: DopplerModel, settings: TrackerSettings,
+                prior: tuple[FloatArray, FloatArray] | None) -> BatchSolution | None:
+    """Multi-start deterministic-CV ML over the whole recording, then the full smoother from it."""
+    from fgdoppler.estimators.initiation import InitiationSettings, initiate
+
+    full = initiate(measurements, model.geometry,
+                    InitiationSettings(window="batch", motion=settings.motion, grid=settings.grid,
+                                       weak_prior=settings.weak_prior))
+    times, _ = measurements.scan_index()
+    x0 = settings.motion.propagate(full.x_start, times - full.t_start)
+    try:
+        return solve_batch(measurements, model, x0, settings, prior=prior, covariances=settings.smoothed_covariances)
+    except ValueError:
+        return None
+
+
 def run_batch(
     measurements: Measurements,
     model: MeasurementModel,
     init: Initiation,
     settings: TrackerSettings | None = None,
 ) -> TrackResult:
-    """Offline reconstruction of a whole recording (initiation → EKF start → LM) with marginals."""
+    """Offline reconstruction of a whole recording (initiation → EKF start → LM) with marginals.
+
+    If the solution's cost fails a 99.9 % χ² check (it cannot explain the
+    data: the window's initiation led to a wrong basin), the whole recording
+    is initiated again (multi-start, deterministic constant velocity) and
+    smoothed from there; the lower cost wins and a warning says so.
+    """
     settings = settings or TrackerSettings()
     t_begin = time.perf_counter()
     x_init = initial_trajectory(measurements, model, init, settings)
     prior = region_prior(settings.grid) if settings.weak_prior else None
     sol = solve_batch(measurements, model, x_init, settings, prior=prior, covariances=settings.smoothed_covariances)
+    notes = list(sol.warnings)
+    threshold = float(chi2.ppf(0.999, max(len(measurements) - 4, 1)))
+    if sol.cost > threshold and isinstance(model, DopplerModel):
+        # The solution cannot explain the data (a wrong basin inherited from the window):
+        # offline, every measurement is available, so initiate again from all of them.
+        notes.append(f"cost {sol.cost:.1f} fails the 99.9 % chi-square check ({threshold:.1f}): "
+                     "re-initiated from the whole recording")
+        again = _reinitiate(measurements, model, settings, prior)
+        if again is not None and again.cost < sol.cost:
+            sol = again
+            notes += list(again.warnings)
+        if sol.cost > threshold:
+            notes.append(f"final cost {sol.cost:.1f} still fails the chi-square check: the estimate is unreliable")
     covs = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
     t_last = float(sol.times[-1])
     return TrackResult(
@@ -293,6 +329,6 @@ def run_batch(
         primary="smoothed",
         relinearizations=np.array([sol.iterations], dtype=np.int64),
         cost=sol.cost,
-        warnings=tuple((t_last, w) for w in sol.warnings),
+        warnings=tuple((t_last, w) for w in notes),
         wall_time=time.perf_counter() - t_begin,
     )

@@ -161,7 +161,7 @@ class FixedLagTracker:
             P = np.asarray(self.smoother.marginalCovariance(X(k)), dtype=float)
             if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
                 raise RuntimeError("non-finite estimate")
-        except RuntimeError as exc:
+        except (RuntimeError, ValueError) as exc:  # ValueError: the model at a sensor position
             self.failures += 1
             msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             self.warnings.append((t, f"fixed-lag update failed ({msg}); smoother rebuilt from the last good estimate"))

@@ -302,7 +302,7 @@ def _lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, settings: Initi
     try:
         opt = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params(settings.max_iterations))
         res = opt.optimize()
-    except RuntimeError as exc:
+    except (RuntimeError, ValueError) as exc:  # ValueError: a step onto a sensor position
         return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
     cost = 2.0 * graph.error(res)
     if not np.isfinite(cost):

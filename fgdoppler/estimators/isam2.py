@@ -111,8 +111,13 @@ class ISAM2Tracker:
         sd = self.scans[k]
         if sd.channels.size == 0:
             return None
-        rows = linearize_rows(self.model, np.broadcast_to(x_lin, (sd.channels.size, 4)), sd.channels, sd.z,
-                              sd.sigma, self.settings.huber_k)
+        try:
+            rows = linearize_rows(self.model, np.broadcast_to(x_lin, (sd.channels.size, 4)), sd.channels, sd.z,
+                                  sd.sigma, self.settings.huber_k)
+        except ValueError as exc:  # the predicted state sits on a sensor: drop this scan's factor
+            self.warnings.append((self.times[k], f"measurements skipped: {exc}"))
+            sd.channels = sd.channels[:0]
+            return None
         return _absolute_linear([X(k)], [rows.A], rows.b + rows.A @ x_lin)
 
     def _estimate(self, k: int) -> FloatArray:
