@@ -27,8 +27,8 @@ from dataclasses import dataclass
 
 import gtsam
 import numpy as np
-from scipy.stats import chi2
 from numpy.typing import ArrayLike, NDArray
+from scipy.stats import chi2
 
 from fgdoppler.estimators.common import (
     Scans,
@@ -80,7 +80,15 @@ class _Problem:
         else:
             self.prior = None
         dts = np.diff(self.times)
-        self.blocks = [self.motion(dt) for dt in dts]
+        blocks = [self.motion(dt) for dt in dts]
+        self.Ap = np.array([blk[0] for blk in blocks]).reshape(-1, 4, 4)
+        self.An = np.array([blk[1] for blk in blocks]).reshape(-1, 4, 4)
+        counts = np.diff(self.scans.bounds)
+        self.m_max = int(counts.max()) if counts.size else 0
+        self.row_in_scan = np.arange(len(meas)) - self.scans.bounds[self.scan_of]
+        self.keys = [X(k) for k in range(self.n)]
+        self.unit = gtsam.noiseModel.Unit.Create(8 + self.m_max)
+        self._damp = np.zeros((self.n, 4))
 
     def cost(self, states: FloatArray) -> float:
         h = self.model.predict(states[self.scan_of], self.meas.pair)
@@ -94,54 +102,61 @@ class _Problem:
         return c
 
     def system(self, states: FloatArray, lam: float) -> gtsam.GaussianFactorGraph:
-        """The damped linear system in delta coordinates, one JacobianFactor per scan."""
+        """The damped linear system in delta coordinates, one JacobianFactor per scan.
+
+        Every scan's block has rows ``[motion (4); measurements (padded to the
+        largest scan with zero rows, which add nothing); damping (4)]``; all
+        blocks are filled in one vectorised pass and only the factor
+        construction loops over scans.
+        """
+        n, m = self.n, self.m_max
         lin = linearize_rows(self.model, states[self.scan_of], self.meas.pair, self.meas.doppler,
                              self.meas.sigma, self.settings.huber_k)
-        mres = self.motion.residuals(states, self.times)
         # Marquardt scaling: the diagonal of J'J per state
-        diag = np.zeros((self.n, 4))
+        diag = np.zeros((n, 4))
         np.add.at(diag, self.scan_of, lin.A**2)
-        for k in range(1, self.n):
-            Ap, An = self.blocks[k - 1]
-            diag[k] += np.sum(An**2, axis=0)
-            diag[k - 1] += np.sum(Ap**2, axis=0)
+        if n > 1:
+            diag[1:] += np.sum(self.An**2, axis=1)
+            diag[:-1] += np.sum(self.Ap**2, axis=1)
         if self.prior is not None:
             diag[0] += np.sum(self.prior[0] ** 2, axis=0)
         damp = np.sqrt(lam * np.maximum(diag, 1e-12))
         self._damp = damp
+        rows = 8 + m
+        A_next = np.zeros((n, rows, 4))
+        A_prev = np.zeros((n, rows, 4))
+        b = np.zeros((n, rows))
+        A_next[self.scan_of, 4 + self.row_in_scan] = lin.A
+        b[self.scan_of, 4 + self.row_in_scan] = lin.b
+        A_next[:, 4 + m:, :] = damp[:, :, None] * np.eye(4)
+        if n > 1:
+            A_next[1:, :4] = self.An
+            A_prev[1:, :4] = self.Ap
+            b[1:, :4] = -self.motion.residuals(states, self.times)
         gfg = gtsam.GaussianFactorGraph()
-        bounds = self.scans.bounds
-        for k in range(self.n):
-            sl = slice(bounds[k], bounds[k + 1])
-            A_meas, b_meas = lin.A[sl], lin.b[sl]
-            rows_k = [A_meas, np.diag(damp[k])]
-            b = [b_meas, np.zeros(4)]
-            if k == 0:
-                if self.prior is not None:
-                    rows_k.append(self.prior[0])
-                    b.append(self.prior[1] - self.prior[0] @ states[0])
-                A = np.vstack(rows_k)
-                gfg.add(gtsam.JacobianFactor(X(0), A, np.concatenate(b), gtsam.noiseModel.Unit.Create(A.shape[0])))
-                continue
-            Ap, An = self.blocks[k - 1]
-            m = A_meas.shape[0]
-            A_prev = np.vstack([Ap, np.zeros((m + 4, 4))])
-            A_next = np.vstack([An, *rows_k])
-            bb = np.concatenate([-mres[k - 1], *b])
-            gfg.add(gtsam.JacobianFactor(X(k - 1), A_prev, X(k), A_next, bb,
-                                         gtsam.noiseModel.Unit.Create(bb.size)))
+        keys = self.keys
+        unit = self.unit
+        first_rows = [A_next[0, 4:]]
+        first_b = [b[0, 4:]]
+        if self.prior is not None:
+            first_rows.append(self.prior[0])
+            first_b.append(self.prior[1] - self.prior[0] @ states[0])
+        A0 = np.vstack(first_rows)
+        gfg.add(gtsam.JacobianFactor(keys[0], A0, np.concatenate(first_b), gtsam.noiseModel.Unit.Create(A0.shape[0])))
+        for k in range(1, n):
+            gfg.add(gtsam.JacobianFactor(keys[k - 1], A_prev[k], keys[k], A_next[k], b[k], unit))
         return gfg
 
     def model_cost(self, gfg: gtsam.GaussianFactorGraph, dx: FloatArray, lam: float) -> float:
         """Cost predicted by the undamped linear model for step ``dx``."""
         vv = gtsam.VectorValues()
-        for k in range(self.n):
-            vv.insert(X(k), dx[k])
+        for k, key in enumerate(self.keys):
+            vv.insert(key, dx[k])
         damped = 2.0 * gfg.error(vv)
         return damped - float(np.sum(self._damp**2 * dx**2))
 
     def solve(self, gfg: gtsam.GaussianFactorGraph, covariances: bool = False) -> tuple[FloatArray, FloatArray | None]:
-        return chain_solve(gfg, [X(k) for k in range(self.n)], covariances=covariances)
+        return chain_solve(gfg, self.keys, covariances=covariances)
 
 
 def solve_batch(

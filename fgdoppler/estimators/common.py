@@ -74,7 +74,7 @@ class TrackerSettings:
     grid: GridSpec = field(default_factory=GridSpec)
     relinearize_position: float = 10.0
     relinearize_velocity: float = 0.1
-    relinearize_window: int = 20
+    relinearize_window: int = 10
     lag: float = 5.0
     max_iterations: int = 100
     smoothed_covariances: bool = True
