@@ -7,6 +7,7 @@ Carlo studies reproducing Yang, Leung & Bar-Shalom (FUSION 2026).
 
 from importlib.metadata import PackageNotFoundError, version
 
+from fgdoppler.analysis.observability import observability_measure
 from fgdoppler.geometry import (
     BistaticPair,
     Geometry,
@@ -59,6 +60,7 @@ __all__ = [
     "bistatic_doppler_jacobian",
     "bistatic_range",
     "ellipse_tangent",
+    "observability_measure",
     "paper_geometry",
     "paper_scenario",
     "paper_scenarios",

@@ -459,7 +459,7 @@ def _run_montecarlo(args: argparse.Namespace) -> int:
     else:
         print(f"{res.runs} runs x {len(scen)} scenarios in {res.wall_time:.1f} s; wrote {npz} and {js}")
         print(f"{'scenario':22s} " + " ".join(f"{e:>10s}" for e in res.estimators))
-        for s, name in enumerate(res.scenario_names):
+        for name in res.scenario_names:
             vals = [r["pos_rmse_mean"] for r in summ["rows"] if r["scenario"] == name]
             print(f"{name:22s} " + " ".join(f"{v:10.1f}" if v is not None else f"{'-':>10s}" for v in vals))
     if args.plot:

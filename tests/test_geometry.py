@@ -89,3 +89,13 @@ def test_toml_errors_name_the_file(tmp_path, text: str, msg: str) -> None:
 def test_resolve_geometry_unknown() -> None:
     with pytest.raises(ValueError, match="neither a preset"):
         resolve_geometry("no-such-file.toml")
+
+
+def test_design_contract_names_import_from_the_package() -> None:
+    # ../shared/DESIGN.md "Public contract"
+    geom = fd.paper_geometry("a")
+    assert isinstance(fd.BistaticPair(tx=(50e3, 0.0), rx=(0.0, 0.0)), fd.BistaticPair)
+    states = np.array([[25e3, 2e3, 10.0, -100.0]])
+    assert fd.bistatic_doppler(states, geom).shape == (1, 2)
+    assert fd.bistatic_doppler_jacobian(states, geom).shape == (1, 2, 4)
+    assert isinstance(fd.observability_measure(states[0], geom, [np.arange(3.0), np.arange(3.0)]), float)

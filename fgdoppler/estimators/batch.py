@@ -291,11 +291,15 @@ def initial_trajectory(measurements: Measurements, model: MeasurementModel, init
 def _reinitiate(measurements: Measurements, model: DopplerModel, settings: TrackerSettings,
                 prior: tuple[FloatArray, FloatArray] | None) -> BatchSolution | None:
     """Multi-start deterministic-CV ML over the whole recording, then the full smoother from it."""
-    from fgdoppler.estimators.initiation import InitiationSettings, initiate
+    from fgdoppler.estimators.initiation import InitiationSettings, initiate, window_grid
 
-    full = initiate(measurements, model.geometry,
-                    InitiationSettings(window="batch", motion=settings.motion, grid=settings.grid,
-                                       weak_prior=settings.weak_prior))
+    init_settings = InitiationSettings(window="batch", motion=settings.motion, grid=settings.grid,
+                                       weak_prior=settings.weak_prior)
+    # The grid only has to find the basins: search on every 4th scan (a quarter of the cost),
+    # then let LM refine each candidate against every measurement.
+    _, scan = measurements.scan_index()
+    grid = window_grid(measurements.subset(scan % 4 == 0), model.geometry, init_settings)
+    full = initiate(measurements, model.geometry, init_settings, grid_result=grid)
     times, _ = measurements.scan_index()
     x0 = settings.motion.propagate(full.x_start, times - full.t_start)
     try:

@@ -1,0 +1,37 @@
+"""Run every benchmark and write a Markdown table: ``python -m benchmarks [--out PATH] [--only NAME ...]``."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+from pathlib import Path
+
+from benchmarks import bench_ekf, bench_grid, bench_montecarlo, bench_scaling
+
+BENCHES = {"grid": bench_grid, "ekf": bench_ekf, "scaling": bench_scaling, "montecarlo": bench_montecarlo}
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(prog="python -m benchmarks")
+    p.add_argument("--out", type=Path, default=Path("output/benchmarks.md"))
+    p.add_argument("--only", nargs="+", choices=sorted(BENCHES), default=list(BENCHES))
+    args = p.parse_args()
+    rows = []
+    for name in args.only:
+        print(f"running {name} ...", flush=True)
+        rows += BENCHES[name].run()
+    machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    lines = [f"Machine: {machine}", "", "| benchmark | measured | ratio | target | met |", "|---|---|---|---|---|"]
+    for r in rows:
+        ratio = "" if r.ratio is None else f"{r.ratio:.2f}"
+        met = "" if r.met is None else ("yes" if r.met else "**no**")
+        lines.append(f"| {r.name} | {r.value} | {ratio} | {r.target} | {met} |")
+    text = "\n".join(lines) + "\n"
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

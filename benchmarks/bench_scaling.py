@@ -1,0 +1,67 @@
+"""Per-scan cost of iSAM2, the fixed-lag smoother and offline reconstruction at 60, 600 and 7,200 scans."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+import fgdoppler as fd
+from benchmarks._common import Row, long_scenario
+from fgdoppler.estimators.batch import initial_trajectory, solve_batch
+from fgdoppler.estimators.common import Scans, TrackerSettings, region_prior
+from fgdoppler.estimators.fixed_lag import FixedLagTracker
+from fgdoppler.estimators.initiation import initiate
+from fgdoppler.estimators.isam2 import ISAM2Tracker
+from fgdoppler.models.measurement import DopplerModel
+
+SIZES = (60, 600, 7200)
+
+
+def _stream(tracker: object, sim: fd.Simulation, n_window: int) -> np.ndarray:
+    m = sim.measurements
+    sc = Scans.of(m)
+    lat = []
+    x0 = sim.truth.states[0]
+    for k in range(len(sc)):
+        sl = sc.rows(k)
+        t = time.perf_counter()
+        if isinstance(tracker, ISAM2Tracker):
+            tracker.add_scan(sc.times[k], m.pair[sl], m.doppler[sl], m.sigma[sl], x0 if k == 0 else None,
+                             gate=k >= n_window)
+        else:
+            tracker.add_scans([sc.times[k]], [m.pair[sl]], [m.doppler[sl]], [m.sigma[sl]],
+                              [x0] if k == 0 else None, gate=k >= n_window)
+        lat.append(time.perf_counter() - t)
+    return np.array(lat)
+
+
+def run() -> list[Row]:
+    rows = []
+    s = TrackerSettings(lag=2.0)
+    prior = region_prior(s.grid)
+    results: dict[str, dict[int, float]] = {"isam2": {}, "fixed-lag": {}, "batch": {}}
+    detail: dict[str, dict[int, str]] = {"isam2": {}, "fixed-lag": {}, "batch": {}}
+    for n in SIZES:
+        sim = fd.simulate(long_scenario(n), np.random.default_rng(0))
+        model = DopplerModel(geometry=sim.scenario.geometry)
+        for name, tr in (("isam2", ISAM2Tracker(model, s, prior)), ("fixed-lag", FixedLagTracker(model, s, prior))):
+            lat = _stream(tr, sim, 20)
+            steady = lat[min(20, lat.size // 2):]
+            results[name][n] = float(np.median(steady))
+            detail[name][n] = f"median {np.median(steady) * 1e3:.2f} ms, p99 {np.percentile(steady, 99) * 1e3:.2f} ms"
+        init = initiate(sim.measurements.first_per_pair(min(100, n // 2)), sim.scenario.geometry)
+        x_init = initial_trajectory(sim.measurements, model, init, s)
+        t = time.perf_counter()
+        sol = solve_batch(sim.measurements, model, x_init, s, prior=prior)
+        dt = time.perf_counter() - t
+        per_it = dt / n / max(sol.iterations, 1)
+        results["batch"][n] = per_it
+        detail["batch"][n] = (f"{dt / n * 1e3:.2f} ms/scan total ({sol.iterations} LM iterations), "
+                              f"{per_it * 1e6:.1f} us/scan/iteration")
+    for name, label in (("isam2", "iSAM2 per-scan latency"), ("fixed-lag", "fixed-lag (2 s) per-scan latency"),
+                        ("batch", "offline reconstruction cost per scan and LM iteration")):
+        ratio = results[name][SIZES[-1]] / results[name][SIZES[0]]
+        value = "; ".join(f"{n}: {detail[name][n]}" for n in SIZES)
+        rows.append(Row(name=label, value=value, ratio=ratio, target="7200 vs 60 scans <= 1.5x", met=ratio <= 1.5))
+    return rows

@@ -1,0 +1,36 @@
+"""Every Python example in the README and docs/ runs (and every CLI subcommand is documented)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from fgdoppler.cli import build_parser
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+BLOCK = re.compile(r"```python\n(.*?)```", re.DOTALL)
+
+
+def _examples() -> list[tuple[str, str]]:
+    out = []
+    for page in PAGES:
+        for i, code in enumerate(BLOCK.findall(page.read_text(encoding="utf-8"))):
+            out.append((f"{page.relative_to(ROOT)}#{i}", code))
+    return out
+
+
+@pytest.mark.parametrize(("where", "code"), _examples(), ids=[w for w, _ in _examples()])
+def test_python_examples_run(where: str, code: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    exec(compile(code, where, "exec"), {"__name__": "__docs__"})
+
+
+def test_every_subcommand_is_documented() -> None:
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    text = (ROOT / "docs" / "cli.md").read_text()
+    for name in sub.choices:  # type: ignore[union-attr]
+        assert f"fgdoppler {name}" in text, name
