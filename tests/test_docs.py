@@ -34,3 +34,16 @@ def test_every_subcommand_is_documented() -> None:
     text = (ROOT / "docs" / "cli.md").read_text()
     for name in sub.choices:  # type: ignore[union-attr]
         assert f"fgdoppler {name}" in text, name
+
+
+def test_docs_build_strict(tmp_path: Path) -> None:
+    """The MkDocs site (with the API reference from docstrings) builds with no warning."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("mkdocs")
+    pytest.importorskip("mkdocstrings")
+    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(tmp_path / "site")],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert (tmp_path / "site" / "api" / "estimators" / "index.html").exists()

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.stats import chi2
 
 from fgdoppler.estimators.grid import GridSpec
@@ -22,7 +22,7 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.measurement import MeasurementModel
 from fgdoppler.models.motion import ConstantVelocity
 
-__all__ = ["Scans", "TrackerSettings", "huber_weights", "region_prior", "split_window"]
+__all__ = ["Scans", "StreamingTracker", "TrackerSettings", "feed", "huber_weights", "region_prior", "split_window"]
 
 FloatArray = NDArray[np.float64]
 
@@ -157,3 +157,43 @@ def check_model(model: MeasurementModel, meas: Measurements) -> None:
     """Raise if a measurement's channel is outside the model."""
     if len(meas) and int(meas.pair.max()) >= model.n_channels:
         raise ValueError(f"pair index {int(meas.pair.max())} outside a model of {model.n_channels} channel(s)")
+
+
+class StreamingTracker(Protocol):
+    """What :func:`feed` needs from a tracker (iSAM2 and fixed-lag implement it)."""
+
+    def add_window(self, times: ArrayLike, channels: list[ArrayLike], z: list[ArrayLike], sigma: list[ArrayLike],
+                   guesses: ArrayLike) -> tuple[FloatArray, FloatArray | None]: ...
+
+    def add_scan(self, t: float, channels: ArrayLike, z: ArrayLike,
+                 sigma: ArrayLike) -> tuple[FloatArray, FloatArray | None]: ...
+
+
+def feed(tracker: StreamingTracker, measurements: Measurements, init: Any,
+         settings: TrackerSettings) -> tuple[list[float], list[FloatArray], list[FloatArray | None]]:
+    """Feed the initiation window (one call, starting on the initiation's CV track), then every later scan.
+
+    Returns the filtered ``(times, states, covariances)`` from the window's end on.
+    """
+    window, stream = split_window(measurements, init.t_end)
+    times: list[float] = []
+    states: list[FloatArray] = []
+    covs: list[FloatArray | None] = []
+    ws = Scans.of(window)
+    if len(ws):
+        rows = [ws.rows(k) for k in range(len(ws))]
+        x, P = tracker.add_window(
+            ws.times, [window.pair[r] for r in rows], [window.doppler[r] for r in rows],
+            [window.sigma[r] for r in rows], settings.motion.propagate(init.x_start, ws.times - init.t_start),
+        )
+        times.append(float(ws.times[-1]))
+        states.append(x)
+        covs.append(P)
+    ss = Scans.of(stream)
+    for k in range(len(ss)):
+        sl = ss.rows(k)
+        x, P = tracker.add_scan(ss.times[k], stream.pair[sl], stream.doppler[sl], stream.sigma[sl])
+        times.append(float(ss.times[k]))
+        states.append(x)
+        covs.append(P)
+    return times, states, covs

@@ -26,13 +26,7 @@ import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.estimators.common import (
-    Scans,
-    TrackerSettings,
-    check_model,
-    region_prior,
-    split_window,
-)
+from fgdoppler.estimators.common import TrackerSettings, check_model, feed, region_prior
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
@@ -86,6 +80,26 @@ class FixedLagTracker:
         self._last: tuple[FloatArray, FloatArray | None] | None = None
         self._gate = self.settings.gate
         self.failures = 0
+
+    def add_window(self, times: ArrayLike, channels: list[ArrayLike], z: list[ArrayLike], sigma: list[ArrayLike],
+                   guesses: ArrayLike) -> tuple[FloatArray, FloatArray | None]:
+        """Add the initiation window, ungated; returns the newest ``(x, P)``.
+
+        The scans within one lag of the start go in together (jointly
+        determined); later window scans one by one, so every state is
+        recorded before it is marginalised.
+        """
+        ts = np.asarray(times, dtype=float).reshape(-1)
+        g = np.asarray(guesses, dtype=float).reshape(-1, 4)
+        first = max(1, int(np.searchsorted(ts, ts[0] + 0.999 * self.settings.lag, side="right")))
+        x, P = self.add_scans(ts[:first], channels[:first], z[:first], sigma[:first], g[:first], gate=False)
+        for k in range(first, ts.size):
+            x, P = self.add_scans(ts[k:k + 1], channels[k:k + 1], z[k:k + 1], sigma[k:k + 1], g[k:k + 1], gate=False)
+        return x, P
+
+    def add_scan(self, t: float, channels: ArrayLike, z: ArrayLike, sigma: ArrayLike) -> tuple[FloatArray, FloatArray | None]:
+        """Add one scan (gated); returns the newest ``(x, P)``."""
+        return self.add_scans([t], [channels], [z], [sigma])
 
     def _factors(self, k: int, t: float, c: NDArray[np.intp], z: FloatArray, s: FloatArray,
                  graph: gtsam.NonlinearFactorGraph) -> None:
@@ -269,30 +283,7 @@ def run_fixed_lag(
     t_begin = time.perf_counter()
     prior = region_prior(settings.grid) if settings.weak_prior else None
     tr = FixedLagTracker(model, settings, prior)
-    window, stream = split_window(measurements, init.t_end)
-    times, states, covs = [], [], []
-    ws = Scans.of(window)
-    if len(ws):
-        rows = [ws.rows(k) for k in range(len(ws))]
-        guesses = settings.motion.propagate(init.x_start, ws.times - init.t_start)
-        # The scans within one lag of the start go in together (jointly determined); later
-        # window scans one by one, so every state is recorded before it is marginalised.
-        first = max(1, int(np.searchsorted(ws.times, ws.times[0] + 0.999 * settings.lag, side="right")))
-        chunks = [range(0, first)] + [range(k, k + 1) for k in range(first, len(ws))]
-        for ch in chunks:
-            x, P = tr.add_scans(ws.times[ch.start:ch.stop], [window.pair[rows[k]] for k in ch],
-                                [window.doppler[rows[k]] for k in ch], [window.sigma[rows[k]] for k in ch],
-                                guesses[ch.start:ch.stop], gate=False)
-        times.append(float(ws.times[-1]))
-        states.append(x)
-        covs.append(P)
-    ss = Scans.of(stream)
-    for k in range(len(ss)):
-        sl = ss.rows(k)
-        x, P = tr.add_scans([ss.times[k]], [stream.pair[sl]], [stream.doppler[sl]], [stream.sigma[sl]])
-        times.append(float(ss.times[k]))
-        states.append(x)
-        covs.append(P)
+    times, states, covs = feed(tr, measurements, init, settings)
     tr.finish()
     idx = sorted(tr.lagged)
     lagged = Estimates.from_lists([tr.times[j] for j in idx], [tr.lagged[j][0] for j in idx],

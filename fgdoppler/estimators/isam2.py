@@ -29,13 +29,7 @@ import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.estimators.common import (
-    Scans,
-    TrackerSettings,
-    check_model,
-    region_prior,
-    split_window,
-)
+from fgdoppler.estimators.common import TrackerSettings, check_model, feed, region_prior
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
 from fgdoppler.estimators.results import Estimates, TrackResult
@@ -340,25 +334,7 @@ def run_isam2(
     t_begin = time.perf_counter()
     prior = region_prior(settings.grid) if settings.weak_prior else None
     tracker = ISAM2Tracker(model, settings, prior)
-    window, stream = split_window(measurements, init.t_end)
-    times, states, covs = [], [], []
-    ws = Scans.of(window)
-    if len(ws):
-        rows = [ws.rows(k) for k in range(len(ws))]
-        x, P = tracker.add_window(
-            ws.times, [window.pair[r] for r in rows], [window.doppler[r] for r in rows],
-            [window.sigma[r] for r in rows], settings.motion.propagate(init.x_start, ws.times - init.t_start),
-        )
-        times.append(float(ws.times[-1]))
-        states.append(x)
-        covs.append(P)
-    ss = Scans.of(stream)
-    for k in range(len(ss)):
-        sl = ss.rows(k)
-        x, P = tracker.add_scan(ss.times[k], stream.pair[sl], stream.doppler[sl], stream.sigma[sl])
-        times.append(float(ss.times[k]))
-        states.append(x)
-        covs.append(P)
+    times, states, covs = feed(tracker, measurements, init, settings)
     n_online = len(tracker.relinearized)
     smoothed, scov = tracker.finish(covariances=settings.smoothed_covariances)
     all_times = list(tracker.times)
