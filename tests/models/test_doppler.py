@@ -164,3 +164,20 @@ def test_bad_inputs() -> None:
         fd.bistatic_doppler([1.0, 2.0, 3.0], g)
     with pytest.raises(ValueError, match="out of range"):
         fd.batch_doppler([1e3, 2e3, 1.0, 1.0], g, [[0.0], [0.0], [0.0]])
+
+
+def test_measurement_model_small_and_vectorised_paths_agree(rng: np.random.Generator) -> None:
+    from fgdoppler.models.measurement import DopplerModel
+
+    g = random_geometry(rng, 3)
+    model = DopplerModel(geometry=g)
+    x = random_states(rng, g, 200)
+    c = rng.integers(0, 3, 200)
+    h_vec, H_vec = model.predict_and_jacobian(x, c)  # 200 rows: vectorised path
+    for i in range(0, 200, 2):  # 2 rows at a time: the plain-float path
+        h, H = model.predict_and_jacobian(x[i:i + 2], c[i:i + 2])
+        np.testing.assert_allclose(h, h_vec[i:i + 2], rtol=1e-13, atol=1e-12)
+        np.testing.assert_allclose(H, H_vec[i:i + 2], rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(model.predict(x[i:i + 2], c[i:i + 2]), h, rtol=1e-15)
+    with pytest.raises(ValueError, match="coincide with a sensor"):
+        model.predict(np.array([[*g.rx[0], 1.0, 1.0]]), [0])
