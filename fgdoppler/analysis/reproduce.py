@@ -182,6 +182,17 @@ def _monte_carlo_section(mc: MonteCarloResult, scenarios: tuple[Scenario, ...], 
         ekf["case a, start 45 km"] < ekf["case a, start 5 km"] < ekf["case a, start 25 km"])
     claims[("Fig. 11", "case (b): 5 km best, 25 km worst (EKF)")] = bool(
         ekf["case b, start 5 km"] < ekf["case b, start 45 km"] < ekf["case b, start 25 km"])
+    poor = ("case a, start 5 km", "case a, start 25 km", "case b, start 25 km", "case b, start 45 km")
+    grid_wins = {n: avg[n]["grid"] < avg[n]["ekf"] for n in poor}
+    claims[("Section 5", "poor observability (25 km, a 5 km, b 45 km): the grid-only initial estimate beats the "
+                         "EKF")] = all(grid_wins.values())
+    lines += ["", "Section 5 of the paper finds the grid-only initial estimate more accurate than the EKF in the "
+              "poorly observed scenarios. Here (time-averaged position RMSE after the window): "
+              + "; ".join(f"{n}: grid {avg[n]['grid']:.0f} m vs EKF {avg[n]['ekf']:.0f} m" for n in poor)
+              + ". Our EKF starts from the LM initiation (not the grid point) with its covariance and resolves "
+              "ambiguous initiations by likelihood, and our grid estimate is extrapolated at constant velocity over "
+              "30 s, where its velocity error (grid step 10 m/s, 20 deg) grows into kilometres; the paper's "
+              "curves start from its grid point and do not state the EKF's initial covariance."]
     # beyond the paper
     lines += ["", "## Smoother vs EKF vs CRLB", ""]
     for name in names:

@@ -62,6 +62,7 @@ class ExtendedKalmanFilter:
             raise ValueError("initial state and covariance must be finite")
         self.t = float(t0)
         self._gate = self.settings.gate
+        self._FQ: dict[float, tuple[FloatArray, FloatArray]] = {}
         self.nis: list[tuple[float, int, float, bool]] = []
         self.warnings: list[tuple[float, str]] = []
         #: Cumulative predictive log-likelihood of all measurements (gated ones
@@ -81,10 +82,13 @@ class ExtendedKalmanFilter:
             raise ValueError(f"measurement at t = {t} is earlier than the filter time {self.t}: out of order")
         if dt == 0:
             return
-        m = self.settings.motion
-        F = m.F(dt)
+        FQ = self._FQ.get(dt)
+        if FQ is None:  # few distinct step lengths: build F and Q once each
+            m = self.settings.motion
+            FQ = self._FQ[dt] = (m.F(dt), m.Q(dt))
+        F, Q = FQ
         self.x = F @ self.x
-        self.P = F @ self.P @ F.T + m.Q(dt)
+        self.P = F @ self.P @ F.T + Q
         self.t = float(t)
 
     def update(self, t: float, channel: int, z: float, sigma: float) -> float:

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import minimum_filter
 
-from fgdoppler.geometry import SENSOR_EPS, Geometry
+from fgdoppler.geometry import Geometry
 from fgdoppler.models.doppler import BatchTimes, _batch
 
 __all__ = ["GridResult", "GridSpec", "HalfPlane", "grid_costs", "grid_search", "speed_lower_bound"]
@@ -206,7 +206,6 @@ def _product_costs(
     s2 = vel[:, 0] ** 2 + vel[:, 1] ** 2
     out = np.empty((pos.shape[0], vel.shape[0]))
     step = max(1, chunk // max(1, vel.shape[0]))
-    eps2 = SENSOR_EPS**2
     for start in range(0, pos.shape[0], step):
         p = pos[start:start + step]
         a = p[:, None, 0] - sensors[None, :, 0]
@@ -214,18 +213,30 @@ def _product_costs(
         c = a * a + b * b  # (P, S)
         U = a[:, :, None] * vel[None, None, :, 0] + b[:, :, None] * vel[None, None, :, 1]  # (P, S, V)
         acc = np.zeros((p.shape[0], vel.shape[0]))
-        singular = np.zeros(acc.shape, dtype=bool)
-        for j in range(times.size):
-            t = times.t[j]
-            h = np.zeros_like(acc)
-            for si in (t_idx[j], r_idx[j]):
-                Us = U[:, si, :]
-                d2 = c[:, si, None] + (2.0 * t) * Us + (t * t) * s2
-                singular |= d2 <= eps2
-                h += (Us + t * s2) / np.sqrt(np.maximum(d2, eps2))
-            r = (z[j] - h) * w[j]
-            acc += r * r
-        acc[singular] = np.inf
+        h = np.empty_like(acc)
+        d2 = np.empty_like(acc)
+        num = np.empty_like(acc)
+        # In place and without a per-element guard: a trajectory through a sensor makes
+        # d2 = 0 (or a round-off negative) and its cost inf/NaN, mapped to inf once at the end.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for j in range(times.size):
+                t = times.t[j]
+                ts2 = t * s2
+                h.fill(0.0)
+                for si in (t_idx[j], r_idx[j]):
+                    Us = U[:, si, :]
+                    np.multiply(Us, 2.0 * t, out=d2)
+                    d2 += c[:, si, None]
+                    d2 += t * ts2
+                    np.sqrt(d2, out=d2)
+                    np.add(Us, ts2, out=num)
+                    num /= d2
+                    h += num
+                np.subtract(z[j], h, out=h)
+                h *= w[j]
+                h *= h
+                acc += h
+        acc[~np.isfinite(acc)] = np.inf
         out[start:start + step] = acc
     return out
 
