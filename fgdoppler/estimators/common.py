@@ -59,6 +59,10 @@ class TrackerSettings:
         iSAM2: how many of the most recent scans are checked for
         relinearisation at every update (older states barely move).  All
         are relinearised to convergence at the end.
+    wildfire_threshold
+        iSAM2 back-substitution threshold (m and m/s): changes smaller than
+        this are not propagated to older states until the end (GTSAM's
+        default 0.001 made the per-scan cost grow with the track length).
     lag
         Fixed-lag smoother lag in seconds.
     max_iterations
@@ -75,6 +79,7 @@ class TrackerSettings:
     relinearize_position: float = 10.0
     relinearize_velocity: float = 0.1
     relinearize_window: int = 10
+    wildfire_threshold: float = 0.01
     lag: float = 5.0
     max_iterations: int = 100
     smoothed_covariances: bool = True
@@ -90,6 +95,8 @@ class TrackerSettings:
             raise ValueError("relinearize_window and max_iterations must be >= 1")
         if not self.lag > 0:
             raise ValueError(f"lag must be > 0 s, got {self.lag}")
+        if not self.wildfire_threshold > 0:
+            raise ValueError(f"wildfire_threshold must be > 0, got {self.wildfire_threshold}")
 
     @property
     def gate(self) -> float:

@@ -87,6 +87,17 @@ class ISAM2Tracker:
         params = gtsam.ISAM2Params()
         params.setFactorization("QR")
         params.enableRelinearization = False
+        # Relinearising replaces factors all the time: reuse the freed slots (no measurable
+        # speed effect here, but the factor list no longer grows with every replacement).
+        params.findUnusedFactorSlots = True
+        # Wildfire: after an update iSAM2 back-substitutes into every state whose solution
+        # changed by more than this.  GTSAM's default (0.001) let each new measurement ripple
+        # through hundreds of old states, so the per-scan cost grew with the track (0.30 ms at
+        # 60 scans, 0.53 ms at 7,200); at 0.01 it is flat.  The newest state (the filtered
+        # output) is always exact, and finish() back-substitutes fully.
+        gn = gtsam.ISAM2GaussNewtonParams()
+        gn.setWildfireThreshold(self.settings.wildfire_threshold)
+        params.setOptimizationParams(gn)
         self.isam = gtsam.ISAM2(params)
         self.motion = MotionBlocks(self.settings.motion)
         self.prior = None if prior is None else (np.asarray(prior[0], float), np.asarray(prior[1], float))
