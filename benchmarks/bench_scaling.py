@@ -16,6 +16,7 @@ from fgdoppler.estimators.isam2 import ISAM2Tracker
 from fgdoppler.models.measurement import DopplerModel
 
 SIZES = (60, 600, 7200)
+REPEATS = 3
 
 
 def _stream(tracker: object, sim: fd.Simulation, n_window: int) -> np.ndarray:
@@ -73,9 +74,9 @@ def run() -> list[Row]:
     for n in SIZES:
         sim = fd.simulate(long_scenario(n), np.random.default_rng(0))
         model = DopplerModel(geometry=sim.scenario.geometry)
-        for name, tr in (("isam2", ISAM2Tracker(model, s, prior)), ("fixed-lag", FixedLagTracker(model, s, prior))):
-            lat = _stream(tr, sim, 20)
-            steady = lat[30:]  # after the window has filled (20 states) and the start-up scans
+        for name, make in (("isam2", ISAM2Tracker), ("fixed-lag", FixedLagTracker)):
+            # sub-millisecond medians are noisy on a shared machine: pool three repeats
+            steady = np.concatenate([_stream(make(model, s, prior), sim, 20)[30:] for _ in range(REPEATS)])
             results[name][n] = float(np.median(steady))
             detail[name][n] = f"median {np.median(steady) * 1e3:.2f} ms, p99 {np.percentile(steady, 99) * 1e3:.2f} ms"
         init = initiate(sim.measurements.first_per_pair(min(100, n // 2)), sim.scenario.geometry)
