@@ -23,6 +23,7 @@ garbage.
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -37,6 +38,8 @@ from fgdoppler.models.measurement import MeasurementModel
 __all__ = ["ExtendedKalmanFilter", "run_ekf"]
 
 FloatArray = NDArray[np.float64]
+_EYE4 = np.eye(4)
+_EYE4.setflags(write=False)
 
 
 class ExtendedKalmanFilter:
@@ -102,25 +105,26 @@ class ExtendedKalmanFilter:
         H = H[0]
         r = float(z - h[0])
         PH = self.P @ H
-        S = float(H @ PH + sigma**2)
-        if not (np.isfinite(S) and S > 0):
+        S = float(H @ PH) + sigma * sigma
+        if not (math.isfinite(S) and S > 0):
             self.warnings.append((self.t, f"update skipped: innovation variance {S}"))
             return float("nan")
         nis = r * r / S
         # Every measurement counts in the likelihood, gated or not: a hypothesis must not
         # gain by rejecting the data that contradict it.
-        self.log_likelihood -= 0.5 * (np.log(2 * np.pi * S) + nis)
+        self.log_likelihood -= 0.5 * (math.log(2 * math.pi * S) + nis)
         accepted = nis <= self._gate
         self.nis.append((self.t, int(channel), nis, bool(accepted)))
         if not accepted:
             self.warnings.append((self.t, f"pair {channel}: NIS {nis:.1f} > gate {self._gate:.1f}, measurement rejected"))
             return nis
         K = PH / S
-        IKH = np.eye(4) - np.outer(K, H)
-        P = IKH @ self.P @ IKH.T + np.outer(K, K) * sigma**2
+        IKH = _EYE4 - K[:, None] * H[None, :]
+        P = IKH @ self.P @ IKH.T + (sigma * sigma) * (K[:, None] * K[None, :])
         P = 0.5 * (P + P.T)
         x = self.x + K * r
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
+        # one scalar check: inf and NaN propagate into the sum
+        if not math.isfinite(float(P.sum()) + float(x.sum())):
             self.warnings.append((self.t, "update skipped: non-finite result"))
             return nis
         self.x, self.P = x, P

@@ -58,6 +58,13 @@ class DopplerModel:
         return self.geometry.n_pairs
 
     def _check(self, states: ArrayLike, channels: ArrayLike) -> tuple[FloatArray, NDArray[np.intp]]:
+        if isinstance(states, np.ndarray) and states.shape == (1, 4) and isinstance(channels, list) \
+                and len(channels) == 1:
+            # the filters' one-state, one-channel call: validate cheaply
+            k = channels[0]
+            if not 0 <= k < self.geometry.n_pairs:
+                raise ValueError(f"pair index out of range for a geometry of {self.geometry.n_pairs} pair(s)")
+            return states.astype(float, copy=False), np.array([k], dtype=np.intp)
         x = _as_states(states).reshape(-1, 4)
         c = np.asarray(channels, dtype=np.intp).reshape(-1)
         if c.shape[0] != x.shape[0]:
