@@ -38,12 +38,11 @@ from fgdoppler.models.measurement import MeasurementModel
 __all__ = ["ExtendedKalmanFilter", "run_ekf"]
 
 FloatArray = NDArray[np.float64]
-_EYE4 = np.eye(4)
-_EYE4.setflags(write=False)
+
 
 
 class ExtendedKalmanFilter:
-    """Streaming EKF.
+    r"""Streaming EKF.
 
     Parameters
     ----------
@@ -53,24 +52,49 @@ class ExtendedKalmanFilter:
         Initial state, covariance and time.
     settings
         Motion model and gate.
+
+    Notes
+    -----
+    The 4-state arithmetic runs in plain Python floats: for 4x4 matrices
+    numpy's per-call overhead is several times the arithmetic.  The Joseph
+    update for a scalar measurement is evaluated exactly in O(n^2) as
+    :math:`\mathbf A = \mathbf P - \mathbf K(\mathbf P\mathbf H')'`,
+    :math:`\mathbf P^+ = \mathbf A - (\mathbf A\mathbf H')\mathbf K' + \sigma^2\mathbf K\mathbf K'`,
+    which equals :math:`(\mathbf I-\mathbf K\mathbf H)\mathbf P(\mathbf I-\mathbf K\mathbf H)' + \mathbf K\sigma^2\mathbf K'`
+    term by term; the prediction uses the block structure of the
+    constant-velocity :math:`\mathbf F`.  ``x`` and ``P`` are numpy arrays.
     """
 
     def __init__(self, model: MeasurementModel, x0: ArrayLike, P0: ArrayLike, t0: float,
                  settings: TrackerSettings | None = None) -> None:
         self.model = model
         self.settings = settings or TrackerSettings()
-        self.x = np.array(x0, dtype=float).reshape(4)
-        self.P = np.array(P0, dtype=float).reshape(4, 4)
-        if not (np.all(np.isfinite(self.x)) and np.all(np.isfinite(self.P))):
+        x = np.array(x0, dtype=float).reshape(4)
+        P = np.array(P0, dtype=float).reshape(4, 4)
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
             raise ValueError("initial state and covariance must be finite")
+        self._x = x.tolist()
+        self._P = (0.5 * (P + P.T)).tolist()
         self.t = float(t0)
         self._gate = self.settings.gate
-        self._FQ: dict[float, tuple[FloatArray, FloatArray]] = {}
+        # plain-float fast path of models that offer one (DopplerModel.scalar)
+        self._scalar = getattr(model, "scalar", None)
+        self._Q: dict[float, list[list[float]]] = {}
         self.nis: list[tuple[float, int, float, bool]] = []
         self.warnings: list[tuple[float, str]] = []
         #: Cumulative predictive log-likelihood of all measurements (gated ones
         #: included), sum of -0.5 (log(2 pi S) + NIS).
         self.log_likelihood = 0.0
+
+    @property
+    def x(self) -> FloatArray:
+        """Current state estimate ``(4,)``."""
+        return np.array(self._x)
+
+    @property
+    def P(self) -> FloatArray:
+        """Current covariance ``(4, 4)``."""
+        return np.array(self._P)
 
     def predict(self, t: float) -> None:
         """Propagate to time ``t`` (no-op if ``t`` equals the current time).
@@ -85,27 +109,43 @@ class ExtendedKalmanFilter:
             raise ValueError(f"measurement at t = {t} is earlier than the filter time {self.t}: out of order")
         if dt == 0:
             return
-        FQ = self._FQ.get(dt)
-        if FQ is None:  # few distinct step lengths: build F and Q once each
-            m = self.settings.motion
-            FQ = self._FQ[dt] = (m.F(dt), m.Q(dt))
-        F, Q = FQ
-        self.x = F @ self.x
-        self.P = F @ self.P @ F.T + Q
+        Q = self._Q.get(dt)
+        if Q is None:  # few distinct step lengths: build Q once each
+            Q = self._Q[dt] = self.settings.motion.Q(dt).tolist()
+        x = self._x
+        self._x = [x[0] + dt * x[2], x[1] + dt * x[3], x[2], x[3]]
+        P = self._P
+        # F P F' for F = [[I, dt I], [0, I]], by blocks (P symmetric)
+        n = [[0.0] * 4 for _ in range(4)]
+        for i in range(2):
+            for j in range(2):
+                p11, p12, p21, p22 = P[i][j], P[i][j + 2], P[i + 2][j], P[i + 2][j + 2]
+                n[i][j] = p11 + dt * (p12 + p21) + dt * dt * p22 + Q[i][j]
+                n[i][j + 2] = p12 + dt * p22 + Q[i][j + 2]
+                n[i + 2][j] = p21 + dt * p22 + Q[i + 2][j]
+                n[i + 2][j + 2] = p22 + Q[i + 2][j + 2]
+        self._P = n
         self.t = float(t)
 
     def update(self, t: float, channel: int, z: float, sigma: float) -> float:
         """Predict to ``t`` and apply one scalar measurement; returns its NIS (``nan`` if skipped)."""
         self.predict(t)
         try:
-            h, H = self.model.predict_and_jacobian(self.x[None], [channel])
+            if self._scalar is not None:
+                if not 0 <= channel < self.model.n_channels:
+                    raise ValueError(f"pair index {channel} out of range")
+                hv, H = self._scalar(self._x, int(channel))
+            else:
+                h, Hm = self.model.predict_and_jacobian(np.array([self._x]), [channel])
+                hv, H = float(h[0]), Hm[0].tolist()
         except ValueError as exc:
             self.warnings.append((self.t, f"update skipped: {exc}"))
             return float("nan")
-        H = H[0]
-        r = float(z - h[0])
-        PH = self.P @ H
-        S = float(H @ PH) + sigma * sigma
+        r = float(z) - hv
+        P = self._P
+        PH = [P[i][0] * H[0] + P[i][1] * H[1] + P[i][2] * H[2] + P[i][3] * H[3] for i in range(4)]
+        s2 = float(sigma) * float(sigma)
+        S = H[0] * PH[0] + H[1] * PH[1] + H[2] * PH[2] + H[3] * PH[3] + s2
         if not (math.isfinite(S) and S > 0):
             self.warnings.append((self.t, f"update skipped: innovation variance {S}"))
             return float("nan")
@@ -118,16 +158,17 @@ class ExtendedKalmanFilter:
         if not accepted:
             self.warnings.append((self.t, f"pair {channel}: NIS {nis:.1f} > gate {self._gate:.1f}, measurement rejected"))
             return nis
-        K = PH / S
-        IKH = _EYE4 - K[:, None] * H[None, :]
-        P = IKH @ self.P @ IKH.T + (sigma * sigma) * (K[:, None] * K[None, :])
-        P = 0.5 * (P + P.T)
-        x = self.x + K * r
-        # one scalar check: inf and NaN propagate into the sum
-        if not math.isfinite(float(P.sum()) + float(x.sum())):
+        K = [v / S for v in PH]
+        # Joseph form, exactly: A = (I - K H) P = P - K (P H')', then A (I - K H)' + s2 K K'
+        A = [[P[i][j] - K[i] * PH[j] for j in range(4)] for i in range(4)]
+        AH = [A[i][0] * H[0] + A[i][1] * H[1] + A[i][2] * H[2] + A[i][3] * H[3] for i in range(4)]
+        Pn = [[A[i][j] - AH[i] * K[j] + s2 * K[i] * K[j] for j in range(4)] for i in range(4)]
+        Pn = [[0.5 * (Pn[i][j] + Pn[j][i]) for j in range(4)] for i in range(4)]
+        x = [self._x[i] + K[i] * r for i in range(4)]
+        if not math.isfinite(sum(x) + sum(sum(row) for row in Pn)):
             self.warnings.append((self.t, "update skipped: non-finite result"))
             return nis
-        self.x, self.P = x, P
+        self._x, self._P = x, Pn
         return nis
 
 

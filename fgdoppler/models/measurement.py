@@ -92,37 +92,44 @@ class DopplerModel:
         assert dp is not None and dv is not None
         return h, np.concatenate([dp, dv], axis=-1)
 
+    def scalar(self, state: list[float], channel: int) -> tuple[float, list[float]]:
+        """Doppler of one pair at one state and its Jacobian row, in plain floats (no checks on ``channel``).
+
+        The same formulas as :func:`fgdoppler.models.doppler.bistatic_doppler_and_jacobian`;
+        the filters call this for their one-state, one-pair updates, where
+        numpy's per-call overhead would cost several times the arithmetic.
+        """
+        px, py, vx, vy = state
+        tx = self.geometry.tx[channel]
+        rx = self.geometry.rx[channel]
+        dpx = dpy = dvx = dvy = hv = 0.0
+        for sx, sy in ((float(tx[0]), float(tx[1])), (float(rx[0]), float(rx[1]))):
+            dx = px - sx
+            dy = py - sy
+            r = math.sqrt(dx * dx + dy * dy)
+            if r <= SENSOR_EPS:
+                raise ValueError(
+                    f"1 target position(s) coincide with a sensor (distance <= {SENSOR_EPS} m): "
+                    "the bistatic Doppler is undefined there"
+                )
+            ux = dx / r
+            uy = dy / r
+            rd = ux * vx + uy * vy
+            hv += rd
+            dpx += (vx - rd * ux) / r
+            dpy += (vy - rd * uy) / r
+            dvx += ux
+            dvy += uy
+        return hv, [dpx, dpy, dvx, dvy]
+
     def _small(self, x: FloatArray, c: NDArray[np.intp], *, jacobian: bool) -> tuple[FloatArray, FloatArray | None]:
-        # The same formulas as models.doppler._terms in plain floats: for the one-state,
-        # one- or two-pair calls of the filters and factor callbacks, numpy's per-call
-        # overhead (about 30 tiny array operations) costs ten times the arithmetic.
-        tx = self.geometry.tx
-        rx = self.geometry.rx
+        # Few rows: plain floats beat numpy's per-call overhead (see :meth:`scalar`).
         n = c.size
         h = np.empty(n)
         H = np.empty((n, 4)) if jacobian else None
         for i, (row, k) in enumerate(zip(x.tolist(), c.tolist(), strict=True)):
-            px, py, vx, vy = row
-            dpx = dpy = dvx = dvy = hv = 0.0
-            for sx, sy in ((tx[k, 0], tx[k, 1]), (rx[k, 0], rx[k, 1])):
-                dx = px - sx
-                dy = py - sy
-                r = math.sqrt(dx * dx + dy * dy)
-                if r <= SENSOR_EPS:
-                    raise ValueError(
-                        f"1 target position(s) coincide with a sensor (distance <= {SENSOR_EPS} m): "
-                        "the bistatic Doppler is undefined there"
-                    )
-                ux = dx / r
-                uy = dy / r
-                rd = ux * vx + uy * vy
-                hv += rd
-                if jacobian:
-                    dpx += (vx - rd * ux) / r
-                    dpy += (vy - rd * uy) / r
-                    dvx += ux
-                    dvy += uy
+            hv, Hrow = self.scalar(row, k)
             h[i] = hv
             if H is not None:
-                H[i, 0], H[i, 1], H[i, 2], H[i, 3] = dpx, dpy, dvx, dvy
+                H[i] = Hrow
         return h, H
