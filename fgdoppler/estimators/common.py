@@ -22,7 +22,8 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.measurement import MeasurementModel
 from fgdoppler.models.motion import ConstantVelocity
 
-__all__ = ["Scans", "StreamingTracker", "TrackerSettings", "feed", "huber_weights", "region_prior", "split_window"]
+__all__ = ["Scans", "StreamingTracker", "TrackerSettings", "feed", "huber_weights", "nis_gate", "region_prior",
+           "split_window"]
 
 FloatArray = NDArray[np.float64]
 
@@ -204,3 +205,30 @@ def feed(tracker: StreamingTracker, measurements: Measurements, init: Any,
         states.append(x)
         covs.append(P)
     return times, states, covs
+
+
+def nis_gate(
+    model: MeasurementModel,
+    x_pred: FloatArray,
+    P_pred: FloatArray,
+    t: float,
+    channels: NDArray[np.intp],
+    z: FloatArray,
+    sigma: FloatArray,
+    gate: float,
+    nis_log: list[tuple[float, int, float, bool]],
+    warnings: list[tuple[float, str]],
+) -> NDArray[np.bool_]:
+    r"""Gate the measurements of one scan against the prediction; returns the mask of those kept.
+
+    :math:`\mathrm{NIS}_j = (z_j - h_j(\mathbf x^-))^2 / (\mathbf H_j\mathbf P^-\mathbf H_j' + \sigma_j^2)`;
+    every value is appended to ``nis_log`` and every rejection to ``warnings``.
+    """
+    h, H = model.predict_and_jacobian(np.broadcast_to(x_pred, (channels.size, 4)), channels)
+    nis = (z - h) ** 2 / (np.einsum("ij,jk,ik->i", H, P_pred, H) + sigma**2)
+    keep = nis <= gate
+    for ch, v, ok in zip(channels, nis, keep, strict=True):
+        nis_log.append((t, int(ch), float(v), bool(ok)))
+        if not ok:
+            warnings.append((t, f"pair {ch}: NIS {v:.1f} > gate {gate:.1f}, measurement rejected"))
+    return keep

@@ -26,7 +26,7 @@ import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.estimators.common import TrackerSettings, check_model, feed, region_prior
+from fgdoppler.estimators.common import TrackerSettings, check_model, feed, nis_gate, region_prior
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
@@ -140,13 +140,7 @@ class FixedLagTracker:
             if gate and self._last is not None and self._last[1] is not None and cc.size:
                 dt = t - self.times[-1]
                 P_pred = m.F(dt) @ self._last[1] @ m.F(dt).T + m.Q(dt)
-                h, H = self.model.predict_and_jacobian(np.broadcast_to(x_pred, (cc.size, 4)), cc)
-                nis = (zz - h) ** 2 / (np.einsum("ij,jk,ik->i", H, P_pred, H) + ss**2)
-                keep = nis <= self._gate
-                for ch, v, ok in zip(cc, nis, keep, strict=True):
-                    self.nis.append((t, int(ch), float(v), bool(ok)))
-                    if not ok:
-                        self.warnings.append((t, f"pair {ch}: NIS {v:.1f} > gate {self._gate:.1f}, measurement rejected"))
+                keep = nis_gate(self.model, x_pred, P_pred, t, cc, zz, ss, self._gate, self.nis, self.warnings)
                 cc, zz, ss = cc[keep], zz[keep], ss[keep]
             self.times.append(t)
             if k == 0 and self.prior is not None:

@@ -29,7 +29,7 @@ import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.estimators.common import TrackerSettings, check_model, feed, region_prior
+from fgdoppler.estimators.common import TrackerSettings, check_model, feed, nis_gate, region_prior
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
 from fgdoppler.estimators.results import Estimates, TrackResult
@@ -241,14 +241,7 @@ class ISAM2Tracker:
             P_pred = None if self._last_cov is None else m.F(dt) @ self._last_cov @ m.F(dt).T + m.Q(dt)
         keep = np.ones(c.size, dtype=bool)
         if gate and P_pred is not None and c.size:
-            h, H = self.model.predict_and_jacobian(np.broadcast_to(x_pred, (c.size, 4)), c)
-            S = np.einsum("ij,jk,ik->i", H, P_pred, H) + ss**2
-            nis = (zz - h) ** 2 / S
-            keep = nis <= self._gate
-            for ch, v, ok in zip(c, nis, keep, strict=True):
-                self.nis.append((t, int(ch), float(v), bool(ok)))
-                if not ok:
-                    self.warnings.append((t, f"pair {ch}: NIS {v:.1f} > gate {self._gate:.1f}, measurement rejected"))
+            keep = nis_gate(self.model, x_pred, P_pred, t, c, zz, ss, self._gate, self.nis, self.warnings)
         self.times.append(t)
         self.scans.append(_ScanData(channels=c[keep], z=zz[keep], sigma=ss[keep]))
         if self._pending is None:
