@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 import fgdoppler as fd
+import fgdoppler.estimators.results
 from fgdoppler.cli import build_parser, main
 
 
@@ -92,3 +93,37 @@ def test_track_malformed_input_exits_2_and_writes_nothing(
     assert str(bad) in err and msg in err
     assert not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv"]
+
+
+@pytest.mark.parametrize("estimator", ["ekf", "isam2", "fixed-lag", "batch"])
+def test_track_every_estimator_json_out_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                 estimator: str) -> None:
+    sim = tmp_path / "sim"
+    main(["simulate", "--case", "b", "--start-x", "5000", "--seed", "3", "--out", str(sim)])
+    capsys.readouterr()
+    args = ["track", str(sim / "measurements.csv"), "--geometry", "b", "--estimator", estimator, "--lag", "3"]
+    assert main([*args, "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["estimator"] == estimator
+    n = len(d["times"])
+    assert n > 10 and len(d["states"]) == n and len(d["covariances"]) == n
+    assert all(len(s) == 4 for s in d["states"])
+    assert all(c is None or (len(c) == 4 and all(len(r) == 4 for r in c)) for c in d["covariances"])
+    out = tmp_path / "track.csv"
+    assert main([*args, "--out", str(out), "--truth", str(sim / "truth.csv"), "--plot", str(tmp_path / "t.png")]) == 0
+    assert "position RMSE vs truth" in capsys.readouterr().out
+    back = fd.estimators.results.TrackResult.read_csv(out)
+    assert back.states.shape == (n, 4)
+    assert json.loads(out.with_suffix(".json").read_text())["estimator"] == estimator
+    assert (tmp_path / "t.png").stat().st_size > 0
+
+
+def test_montecarlo_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    stem = tmp_path / "mc"
+    assert main(["montecarlo", "--case", "a", "--start-x", "45000", "--runs", "2", "--workers", "1",
+                 "--estimators", "lm", "ekf", "--out", str(stem), "--json", "--plot", str(tmp_path / "r.png")]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["runs"] == 2 and d["estimators"] == ["lm", "ekf"]
+    assert (tmp_path / "mc.npz").exists() and (tmp_path / "r.png").stat().st_size > 0
+    assert main(["montecarlo", "--estimators", "ukf", "--runs", "1", "--out", str(stem)]) == 2
+    assert "unknown estimator" in capsys.readouterr().err
