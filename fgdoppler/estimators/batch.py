@@ -297,10 +297,9 @@ def _reinitiate(measurements: Measurements, model: DopplerModel, settings: Track
                                        weak_prior=settings.weak_prior)
     # The grid only has to find the basins: search on every 4th scan (a quarter of the cost),
     # then let LM refine each candidate against every measurement.
-    _, scan = measurements.scan_index()
+    times, scan = measurements.scan_index()
     grid = window_grid(measurements.subset(scan % 4 == 0), model.geometry, init_settings)
     full = initiate(measurements, model.geometry, init_settings, grid_result=grid)
-    times, _ = measurements.scan_index()
     x0 = settings.motion.propagate(full.x_start, times - full.t_start)
     try:
         return solve_batch(measurements, model, x0, settings, prior=prior, covariances=settings.smoothed_covariances)
