@@ -1,0 +1,93 @@
+"""Rebuild docs/reproduction.md (and its figures in docs/img) from a `fgdoppler reproduce` output folder.
+
+Run: fgdoppler reproduce --runs 100 --out output/reproduce && python studies/reproduction_page.py output/reproduce
+"""
+
+import re
+import shutil
+import sys
+from pathlib import Path
+
+FIGURES = ("fig10_rmse_case_a.png", "fig11_rmse_case_b.png", "fig5_map_group2.png", "fig8_slices.png", "lag_sweep.png")
+
+
+def section(text: str, start: str, end: str) -> str:
+    return text[text.index(start):text.index(end)].strip()
+
+
+def main(folder: Path, docs: Path = Path("docs")) -> None:
+    rep = (folder / "report.md").read_text()
+    wall = re.search(r"Wall time ([\d.]+) s \(observability ([\d.]+) s, Monte Carlo ([\d.]+) s\)", rep)
+    runs = re.search(r"Runs per scenario: (\d+)", rep)
+    (docs / "img").mkdir(parents=True, exist_ok=True)
+    for f in FIGURES:
+        shutil.copy(folder / f, docs / "img" / f)
+    page = f"""# Reproducing the paper
+
+Everything on this page was produced by one command on the 2-core CI machine
+(Python 3.11, GTSAM 4.3.0), {runs.group(1)} Monte Carlo runs per scenario, seed 2026:
+
+```bash
+fgdoppler reproduce --runs {runs.group(1)} --workers 2 --out output/reproduce
+python studies/reproduction_page.py output/reproduce   # rebuilds this page
+```
+
+Wall time inside the run: {wall.group(1)} s (observability {wall.group(2)} s, Monte Carlo {wall.group(3)} s, the
+rest lag sweep, bounds and figures).  `fgdoppler reproduce --quick` (5 runs) takes under a minute.
+
+## The paper's claims
+
+{section(rep, "| artefact | claim | reproduced |", "## Table 2")}
+
+## Table 2: observability versus speed
+
+The paper does not say which measurement batch its observability study used.
+Two synchronous samples per pair, 1 s apart (evaluation points at y = +2 km),
+reproduces it; our values beside the paper's:
+
+{section(rep, "Batch: 2 samples", "## Observability figures")}
+
+![group 2 map](img/fig5_map_group2.png)
+![Fig. 8](img/fig8_slices.png)
+
+## Figs. 10–11: position RMSE
+
+Time-averaged position RMSE after the initiation window (m); `grid`, `ils`,
+`lm` are the initiation estimates extrapolated at constant velocity, `CRLB`
+the deterministic constant-velocity bounds (filtering: data up to *t*;
+smoothing: all data).
+
+{section(rep, "| scenario | grid | ils", "Section 5 of the paper finds")}
+
+{section(rep, "Section 5 of the paper finds", "## Smoother vs EKF")}
+
+![Fig. 10](img/fig10_rmse_case_a.png)
+![Fig. 11](img/fig11_rmse_case_b.png)
+
+## Consistency
+
+Average NEES over t >= 10 s.  The full smoother is consistent where the
+geometry is informative; the online estimators' averages are dominated by the
+few runs whose 20-measurement initiation lands in a wrong basin (the window's
+maximum-likelihood solution itself is there), from which a filter cannot
+recover.  The offline smoother detects those runs by a chi-square check and
+initiates again from the whole recording.
+
+{section(rep, "## NEES", "(average NEES").replace("## NEES ", "Run-averaged NEES ").strip()}
+
+## Lag sweep
+
+{section(rep, "## Lag sweep", "![lag sweep]").replace("## Lag sweep", "").strip()}
+
+![lag sweep](img/lag_sweep.png)
+
+## Observability report per scenario
+
+{section(rep, "| scenario | O(x0) |", "## Files")}
+"""
+    (docs / "reproduction.md").write_text(page)
+    print(f"wrote {docs / 'reproduction.md'}")
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path("output/reproduce"))
