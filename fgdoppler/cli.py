@@ -87,7 +87,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
     sim.measurements.to_csv(out / "measurements.csv")
     sim.truth.to_csv(out / "truth.csv")
     geom.to_toml(out / "geometry.toml")
-    summary = {
+    summary: dict[str, Any] = {
         "scenario": scen.name,
         "measurements": len(sim.measurements),
         "states": int(sim.truth.times.size),
@@ -210,7 +210,7 @@ def _run_observability(args: argparse.Namespace) -> int:
     if args.json:
         _emit_json(m.to_dict())
     else:
-        i, j = np.unravel_index(np.argmin(m.O), m.O.shape)
+        i, j = (int(v) for v in np.unravel_index(np.argmin(m.O), m.O.shape))
         print(f"geometry {geom.name or case}, y = {y:g} m, speed {args.speed:g} m/s; batch: {batch.describe()}")
         print(f"O: max {m.O.max():.2f}, min {m.O.min():.2f} (x = {m.x[i] / 1e3:g} km, heading "
               f"{m.heading_deg[j]:g} deg); {int(m.unobservable.sum())} of {m.O.size} cells at the -40 floor")

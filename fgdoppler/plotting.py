@@ -43,7 +43,8 @@ def save(ax: Axes, path: str | Path, *, dpi: int = 120) -> Path:
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig = ax.figure
+    fig = ax.get_figure(root=True)
+    assert fig is not None
     fig.savefig(path, dpi=dpi)
     plt.close(fig)  # type: ignore[arg-type]
     return path
@@ -59,9 +60,9 @@ def ellipse_points(geometry: Geometry, pair: int, point: ArrayLike, n: int = 361
     R = float(bistatic_range(np.asarray(point, dtype=float), geometry)[pair])
     a = R / 2
     c = np.linalg.norm(rx - tx) / 2
-    b = np.sqrt(max(a * a - c * c, 0.0))
+    b = float(np.sqrt(max(float(a * a - c * c), 0.0)))
     th = np.linspace(0, 2 * np.pi, n)
-    ang = np.arctan2(*(rx - tx)[::-1])
+    ang = float(np.arctan2(rx[1] - tx[1], rx[0] - tx[0]))
     rot = np.array([[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]])
     pts = np.stack([a * np.cos(th), b * np.sin(th)], axis=1) @ rot.T
     return pts + (tx + rx) / 2

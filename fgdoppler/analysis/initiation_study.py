@@ -67,7 +67,7 @@ def initiation_study(
                 crlb = float(np.sqrt(P[0, 0] + P[1, 1]))
         rows.append(InitiationRow(
             scenario=scen.name, runs=runs, passes_chi2=passes, ambiguous=amb,
-            pos_rmse_end=float(np.sqrt(np.mean(errs))), crlb_pos_end=float(crlb),
+            pos_rmse_end=float(np.sqrt(np.mean(errs))), crlb_pos_end=float(crlb if crlb is not None else np.nan),
             median_time=float(np.median(times)), p90_time=float(np.percentile(times, 90)),
         ))
     return rows

@@ -29,7 +29,7 @@ import time
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from fgdoppler._io import atomic_write_text
 from fgdoppler.analysis.metrics import errors, nees, nees_band, rmse
 from fgdoppler.estimators.common import TrackerSettings
-from fgdoppler.estimators.initiation import InitiationSettings
+from fgdoppler.estimators.initiation import InitiationSettings, Method
 from fgdoppler.simulation import Scenario, simulate
 
 __all__ = ["INIT_METHODS", "MonteCarloResult", "MonteCarloSpec", "run_monte_carlo"]
@@ -116,7 +116,7 @@ def _run_one_unlimited(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.ran
     window = meas.first_per_pair(spec.init_per_pair)
     model = DopplerModel(geometry=scen.geometry)
     grid = window_grid(window, scen.geometry, spec.initiation)
-    inits = {}
+    inits: dict[str, Any] = {}
     n_t = truth_t.size
     out: dict[str, Any] = {}
     timing: dict[str, float] = {}
@@ -126,7 +126,7 @@ def _run_one_unlimited(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.ran
         est = np.full((n_t, 4), np.nan)
         cov = np.full((n_t, 4, 4), np.nan)
         if name in INIT_METHODS or lm_init is None:
-            method = name if name in INIT_METHODS else "lm"
+            method = cast(Method, name if name in INIT_METHODS else "lm")
             if method not in inits:
                 inits[method] = initiate(window, scen.geometry, replace(spec.initiation, method=method),
                                          grid_result=grid)
@@ -225,7 +225,7 @@ class MonteCarloResult:
         """Write ``path.npz`` (all arrays) and ``path.json`` (summary); returns both paths."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        arrays: dict[str, FloatArray] = {}
+        arrays: dict[str, Any] = {}
         for s in range(len(self.scenario_names)):
             arrays[f"times_{s}"] = self.times[s]
             for e in self.estimators:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import gtsam
 import numpy as np
@@ -99,8 +100,8 @@ class Batch:
         offs = (0.0,) * n_pairs if self.offsets is None else self.offsets
         if len(offs) != n_pairs:
             raise ValueError(f"{len(offs)} offsets for {n_pairs} pairs")
-        k = np.arange(self.samples_per_pair) * self.interval
-        return [o + k for o in offs]
+        k = np.arange(self.samples_per_pair, dtype=float) * self.interval
+        return [np.asarray(o + k, dtype=float) for o in offs]
 
     def describe(self) -> str:
         """Human-readable summary."""
@@ -240,7 +241,7 @@ class SpeedTable:
     #: ``values[g][s] = (max, min)``
     values: dict[int, dict[float, tuple[float, float]]]
 
-    def compare(self) -> list[dict[str, object]]:
+    def compare(self) -> list[dict[str, Any]]:
         """Rows with ours and the paper's values side by side (where the paper has them)."""
         rows = []
         for g in self.groups:
@@ -418,7 +419,7 @@ def observability_report(
     if prior_covariance is not None:
         graph.add(prior_factor(X(0), states[0], prior_covariance))
     res = marginal_covariances(graph, values, keys)
-    common = {"times": times, "O_x0": O, "cond_JtJ": cond, "tangent_angle_deg": angles}
+    common: dict[str, Any] = {"times": times, "O_x0": O, "cond_JtJ": cond, "tangent_angle_deg": angles}
     if not res.ok:
         return ObservabilityReport(status="indeterminate", message=res.message, **common)
     covs = res.covariances

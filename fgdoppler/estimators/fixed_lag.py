@@ -21,6 +21,7 @@ covariance of the newest state as a Gaussian prior, the event is reported in
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import gtsam
 import numpy as np
@@ -121,7 +122,7 @@ class FixedLagTracker:
         g = None if guesses is None else np.asarray(guesses, dtype=float).reshape(-1, 4)
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
-        stamps: dict[int, float] = {}
+        stamps: dict[Any, Any] = {}  # key -> time (gtsam's stub wants SupportsInt keys)
         m = self.settings.motion
         for j, t in enumerate(ts):
             t = float(t)
@@ -152,7 +153,7 @@ class FixedLagTracker:
         return self._update(graph, values, stamps)
 
     def _update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
-                stamps: dict[int, float]) -> tuple[FloatArray, FloatArray | None]:
+                stamps: dict[Any, Any]) -> tuple[FloatArray, FloatArray | None]:
         k = len(self.times) - 1
         t = self.times[-1]
         before: dict[int, FloatArray] = {}
@@ -230,12 +231,13 @@ class FixedLagTracker:
             self._first_live = live[0]
 
     def _rebuild(self, k: int, t: float, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
-                 stamps: dict[int, float], before: dict[int, FloatArray]) -> tuple[FloatArray, FloatArray | None]:
+                 stamps: dict[Any, Any], before: dict[int, FloatArray]) -> tuple[FloatArray, FloatArray | None]:
         # Restart from the newest good estimate as a prior; the current scan's measurement
         # factors are re-added on top of it (motion factors to dead keys are dropped).
         if self._last is None or self._last[1] is None:
             raise RuntimeError(f"fixed-lag smoother failed at t = {t} before any good estimate") from None
         x_prev, P_prev = self._last
+        assert P_prev is not None  # checked just above
         t_prev = self.times[-2] if len(self.times) > 1 else t
         m = self.settings.motion
         dt = t - t_prev

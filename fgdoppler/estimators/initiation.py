@@ -503,9 +503,9 @@ def initiate(
         P0, cov_status, cov_msg = _inverse(info)
         P1 = None if P0 is None else F_end @ P0 @ F_end.T
         # other grid optima that pass the test are alternatives as well
-        for c in candidates[1:]:
-            if c.passes_chi2 and not _same(c.state, x0, settings):
-                alternatives.append(c)
+        for cand in candidates[1:]:
+            if cand.passes_chi2 and not _same(cand.state, x0, settings):
+                alternatives.append(cand)
 
     # Each alternative gets the covariance of the deterministic window fit at its state, so a
     # tracker can follow it as a hypothesis (see :func:`hypotheses`).

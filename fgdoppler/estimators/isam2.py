@@ -245,7 +245,9 @@ class ISAM2Tracker:
         self.times.append(t)
         self.scans.append(_ScanData(channels=c[keep], z=zz[keep], sigma=ss[keep]))
         if self._pending is None:
-            graph, values, owners, remove = gtsam.NonlinearFactorGraph(), gtsam.Values(), [], []
+            owners: list[int] = []
+            remove: list[int] = []
+            graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         else:
             graph, values, owners, remove = self._pending
         values.insert(X(k), x_pred)

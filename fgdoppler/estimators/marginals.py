@@ -82,7 +82,12 @@ def marginal_covariances(
     ``status="indeterminate"`` with GTSAM's message instead.
     """
     try:
-        gfg = graph if isinstance(graph, gtsam.GaussianFactorGraph) else graph.linearize(values)
+        if isinstance(graph, gtsam.GaussianFactorGraph):
+            gfg = graph
+        elif isinstance(values, gtsam.Values):
+            gfg = graph.linearize(values)
+        else:
+            raise TypeError("a nonlinear graph needs gtsam.Values to linearise at")
         # Symbol keys x0, x1, ... sort in time order: try the exact chain recursion first.
         ordered = sorted(int(k) for k in gfg.keyVector())
         try:

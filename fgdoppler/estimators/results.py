@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -56,7 +57,8 @@ class Estimates:
                    cov_ok=np.zeros(0, dtype=bool))
 
     @classmethod
-    def from_lists(cls, times: list[float], states: list[FloatArray], covs: list[FloatArray | None]) -> Estimates:
+    def from_lists(cls, times: Sequence[float], states: Sequence[FloatArray],
+                   covs: Sequence[FloatArray | None]) -> Estimates:
         """Build from per-step lists; a ``None`` covariance marks an indeterminate step."""
         if not times:
             return cls.empty()
