@@ -46,7 +46,7 @@ def save(ax: Axes, path: str | Path, *, dpi: int = 120) -> Path:
     fig = ax.get_figure(root=True)
     assert fig is not None
     fig.savefig(path, dpi=dpi)
-    plt.close(fig)  # type: ignore[arg-type]
+    plt.close(fig)
     return path
 
 
