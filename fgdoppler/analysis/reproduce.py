@@ -31,7 +31,7 @@ from fgdoppler.analysis.montecarlo import MonteCarloResult, MonteCarloSpec, run_
 from fgdoppler.analysis.observability import observability_report
 from fgdoppler.simulation import Scenario, paper_scenarios, simulate
 
-__all__ = ["ReproduceSettings", "reproduce"]
+__all__ = ["ReproduceSettings", "lag_sweep", "paper_monte_carlo", "reproduce"]
 
 TRACKERS = ("ekf", "isam2", "fixed-lag", "batch")
 
@@ -57,6 +57,34 @@ class ReproduceSettings:
     seed: int = 2026
     lag_sweep_lags: tuple[float, ...] = (1.0, 2.0, 5.0, 10.0, 30.0)
     well_observed: tuple[str, ...] = field(default=("case a, start 45 km", "case b, start 5 km"))
+
+
+def paper_monte_carlo(
+    out: Path, settings: ReproduceSettings, *, executor: Executor | None = None, progress: bool | None = None,
+) -> tuple[MonteCarloResult, tuple[dict[tuple[str, str], bool], list[str], list[Path]]]:
+    """Figs. 10-11 study: six scenarios x all estimators; saves ``montecarlo.npz/json`` and the figures.
+
+    Returns the result and ``(claims, report lines, figure paths)``.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    scenarios = tuple(paper_scenarios())
+    spec = MonteCarloSpec(scenarios=scenarios, runs=settings.runs, seed=settings.seed)
+    mc = run_monte_carlo(spec, executor=executor, workers=settings.workers, progress=progress)
+    mc.save(out / "montecarlo")
+    return mc, _monte_carlo_section(mc, scenarios, out, settings)
+
+
+def lag_sweep(
+    out: Path, settings: ReproduceSettings, *, executor: Executor | None = None, progress: bool | None = None,
+) -> tuple[list[str], Path]:
+    """Lag sweep on case (b) at 5 km (``max(4, runs // 5)`` runs); saves ``lag_sweep.npz/json`` and the figure."""
+    out.mkdir(parents=True, exist_ok=True)
+    scen = next(s for s in paper_scenarios() if s.name == "case b, start 5 km")
+    spec = MonteCarloSpec(scenarios=(scen,), runs=max(4, settings.runs // 5), seed=settings.seed + 1,
+                          estimators=(*(f"lag:{lag:g}" for lag in settings.lag_sweep_lags), "ekf", "batch"))
+    sweep = run_monte_carlo(spec, executor=executor, workers=settings.workers, progress=progress)
+    sweep.save(out / "lag_sweep")
+    return _lag_sweep_section(sweep, out)
 
 
 def _bounds(scen: Scenario) -> tuple[np.ndarray, np.ndarray]:
@@ -95,20 +123,9 @@ def reproduce(
     t_obs = time.perf_counter() - t_begin
 
     scenarios = tuple(paper_scenarios())
-    spec = MonteCarloSpec(scenarios=scenarios, runs=settings.runs, seed=settings.seed)
-    mc = run_monte_carlo(spec, executor=executor, workers=settings.workers, progress=progress)
-    mc.save(out / "montecarlo")
+    mc, (mc_claims, mc_lines, figs) = paper_monte_carlo(out, settings, executor=executor, progress=progress)
     t_mc = time.perf_counter() - t_begin - t_obs
-
-    sweep_runs = max(4, settings.runs // 5)
-    sweep_scen = scenarios[[s.name for s in scenarios].index("case b, start 5 km")]
-    sweep_spec = MonteCarloSpec(scenarios=(sweep_scen,), runs=sweep_runs, seed=settings.seed + 1,
-                                estimators=(*(f"lag:{lag:g}" for lag in settings.lag_sweep_lags), "ekf", "batch"))
-    sweep = run_monte_carlo(sweep_spec, executor=executor, workers=settings.workers, progress=progress)
-    sweep.save(out / "lag_sweep")
-
-    mc_claims, mc_lines, figs = _monte_carlo_section(mc, scenarios, out, settings)
-    sweep_lines, sweep_fig = _lag_sweep_section(sweep, out)
+    sweep_lines, sweep_fig = lag_sweep(out, settings, executor=executor, progress=progress)
     obs_lines = _report_section(scenarios)
     wall = time.perf_counter() - t_begin
 
