@@ -40,6 +40,7 @@ from fgdoppler.models.motion import ConstantVelocity
 
 __all__ = [
     "X",
+    "absolute_linear_factor",
     "batch_factor",
     "doppler_factor",
     "linear_doppler_factor",
@@ -163,14 +164,27 @@ def motion_factor(key1: int, key2: int, dt: float, model: ConstantVelocity) -> g
     ``Q(dt)`` is singular (``dt <= 0``, ``q = 0`` or the paper's rank-2 form).
     """
     R = model.sqrt_information(dt)
-    jf = gtsam.JacobianFactor(
-        int(key1), -R @ model.F(dt), int(key2), R, np.zeros(4), gtsam.noiseModel.Unit.Create(4)
-    )
-    return _absolute(jf, (key1, key2))
+    return absolute_linear_factor((key1, key2), (-R @ model.F(dt), R), np.zeros(4))
 
 
-def _absolute(jf: gtsam.JacobianFactor, keys: Sequence[int]) -> gtsam.LinearContainerFactor:
-    # Linearised at zero, so the factor's error is its linear residual in absolute coordinates.
+def absolute_linear_factor(
+    keys: Sequence[int], blocks: Sequence[ArrayLike], b: ArrayLike
+) -> gtsam.LinearContainerFactor:
+    r"""Native linear factor :math:`\sum_i \mathbf A_i\mathbf x_i - \mathbf b` (whitened, 1 or 2 keys).
+
+    Wrapped in a :class:`gtsam.LinearContainerFactor` linearised at zero, so its
+    error is the linear residual in absolute coordinates and any optimiser
+    (LM, iSAM2, fixed-lag) can use it exactly, without a Python callback.
+    """
+    rhs = np.asarray(b, dtype=float).reshape(-1)
+    unit = gtsam.noiseModel.Unit.Create(rhs.size)
+    A = [np.ascontiguousarray(a, dtype=float) for a in blocks]
+    if len(keys) == 1:
+        jf = gtsam.JacobianFactor(int(keys[0]), A[0], rhs, unit)
+    elif len(keys) == 2:
+        jf = gtsam.JacobianFactor(int(keys[0]), A[0], int(keys[1]), A[1], rhs, unit)
+    else:
+        raise ValueError(f"absolute_linear_factor takes 1 or 2 keys, got {len(keys)}")
     lin = gtsam.Values()
     for k in keys:
         lin.insert(int(k), np.zeros(4))
@@ -250,6 +264,4 @@ def linear_doppler_factor(
     s = np.broadcast_to(np.asarray(sigma, dtype=float), r.shape)
     H = _checked(H, r.size, 4, "linear_doppler_factor")
     W = 1.0 / s
-    b = (r + H @ np.asarray(x_lin, dtype=float)) * W
-    jf = gtsam.JacobianFactor(int(key), H * W[:, None], b, gtsam.noiseModel.Unit.Create(r.size))
-    return _absolute(jf, (key,))
+    return absolute_linear_factor((key,), (H * W[:, None],), (r + H @ np.asarray(x_lin, dtype=float)) * W)

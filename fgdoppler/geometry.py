@@ -10,7 +10,6 @@ unobservability (Section 4).
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -283,7 +282,3 @@ def ellipse_tangent(points: ArrayLike, geometry: Geometry) -> NDArray[np.float64
     safe = np.where(degenerate, 1.0, gnorm)
     return np.where(degenerate, base_dir, tangent / safe)
 
-
-def pairs_from_arrays(tx: Iterable[Sequence[float]], rx: Iterable[Sequence[float]]) -> Geometry:
-    """A geometry from parallel lists of Tx and Rx positions."""
-    return Geometry(pairs=tuple(BistaticPair(tx=t, rx=r) for t, r in zip(tx, rx, strict=True)))

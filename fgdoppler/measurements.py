@@ -178,10 +178,6 @@ class Measurements:
             sl = slice(bounds[k], bounds[k + 1])
             yield Scan(time=float(t), pair=self.pair[sl], doppler=self.doppler[sl], sigma=self.sigma[sl])
 
-    def per_pair_times(self, n_pairs: int, t_ref: float = 0.0) -> list[NDArray[np.float64]]:
-        """Times of each pair relative to ``t_ref`` (the batch-map layout)."""
-        return [self.time[self.pair == k] - t_ref for k in range(n_pairs)]
-
     def batch_order(self) -> NDArray[np.intp]:
         """Permutation that stacks pair 0's entries first, then pair 1's, ... (paper Eq. 11)."""
         return np.lexsort((self.time, self.pair)).astype(np.intp)

@@ -33,7 +33,7 @@ from fgdoppler.estimators.common import TrackerSettings, check_model, feed, nis_
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
 from fgdoppler.estimators.results import Estimates, TrackResult
-from fgdoppler.factors import X
+from fgdoppler.factors import X, absolute_linear_factor
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.measurement import MeasurementModel
 
@@ -49,22 +49,6 @@ class _ScanData:
     sigma: FloatArray
     lin: FloatArray | None = None  # linearisation point of its factor (None: no factor)
     factor: int = -1  # index of its factor in iSAM2
-
-
-def _absolute_linear(keys: list[int], blocks: list[FloatArray], b: FloatArray) -> gtsam.LinearContainerFactor:
-    # A linear factor sum_i A_i x_i - b in absolute coordinates (linearisation point zero).
-    n = b.size
-    unit = gtsam.noiseModel.Unit.Create(n)
-    if len(keys) == 1:
-        jf = gtsam.JacobianFactor(keys[0], blocks[0], b, unit)
-    elif len(keys) == 2:
-        jf = gtsam.JacobianFactor(keys[0], blocks[0], keys[1], blocks[1], b, unit)
-    else:  # pragma: no cover - not used
-        raise ValueError("at most two keys")
-    lin = gtsam.Values()
-    for k in keys:
-        lin.insert(k, np.zeros(4))
-    return gtsam.LinearContainerFactor(jf, lin)
 
 
 class ISAM2Tracker:
@@ -123,7 +107,7 @@ class ISAM2Tracker:
             self.warnings.append((self.times[k], f"measurements skipped: {exc}"))
             sd.channels = sd.channels[:0]
             return None
-        return _absolute_linear([X(k)], [rows.A], rows.b + rows.A @ x_lin)
+        return absolute_linear_factor([X(k)], [rows.A], rows.b + rows.A @ x_lin)
 
     def _estimate(self, k: int) -> FloatArray:
         # calculateEstimateVector(key) costs O(N) in the Python binding; the list form is O(1).
@@ -173,7 +157,7 @@ class ISAM2Tracker:
             start += counts[i]
             A, b = rows.A[sl], rows.b[sl]
             remove.append(self.scans[j].factor)
-            graph.add(_absolute_linear([X(j)], [A], b + A @ xsel[i]))
+            graph.add(absolute_linear_factor([X(j)], [A], b + A @ xsel[i]))
             owners.append(j)
             self.scans[j].lin = xsel[i].copy()
         return len(sel)
@@ -255,11 +239,11 @@ class ISAM2Tracker:
             mean, cov = self.prior
             L = np.linalg.cholesky(cov)
             Ri = np.linalg.inv(L)
-            graph.add(_absolute_linear([X(0)], [Ri], Ri @ mean))
+            graph.add(absolute_linear_factor([X(0)], [Ri], Ri @ mean))
             owners.append(-1)
         if k:
             Ap, An = self.motion(t - self.times[-2])
-            graph.add(_absolute_linear([X(k - 1), X(k)], [Ap, An], np.zeros(4)))
+            graph.add(absolute_linear_factor([X(k - 1), X(k)], [Ap, An], np.zeros(4)))
             owners.append(-1)
         f = self._meas_factor(k, x_pred)
         if f is not None:
