@@ -17,6 +17,9 @@ factor's noise model.
 ``batch_factor``
     The paper's window map on one initial-state key,
     :math:`\mathbf e = \mathbf g(\mathbf x_0) - \mathbf Z` with Jacobian :math:`\mathbf J(\mathbf x_0)`.
+``region_factor``
+    The search region as the support of the initial state: zero inside the
+    position box and below the speed limit, a steep quadratic wall outside.
 ``linear_doppler_factor``
     A Doppler factor linearised in numpy at a given point, as a native
     linear factor.  Long-running graphs (iSAM2, offline reconstruction) use it
@@ -48,6 +51,7 @@ __all__ = [
     "motion_factor",
     "noise_model",
     "prior_factor",
+    "region_factor",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -201,6 +205,76 @@ def prior_factor(key: int, mean: ArrayLike, covariance: ArrayLike) -> gtsam.Prio
     except np.linalg.LinAlgError:
         raise ValueError("prior covariance must be positive definite") from None
     return gtsam.PriorFactorVector(int(key), np.asarray(mean, dtype=float), gtsam.noiseModel.Gaussian.Covariance(cov))
+
+
+def region_excess(
+    x: FloatArray, x_range: tuple[float, float], y_range: tuple[float, float], speed_max: float
+) -> tuple[FloatArray, FloatArray]:
+    r"""How far a state lies outside a search region, and the Jacobian of that.
+
+    .. math::
+
+        \mathbf e(\mathbf x) = \begin{bmatrix}
+            \min(0, x - x_{lo}) + \max(0, x - x_{hi}) \\
+            \min(0, y - y_{lo}) + \max(0, y - y_{hi}) \\
+            \max(0, \lVert \mathbf v \rVert - s_{max})
+        \end{bmatrix}
+
+    zero inside the region; continuous, piecewise linear in position.
+    """
+    x = np.asarray(x, dtype=float)
+    e = np.zeros(3)
+    J = np.zeros((3, 4))
+    for i, (lo, hi) in enumerate((x_range, y_range)):
+        if x[i] < lo:
+            e[i], J[i, i] = x[i] - lo, 1.0
+        elif x[i] > hi:
+            e[i], J[i, i] = x[i] - hi, 1.0
+    speed = float(np.hypot(x[2], x[3]))
+    if speed > speed_max:
+        e[2] = speed - speed_max
+        J[2, 2:] = x[2:] / speed
+    return e, J
+
+
+def _region_error(
+    bounds: tuple[tuple[float, float], tuple[float, float], float],
+    this: gtsam.CustomFactor,
+    values: gtsam.Values,
+    jacobians: list[FloatArray] | None,
+) -> FloatArray:
+    e, J = region_excess(values.atVector(this.keys()[0]), *bounds)
+    if jacobians is not None:
+        jacobians[0] = J
+    return e
+
+
+def region_factor(
+    key: int,
+    x_range: tuple[float, float],
+    y_range: tuple[float, float],
+    speed_max: float,
+    *,
+    wall_sigma: tuple[float, float] = (10.0, 0.1),
+) -> gtsam.CustomFactor:
+    r"""The search region as the support of a state: a steep wall outside, nothing inside.
+
+    Error :func:`region_excess` whitened by ``wall_sigma`` (position m, speed
+    m/s): a state ``d`` metres outside the box costs :math:`(d/\sigma_w)^2`, so
+    a solution can cross the boundary only by a few :math:`\sigma_w`.  This is
+    the hard (uniform) prior of the paper's detectable zone in a form
+    Levenberg–Marquardt can use.
+    """
+    for lo, hi in (x_range, y_range):
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+            raise ValueError(f"region bounds must be finite with lo < hi, got ({lo}, {hi})")
+    if not (np.isfinite(speed_max) and speed_max > 0):
+        raise ValueError(f"speed_max must be > 0, got {speed_max}")
+    sp, sv = wall_sigma
+    if not (sp > 0 and sv > 0):
+        raise ValueError(f"wall_sigma must be positive, got {wall_sigma}")
+    bounds = ((float(x_range[0]), float(x_range[1])), (float(y_range[0]), float(y_range[1])), float(speed_max))
+    return gtsam.CustomFactor(noise_model([sp, sp, sv]), [int(key)], partial(_region_error, bounds))
 
 
 def _batch_error(

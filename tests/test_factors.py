@@ -138,3 +138,57 @@ def test_huber_noise_model_downweights_outliers() -> None:
     # Huber loss for |r| = 50 > k: k |r| - k^2 / 2
     assert robust.error(v) == pytest.approx(1.345 * 50 - 1.345**2 / 2, rel=1e-9)
     assert plain.error(v) == pytest.approx(0.5 * 50**2, rel=1e-12)
+
+
+REGION = ((2e3, 48e3), (-5e3, 5e3), 200.0)
+
+
+@pytest.mark.parametrize(
+    "state",
+    [
+        [49.3e3, 1.9e3, -80.0, 9.0],  # beyond x_hi
+        [1.0e3, -6.0e3, 30.0, 40.0],  # below x_lo and y_lo
+        [10e3, 7e3, 180.0, 150.0],  # above y_hi and too fast
+    ],
+)
+def test_region_factor_outside_matches_finite_differences(state: list[float]) -> None:
+    x = np.asarray(state)
+    e, J = factors.region_excess(x, *REGION)
+    # analytic excess: distance beyond each violated bound, signed, and the speed surplus
+    lo = np.array([REGION[0][0], REGION[1][0]])
+    hi = np.array([REGION[0][1], REGION[1][1]])
+    expected = np.minimum(0.0, x[:2] - lo) + np.maximum(0.0, x[:2] - hi)
+    np.testing.assert_allclose(e[:2], expected)
+    assert e[2] == pytest.approx(max(0.0, float(np.hypot(x[2], x[3])) - REGION[2]))
+    assert np.any(e != 0)
+    h = 1e-3
+    fd_J = np.column_stack([
+        (factors.region_excess(x + h * np.eye(4)[i], *REGION)[0] - factors.region_excess(x - h * np.eye(4)[i], *REGION)[0])
+        / (2 * h)
+        for i in range(4)
+    ])
+    np.testing.assert_allclose(J, fd_J, atol=1e-8)
+    f = factors.region_factor(X(0), *REGION, wall_sigma=(10.0, 0.1))
+    lin = f.linearize(_values(x0=x))
+    A, b = lin.jacobian()
+    W = np.diag([1 / 10.0, 1 / 10.0, 1 / 0.1])
+    np.testing.assert_allclose(A, W @ J, atol=1e-12)
+    np.testing.assert_allclose(b, -W @ e, atol=1e-12)
+
+
+def test_region_factor_is_zero_inside(rng: np.random.Generator) -> None:
+    f = factors.region_factor(X(0), *REGION)
+    for _ in range(50):
+        x = np.array([rng.uniform(2e3, 48e3), rng.uniform(-5e3, 5e3), *rng.uniform(-140.0, 140.0, 2)])
+        assert f.error(_values(x0=x)) == 0.0
+        e, J = factors.region_excess(x, *REGION)
+        assert not np.any(e) and not np.any(J)
+
+
+def test_region_factor_validation() -> None:
+    with pytest.raises(ValueError, match="lo < hi"):
+        factors.region_factor(X(0), (5.0, 1.0), (0.0, 1.0), 10.0)
+    with pytest.raises(ValueError, match="speed_max"):
+        factors.region_factor(X(0), (0.0, 1.0), (0.0, 1.0), 0.0)
+    with pytest.raises(ValueError, match="wall_sigma"):
+        factors.region_factor(X(0), (0.0, 1.0), (0.0, 1.0), 1.0, wall_sigma=(0.0, 1.0))

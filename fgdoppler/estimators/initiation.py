@@ -43,7 +43,7 @@ degrees of freedom applies.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import gtsam
@@ -51,9 +51,17 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
+from fgdoppler.estimators.common import region_prior
 from fgdoppler.estimators.grid import GridResult, GridSpec, HalfPlane, grid_search
 from fgdoppler.estimators.marginals import marginal_covariances
-from fgdoppler.factors import X, batch_factor, doppler_factor, motion_factor, prior_factor
+from fgdoppler.factors import (
+    X,
+    batch_factor,
+    doppler_factor,
+    motion_factor,
+    prior_factor,
+    region_factor,
+)
 from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.doppler import BatchTimes, batch_doppler, batch_doppler_and_jacobian
@@ -89,6 +97,17 @@ class InitiationSettings:
         windows: without it LM can run off to non-physical speeds of several
         hundred m/s along the nearly flat cost valleys of a poorly observed
         window.  Its effect on a well-posed window is negligible.
+    region_bound
+        (default on) Treat the search region as the support of the window's
+        initial state, as the paper does when it samples candidates only in
+        the detectable zone: a steep wall (:func:`fgdoppler.factors.region_factor`,
+        ``wall_sigma``) keeps the start position inside the grid's x/y box and
+        the speed at most ``grid.speed_max``.  Without it, in a few percent of
+        well-observed windows the lowest-cost solution is a second likelihood
+        mode *outside* the zone — a slower target a few hundred metres from a
+        sensor, moving along the baseline — about 4 km from the truth.
+    wall_sigma
+        Stiffness of the region wall: (position m, speed m/s).
     half_plane
         Restrict candidates and solutions to one side of a line.
     confidence
@@ -111,6 +130,8 @@ class InitiationSettings:
     motion: ConstantVelocity = field(default_factory=lambda: ConstantVelocity(q=1e-3))
     window: Literal["states", "batch"] = "states"
     weak_prior: bool = True
+    region_bound: bool = True
+    wall_sigma: tuple[float, float] = (10.0, 0.1)
     half_plane: HalfPlane | None = None
     confidence: float = 0.95
     max_iterations: int = 100
@@ -162,9 +183,15 @@ class Initiation:
         Their covariances, or ``None`` with ``covariance_status ==
         "indeterminate"`` and the reason in ``covariance_message``.
     cost
-        Final sum of squared whitened residuals (twice GTSAM's error).
+        Sum of squared whitened data residuals at the solution (Doppler, and
+        the motion factors' terms with ``window="states"``): the statistic of
+        the χ² test, the paper's Eq. 16.
+    objective
+        What the refinement minimised and ranked the solutions by: ``cost``
+        plus the weak prior and region wall terms (equal to ``cost`` for ILS
+        and grid).
     chi2_threshold, dof, passes_chi2
-        The χ² test of the final cost.
+        The χ² test of ``cost``.
     iterations
         ILS iterations, or LM iterations of the winning start.
     candidates
@@ -189,6 +216,7 @@ class Initiation:
     covariance_status: str
     covariance_message: str
     cost: float
+    objective: float
     chi2_threshold: float
     dof: int
     passes_chi2: bool
@@ -215,6 +243,7 @@ class Initiation:
             "covariance_status": self.covariance_status,
             "covariance_message": self.covariance_message,
             "cost": self.cost,
+            "objective": self.objective,
             "chi2_threshold": self.chi2_threshold,
             "dof": self.dof,
             "passes_chi2": self.passes_chi2,
@@ -266,7 +295,12 @@ class _Window:
         return float(r @ r)
 
 
-def _graph(w: _Window, settings: InitiationSettings) -> gtsam.NonlinearFactorGraph:
+def _graph(w: _Window, settings: InitiationSettings) -> tuple[gtsam.NonlinearFactorGraph, int]:
+    """The window graph and the number of its data factors (Doppler and motion).
+
+    The regularisers (weak prior, region wall) come last, so the data cost —
+    the statistic of the χ² test — is the error of the first factors.
+    """
     g = gtsam.NonlinearFactorGraph()
     if settings.window == "batch":
         g.add(batch_factor(X(0), w.geometry, w.bt, w.z, w.sigma))
@@ -278,12 +312,13 @@ def _graph(w: _Window, settings: InitiationSettings) -> gtsam.NonlinearFactorGra
             g.add(doppler_factor(X(k), w.geometry, m.pair[sl], m.doppler[sl], m.sigma[sl]))
             if k:
                 g.add(motion_factor(X(k - 1), X(k), w.scan_times[k] - w.scan_times[k - 1], settings.motion))
+    n_data = int(g.size())
+    spec = settings.grid
     if settings.weak_prior:
-        spec = settings.grid
-        centre = np.array([(spec.x[0] + spec.x[1]) / 2, (spec.y[0] + spec.y[1]) / 2, 0.0, 0.0])
-        half = np.array([(spec.x[1] - spec.x[0]) / 2, (spec.y[1] - spec.y[0]) / 2, spec.speed_max, spec.speed_max])
-        g.add(prior_factor(X(0), centre, np.diag(np.maximum(half, 1.0) ** 2)))
-    return g
+        g.add(prior_factor(X(0), *region_prior(spec)))
+    if settings.region_bound:
+        g.add(region_factor(X(0), spec.x[:2], spec.y[:2], spec.speed_max, wall_sigma=settings.wall_sigma))
+    return g, n_data
 
 
 def _values(w: _Window, x0: FloatArray, settings: InitiationSettings) -> gtsam.Values:
@@ -297,58 +332,63 @@ def _values(w: _Window, x0: FloatArray, settings: InitiationSettings) -> gtsam.V
     return v
 
 
-def _lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, settings: InitiationSettings
-        ) -> tuple[float, gtsam.Values, int] | str:
+@dataclass(frozen=True)
+class _Solution:
+    objective: float  # what LM minimised: data + regularisers (ranks the solutions)
+    cost: float  # data part only: the χ² statistic
+    x0: FloatArray
+    values: gtsam.Values
+    iterations: int
+
+
+def _lm(graph: gtsam.NonlinearFactorGraph, n_data: int, values: gtsam.Values, settings: InitiationSettings
+        ) -> _Solution | str:
     try:
         opt = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params(settings.max_iterations))
         res = opt.optimize()
     except (RuntimeError, ValueError) as exc:  # ValueError: a step onto a sensor position
         return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-    cost = 2.0 * graph.error(res)
-    if not np.isfinite(cost):
+    objective = 2.0 * graph.error(res)
+    regularisers = 2.0 * sum(graph.at(i).error(res) for i in range(n_data, int(graph.size())))
+    if not np.isfinite(objective):
         return "non-finite cost"
-    return cost, res, int(opt.iterations())
+    return _Solution(objective, max(objective - regularisers, 0.0), res.atVector(X(0)), res, int(opt.iterations()))
 
 
 def _refine_lm(
     w: _Window, settings: InitiationSettings, grid: GridResult
-) -> tuple[list[tuple[float, FloatArray, gtsam.Values, int]], gtsam.NonlinearFactorGraph, list[str]]:
-    """LM from every grid candidate; returns solutions sorted by final cost.
+) -> tuple[list[_Solution], gtsam.NonlinearFactorGraph, list[str]]:
+    """LM from every grid candidate; returns solutions sorted by final objective.
 
     With ``window="states"`` this runs in two stages to keep Python callbacks
     few: LM on the one-key batch factor from each candidate, then LM on the
     per-state graph from each *distinct* stage-1 solution.
     """
     batch_settings = settings if settings.window == "batch" else _replace_window(settings, "batch")
-    batch_graph = _graph(w, batch_settings)
+    batch_graph, n_batch = _graph(w, batch_settings)
     notes: list[str] = []
-    stage1: list[tuple[float, FloatArray, gtsam.Values, int]] = []
+    stage1: list[_Solution] = []
     for x0 in grid.states:
-        out = _lm(batch_graph, _values(w, x0, batch_settings), batch_settings)
+        out = _lm(batch_graph, n_batch, _values(w, x0, batch_settings), batch_settings)
         if isinstance(out, str):
             notes.append(f"LM from {np.round(x0, 1).tolist()} failed: {out}")
             continue
-        cost, res, its = out
-        xs = res.atVector(X(0))
-        if not any(_same(xs, s[1], settings) for s in stage1):
-            stage1.append((cost, xs, res, its))
+        if not any(_same(out.x0, s.x0, settings) for s in stage1):
+            stage1.append(out)
     if settings.window == "batch":
-        return sorted(stage1, key=lambda s: s[0]), batch_graph, notes
-    graph = _graph(w, settings)
+        return sorted(stage1, key=lambda s: s.objective), batch_graph, notes
+    graph, n_data = _graph(w, settings)
     sols = []
-    for _, x0, _, its1 in stage1:
-        out = _lm(graph, _values(w, x0, settings), settings)
+    for first in stage1:
+        out = _lm(graph, n_data, _values(w, first.x0, settings), settings)
         if isinstance(out, str):
-            notes.append(f"window LM from {np.round(x0, 1).tolist()} failed: {out}")
+            notes.append(f"window LM from {np.round(first.x0, 1).tolist()} failed: {out}")
             continue
-        cost, res, its = out
-        sols.append((cost, res.atVector(X(0)), res, its1 + its))
-    return sorted(sols, key=lambda s: s[0]), graph, notes
+        sols.append(replace(out, iterations=first.iterations + out.iterations))
+    return sorted(sols, key=lambda s: s.objective), graph, notes
 
 
 def _replace_window(settings: InitiationSettings, window: Literal["states", "batch"]) -> InitiationSettings:
-    from dataclasses import replace
-
     return replace(settings, window=window)
 
 
@@ -463,16 +503,18 @@ def initiate(
         sols, graph, lm_notes = _refine_lm(w, settings, grid)
         notes += lm_notes
         if settings.half_plane is not None:
-            kept = [s for s in sols if settings.half_plane.contains(s[1])]
+            kept = [s for s in sols if settings.half_plane.contains(s.x0)]
             if len(kept) < len(sols):
                 notes.append(f"{len(sols) - len(kept)} refined solution(s) outside the half plane discarded")
             sols = kept
         if not sols:
             notes.append("no LM start succeeded: returning the best grid candidate")
             x0, cost = grid.best.copy(), float(grid.costs[0])
+            objective = cost
             x1 = settings.motion.propagate(x0, t_span)
         else:
-            cost, x0, best_vals, iterations = sols[0]
+            best = sols[0]
+            cost, objective, x0, best_vals, iterations = best.cost, best.objective, best.x0, best.values, best.iterations
             last = X(0) if settings.window == "batch" else X(w.scan_times.size - 1)
             x1 = F_end @ x0 if settings.window == "batch" else best_vals.atVector(last)
             keys = [X(0)] if settings.window == "batch" else [X(0), last]
@@ -483,10 +525,10 @@ def initiate(
                 P0 = marg.covariances[0]
                 P1 = F_end @ P0 @ F_end.T if settings.window == "batch" else marg.covariances[1]
             distinct: list[tuple[float, FloatArray]] = [(cost, x0)]
-            for c, xs, _, _ in sols[1:]:
-                if c <= threshold and not any(_same(xs, d[1], settings) for d in distinct):
-                    distinct.append((c, xs))
-                    alternatives.append(Candidate(state=xs, cost=float(c), passes_chi2=True))
+            for sol in sols[1:]:
+                if sol.cost <= threshold and not any(_same(sol.x0, d[1], settings) for d in distinct):
+                    distinct.append((sol.cost, sol.x0))
+                    alternatives.append(Candidate(state=sol.x0, cost=sol.cost, passes_chi2=True))
     else:
         x_grid = grid.best.copy()
         if settings.method == "ils":
@@ -494,7 +536,7 @@ def initiate(
             notes += ils_notes
         else:
             x0, info = x_grid, None
-        cost = w.cost(x0)
+        cost = objective = w.cost(x0)
         if info is None:
             _, J = batch_doppler_and_jacobian(x0, geometry, w.bt)
             Jw = J / w.sigma[:, None]
@@ -530,6 +572,7 @@ def initiate(
         covariance_status=cov_status,
         covariance_message=cov_msg,
         cost=float(cost),
+        objective=float(objective),
         chi2_threshold=threshold,
         dof=dof,
         passes_chi2=passes,
@@ -583,10 +626,9 @@ def hypotheses(init: Initiation) -> list[Initiation]:
 
     Each copy starts from the alternative's state and covariance at the
     window start, propagated to the window end.  Alternatives without a
-    determinate covariance are skipped.
+    determinate covariance are skipped.  A copy's ``objective`` is its data
+    cost (the regularisers are not evaluated for alternatives).
     """
-    from dataclasses import replace
-
     out = [replace(init, alternatives=(), ambiguous=False)]
     F = ConstantVelocity.F(init.t_end - init.t_start)
     for a in init.alternatives:
@@ -594,7 +636,7 @@ def hypotheses(init: Initiation) -> list[Initiation]:
             continue
         out.append(replace(
             init, x_start=a.state, x_end=F @ a.state, P_start=a.covariance, P_end=F @ a.covariance @ F.T,
-            cost=a.cost, passes_chi2=a.passes_chi2, covariance_status="ok", covariance_message="",
+            cost=a.cost, objective=a.cost, passes_chi2=a.passes_chi2, covariance_status="ok", covariance_message="",
             alternatives=(), ambiguous=False, notes=(*init.notes, "hypothesis from an ambiguous initiation"),
         ))
     return out
