@@ -268,6 +268,8 @@ def _add_track(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--init-per-pair", type=int, default=10, help="initiation window: measurements per pair (default 10)")
     p.add_argument("--k-best", type=int, default=5, help="grid candidates to refine (default 5)")
     p.add_argument("--no-weak-prior", action="store_true", help="initiation without the weak search-region prior")
+    p.add_argument("--no-region-bound", action="store_true",
+                   help="let the initiation's start state leave the search region (detectable zone)")
     p.add_argument("--half-plane", type=float, nargs=4, metavar=("PX", "PY", "NX", "NY"), default=None,
                    help="target known to satisfy (NX, NY) . (p - (PX, PY)) >= 0, e.g. 0 0 0 1 for y >= 0")
     p.add_argument("--q", type=float, default=None, help="process noise PSD in m^2/s^3 (default 1e-3)")
@@ -292,7 +294,7 @@ def _initiation_settings(args: argparse.Namespace) -> Any:
     if args.q is not None:
         kw["motion"] = ConstantVelocity(q=args.q)
     return InitiationSettings(method=args.init_method, k_best=args.k_best, weak_prior=not args.no_weak_prior,
-                              half_plane=hp, **kw)
+                              region_bound=not args.no_region_bound, half_plane=hp, **kw)
 
 
 def _run_track(args: argparse.Namespace) -> int:
@@ -331,7 +333,8 @@ def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: A
         else:
             print(f"  covariance indeterminate: {init.covariance_message}")
         verdict = "passes" if init.passes_chi2 else "FAILS"
-        print(f"  cost {init.cost:.2f} {verdict} the chi-square test ({init.chi2_threshold:.2f}, {init.dof} dof)")
+        print(f"  cost {init.cost:.2f} {verdict} the chi-square test ({init.chi2_threshold:.2f}, {init.dof} dof); "
+              f"objective with prior and region terms {init.objective:.2f}")
         if init.ambiguous:
             print(f"  AMBIGUOUS: {len(init.alternatives)} other solution(s) pass the test:")
             for a in init.alternatives:

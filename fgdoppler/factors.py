@@ -51,6 +51,7 @@ __all__ = [
     "motion_factor",
     "noise_model",
     "prior_factor",
+    "region_excess",
     "region_factor",
 ]
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import fgdoppler as fd
@@ -72,6 +73,12 @@ def test_track_init_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert main([*args, "--truth", str(out / "truth.csv"), "--plot", str(tmp_path / "land.png")]) == 0
     assert "error at t_end" in capsys.readouterr().out
     assert (tmp_path / "land.png").stat().st_size > 0
+    # The region bound is on by default and switchable; a start well inside the zone
+    # does not touch it, so both give the same estimate.
+    assert main([*args, "--json", "--no-region-bound"]) == 0
+    free = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(free["x_start"], d["x_start"], atol=1e-6)
+    assert d["objective"] >= d["cost"]
 
 
 @pytest.mark.parametrize(

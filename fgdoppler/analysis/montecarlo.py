@@ -204,6 +204,13 @@ class MonteCarloResult:
         total = np.where(ok, x, 0.0).sum(axis=0)
         return np.where(n > 0, total / np.maximum(n, 1), np.nan)
 
+    def run_nees(self, s: int, name: str, t_min: float = 0.0) -> FloatArray:
+        """Each run's NEES averaged over its times ``>= t_min`` (NaN for a run with none)."""
+        x = self.nees[s][name][:, np.asarray(self.times[s]) >= t_min]
+        ok = np.isfinite(x)
+        n = ok.sum(axis=1)
+        return np.where(n > 0, np.where(ok, x, 0.0).sum(axis=1) / np.maximum(n, 1), np.nan)
+
     def nees_band(self) -> tuple[float, float]:
         """95 % band of the run-averaged NEES."""
         return nees_band(self.runs)

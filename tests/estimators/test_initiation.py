@@ -172,3 +172,16 @@ def test_well_observed_windows_reach_the_crlb() -> None:
     for row in initiation_study(runs=100, seed=4, scenarios=scenarios):
         assert row.passes_chi2 >= 88, row
         assert row.pos_rmse_end <= 1.5 * row.crlb_pos_end, row
+
+
+def test_start_held_at_the_region_boundary_is_reported() -> None:
+    # A target beyond Tx (x0 = 55 km, outside the zone's 48 km): the bounded start sits on
+    # the boundary and the result says so.
+    g = fd.paper_geometry("a")
+    sc = fd.Scenario(geometry=g, x0=(55e3, 3e3, -50.0, -20.0), duration=10.0, dt=0.5)
+    settings = InitiationSettings(weak_prior=False)
+    r = initiate(_noise_free_window(sc), g, settings)
+    assert any("boundary" in n for n in r.notes)
+    tol = 5 * settings.wall_sigma[0]
+    assert settings.grid.x[0] - tol <= r.x_start[0] <= settings.grid.x[1] + tol
+    assert settings.grid.y[0] - tol <= r.x_start[1] <= settings.grid.y[1] + tol
