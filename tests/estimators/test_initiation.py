@@ -185,3 +185,19 @@ def test_start_held_at_the_region_boundary_is_reported() -> None:
     tol = 5 * settings.wall_sigma[0]
     assert settings.grid.x[0] - tol <= r.x_start[0] <= settings.grid.x[1] + tol
     assert settings.grid.y[0] - tol <= r.x_start[1] <= settings.grid.y[1] + tol
+
+
+def test_active_region_wall_does_not_shrink_the_covariance() -> None:
+    # The wall bounds the solution; it does not measure it.  At a start held on the
+    # boundary the covariance is still the inverse Fisher information of the data alone
+    # (paper window map, no weak prior), computed here independently with numpy.
+    g = fd.paper_geometry("a")
+    sc = fd.Scenario(geometry=g, x0=(55e3, 3e3, -50.0, -20.0), duration=10.0, dt=0.5)
+    w = _noise_free_window(sc)
+    r = initiate(w, g, InitiationSettings(weak_prior=False, window="batch"))
+    assert any("boundary" in n for n in r.notes) and r.P_start is not None
+    times = [w.time[w.pair == p] - w.time[0] for p in range(2)]
+    J = fd.batch_doppler_jacobian(r.x_start, g, times)
+    sigma = np.concatenate([w.sigma[w.pair == p] for p in range(2)])
+    info = (J / sigma[:, None]).T @ (J / sigma[:, None])
+    np.testing.assert_allclose(r.P_start, np.linalg.inv(info), rtol=1e-6)
