@@ -157,6 +157,8 @@ class InitiationSettings:
             raise ValueError(f"window must be 'states' or 'batch', got {self.window!r}")
         if not 0 < self.confidence < 1:
             raise ValueError(f"confidence must be in (0, 1), got {self.confidence}")
+        if not (len(self.wall_sigma) == 2 and all(v > 0 for v in self.wall_sigma)):
+            raise ValueError(f"wall_sigma must be two positive numbers, got {self.wall_sigma}")
         if self.k_best < 1 or self.max_iterations < 1:
             raise ValueError("k_best and max_iterations must be >= 1")
 

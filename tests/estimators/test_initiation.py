@@ -201,3 +201,8 @@ def test_active_region_wall_does_not_shrink_the_covariance() -> None:
     sigma = np.concatenate([w.sigma[w.pair == p] for p in range(2)])
     info = (J / sigma[:, None]).T @ (J / sigma[:, None])
     np.testing.assert_allclose(r.P_start, np.linalg.inv(info), rtol=1e-6)
+
+
+def test_wall_sigma_validation() -> None:
+    with pytest.raises(ValueError, match="wall_sigma"):
+        InitiationSettings(wall_sigma=(0.0, 0.1))
