@@ -29,6 +29,7 @@ factor's noise model.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from functools import partial
 
@@ -223,19 +224,21 @@ def region_excess(
 
     zero inside the region; continuous, piecewise linear in position.
     """
-    x = np.asarray(x, dtype=float)
-    e = np.zeros(3)
-    J = np.zeros((3, 4))
-    for i, (lo, hi) in enumerate((x_range, y_range)):
-        if x[i] < lo:
-            e[i], J[i, i] = x[i] - lo, 1.0
-        elif x[i] > hi:
-            e[i], J[i, i] = x[i] - hi, 1.0
-    speed = float(np.hypot(x[2], x[3]))
+    # plain floats: this runs once per LM iteration as a Python callback, where numpy's
+    # per-call overhead would be most of the cost
+    px, py, vx, vy = (float(v) for v in np.asarray(x, dtype=float).reshape(4))
+    e = [0.0, 0.0, 0.0]
+    J = [[0.0] * 4 for _ in range(3)]
+    for i, (v, (lo, hi)) in enumerate(((px, x_range), (py, y_range))):
+        if v < lo:
+            e[i], J[i][i] = v - lo, 1.0
+        elif v > hi:
+            e[i], J[i][i] = v - hi, 1.0
+    speed = math.hypot(vx, vy)
     if speed > speed_max:
         e[2] = speed - speed_max
-        J[2, 2:] = x[2:] / speed
-    return e, J
+        J[2][2], J[2][3] = vx / speed, vy / speed
+    return np.array(e), np.array(J)
 
 
 def _region_error(
