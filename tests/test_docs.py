@@ -36,6 +36,19 @@ def test_every_subcommand_is_documented() -> None:
         assert f"fgdoppler {name}" in text, name
 
 
+def test_every_long_option_is_documented() -> None:
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    text = (ROOT / "docs" / "cli.md").read_text()
+    missing = [
+        f"{name} {opt}"
+        for name, parser in sub.choices.items()  # type: ignore[union-attr]
+        for action in parser._actions
+        for opt in action.option_strings
+        if opt.startswith("--") and opt != "--help" and not re.search(rf"(?<![\w-]){re.escape(opt)}(?![\w-])", text)
+    ]
+    assert not missing, missing
+
+
 def test_docs_build_strict(tmp_path: Path) -> None:
     """The MkDocs site (with the API reference from docstrings) builds with no warning."""
     import subprocess
