@@ -178,10 +178,15 @@ class StreamingTracker(Protocol):
 
 
 def feed(tracker: StreamingTracker, measurements: Measurements, init: Any,
-         settings: TrackerSettings) -> tuple[list[float], list[FloatArray], list[FloatArray | None]]:
-    """Feed the initiation window (one call, starting on the initiation's CV track), then every later scan.
+         settings: TrackerSettings, *, guesses: ArrayLike | None = None,
+         ) -> tuple[list[float], list[FloatArray], list[FloatArray | None]]:
+    """Feed the initiation window (one call), then every later scan.
 
-    Returns the filtered ``(times, states, covariances)`` from the window's end on.
+    The window's states start at ``guesses`` (one per window scan; default:
+    the initiation's constant-velocity track, see
+    :func:`fgdoppler.estimators.window.window_start` for why the trackers
+    pass better ones).  Returns the filtered ``(times, states, covariances)``
+    from the window's end on.
     """
     window, stream = split_window(measurements, init.t_end)
     times: list[float] = []
@@ -192,7 +197,8 @@ def feed(tracker: StreamingTracker, measurements: Measurements, init: Any,
         rows = [ws.rows(k) for k in range(len(ws))]
         x, P = tracker.add_window(
             ws.times, [window.pair[r] for r in rows], [window.doppler[r] for r in rows],
-            [window.sigma[r] for r in rows], settings.motion.propagate(init.x_start, ws.times - init.t_start),
+            [window.sigma[r] for r in rows],
+            settings.motion.propagate(init.x_start, ws.times - init.t_start) if guesses is None else guesses,
         )
         times.append(float(ws.times[-1]))
         states.append(x)

@@ -27,9 +27,17 @@ import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.estimators.common import TrackerSettings, check_model, feed, nis_gate, region_prior
+from fgdoppler.estimators.common import (
+    TrackerSettings,
+    check_model,
+    feed,
+    nis_gate,
+    region_prior,
+    split_window,
+)
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.window import window_start
 from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.measurement import MeasurementModel
@@ -270,6 +278,9 @@ def run_fixed_lag(
 ) -> TrackResult:
     """Fixed-lag smoothing of a recording: the initiation window in one update, then one update per scan.
 
+    The window's states start at the optimum of this tracker's window graph
+    (:func:`~fgdoppler.estimators.window.window_start`).
+
     ``filtered``: newest state after each update (from the window's end on).
     ``lagged``: every state as estimated when it was ``lag`` seconds old (or
     at the end of the recording); this is the primary output.
@@ -279,7 +290,10 @@ def run_fixed_lag(
     t_begin = time.perf_counter()
     prior = region_prior(settings.grid) if settings.weak_prior else None
     tr = FixedLagTracker(model, settings, prior)
-    times, states, covs = feed(tr, measurements, init, settings)
+    start, note = window_start(model, split_window(measurements, init.t_end)[0], init, settings)
+    if note:
+        tr.warnings.append((init.t_start, note))
+    times, states, covs = feed(tr, measurements, init, settings, guesses=start)
     tr.finish()
     idx = sorted(tr.lagged)
     lagged = Estimates.from_lists([tr.times[j] for j in idx], [tr.lagged[j][0] for j in idx],

@@ -29,10 +29,18 @@ import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.estimators.common import TrackerSettings, check_model, feed, nis_gate, region_prior
+from fgdoppler.estimators.common import (
+    TrackerSettings,
+    check_model,
+    feed,
+    nis_gate,
+    region_prior,
+    split_window,
+)
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
 from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.window import window_start
 from fgdoppler.factors import X, absolute_linear_factor
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.measurement import MeasurementModel
@@ -313,9 +321,9 @@ def run_isam2(
 ) -> TrackResult:
     """Initiation window in iSAM2, then one update per later scan; filtered and smoothed results.
 
-    The window's states start on the constant-velocity trajectory of
-    ``init.x_start``; its scans are added ungated (they produced the
-    initiation).  ``filtered`` holds the estimate of the newest state after
+    The window's states start at the optimum of this tracker's window graph
+    (:func:`~fgdoppler.estimators.window.window_start`); its scans are added
+    ungated (they produced the initiation).  ``filtered`` holds the estimate of the newest state after
     each update from the window's end on; ``smoothed`` the whole trajectory
     after :meth:`ISAM2Tracker.finish`.
     """
@@ -324,7 +332,10 @@ def run_isam2(
     t_begin = time.perf_counter()
     prior = region_prior(settings.grid) if settings.weak_prior else None
     tracker = ISAM2Tracker(model, settings, prior)
-    times, states, covs = feed(tracker, measurements, init, settings)
+    start, note = window_start(model, split_window(measurements, init.t_end)[0], init, settings)
+    if note:
+        tracker.warnings.append((init.t_start, note))
+    times, states, covs = feed(tracker, measurements, init, settings, guesses=start)
     n_online = len(tracker.relinearized)
     smoothed, scov = tracker.finish(covariances=settings.smoothed_covariances)
     all_times = list(tracker.times)
