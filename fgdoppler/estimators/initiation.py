@@ -114,8 +114,8 @@ class InitiationSettings:
         ``wall_sigma``) keeps the start position inside the grid's x/y box and
         the speed at most ``grid.speed_max``.  Without it, in a few percent of
         well-observed windows the lowest-cost solution is a second likelihood
-        mode *outside* the zone — a slower target a few hundred metres from a
-        sensor, moving along the baseline — about 4 km from the truth.
+        mode *outside* the zone — a slower target about 1-2 km from a sensor,
+        moving along the baseline — about 4 km from the truth.
     wall_sigma
         Stiffness of the region wall: (position m, speed m/s).
     half_plane
