@@ -30,14 +30,12 @@ from numpy.typing import ArrayLike, NDArray
 from fgdoppler.estimators.common import (
     TrackerSettings,
     check_model,
-    feed,
     nis_gate,
     region_prior,
-    split_window,
 )
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
-from fgdoppler.estimators.window import window_start
+from fgdoppler.estimators.window import feed_from_window_start
 from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.measurement import MeasurementModel
@@ -290,10 +288,7 @@ def run_fixed_lag(
     t_begin = time.perf_counter()
     prior = region_prior(settings.grid) if settings.weak_prior else None
     tr = FixedLagTracker(model, settings, prior)
-    start, note = window_start(model, split_window(measurements, init.t_end)[0], init, settings)
-    if note:
-        tr.warnings.append((init.t_start, note))
-    times, states, covs = feed(tr, measurements, init, settings, guesses=start)
+    times, states, covs = feed_from_window_start(tr, model, measurements, init, settings, tr.warnings)
     tr.finish()
     idx = sorted(tr.lagged)
     lagged = Estimates.from_lists([tr.times[j] for j in idx], [tr.lagged[j][0] for j in idx],

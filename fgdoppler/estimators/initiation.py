@@ -394,7 +394,7 @@ def _refine_lm(
     few: LM on the one-key batch factor from each candidate, then LM on the
     per-state graph from each *distinct* stage-1 solution.
     """
-    batch_settings = settings if settings.window == "batch" else _replace_window(settings, "batch")
+    batch_settings = settings if settings.window == "batch" else replace(settings, window="batch")
     batch_graph, n_batch = _graph(w, batch_settings)
     notes: list[str] = []
     stage1: list[_Solution] = []
@@ -416,10 +416,6 @@ def _refine_lm(
             continue
         sols.append(replace(out, iterations=first.iterations + out.iterations))
     return sorted(sols, key=lambda s: s.objective), graph, notes
-
-
-def _replace_window(settings: InitiationSettings, window: Literal["states", "batch"]) -> InitiationSettings:
-    return replace(settings, window=window)
 
 
 def _refine_ils(

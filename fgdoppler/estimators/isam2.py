@@ -32,15 +32,13 @@ from numpy.typing import ArrayLike, NDArray
 from fgdoppler.estimators.common import (
     TrackerSettings,
     check_model,
-    feed,
     nis_gate,
     region_prior,
-    split_window,
 )
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
 from fgdoppler.estimators.results import Estimates, TrackResult
-from fgdoppler.estimators.window import window_start
+from fgdoppler.estimators.window import feed_from_window_start
 from fgdoppler.factors import X, absolute_linear_factor
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.measurement import MeasurementModel
@@ -332,10 +330,7 @@ def run_isam2(
     t_begin = time.perf_counter()
     prior = region_prior(settings.grid) if settings.weak_prior else None
     tracker = ISAM2Tracker(model, settings, prior)
-    start, note = window_start(model, split_window(measurements, init.t_end)[0], init, settings)
-    if note:
-        tracker.warnings.append((init.t_start, note))
-    times, states, covs = feed(tracker, measurements, init, settings, guesses=start)
+    times, states, covs = feed_from_window_start(tracker, model, measurements, init, settings, tracker.warnings)
     n_online = len(tracker.relinearized)
     smoothed, scov = tracker.finish(covariances=settings.smoothed_covariances)
     all_times = list(tracker.times)

@@ -19,13 +19,20 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from fgdoppler.estimators.common import Scans, TrackerSettings, region_prior
+from fgdoppler.estimators.common import (
+    Scans,
+    StreamingTracker,
+    TrackerSettings,
+    feed,
+    region_prior,
+    split_window,
+)
 from fgdoppler.estimators.initiation import Initiation, lm_params
 from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.measurement import MeasurementModel
 
-__all__ = ["window_start"]
+__all__ = ["feed_from_window_start", "window_start"]
 
 FloatArray = NDArray[np.float64]
 
@@ -74,3 +81,17 @@ def window_start(
     if not np.all(np.isfinite(states)):
         return guesses, "window start: LM gave non-finite states; starting on the CV track"
     return states, None
+
+
+def feed_from_window_start(
+    tracker: StreamingTracker, model: MeasurementModel, measurements: Measurements, init: Initiation,
+    settings: TrackerSettings, warnings: list[tuple[float, str]],
+) -> tuple[list[float], list[FloatArray], list[FloatArray | None]]:
+    """:func:`~fgdoppler.estimators.common.feed` with the window's states started at :func:`window_start`.
+
+    A failed LM start is recorded in ``warnings`` (the tracker's list).
+    """
+    start, note = window_start(model, split_window(measurements, init.t_end)[0], init, settings)
+    if note:
+        warnings.append((init.t_start, note))
+    return feed(tracker, measurements, init, settings, guesses=start)
