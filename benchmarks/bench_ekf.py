@@ -6,9 +6,7 @@ import numpy as np
 
 import fgdoppler as fd
 from benchmarks._common import Row, median_time
-from fgdoppler.estimators.common import TrackerSettings
 from fgdoppler.estimators.ekf import ExtendedKalmanFilter
-from fgdoppler.models.measurement import DopplerModel
 
 
 def run() -> list[Row]:
@@ -19,14 +17,15 @@ def run() -> list[Row]:
     scen = fd.paper_scenario("a", 45e3)
     sim = fd.simulate(scen, np.random.default_rng(3))
     m = sim.measurements
-    model = DopplerModel(geometry=scen.geometry)
-    settings = TrackerSettings(gate_probability=None)
-    motion = settings.motion
+    tracking = fd.TrackingModel.of(scen.geometry)
+    model = tracking.observation
+    settings = fd.EKFSettings(gate_probability=None)
+    motion = tracking.motion
     x0 = np.asarray(scen.x0) + np.array([200.0, -50.0, 3.0, 1.0])
     P0 = np.diag([500.0**2, 100.0**2, 20.0**2, 10.0**2])
 
     def ours() -> np.ndarray:
-        f = ExtendedKalmanFilter(model, x0, P0, 0.0, settings)
+        f = ExtendedKalmanFilter(tracking, x0, P0, 0.0, settings)
         for t, p, z, s in zip(m.time, m.pair, m.doppler, m.sigma, strict=True):
             f.update(float(t), int(p), float(z), float(s))
         return f.x

@@ -1,13 +1,42 @@
 """fgdoppler: Doppler-only multistatic tracking near the Tx–Rx baseline.
 
 Bistatic Doppler models and their GTSAM factors, multi-start track initiation,
-EKF / iSAM2 / fixed-lag / batch estimators, observability analysis and Monte
+EKF / iSAM2 / fixed-lag / offline smoothers, observability analysis and Monte
 Carlo studies reproducing Yang, Leung & Bar-Shalom (FUSION 2026).
+
+The names here are what a first track needs::
+
+    import fgdoppler as fd
+    geometry = fd.paper_geometry("b")
+    sim = fd.simulate(fd.paper_scenario("b", 5e3), rng)
+    result = fd.track(sim.measurements, geometry, "smoother")
+    result.status, result.primary.states
 """
 
 from importlib.metadata import PackageNotFoundError, version
 
 from fgdoppler.analysis.observability import observability_measure
+from fgdoppler.estimators import (
+    ESTIMATORS,
+    METHODS,
+    STATUSES,
+    EKFSettings,
+    Estimates,
+    Event,
+    FixedLagSettings,
+    Initiation,
+    InitiationSettings,
+    ISAM2Settings,
+    Reason,
+    SmootherSettings,
+    TrackerSettings,
+    TrackResult,
+    initiate,
+    run_estimator,
+    track,
+)
+from fgdoppler.estimators.grid import GridSpec, HalfPlane
+from fgdoppler.frames import Frame
 from fgdoppler.geometry import (
     BistaticPair,
     Geometry,
@@ -18,14 +47,18 @@ from fgdoppler.geometry import (
 )
 from fgdoppler.measurements import MeasurementError, Measurements
 from fgdoppler.models import (
-    BatchTimes,
     ConstantVelocity,
-    batch_doppler,
-    batch_doppler_and_jacobian,
-    batch_doppler_jacobian,
+    DopplerModel,
+    MeasurementModel,
+    StackedTimes,
+    TrackingModel,
     bistatic_doppler,
     bistatic_doppler_and_jacobian,
     bistatic_doppler_jacobian,
+    cv_doppler,
+    cv_doppler_and_jacobian,
+    cv_doppler_jacobian,
+    cv_information,
 )
 from fgdoppler.simulation import (
     Scenario,
@@ -35,6 +68,7 @@ from fgdoppler.simulation import (
     paper_scenarios,
     simulate,
 )
+from fgdoppler.zone import Zone
 
 try:
     __version__ = version("fgdoppler")
@@ -42,28 +76,53 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0+unknown"
 
 __all__ = [
-    "BatchTimes",
+    "ESTIMATORS",
+    "METHODS",
+    "STATUSES",
     "BistaticPair",
     "ConstantVelocity",
+    "DopplerModel",
+    "EKFSettings",
+    "Estimates",
+    "Event",
+    "FixedLagSettings",
+    "Frame",
     "Geometry",
+    "GridSpec",
+    "HalfPlane",
+    "ISAM2Settings",
+    "Initiation",
+    "InitiationSettings",
     "MeasurementError",
+    "MeasurementModel",
     "Measurements",
+    "Reason",
     "Scenario",
     "Simulation",
+    "SmootherSettings",
+    "StackedTimes",
+    "TrackResult",
+    "TrackerSettings",
+    "TrackingModel",
     "Trajectory",
+    "Zone",
     "__version__",
-    "batch_doppler",
-    "batch_doppler_and_jacobian",
-    "batch_doppler_jacobian",
     "bistatic_doppler",
     "bistatic_doppler_and_jacobian",
     "bistatic_doppler_jacobian",
     "bistatic_range",
+    "cv_doppler",
+    "cv_doppler_and_jacobian",
+    "cv_doppler_jacobian",
+    "cv_information",
     "ellipse_tangent",
+    "initiate",
     "observability_measure",
     "paper_geometry",
     "paper_scenario",
     "paper_scenarios",
     "resolve_geometry",
+    "run_estimator",
     "simulate",
+    "track",
 ]

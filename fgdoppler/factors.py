@@ -14,54 +14,51 @@ factor's noise model.
     :mod:`fgdoppler.models.motion`).  The model is linear, so a
     :class:`gtsam.JacobianFactor` wrapped in a :class:`gtsam.LinearContainerFactor`
     linearised at zero is exact and costs no Python callback.
-``batch_factor``
-    The paper's window map on one initial-state key,
-    :math:`\mathbf e = \mathbf g(\mathbf x_0) - \mathbf Z` with Jacobian :math:`\mathbf J(\mathbf x_0)`.
+``cv_factor``
+    The paper's window map on one initial-state key (exactly constant
+    velocity), :math:`\mathbf e = \mathbf g(\mathbf x_0) - \mathbf Z` with
+    Jacobian :math:`\mathbf J(\mathbf x_0)`.
 ``region_factor``
-    The search region as the support of the initial state: zero inside the
-    position box and below the speed limit, a steep quadratic wall outside.
-``linear_doppler_factor``
-    A Doppler factor linearised in numpy at a given point, as a native
-    linear factor.  Long-running graphs (iSAM2, offline reconstruction) use it
-    because GTSAM copies the whole ``Values`` into Python for every
+    The zone as the support of the initial state: zero inside the box and
+    below the speed limit, a steep quadratic wall outside.
+``absolute_linear_factor``
+    A native linear factor in absolute coordinates.  Long-running graphs
+    (iSAM2, the offline smoother) linearise the Doppler model in numpy and use
+    it, because GTSAM copies the whole ``Values`` into Python for every
     ``CustomFactor`` callback, which makes callbacks cost O(number of states).
+
+Keys are GTSAM's standard ``x0, x1, ...`` (:data:`gtsam.symbol_shorthand.X`).
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from functools import partial
 
 import gtsam
 import numpy as np
+from gtsam.symbol_shorthand import X
 from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.geometry import Geometry
-from fgdoppler.models.doppler import BatchTimes, _batch
-from fgdoppler.models.measurement import DopplerModel, MeasurementModel
+from fgdoppler.models.doppler import StackedTimes, _cv
 from fgdoppler.models.motion import ConstantVelocity
+from fgdoppler.models.observation import DopplerModel, MeasurementModel
+from fgdoppler.zone import Zone
 
 __all__ = [
     "X",
     "absolute_linear_factor",
-    "batch_factor",
+    "cv_factor",
     "doppler_factor",
-    "linear_doppler_factor",
     "measurement_factor",
     "motion_factor",
     "noise_model",
     "prior_factor",
-    "region_excess",
     "region_factor",
 ]
 
 FloatArray = NDArray[np.float64]
-
-
-def X(k: int) -> int:
-    """GTSAM key of the ``k``-th state (symbol ``x``)."""
-    return int(gtsam.symbol("x", int(k)))
 
 
 def noise_model(sigma: ArrayLike, huber_k: float | None = None) -> gtsam.noiseModel.Base:
@@ -103,11 +100,12 @@ def _measurement_error(
     values: gtsam.Values,
     jacobians: list[FloatArray] | None,
 ) -> FloatArray:
-    x = np.broadcast_to(values.atVector(this.keys()[0]), (channels.size, 4))
+    state = values.atVector(this.keys()[0])
+    x = np.broadcast_to(state, (channels.size, state.size))
     if jacobians is None:
         return model.predict(x, channels) - z
     h, H = model.predict_and_jacobian(x, channels)
-    jacobians[0] = _checked(H, channels.size, 4, "measurement factor")
+    jacobians[0] = _checked(H, channels.size, state.size, "measurement factor")
     return h - z
 
 
@@ -192,154 +190,85 @@ def absolute_linear_factor(
     else:
         raise ValueError(f"absolute_linear_factor takes 1 or 2 keys, got {len(keys)}")
     lin = gtsam.Values()
-    for k in keys:
-        lin.insert(int(k), np.zeros(4))
+    for k, a in zip(keys, A, strict=True):
+        lin.insert(int(k), np.zeros(a.shape[1]))
     return gtsam.LinearContainerFactor(jf, lin)
 
 
 def prior_factor(key: int, mean: ArrayLike, covariance: ArrayLike) -> gtsam.PriorFactorVector:
     """Gaussian prior on one state."""
+    mean = np.asarray(mean, dtype=float).reshape(-1)
     cov = np.asarray(covariance, dtype=float)
-    if cov.shape != (4, 4) or not np.all(np.isfinite(cov)):
-        raise ValueError(f"prior covariance must be a finite 4x4 matrix, got shape {cov.shape}")
+    if cov.shape != (mean.size, mean.size) or not np.all(np.isfinite(cov)):
+        raise ValueError(f"prior covariance must be a finite {mean.size}x{mean.size} matrix, got shape {cov.shape}")
     try:
         np.linalg.cholesky(cov)
     except np.linalg.LinAlgError:
         raise ValueError("prior covariance must be positive definite") from None
-    return gtsam.PriorFactorVector(int(key), np.asarray(mean, dtype=float), gtsam.noiseModel.Gaussian.Covariance(cov))
-
-
-def region_excess(
-    x: FloatArray, x_range: tuple[float, float], y_range: tuple[float, float], speed_max: float
-) -> tuple[FloatArray, FloatArray]:
-    r"""How far a state lies outside a search region, and the Jacobian of that.
-
-    .. math::
-
-        \mathbf e(\mathbf x) = \begin{bmatrix}
-            \min(0, x - x_{lo}) + \max(0, x - x_{hi}) \\
-            \min(0, y - y_{lo}) + \max(0, y - y_{hi}) \\
-            \max(0, \lVert \mathbf v \rVert - s_{max})
-        \end{bmatrix}
-
-    zero inside the region; continuous, piecewise linear in position.
-    """
-    # plain floats: this runs once per LM iteration as a Python callback, where numpy's
-    # per-call overhead would be most of the cost
-    px, py, vx, vy = (float(v) for v in np.asarray(x, dtype=float).reshape(4))
-    e = [0.0, 0.0, 0.0]
-    J = [[0.0] * 4 for _ in range(3)]
-    for i, (v, (lo, hi)) in enumerate(((px, x_range), (py, y_range))):
-        if v < lo:
-            e[i], J[i][i] = v - lo, 1.0
-        elif v > hi:
-            e[i], J[i][i] = v - hi, 1.0
-    speed = math.hypot(vx, vy)
-    if speed > speed_max:
-        e[2] = speed - speed_max
-        J[2][2], J[2][3] = vx / speed, vy / speed
-    return np.array(e), np.array(J)
+    return gtsam.PriorFactorVector(int(key), mean, gtsam.noiseModel.Gaussian.Covariance(cov))
 
 
 def _region_error(
-    bounds: tuple[tuple[float, float], tuple[float, float], float],
+    zone: Zone,
     this: gtsam.CustomFactor,
     values: gtsam.Values,
     jacobians: list[FloatArray] | None,
 ) -> FloatArray:
-    e, J = region_excess(values.atVector(this.keys()[0]), *bounds)
+    e, J = zone.excess(values.atVector(this.keys()[0]))
     if jacobians is not None:
         jacobians[0] = J
     return e
 
 
-def region_factor(
-    key: int,
-    x_range: tuple[float, float],
-    y_range: tuple[float, float],
-    speed_max: float,
-    *,
-    wall_sigma: tuple[float, float] = (10.0, 0.1),
-) -> gtsam.CustomFactor:
-    r"""The search region as the support of a state: a steep wall outside, nothing inside.
+def region_factor(key: int, zone: Zone, *, wall_sigma: tuple[float, float] = (10.0, 0.1)) -> gtsam.CustomFactor:
+    r"""The zone as the support of a state: a steep wall outside, nothing inside.
 
-    Error :func:`region_excess` whitened by ``wall_sigma`` (position m, speed
-    m/s): a state ``d`` metres outside the box costs :math:`(d/\sigma_w)^2`, so
-    a solution can cross the boundary only by a few :math:`\sigma_w`.  This is
-    the hard (uniform) prior of the paper's detectable zone in a form
-    Levenberg–Marquardt can use.
+    Error :meth:`fgdoppler.zone.Zone.excess` whitened by ``wall_sigma``
+    (position m, speed m/s): a state ``d`` metres outside the box costs
+    :math:`(d/\sigma_w)^2`, so a solution can cross the boundary only by a few
+    :math:`\sigma_w`.  This is the hard (uniform) prior of the paper's
+    detectable zone in a form Levenberg–Marquardt can use.
     """
-    for lo, hi in (x_range, y_range):
-        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-            raise ValueError(f"region bounds must be finite with lo < hi, got ({lo}, {hi})")
-    if not (np.isfinite(speed_max) and speed_max > 0):
-        raise ValueError(f"speed_max must be > 0, got {speed_max}")
     sp, sv = wall_sigma
     if not (sp > 0 and sv > 0):
         raise ValueError(f"wall_sigma must be positive, got {wall_sigma}")
-    bounds = ((float(x_range[0]), float(x_range[1])), (float(y_range[0]), float(y_range[1])), float(speed_max))
-    return gtsam.CustomFactor(noise_model([sp, sp, sv]), [int(key)], partial(_region_error, bounds))
+    return gtsam.CustomFactor(noise_model([sp, sp, sv]), [int(key)], partial(_region_error, zone))
 
 
-def _batch_error(
+def _cv_error(
     geometry: Geometry,
-    times: BatchTimes,
+    times: StackedTimes,
     z: FloatArray,
     this: gtsam.CustomFactor,
     values: gtsam.Values,
     jacobians: list[FloatArray] | None,
 ) -> FloatArray:
     x0 = values.atVector(this.keys()[0])
-    g, J, _ = _batch(x0, geometry, times, jacobian=jacobians is not None)
+    g, J, _ = _cv(x0, geometry, times, jacobian=jacobians is not None)
     if jacobians is not None:
         assert J is not None
-        jacobians[0] = _checked(J, z.size, 4, "batch_factor")
+        jacobians[0] = _checked(J, z.size, 4, "cv_factor")
     return g - z
 
 
-def batch_factor(
+def cv_factor(
     key: int,
     geometry: Geometry,
-    times: Sequence[ArrayLike] | BatchTimes,
+    times: Sequence[ArrayLike] | StackedTimes,
     doppler: ArrayLike,
     sigma: ArrayLike,
 ) -> gtsam.CustomFactor:
     r"""The paper's window factor :math:`\mathbf g(\mathbf x_0) - \mathbf Z` on one initial-state key.
 
     ``times`` are relative to the time of :math:`\mathbf x_0`, one array per pair
-    (or a :class:`~fgdoppler.models.BatchTimes`); ``doppler`` and ``sigma`` are
+    (or a :class:`~fgdoppler.models.StackedTimes`); ``doppler`` and ``sigma`` are
     stacked in the same order.
     """
-    bt = times if isinstance(times, BatchTimes) else BatchTimes.from_per_pair(times)
+    bt = times if isinstance(times, StackedTimes) else StackedTimes.from_per_pair(times)
     bt.check(geometry)
     z = np.asarray(doppler, dtype=float).reshape(-1)
     if z.size != bt.size or z.size == 0:
         raise ValueError(f"{z.size} measurements for {bt.size} batch times")
     return gtsam.CustomFactor(
-        noise_model(np.broadcast_to(sigma, z.shape)), [int(key)], partial(_batch_error, geometry, bt, z.copy())
+        noise_model(np.broadcast_to(sigma, z.shape)), [int(key)], partial(_cv_error, geometry, bt, z.copy())
     )
-
-
-def linear_doppler_factor(
-    key: int,
-    H: ArrayLike,
-    residual: ArrayLike,
-    x_lin: ArrayLike,
-    sigma: ArrayLike,
-) -> gtsam.LinearContainerFactor:
-    r"""A Doppler factor linearised at ``x_lin``, as a native linear factor.
-
-    With :math:`\mathbf r = \mathbf z - \mathbf h(\bar{\mathbf x})` and
-    :math:`\mathbf H = \partial\mathbf h/\partial\mathbf x|_{\bar{\mathbf x}}`, the
-    linearised error :math:`\mathbf H(\mathbf x-\bar{\mathbf x}) - \mathbf r` is
-    stored in absolute coordinates as
-    :math:`\mathbf H\mathbf x - (\mathbf r + \mathbf H\bar{\mathbf x})`, whitened by ``sigma``.
-    Use :func:`fgdoppler.models.bistatic_doppler_and_jacobian` to compute
-    ``H`` and the prediction for many states at once.
-    """
-    H = np.atleast_2d(np.asarray(H, dtype=float))
-    r = np.asarray(residual, dtype=float).reshape(-1)
-    s = np.broadcast_to(np.asarray(sigma, dtype=float), r.shape)
-    H = _checked(H, r.size, 4, "linear_doppler_factor")
-    W = 1.0 / s
-    return absolute_linear_factor((key,), (H * W[:, None],), (r + H @ np.asarray(x_lin, dtype=float)) * W)

@@ -11,10 +11,14 @@ from __future__ import annotations
 
 import sys
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from fgdoppler.frames import Frame, sensor_frame
+from fgdoppler.zone import DEFAULT_SPEED_MAX, Zone, default_zone
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -125,6 +129,15 @@ class Geometry:
     def sensors(self) -> NDArray[np.float64]:
         """Distinct sensor positions (Tx and Rx), shape ``(n_sensors, 2)``."""
         return np.unique(np.vstack([self._tx, self._rx]), axis=0)
+
+    @cached_property
+    def frame(self) -> Frame:
+        """The sensors' own frame (:func:`fgdoppler.frames.sensor_frame`): identity for the paper's geometries."""
+        return sensor_frame(self._tx, self._rx)
+
+    def default_zone(self, *, speed_max: float = DEFAULT_SPEED_MAX) -> Zone:
+        """The default detectable zone in :attr:`frame` (:func:`fgdoppler.zone.default_zone`)."""
+        return default_zone(self.frame, self._tx, self._rx, speed_max=speed_max)
 
     def mirrored_x(self, x_mirror: float) -> Geometry:
         """The geometry reflected about the vertical line ``x = x_mirror``."""

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from fgdoppler._io import atomic_open
 from fgdoppler.geometry import Geometry
 
-__all__ = ["MeasurementError", "Measurements", "Scan"]
+__all__ = ["MeasurementError", "Measurements", "Scans"]
 
 HEADER = ("time", "pair", "doppler", "sigma")
 
@@ -36,13 +36,34 @@ class MeasurementError(ValueError):
 
 
 @dataclass(frozen=True, kw_only=True)
-class Scan:
-    """All measurements that share one time stamp."""
+class Scans:
+    """Measurements grouped by time: the one scan index every estimator uses.
 
-    time: float
-    pair: NDArray[np.intp]
-    doppler: NDArray[np.float64]
-    sigma: NDArray[np.float64]
+    A *scan* is the set of measurements that share one time stamp (both pairs
+    of the paper's synchronous case (a); a single pair of its staggered
+    case (b)).  Rows of scan ``k`` are ``bounds[k]:bounds[k + 1]`` of the
+    (time-ordered) measurements.
+    """
+
+    times: NDArray[np.float64]
+    bounds: NDArray[np.intp]
+
+    def __len__(self) -> int:
+        return int(self.times.size)
+
+    def rows(self, k: int) -> slice:
+        """Rows of scan ``k``."""
+        return slice(int(self.bounds[k]), int(self.bounds[k + 1]))
+
+    @cached_property
+    def scan_of(self) -> NDArray[np.intp]:
+        """Scan index of every measurement row."""
+        return np.repeat(np.arange(len(self), dtype=np.intp), np.diff(self.bounds))
+
+    @cached_property
+    def counts(self) -> NDArray[np.intp]:
+        """Measurements per scan."""
+        return np.diff(self.bounds).astype(np.intp)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -131,11 +152,6 @@ class Measurements:
     def __len__(self) -> int:
         return int(self.time.size)
 
-    @property
-    def n_pairs_used(self) -> int:
-        """One more than the largest pair index present (0 if empty)."""
-        return int(self.pair.max()) + 1 if len(self) else 0
-
     def check(self, geometry: Geometry, source: str = "measurements") -> None:
         """Raise :class:`MeasurementError` if a pair index is not in ``geometry``."""
         bad = np.flatnonzero(self.pair >= geometry.n_pairs)
@@ -165,20 +181,19 @@ class Measurements:
             keep[np.flatnonzero(self.pair == k)[:n]] = True
         return self.subset(keep)
 
-    def scan_index(self) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
-        """Distinct times and, per entry, the index of its time in that list."""
+    def scans(self) -> Scans:
+        """The measurements grouped by time (:class:`Scans`; computed once)."""
+        return self._scans
+
+    @cached_property
+    def _scans(self) -> Scans:
         times, inverse = np.unique(self.time, return_inverse=True)
-        return times, inverse.astype(np.intp)
+        bounds = np.searchsorted(inverse, np.arange(times.size + 1)).astype(np.intp)
+        times.setflags(write=False)
+        bounds.setflags(write=False)
+        return Scans(times=times, bounds=bounds)
 
-    def scans(self) -> Iterator[Scan]:
-        """Iterate over groups of measurements with equal time, in time order."""
-        times, inv = self.scan_index()
-        bounds = np.searchsorted(inv, np.arange(times.size + 1))
-        for k, t in enumerate(times):
-            sl = slice(bounds[k], bounds[k + 1])
-            yield Scan(time=float(t), pair=self.pair[sl], doppler=self.doppler[sl], sigma=self.sigma[sl])
-
-    def batch_order(self) -> NDArray[np.intp]:
+    def stacked_order(self) -> NDArray[np.intp]:
         """Permutation that stacks pair 0's entries first, then pair 1's, ... (paper Eq. 11)."""
         return np.lexsort((self.time, self.pair)).astype(np.intp)
 
@@ -228,28 +243,10 @@ class Measurements:
         numbered = [(i + 1, r) for i, r in enumerate(rows) if r and any(c.strip() for c in r)]
         if not numbered:
             raise MeasurementError(f"{path}: empty file: expected the header {','.join(HEADER)}")
-        line0, header = numbered[0]
-        header = [h.strip().lower() for h in header]
-        if header == list(HEADER):
-            has_sigma = True
-        elif header == list(HEADER[:3]):
-            has_sigma = False
-            if default_sigma is None:
-                raise MeasurementError(
-                    f"{path}:{line0}: no sigma column and no default sigma given "
-                    "(pass --sigma or add a sigma column)"
-                )
-            if not (math.isfinite(default_sigma) and default_sigma > 0):
-                raise MeasurementError(f"{path}: default sigma must be finite and > 0, got {default_sigma}")
-        else:
-            raise MeasurementError(
-                f"{path}:{line0}: bad header {','.join(header)!r}: expected "
-                f"{','.join(HEADER)!r} (sigma optional)"
-            )
+        has_sigma = _header(path, *numbered[0], default_sigma)
         data = numbered[1:]
         if not data:
             raise MeasurementError(f"{path}: no measurement rows after the header")
-        ncol = 4 if has_sigma else 3
         n = len(data)
         t = np.empty(n)
         p = np.empty(n, dtype=np.intp)
@@ -258,39 +255,63 @@ class Measurements:
         seen: dict[tuple[float, int], int] = {}
         for j, (line, row) in enumerate(data):
             where = f"{path}:{line}"
-            if len(row) != ncol:
-                raise MeasurementError(f"{where}: expected {ncol} fields, got {len(row)}")
-            vals = []
-            for name, cell in zip(HEADER, row, strict=False):
-                try:
-                    v = float(cell)
-                except ValueError:
-                    raise MeasurementError(f"{where}: {name} is not a number: {cell.strip()!r}") from None
-                if not math.isfinite(v):
-                    raise MeasurementError(f"{where}: {name} is not finite: {cell.strip()!r}")
-                vals.append(v)
-            tv, pv, zv = vals[0], vals[1], vals[2]
-            sv = vals[3] if has_sigma else float(default_sigma)  # type: ignore[arg-type]
-            if pv != int(pv) or pv < 0:
-                raise MeasurementError(f"{where}: pair must be a non-negative integer, got {row[1].strip()!r}")
-            if geometry is not None and int(pv) >= geometry.n_pairs:
-                raise MeasurementError(
-                    f"{where}: unknown pair index {int(pv)}: the geometry has {geometry.n_pairs} "
-                    f"pair(s), indices 0..{geometry.n_pairs - 1}"
-                )
-            if sv <= 0:
-                raise MeasurementError(f"{where}: sigma must be > 0, got {sv}")
+            tv, pv, zv, sv = _row(where, row, has_sigma, default_sigma, geometry)
             if j and tv < t[j - 1]:
                 raise MeasurementError(
                     f"{where}: time {tv} is earlier than the previous row's {t[j - 1]}; "
                     "rows must be in time order"
                 )
-            key = (tv, int(pv))
-            if key in seen:
+            if (tv, pv) in seen:
                 raise MeasurementError(
-                    f"{where}: duplicate measurement for time {tv}, pair {int(pv)} "
-                    f"(first at line {seen[key]})"
+                    f"{where}: duplicate measurement for time {tv}, pair {pv} (first at line {seen[(tv, pv)]})"
                 )
-            seen[key] = line
-            t[j], p[j], z[j], s[j] = tv, int(pv), zv, sv
+            seen[(tv, pv)] = line
+            t[j], p[j], z[j], s[j] = tv, pv, zv, sv
         return cls(time=t, pair=p, doppler=z, sigma=s)
+
+
+def _header(path: Path, line: int, header: list[str], default_sigma: float | None) -> bool:
+    """Check the header row; True if it has a sigma column."""
+    names = [h.strip().lower() for h in header]
+    if names == list(HEADER):
+        return True
+    if names != list(HEADER[:3]):
+        raise MeasurementError(
+            f"{path}:{line}: bad header {','.join(names)!r}: expected {','.join(HEADER)!r} (sigma optional)"
+        )
+    if default_sigma is None:
+        raise MeasurementError(
+            f"{path}:{line}: no sigma column and no default sigma given (pass --sigma or add a sigma column)"
+        )
+    if not (math.isfinite(default_sigma) and default_sigma > 0):
+        raise MeasurementError(f"{path}: default sigma must be finite and > 0, got {default_sigma}")
+    return False
+
+
+def _row(where: str, row: list[str], has_sigma: bool, default_sigma: float | None,
+         geometry: Geometry | None) -> tuple[float, int, float, float]:
+    """One data row as ``(time, pair, doppler, sigma)``, checked on its own."""
+    ncol = 4 if has_sigma else 3
+    if len(row) != ncol:
+        raise MeasurementError(f"{where}: expected {ncol} fields, got {len(row)}")
+    vals = []
+    for name, cell in zip(HEADER, row, strict=False):
+        try:
+            v = float(cell)
+        except ValueError:
+            raise MeasurementError(f"{where}: {name} is not a number: {cell.strip()!r}") from None
+        if not math.isfinite(v):
+            raise MeasurementError(f"{where}: {name} is not finite: {cell.strip()!r}")
+        vals.append(v)
+    tv, pv, zv = vals[0], vals[1], vals[2]
+    sv = vals[3] if has_sigma else float(default_sigma)  # type: ignore[arg-type]
+    if pv != int(pv) or pv < 0:
+        raise MeasurementError(f"{where}: pair must be a non-negative integer, got {row[1].strip()!r}")
+    if geometry is not None and int(pv) >= geometry.n_pairs:
+        raise MeasurementError(
+            f"{where}: unknown pair index {int(pv)}: the geometry has {geometry.n_pairs} "
+            f"pair(s), indices 0..{geometry.n_pairs - 1}"
+        )
+    if sv <= 0:
+        raise MeasurementError(f"{where}: sigma must be > 0, got {sv}")
+    return tv, int(pv), zv, sv

@@ -17,13 +17,21 @@ from fgdoppler.geometry import Geometry, bistatic_range
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-    from fgdoppler.analysis.observability import ObservabilityMap, ObservabilityReport
+    from fgdoppler.analysis.observability import ObservabilityMap, ObservabilityReport, SpeedTable
 
 __all__ = [
+    "covariance_ellipse",
+    "ellipse_points",
     "plot_geometry",
+    "plot_lag_sweep",
+    "plot_landscape",
+    "plot_nees",
     "plot_observability_map",
     "plot_observability_slice",
     "plot_report_std",
+    "plot_rmse",
+    "plot_speed_table",
+    "plot_track",
     "save",
 ]
 
@@ -139,7 +147,7 @@ def plot_observability_map(m: ObservabilityMap, ax: Axes | None = None, *, title
                   fontsize="small")
     ax.set_xlabel("initial x (km)")
     ax.set_ylabel("heading (deg, clockwise from +y)")
-    ax.set_title(title or f"y = {m.y / 1e3:g} km, speed {m.speed:g} m/s; {m.batch.describe()}", fontsize="small")
+    ax.set_title(title or f"y = {m.y / 1e3:g} km, speed {m.speed:g} m/s; {m.sampling.describe()}", fontsize="small")
     return ax
 
 
@@ -302,4 +310,30 @@ def plot_nees(
         ax.set_title(title, fontsize="small")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize="x-small")
+    return ax
+
+
+def plot_lag_sweep(lags: Sequence[float], rmse: Sequence[float], ax: Axes | None = None, *,
+                   references: Mapping[str, float] | None = None) -> Axes:
+    """Time-averaged position RMSE of the fixed-lag smoother versus its lag, with horizontal references."""
+    ax = _axes(ax)
+    ax.semilogx(lags, rmse, "-o", label="fixed-lag")
+    for (label, value), style in zip((references or {}).items(), (("tab:red", "--"), ("k", ":"), ("tab:green", "-.")),
+                                     strict=False):
+        ax.axhline(value, color=style[0], ls=style[1], label=label)
+    ax.set_xlabel("lag (s)")
+    ax.set_ylabel("position RMSE, time average (m)")
+    ax.legend(fontsize="small")
+    return ax
+
+
+def plot_speed_table(table: SpeedTable, ax: Axes | None = None) -> Axes:
+    """Max and min of the observability measure per group versus speed (the paper's Table 2 as a figure)."""
+    ax = _axes(ax)
+    for g in table.groups:
+        ax.plot(table.speeds, [table.values[g][s][0] for s in table.speeds], "-o", label=f"group {g} max")
+        ax.plot(table.speeds, [table.values[g][s][1] for s in table.speeds], "--o", label=f"group {g} min")
+    ax.set_xlabel("speed (m/s)")
+    ax.set_ylabel("O")
+    ax.legend(fontsize="small")
     return ax

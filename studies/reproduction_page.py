@@ -45,7 +45,7 @@ The paper does not say which measurement batch its observability study used.
 Two synchronous samples per pair, 1 s apart (evaluation points at y = +2 km),
 reproduces it; our values beside the paper's:
 
-{section(rep, "Batch: 2 samples", "## Observability figures")}
+{section(rep, "Sampling: 2 samples", "## Observability figures")}
 
 ![group 2 map](img/fig5_map_group2.png)
 ![Fig. 8](img/fig8_slices.png)

@@ -102,7 +102,7 @@ def test_track_malformed_input_exits_2_and_writes_nothing(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv"]
 
 
-@pytest.mark.parametrize("estimator", ["ekf", "isam2", "fixed-lag", "batch"])
+@pytest.mark.parametrize("estimator", ["ekf", "isam2", "fixed-lag", "smoother"])
 def test_track_every_estimator_json_out_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                  estimator: str) -> None:
     sim = tmp_path / "sim"

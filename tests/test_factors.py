@@ -9,7 +9,7 @@ import pytest
 import fgdoppler as fd
 from fgdoppler import factors
 from fgdoppler.factors import X
-from fgdoppler.models.measurement import DopplerModel
+from fgdoppler.models.observation import DopplerModel
 from tests.conftest import random_states
 
 
@@ -37,7 +37,7 @@ def test_doppler_factor_linearize_equals_model(rng: np.random.Generator, paper_g
 def test_error_only_call_computes_no_jacobian(monkeypatch: pytest.MonkeyPatch) -> None:
     g = fd.paper_geometry("a")
     f = factors.doppler_factor(X(0), g, [0, 1], [1.0, 2.0], 1.0)
-    bf = factors.batch_factor(X(0), g, [[0.0, 0.5], [0.0, 0.5]], [1.0, 2.0, 3.0, 4.0], 1.0)
+    bf = factors.cv_factor(X(0), g, [[0.0, 0.5], [0.0, 0.5]], [1.0, 2.0, 3.0, 4.0], 1.0)
     v = _values(x0=[25e3, 2e3, 10.0, -100.0])
 
     def boom(*args: object, **kwargs: object) -> None:
@@ -45,14 +45,14 @@ def test_error_only_call_computes_no_jacobian(monkeypatch: pytest.MonkeyPatch) -
 
     monkeypatch.setattr(DopplerModel, "predict_and_jacobian", boom)
     assert np.isfinite(f.error(v))
-    real_batch = factors._batch
+    real_cv = factors._cv
 
     def batch_no_jac(*args: object, jacobian: bool, **kwargs: object):
         if jacobian:
             raise AssertionError("Jacobian computed in an error-only call")
-        return real_batch(*args, jacobian=jacobian, **kwargs)
+        return real_cv(*args, jacobian=jacobian, **kwargs)
 
-    monkeypatch.setattr(factors, "_batch", batch_no_jac)
+    monkeypatch.setattr(factors, "_cv", batch_no_jac)
     assert np.isfinite(bf.error(v))
     # and the linearising call does use the Jacobian path
     monkeypatch.undo()
@@ -68,13 +68,13 @@ def test_error_only_call_computes_no_jacobian(monkeypatch: pytest.MonkeyPatch) -
     assert calls["n"] == 1
 
 
-def test_batch_factor_equals_g_and_J(rng: np.random.Generator, paper_geom: fd.Geometry) -> None:
+def test_cv_factor_equals_g_and_J(rng: np.random.Generator, paper_geom: fd.Geometry) -> None:
     times = [np.arange(10) * 0.5, 0.25 + np.arange(10) * 0.5]
     for x0 in random_states(rng, paper_geom, 10, min_dist=3e3):
         Z = rng.normal(0, 30, 20)
-        f = factors.batch_factor(X(0), paper_geom, times, Z, 1.5)
+        f = factors.cv_factor(X(0), paper_geom, times, Z, 1.5)
         A, b = f.linearize(_values(x0=x0)).jacobian()
-        g, J = fd.batch_doppler_and_jacobian(x0, paper_geom, times)
+        g, J = fd.cv_doppler_and_jacobian(x0, paper_geom, times)
         np.testing.assert_allclose(A, J / 1.5, rtol=1e-12)
         np.testing.assert_allclose(b, -(g - Z) / 1.5, rtol=1e-12, atol=1e-12)
 
@@ -101,12 +101,16 @@ def test_motion_factor_rejects_singular_Q() -> None:
         factors.motion_factor(X(0), X(1), 0.5, fd.ConstantVelocity(q=0.01, form="discrete"))
 
 
-def test_linear_doppler_factor_matches_custom_factor_at_lin_point(rng: np.random.Generator) -> None:
+def test_numpy_linearised_rows_match_the_custom_factor_at_the_point(rng: np.random.Generator) -> None:
+    # iSAM2 and the offline smoother linearise in numpy (linearize_rows) and hand GTSAM an
+    # absolute linear factor; at the linearisation point it must equal the CustomFactor's.
+    from fgdoppler.estimators.linearized import linearize_rows
+
     g = fd.paper_geometry("b")
     x = random_states(rng, g, 1)[0]
     z, s = np.array([3.0, -4.0]), np.array([1.0, 0.7])
-    h, H = fd.bistatic_doppler_and_jacobian(x, g)
-    lf = factors.linear_doppler_factor(X(0), H, z - h, x, s)
+    rows = linearize_rows(DopplerModel(geometry=g), np.broadcast_to(x, (2, 4)), np.array([0, 1]), z, s)
+    lf = factors.absolute_linear_factor([X(0)], [rows.A], rows.b + rows.A @ x)
     cf = factors.doppler_factor(X(0), g, [0, 1], z, s)
     v = _values(x0=x)
     A1, b1 = lf.linearize(v).jacobian()
@@ -123,7 +127,7 @@ def test_factor_input_validation() -> None:
     with pytest.raises(ValueError):
         factors.doppler_factor(X(0), g, [0], [1.0], 0.0)
     with pytest.raises(ValueError, match="measurements for"):
-        factors.batch_factor(X(0), g, [[0.0], [0.0]], [1.0], 1.0)
+        factors.cv_factor(X(0), g, [[0.0], [0.0]], [1.0], 1.0)
     with pytest.raises(ValueError, match="positive definite"):
         factors.prior_factor(X(0), np.zeros(4), np.diag([1.0, 1.0, 0.0, 1.0]))
 
@@ -140,55 +144,36 @@ def test_huber_noise_model_downweights_outliers() -> None:
     assert plain.error(v) == pytest.approx(0.5 * 50**2, rel=1e-12)
 
 
-REGION = ((2e3, 48e3), (-5e3, 5e3), 200.0)
+ZONE = fd.Zone(along=(2e3, 48e3), across=(-5e3, 5e3), speed_max=200.0)
 
 
 @pytest.mark.parametrize(
     "state",
     [
-        [49.3e3, 1.9e3, -80.0, 9.0],  # beyond x_hi
-        [1.0e3, -6.0e3, 30.0, 40.0],  # below x_lo and y_lo
-        [10e3, 7e3, 180.0, 150.0],  # above y_hi and too fast
+        [49.3e3, 1.9e3, -80.0, 9.0],  # beyond along_hi
+        [1.0e3, -6.0e3, 30.0, 40.0],  # below along_lo and across_lo
+        [10e3, 7e3, 180.0, 150.0],  # above across_hi and too fast
     ],
 )
-def test_region_factor_outside_matches_finite_differences(state: list[float]) -> None:
+def test_region_factor_linearises_to_the_zone_excess(state: list[float]) -> None:
     x = np.asarray(state)
-    e, J = factors.region_excess(x, *REGION)
-    # analytic excess: distance beyond each violated bound, signed, and the speed surplus
-    lo = np.array([REGION[0][0], REGION[1][0]])
-    hi = np.array([REGION[0][1], REGION[1][1]])
-    expected = np.minimum(0.0, x[:2] - lo) + np.maximum(0.0, x[:2] - hi)
-    np.testing.assert_allclose(e[:2], expected)
-    assert e[2] == pytest.approx(max(0.0, float(np.hypot(x[2], x[3])) - REGION[2]))
+    e, J = ZONE.excess(x)
     assert np.any(e != 0)
-    h = 1e-3
-    fd_J = np.column_stack([
-        (factors.region_excess(x + h * np.eye(4)[i], *REGION)[0] - factors.region_excess(x - h * np.eye(4)[i], *REGION)[0])
-        / (2 * h)
-        for i in range(4)
-    ])
-    np.testing.assert_allclose(J, fd_J, atol=1e-8)
-    f = factors.region_factor(X(0), *REGION, wall_sigma=(10.0, 0.1))
-    lin = f.linearize(_values(x0=x))
-    A, b = lin.jacobian()
+    f = factors.region_factor(X(0), ZONE, wall_sigma=(10.0, 0.1))
+    A, b = f.linearize(_values(x0=x)).jacobian()
     W = np.diag([1 / 10.0, 1 / 10.0, 1 / 0.1])
     np.testing.assert_allclose(A, W @ J, atol=1e-12)
     np.testing.assert_allclose(b, -W @ e, atol=1e-12)
+    assert f.error(_values(x0=x)) == pytest.approx(0.5 * float(np.sum((W @ e) ** 2)), rel=1e-12)
 
 
 def test_region_factor_is_zero_inside(rng: np.random.Generator) -> None:
-    f = factors.region_factor(X(0), *REGION)
+    f = factors.region_factor(X(0), ZONE)
     for _ in range(50):
         x = np.array([rng.uniform(2e3, 48e3), rng.uniform(-5e3, 5e3), *rng.uniform(-140.0, 140.0, 2)])
         assert f.error(_values(x0=x)) == 0.0
-        e, J = factors.region_excess(x, *REGION)
-        assert not np.any(e) and not np.any(J)
 
 
 def test_region_factor_validation() -> None:
-    with pytest.raises(ValueError, match="lo < hi"):
-        factors.region_factor(X(0), (5.0, 1.0), (0.0, 1.0), 10.0)
-    with pytest.raises(ValueError, match="speed_max"):
-        factors.region_factor(X(0), (0.0, 1.0), (0.0, 1.0), 0.0)
     with pytest.raises(ValueError, match="wall_sigma"):
-        factors.region_factor(X(0), (0.0, 1.0), (0.0, 1.0), 1.0, wall_sigma=(0.0, 1.0))
+        factors.region_factor(X(0), ZONE, wall_sigma=(0.0, 1.0))

@@ -112,11 +112,15 @@ def test_failed_write_leaves_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyP
 
 def test_scans_and_windows() -> None:
     m = fd.Measurements.from_arrays([0, 0, 0.25, 0.5, 0.5], [1, 0, 1, 0, 1], [1, 2, 3, 4, 5], 1.0)
-    scans = list(m.scans())
-    assert [s.time for s in scans] == [0.0, 0.25, 0.5]
-    np.testing.assert_array_equal(scans[0].pair, [0, 1])
-    np.testing.assert_array_equal(scans[0].doppler, [2, 1])
+    scans = m.scans()
+    assert scans is m.scans()  # computed once
+    np.testing.assert_array_equal(scans.times, [0.0, 0.25, 0.5])
+    np.testing.assert_array_equal(scans.counts, [2, 1, 2])
+    np.testing.assert_array_equal(scans.scan_of, [0, 0, 1, 2, 2])
+    np.testing.assert_array_equal(m.pair[scans.rows(0)], [0, 1])
+    np.testing.assert_array_equal(m.doppler[scans.rows(0)], [2, 1])
+    assert len(scans) == 3
     first = m.first_per_pair(1)
     np.testing.assert_array_equal(first.time, [0, 0])
     np.testing.assert_array_equal(m.between(0.2, 0.5).time, [0.25, 0.5, 0.5])
-    np.testing.assert_array_equal(m.pair[m.batch_order()], [0, 0, 1, 1, 1])
+    np.testing.assert_array_equal(m.pair[m.stacked_order()], [0, 0, 1, 1, 1])

@@ -19,9 +19,9 @@ from fgdoppler.analysis.observability import (
     DEFAULT_X,
     PAPER_GROUPS,
     PAPER_TABLE2,
-    TABLE2_BATCH,
-    Batch,
+    TABLE2_SAMPLING,
     ObservabilityMap,
+    SamplingPattern,
     SpeedTable,
     observability_map,
     speed_table,
@@ -57,13 +57,13 @@ def fig3_geometry(out: Path) -> Artefact:
     return Artefact(name="Fig. 3", files=(path,), summary="sensor configurations and evaluation groups")
 
 
-def figs4_7_maps(out: Path, *, speed: float = 100.0, batch: Batch = TABLE2_BATCH) -> tuple[Artefact, dict[int, ObservabilityMap]]:
+def figs4_7_maps(out: Path, *, speed: float = 100.0, sampling: SamplingPattern = TABLE2_SAMPLING) -> tuple[Artefact, dict[int, ObservabilityMap]]:
     """Figs. 4–7: O over x × heading for groups 1–4, and the paper's baseline claim."""
     out.mkdir(parents=True, exist_ok=True)
     maps: dict[int, ObservabilityMap] = {}
     files = []
     for g, (case, y) in PAPER_GROUPS.items():
-        m = observability_map(paper_geometry(case), y=y, speed=speed, batch=batch)
+        m = observability_map(paper_geometry(case), y=y, speed=speed, sampling=sampling)
         maps[g] = m
         ax = plotting.plot_observability_map(m, title=f"group {g}: case ({case}), y = {y / 1e3:g} km")
         files.append(plotting.save(ax, out / f"fig{g + 3}_map_group{g}.png"))
@@ -95,13 +95,13 @@ def fig7a_ellipses(out: Path) -> Artefact:
     return Artefact(name="Fig. 7a", files=(path,), summary="bistatic ellipses through (25, 2) km and (5, 2) km")
 
 
-def fig8_slices(out: Path, *, heading_deg: float = 180.0, batch: Batch = TABLE2_BATCH) -> Artefact:
+def fig8_slices(out: Path, *, heading_deg: float = 180.0, sampling: SamplingPattern = TABLE2_SAMPLING) -> Artefact:
     """Fig. 8: O vs x at heading 180° for groups 2 and 4, and the paper's claims about it."""
     out.mkdir(parents=True, exist_ok=True)
     curves = {}
     for g in (2, 4):
         case, y = PAPER_GROUPS[g]
-        m = observability_map(paper_geometry(case), y=y, heading_deg=[heading_deg], batch=batch)
+        m = observability_map(paper_geometry(case), y=y, heading_deg=[heading_deg], sampling=sampling)
         curves[f"group {g}"] = (m.x, m.O[:, 0])
     path = plotting.save(plotting.plot_observability_slice(curves, heading_deg=heading_deg), out / "fig8_slices.png")
     x, O2 = curves["group 2"]
@@ -122,13 +122,13 @@ def fig8_slices(out: Path, *, heading_deg: float = 180.0, batch: Batch = TABLE2_
                     summary=f"heading {heading_deg:g} deg", claims=claims)
 
 
-def table2(out: Path, *, batch: Batch = TABLE2_BATCH) -> tuple[Artefact, SpeedTable]:
+def table2(out: Path, *, sampling: SamplingPattern = TABLE2_SAMPLING) -> tuple[Artefact, SpeedTable]:
     """Table 2: max/min O per speed for groups 2 and 4, beside the paper's values."""
     out.mkdir(parents=True, exist_ok=True)
-    tab = speed_table(batch=batch)
+    tab = speed_table(sampling=sampling)
     md = tab.to_markdown()
     atomic_write_text(out / "table2.md", md + "\n")
-    atomic_write_text(out / "table2.json", json.dumps({"batch": batch.describe(), "rows": tab.compare()}, indent=1))
+    atomic_write_text(out / "table2.json", json.dumps({"sampling": sampling.describe(), "rows": tab.compare()}, indent=1))
     max_ok = all(abs(tab.values[g][s][0] - PAPER_TABLE2[g][s][0]) <= 0.05 for g in tab.groups for s in tab.speeds)
     min_ok = all(abs(tab.values[g][s][1] - PAPER_TABLE2[g][s][1]) <= 1.0 for g in tab.groups for s in tab.speeds)
     incr = all(

@@ -31,9 +31,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
-from fgdoppler.models.doppler import BatchTimes, batch_doppler_jacobian
-from fgdoppler.models.measurement import MeasurementModel
+from fgdoppler.models.doppler import StackedTimes, cv_doppler_jacobian
 from fgdoppler.models.motion import ConstantVelocity
+from fgdoppler.models.observation import MeasurementModel
 from fgdoppler.simulation import Trajectory
 
 __all__ = ["crlb_deterministic", "pcrlb_filter"]
@@ -81,8 +81,8 @@ def crlb_deterministic(
         NaN where the information is still singular (too few measurements).
     """
     t = np.asarray(times, dtype=float)
-    bt = BatchTimes(pair=measurements.pair, t=measurements.time - t0)
-    J = batch_doppler_jacobian(np.asarray(x0, dtype=float), geometry, bt) / measurements.sigma[:, None]
+    bt = StackedTimes(pair=measurements.pair, t=measurements.time - t0)
+    J = cv_doppler_jacobian(np.asarray(x0, dtype=float), geometry, bt) / measurements.sigma[:, None]
     outer = np.einsum("ji,jk->jik", J, J)
     cum = np.cumsum(outer, axis=0)
     if smoothing:
@@ -111,7 +111,7 @@ def pcrlb_filter(
     each scan (all measurements of a scan together).
     """
     m = measurements.subset(measurements.time > t0)
-    times, scan = m.scan_index()
+    times, scan = m.scans().times, m.scans().scan_of
     J = np.asarray(J0, dtype=float)
     t_prev = t0
     out = np.empty((times.size, 4, 4))

@@ -9,11 +9,14 @@ GTSAM holds the GIL, so processes, not threads, give the speed-up; a Dask
 ``distributed`` cluster works too (``fgdoppler[distributed]``).
 
 Estimators
-    ``"grid"``, ``"ils"``, ``"lm"``: initiation only; the estimate at time
-    *t* is the constant-velocity extrapolation of the initiation's initial
-    state (the paper's "batch initial estimate").
-    ``"ekf"``, ``"isam2"`` (filtered), ``"fixed-lag"`` (each state when it is
-    ``lag`` seconds old), ``"batch"`` (smoothed): see :mod:`fgdoppler.estimators`.
+    ``"grid"``, ``"ils"``, ``"lm"`` (:data:`~fgdoppler.estimators.initiation.METHODS`):
+    initiation only; the estimate at time *t* is the constant-velocity
+    extrapolation of the initiation's initial state (the paper's "batch
+    initial estimate").
+    Every name of the registry (:data:`~fgdoppler.estimators.registry.ESTIMATORS`):
+    that tracker's primary estimate — ``"ekf"``, ``"isam2"`` (filtered),
+    ``"fixed-lag"`` (each state when it is ``lag`` seconds old),
+    ``"smoother"`` (smoothed).
     ``"lag:<seconds>"``: the fixed-lag smoother with that lag (for lag sweeps).
 
 Per run and estimator the squared position and velocity errors and the NEES
@@ -26,6 +29,7 @@ import json
 import os
 import sys
 import time
+from collections.abc import Mapping
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -36,18 +40,36 @@ from numpy.typing import NDArray
 
 from fgdoppler._io import atomic_write_text
 from fgdoppler.analysis.metrics import errors, nees, nees_band, rmse
-from fgdoppler.estimators.common import TrackerSettings
-from fgdoppler.estimators.initiation import InitiationSettings, Method
+from fgdoppler.estimators.initiation import METHODS, InitiationSettings, Method
+from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
+from fgdoppler.estimators.settings import FixedLagSettings, TrackerSettings
+from fgdoppler.models.motion import ConstantVelocity
+from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.simulation import Scenario, simulate
 
-__all__ = ["INIT_METHODS", "MonteCarloResult", "MonteCarloSpec", "run_monte_carlo"]
+__all__ = ["DEFAULT_ESTIMATORS", "MonteCarloResult", "MonteCarloSpec", "run_monte_carlo"]
 
 FloatArray = NDArray[np.float64]
 
-#: Initiation-only "estimators".
-INIT_METHODS = ("grid", "ils", "lm")
-#: Default estimator set of the paper study.
-DEFAULT_ESTIMATORS = ("grid", "ils", "lm", "ekf", "isam2", "fixed-lag", "batch")
+#: Default estimator set of the paper study: every initiation method, then every tracker.
+DEFAULT_ESTIMATORS: tuple[str, ...] = (*METHODS, *ESTIMATORS)
+
+
+def _lag(name: str) -> float | None:
+    """The lag of a ``"lag:<seconds>"`` name, or ``None`` for other names."""
+    if not name.startswith("lag:"):
+        return None
+    try:
+        lag = float(name[4:])
+    except ValueError:
+        raise ValueError(f"bad lag in estimator {name!r}: expected lag:<seconds>") from None
+    if not (np.isfinite(lag) and lag > 0):
+        raise ValueError(f"bad lag in estimator {name!r}: must be > 0 s")
+    return lag
+
+
+def _motion() -> ConstantVelocity:
+    return ConstantVelocity(q=1e-3)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -66,8 +88,14 @@ class MonteCarloSpec:
         Root of the ``SeedSequence``.
     init_per_pair
         Initiation window: the first measurements of each pair (paper: 10).
-    initiation, tracker
-        Settings of the initiation and the trackers.
+    initiation
+        Settings of the initiation.
+    settings
+        Settings per tracker name (registry defaults for the others).
+    motion
+        Motion model of every estimator (the tracking model's).
+    weak_prior
+        Whether the estimators use the zone's weak prior.
     """
 
     scenarios: tuple[Scenario, ...]
@@ -76,7 +104,9 @@ class MonteCarloSpec:
     seed: int = 2026
     init_per_pair: int = 10
     initiation: InitiationSettings = field(default_factory=InitiationSettings)
-    tracker: TrackerSettings = field(default_factory=TrackerSettings)
+    settings: Mapping[str, TrackerSettings] = field(default_factory=dict)
+    motion: ConstantVelocity = field(default_factory=_motion)
+    weak_prior: bool = True
 
     def __post_init__(self) -> None:
         if self.runs < 1:
@@ -84,8 +114,27 @@ class MonteCarloSpec:
         if not self.scenarios:
             raise ValueError("need at least one scenario")
         for e in self.estimators:
-            if e not in DEFAULT_ESTIMATORS and not e.startswith("lag:"):
-                raise ValueError(f"unknown estimator {e!r}")
+            if e not in METHODS and e not in ESTIMATORS and e not in ALIASES and _lag(e) is None:
+                raise ValueError(f"unknown estimator {e!r}: expected one of {', '.join(DEFAULT_ESTIMATORS)} "
+                                 "or lag:<seconds>")
+        for name, st in self.settings.items():
+            if name not in ESTIMATORS or type(st) is not ESTIMATORS[name].settings:
+                raise ValueError(f"settings for {name!r} must be a {ESTIMATORS[name].settings.__name__}"
+                                 if name in ESTIMATORS else f"settings given for unknown estimator {name!r}")
+
+    def model(self, scenario: Scenario) -> TrackingModel:
+        """The tracking model of a scenario (its geometry with this spec's motion and prior)."""
+        return TrackingModel.of(scenario.geometry, motion=self.motion, weak_prior=self.weak_prior)
+
+    def tracker(self, name: str) -> tuple[str, TrackerSettings]:
+        """Registry name and settings of a (non-initiation) estimator name, ``lag:<s>`` included."""
+        lag = _lag(name)
+        if lag is not None:
+            base = self.settings.get("fixed-lag", FixedLagSettings())
+            assert isinstance(base, FixedLagSettings)
+            return "fixed-lag", replace(base, lag=lag)
+        name = ALIASES.get(name, name)
+        return name, self.settings.get(name, ESTIMATORS[name].settings())
 
 
 def _run_one(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.random.SeedSequence) -> dict[str, Any]:
@@ -104,9 +153,8 @@ def _run_one(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.random.SeedSe
 
 
 def _run_one_unlimited(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.random.SeedSequence) -> dict[str, Any]:
-    from fgdoppler.estimators import run_estimator
     from fgdoppler.estimators.initiation import initiate, window_grid
-    from fgdoppler.models.measurement import DopplerModel
+    from fgdoppler.estimators.registry import run_estimator
 
     scen = spec.scenarios[s_idx]
     sim = simulate(scen, np.random.default_rng(seq))
@@ -114,37 +162,31 @@ def _run_one_unlimited(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.ran
     truth_t = sim.truth.times
     truth_x = sim.truth.states
     window = meas.first_per_pair(spec.init_per_pair)
-    model = DopplerModel(geometry=scen.geometry)
-    grid = window_grid(window, scen.geometry, spec.initiation)
+    model = spec.model(scen)
+    grid = window_grid(window, model, spec.initiation)
     inits: dict[str, Any] = {}
+
+    def init_of(method: Method) -> Any:
+        if method not in inits:
+            inits[method] = initiate(window, model, replace(spec.initiation, method=method), grid_result=grid)
+        return inits[method]
+
     n_t = truth_t.size
     out: dict[str, Any] = {}
     timing: dict[str, float] = {}
-    lm_init = None
     for name in spec.estimators:
         t_begin = time.perf_counter()
         est = np.full((n_t, 4), np.nan)
         cov = np.full((n_t, 4, 4), np.nan)
-        if name in INIT_METHODS or lm_init is None:
-            method = cast(Method, name if name in INIT_METHODS else "lm")
-            if method not in inits:
-                inits[method] = initiate(window, scen.geometry, replace(spec.initiation, method=method),
-                                         grid_result=grid)
-            lm_init = inits.get("lm", lm_init)
-        if name in INIT_METHODS:
-            ini = inits[name]
-            F = scen.process_noise.F(truth_t - ini.t_start) if scen.process_noise else _F(truth_t - ini.t_start)
+        if name in METHODS:
+            ini = init_of(cast(Method, name))
+            F = model.motion.F(truth_t - ini.t_start)
             est = F @ ini.x_start
             if ini.P_start is not None:
                 cov = F @ ini.P_start @ np.swapaxes(F, -1, -2)
         else:
-            if lm_init is None:
-                lm_init = initiate(window, scen.geometry, replace(spec.initiation, method="lm"), grid_result=grid)
-                inits["lm"] = lm_init
-            estimator, settings = name, spec.tracker
-            if name.startswith("lag:"):
-                estimator, settings = "fixed-lag", replace(spec.tracker, lag=float(name[4:]))
-            res = run_estimator(estimator, meas, model, lm_init, settings).main
+            estimator, settings = spec.tracker(name)
+            res = run_estimator(estimator, meas, model, init_of("lm"), settings).primary
             idx = np.searchsorted(truth_t, res.times)
             est[idx] = res.states
             cov[idx] = np.where(res.cov_ok[:, None, None], res.covariances, np.nan)
@@ -158,12 +200,6 @@ def _run_one_unlimited(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.ran
         timing[name] = time.perf_counter() - t_begin
     return {"s": s_idx, "r": r_idx, "data": out, "timing": timing,
             "ambiguous": bool(inits["lm"].ambiguous) if "lm" in inits else False}
-
-
-def _F(dt: FloatArray) -> FloatArray:
-    from fgdoppler.models.motion import ConstantVelocity
-
-    return ConstantVelocity.F(dt)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -10,13 +10,13 @@ unobservable).  :math:`\det(\mathbf J'\mathbf J)` is evaluated as the product
 of the squared singular values of :math:`\mathbf J`, which is accurate where
 forming :math:`\mathbf J'\mathbf J` first would square the condition number.
 
-Measurement batch of the study
-    The paper does not state the batch behind its maps and Table 2.  A search
-    over samples per pair (2–40) and intervals (0.01–2 s) finds that **two
-    synchronous samples per pair, 1 s apart** (a square 4×4 Jacobian, the
-    minimal batch) with the evaluation points at y = +2 km reproduces
-    Table 2's maxima to 0.05 and minima to 1.0 at all four speeds
-    (see ``studies/table2_speed.py``); :data:`TABLE2_BATCH` holds it.
+Sampling pattern of the study
+    The paper does not state the measurement batch behind its maps and
+    Table 2.  A search over samples per pair (2–40) and intervals (0.01–2 s)
+    finds that **two synchronous samples per pair, 1 s apart** (a square 4×4
+    Jacobian, the minimal batch) with the evaluation points at y = +2 km
+    reproduces Table 2's maxima to 0.05 and minima to 1.0 at all four speeds
+    (see ``studies/table2_speed.py``); :data:`TABLE2_SAMPLING` holds it.
 """
 
 from __future__ import annotations
@@ -25,16 +25,18 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fgdoppler.estimators.grid import grid_states
 from fgdoppler.estimators.marginals import marginal_covariances
-from fgdoppler.factors import X, batch_factor, doppler_factor, motion_factor, prior_factor
+from fgdoppler.factors import X
 from fgdoppler.geometry import Geometry, ellipse_tangent, paper_geometry
+from fgdoppler.graphs import chain_graph, chain_values, cv_graph
 from fgdoppler.measurements import Measurements
-from fgdoppler.models.doppler import BatchTimes, batch_doppler_jacobian
+from fgdoppler.models.doppler import StackedTimes, cv_doppler_jacobian
 from fgdoppler.models.motion import ConstantVelocity
+from fgdoppler.models.observation import DopplerModel
 from fgdoppler.simulation import Trajectory
 
 __all__ = [
@@ -43,12 +45,11 @@ __all__ = [
     "O_FLOOR",
     "PAPER_GROUPS",
     "PAPER_TABLE2",
-    "TABLE2_BATCH",
-    "Batch",
+    "TABLE2_SAMPLING",
     "ObservabilityMap",
     "ObservabilityReport",
+    "SamplingPattern",
     "SpeedTable",
-    "grid_states",
     "log10_det_information",
     "observability_map",
     "observability_measure",
@@ -76,8 +77,8 @@ PAPER_TABLE2: dict[int, dict[float, tuple[float, float]]] = {
 
 
 @dataclass(frozen=True, kw_only=True)
-class Batch:
-    """Measurement times of an observability batch.
+class SamplingPattern:
+    """Measurement times of an observability study (the paper's "batch").
 
     Pair ``i`` measures at ``offsets[i] + k * interval`` for
     ``k = 0 .. samples_per_pair - 1`` (times relative to :math:`\\mathbf x_0`).
@@ -109,8 +110,8 @@ class Batch:
         return f"{self.samples_per_pair} samples per pair every {self.interval:g} s ({off})"
 
 
-#: The batch that reproduces the paper's Table 2 (module docstring).
-TABLE2_BATCH = Batch(samples_per_pair=2, interval=1.0)
+#: The sampling that reproduces the paper's Table 2 (module docstring).
+TABLE2_SAMPLING = SamplingPattern(samples_per_pair=2, interval=1.0)
 
 
 def log10_det_information(J: ArrayLike, *, floor: float = O_FLOOR) -> FloatArray:
@@ -134,7 +135,7 @@ def log10_det_information(J: ArrayLike, *, floor: float = O_FLOOR) -> FloatArray
 
 
 def observability_measure(
-    x0: ArrayLike, geometry: Geometry, times: Sequence[ArrayLike] | BatchTimes
+    x0: ArrayLike, geometry: Geometry, times: Sequence[ArrayLike] | StackedTimes
 ) -> float | FloatArray:
     r"""The paper's observability measure :math:`O(\mathbf x_0)` (Eq. 18).
 
@@ -152,19 +153,8 @@ def observability_measure(
     float or ndarray of shape ``(...)``
         :math:`\log_{10}\det(\mathbf J'\mathbf J)` with unit noise, floored at −40.
     """
-    O = log10_det_information(batch_doppler_jacobian(x0, geometry, times))
+    O = log10_det_information(cv_doppler_jacobian(x0, geometry, times))
     return float(O) if O.ndim == 0 else O
-
-
-def grid_states(x: ArrayLike, y: float, speed: float, heading_deg: ArrayLike) -> FloatArray:
-    """States on an ``x × heading`` grid at fixed ``y`` and speed, shape ``(nx, nh, 4)``.
-
-    Heading is clockwise from +y: ``vx = v sin h``, ``vy = v cos h``.
-    """
-    xs = np.asarray(x, dtype=float).reshape(-1)
-    h = np.deg2rad(np.asarray(heading_deg, dtype=float).reshape(-1))
-    X_, H_ = np.meshgrid(xs, h, indexing="ij")
-    return np.stack([X_, np.full_like(X_, y), speed * np.sin(H_), speed * np.cos(H_)], axis=-1)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -176,7 +166,7 @@ class ObservabilityMap:
     heading_deg: FloatArray
     y: float
     speed: float
-    batch: Batch
+    sampling: SamplingPattern
     O: FloatArray = field(repr=False)
 
     @property
@@ -190,7 +180,7 @@ class ObservabilityMap:
             "geometry": self.geometry.name,
             "y": self.y,
             "speed": self.speed,
-            "batch": self.batch.describe(),
+            "sampling": self.sampling.describe(),
             "x": self.x.tolist(),
             "heading_deg": self.heading_deg.tolist(),
             "O": self.O.tolist(),
@@ -206,7 +196,7 @@ def observability_map(
     speed: float = 100.0,
     x: ArrayLike = DEFAULT_X,
     heading_deg: ArrayLike = DEFAULT_HEADINGS_DEG,
-    batch: Batch = TABLE2_BATCH,
+    sampling: SamplingPattern = TABLE2_SAMPLING,
     chunk: int = 20_000,
     progress: Callable[[int], None] | None = None,
 ) -> ObservabilityMap:
@@ -218,15 +208,15 @@ def observability_map(
     xs = np.asarray(x, dtype=float).reshape(-1)
     hs = np.asarray(heading_deg, dtype=float).reshape(-1)
     states = grid_states(xs, y, speed, hs).reshape(-1, 4)
-    times = BatchTimes.from_per_pair(batch.times(geometry.n_pairs))
+    times = StackedTimes.from_per_pair(sampling.times(geometry.n_pairs))
     out = np.empty(states.shape[0])
     for start in range(0, states.shape[0], chunk):
         sl = slice(start, start + chunk)
-        out[sl] = log10_det_information(batch_doppler_jacobian(states[sl], geometry, times))
+        out[sl] = log10_det_information(cv_doppler_jacobian(states[sl], geometry, times))
         if progress is not None:
             progress(min(chunk, states.shape[0] - start))
     return ObservabilityMap(
-        geometry=geometry, x=xs, heading_deg=hs, y=float(y), speed=float(speed), batch=batch,
+        geometry=geometry, x=xs, heading_deg=hs, y=float(y), speed=float(speed), sampling=sampling,
         O=out.reshape(xs.size, hs.size),
     )
 
@@ -237,7 +227,7 @@ class SpeedTable:
 
     groups: tuple[int, ...]
     speeds: tuple[float, ...]
-    batch: Batch
+    sampling: SamplingPattern
     #: ``values[g][s] = (max, min)``
     values: dict[int, dict[float, tuple[float, float]]]
 
@@ -256,9 +246,9 @@ class SpeedTable:
         return rows
 
     def to_markdown(self) -> str:
-        """A Markdown table with the batch used."""
+        """A Markdown table with the sampling used."""
         lines = [
-            f"Batch: {self.batch.describe()}",
+            f"Sampling: {self.sampling.describe()}",
             "",
             "| group | speed (m/s) | max O | paper max | min O | paper min |",
             "|---|---|---|---|---|---|",
@@ -274,7 +264,7 @@ def speed_table(
     *,
     groups: Sequence[int] = (2, 4),
     speeds: Sequence[float] = (100.0, 75.0, 50.0, 25.0),
-    batch: Batch = TABLE2_BATCH,
+    sampling: SamplingPattern = TABLE2_SAMPLING,
     x: ArrayLike = DEFAULT_X,
     heading_deg: ArrayLike = DEFAULT_HEADINGS_DEG,
 ) -> SpeedTable:
@@ -285,9 +275,9 @@ def speed_table(
         geom = paper_geometry(case)
         values[g] = {}
         for s in speeds:
-            m = observability_map(geom, y=y, speed=s, x=x, heading_deg=heading_deg, batch=batch)
+            m = observability_map(geom, y=y, speed=s, x=x, heading_deg=heading_deg, sampling=sampling)
             values[g][float(s)] = (float(m.O.max()), float(m.O.min()))
-    return SpeedTable(groups=tuple(groups), speeds=tuple(float(s) for s in speeds), batch=batch, values=values)
+    return SpeedTable(groups=tuple(groups), speeds=tuple(float(s) for s in speeds), sampling=sampling, values=values)
 
 
 # -- the report -------------------------------------------------------------------
@@ -383,41 +373,30 @@ def observability_report(
         graph is evaluated at the truth).
     motion
         ``None``: deterministic constant velocity — one state :math:`\\mathbf x_0`
-        with the paper's batch factor; per-time covariances are
+        with the paper's constant-velocity window; per-time covariances are
         :math:`\\mathbf F(t)\\mathbf P_0\\mathbf F(t)'`.  Otherwise one state
         per measurement time with Doppler and motion factors.
     prior_covariance
         Optional Gaussian prior on the first state, centred on the truth.
     """
     measurements.check(geometry)
-    times, scan = measurements.scan_index()
+    times = measurements.scans().times
     states = truth.at(times)
     t0 = times[0]
-    order = measurements.batch_order()
-    bt = BatchTimes(pair=measurements.pair[order], t=measurements.time[order] - t0)
-    J = batch_doppler_jacobian(states[0], geometry, bt)
+    order = measurements.stacked_order()
+    stacked = StackedTimes(pair=measurements.pair[order], t=measurements.time[order] - t0)
+    J = cv_doppler_jacobian(states[0], geometry, stacked)
     s = np.linalg.svd(J, compute_uv=False) if J.shape[0] >= 4 else np.zeros(4)
     O = float(log10_det_information(J))
     cond = float(s[0] ** 2 / s[-1] ** 2) if s[-1] > 0 else float("inf")
     angles = _tangent_angles(states, geometry)
-
-    graph = gtsam.NonlinearFactorGraph()
-    values = gtsam.Values()
+    prior = None if prior_covariance is None else (states[0], prior_covariance)
     if motion is None:
-        graph.add(batch_factor(X(0), geometry, bt, measurements.doppler[order], measurements.sigma[order]))
-        values.insert(X(0), states[0])
-        keys = [X(0)]
+        graph, _ = cv_graph(geometry, stacked, measurements.doppler[order], measurements.sigma[order], prior=prior)
+        values, keys = chain_values(states[:1]), [X(0)]
     else:
-        bounds = np.searchsorted(scan, np.arange(times.size + 1))
-        for k in range(times.size):
-            values.insert(X(k), states[k])
-            sl = slice(bounds[k], bounds[k + 1])
-            graph.add(doppler_factor(X(k), geometry, measurements.pair[sl], measurements.doppler[sl], measurements.sigma[sl]))
-            if k:
-                graph.add(motion_factor(X(k - 1), X(k), times[k] - times[k - 1], motion))
-        keys = [X(k) for k in range(times.size)]
-    if prior_covariance is not None:
-        graph.add(prior_factor(X(0), states[0], prior_covariance))
+        graph, _ = chain_graph(measurements, DopplerModel(geometry=geometry), motion, prior=prior)
+        values, keys = chain_values(states), [X(k) for k in range(times.size)]
     res = marginal_covariances(graph, values, keys)
     common: dict[str, Any] = {"times": times, "O_x0": O, "cond_JtJ": cond, "tangent_angle_deg": angles}
     if not res.ok:

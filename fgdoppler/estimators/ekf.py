@@ -29,16 +29,19 @@ import time
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.estimators.common import TrackerSettings, check_model, split_window
+from fgdoppler.estimators.gating import NISGate
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.settings import EKFSettings
+from fgdoppler.estimators.verdict import Event, Reason
+from fgdoppler.estimators.window import split_window
 from fgdoppler.measurements import Measurements
-from fgdoppler.models.measurement import MeasurementModel
+from fgdoppler.models.observation import check_channels
+from fgdoppler.models.tracking import TrackingModel
 
 __all__ = ["ExtendedKalmanFilter", "run_ekf"]
 
 FloatArray = NDArray[np.float64]
-
 
 
 class ExtendedKalmanFilter:
@@ -47,11 +50,11 @@ class ExtendedKalmanFilter:
     Parameters
     ----------
     model
-        Measurement model (e.g. :class:`~fgdoppler.models.measurement.DopplerModel`).
+        Observation and motion model.
     x0, P0, t0
         Initial state, covariance and time.
     settings
-        Motion model and gate.
+        The gate.
 
     Notes
     -----
@@ -65,10 +68,11 @@ class ExtendedKalmanFilter:
     constant-velocity :math:`\mathbf F`.  ``x`` and ``P`` are numpy arrays.
     """
 
-    def __init__(self, model: MeasurementModel, x0: ArrayLike, P0: ArrayLike, t0: float,
-                 settings: TrackerSettings | None = None) -> None:
-        self.model = model
-        self.settings = settings or TrackerSettings()
+    def __init__(self, model: TrackingModel, x0: ArrayLike, P0: ArrayLike, t0: float,
+                 settings: EKFSettings | None = None) -> None:
+        self.model = model.observation
+        self.motion = model.motion
+        self.settings = settings or EKFSettings()
         x = np.array(x0, dtype=float).reshape(4)
         P = np.array(P0, dtype=float).reshape(4, 4)
         if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
@@ -76,12 +80,11 @@ class ExtendedKalmanFilter:
         self._x = x.tolist()
         self._P = (0.5 * (P + P.T)).tolist()
         self.t = float(t0)
-        self._gate = self.settings.gate
         # plain-float fast path of models that offer one (DopplerModel.scalar)
-        self._scalar = getattr(model, "scalar", None)
+        self._scalar = getattr(self.model, "scalar", None)
         self._Q: dict[float, list[list[float]]] = {}
-        self.nis: list[tuple[float, int, float, bool]] = []
-        self.warnings: list[tuple[float, str]] = []
+        self.events: list[Event] = []
+        self.gate = NISGate(self.settings.gate_probability, self.events)
         #: Cumulative predictive log-likelihood of all measurements (gated ones
         #: included), sum of -0.5 (log(2 pi S) + NIS).
         self.log_likelihood = 0.0
@@ -111,7 +114,7 @@ class ExtendedKalmanFilter:
             return
         Q = self._Q.get(dt)
         if Q is None:  # few distinct step lengths: build Q once each
-            Q = self._Q[dt] = self.settings.motion.Q(dt).tolist()
+            Q = self._Q[dt] = self.motion.Q(dt).tolist()
         x = self._x
         self._x = [x[0] + dt * x[2], x[1] + dt * x[3], x[2], x[3]]
         P = self._P
@@ -139,7 +142,7 @@ class ExtendedKalmanFilter:
                 h, Hm = self.model.predict_and_jacobian(np.array([self._x]), [channel])
                 hv, H = float(h[0]), Hm[0].tolist()
         except ValueError as exc:
-            self.warnings.append((self.t, f"update skipped: {exc}"))
+            self.events.append(Event(time=self.t, message=f"update skipped: {exc}"))
             return float("nan")
         r = float(z) - hv
         P = self._P
@@ -147,16 +150,13 @@ class ExtendedKalmanFilter:
         s2 = float(sigma) * float(sigma)
         S = H[0] * PH[0] + H[1] * PH[1] + H[2] * PH[2] + H[3] * PH[3] + s2
         if not (math.isfinite(S) and S > 0):
-            self.warnings.append((self.t, f"update skipped: innovation variance {S}"))
+            self.events.append(Event(time=self.t, message=f"update skipped: innovation variance {S}"))
             return float("nan")
         nis = r * r / S
         # Every measurement counts in the likelihood, gated or not: a hypothesis must not
         # gain by rejecting the data that contradict it.
         self.log_likelihood -= 0.5 * (math.log(2 * math.pi * S) + nis)
-        accepted = nis <= self._gate
-        self.nis.append((self.t, int(channel), nis, bool(accepted)))
-        if not accepted:
-            self.warnings.append((self.t, f"pair {channel}: NIS {nis:.1f} > gate {self._gate:.1f}, measurement rejected"))
+        if not self.gate.accept(self.t, int(channel), nis):
             return nis
         K = [v / S for v in PH]
         # Joseph form, exactly: A = (I - K H) P = P - K (P H')', then A (I - K H)' + s2 K K'
@@ -166,7 +166,7 @@ class ExtendedKalmanFilter:
         Pn = [[0.5 * (Pn[i][j] + Pn[j][i]) for j in range(4)] for i in range(4)]
         x = [self._x[i] + K[i] * r for i in range(4)]
         if not math.isfinite(sum(x) + sum(sum(row) for row in Pn)):
-            self.warnings.append((self.t, "update skipped: non-finite result"))
+            self.events.append(Event(time=self.t, message="update skipped: non-finite result"))
             return nis
         self._x, self._P = x, Pn
         return nis
@@ -174,9 +174,9 @@ class ExtendedKalmanFilter:
 
 def run_ekf(
     measurements: Measurements,
-    model: MeasurementModel,
+    model: TrackingModel,
     init: Initiation,
-    settings: TrackerSettings | None = None,
+    settings: EKFSettings | None = None,
     *,
     fallback_covariance: ArrayLike | None = None,
 ) -> TrackResult:
@@ -184,20 +184,23 @@ def run_ekf(
 
     Starts from ``init.x_end`` / ``init.P_end`` at ``init.t_end``.  If the
     initiation covariance is indeterminate, ``fallback_covariance`` (default:
-    the weak search-region prior's covariance) is used and a warning recorded.
+    the zone's weak-prior covariance) is used and the verdict says so.
     Reports the filtered estimate after each scan, including the start.
     """
-    from fgdoppler.estimators.common import region_prior
-
-    settings = settings or TrackerSettings()
-    check_model(model, measurements)
+    settings = settings or EKFSettings()
+    check_channels(model.observation, measurements)
     t_begin = time.perf_counter()
-    warnings: list[tuple[float, str]] = []
+    reasons: list[Reason] = []
     P0 = init.P_end
     if P0 is None:
-        P0 = np.asarray(fallback_covariance) if fallback_covariance is not None else region_prior(settings.grid)[1]
-        warnings.append((init.t_end, f"initiation covariance indeterminate ({init.covariance_message}); EKF starts "
-                                     "from a broad covariance"))
+        if fallback_covariance is not None:
+            P0 = np.asarray(fallback_covariance)
+        elif model.zone is not None:
+            P0 = model.zone.prior()[1]
+        else:
+            raise ValueError("the initiation covariance is indeterminate and the model has no zone to fall back on")
+        reasons.append(Reason(code="start", status="doubtful", message=(
+            "the initiation covariance is indeterminate: the EKF started from a broad covariance")))
     ekf = ExtendedKalmanFilter(model, init.x_end, P0, init.t_end, settings)
     _, stream = split_window(measurements, init.t_end)
     times, states, covs, loglik = [init.t_end], [ekf.x.copy()], [ekf.P.copy()], [0.0]
@@ -217,11 +220,11 @@ def run_ekf(
         loglik.append(ekf.log_likelihood)
     return TrackResult(
         estimator="ekf",
-        settings=settings.to_dict(),
-        estimates={"filtered": Estimates.from_lists(times, states, covs)},
-        primary="filtered",
-        nis=np.array(ekf.nis, dtype=float).reshape(-1, 4),
+        settings=settings,
+        estimates=(Estimates.from_lists("filtered", times, states, covs),),
+        reasons=tuple(reasons),
+        events=tuple(ekf.events),
+        nis=ekf.gate.as_array(),
         log_likelihood=np.array(loglik),
-        warnings=tuple(warnings + ekf.warnings),
         wall_time=time.perf_counter() - t_begin,
     )

@@ -14,8 +14,12 @@ Known marginalisation failures of GTSAM's fixed-lag smoothers (an
 "indeterminant linear system" during marginalisation, or a key that is
 requested after it was marginalised) surface as :class:`RuntimeError`.  They
 are caught: the smoother is rebuilt from the last good estimate and
-covariance of the newest state as a Gaussian prior, the event is reported in
-``warnings``, and processing continues.
+covariance of the newest state as a Gaussian prior, the event is logged,
+and processing continues.
+
+Verdict reasons: ``rebuilt`` (the smoother had to be rebuilt),
+``covariance`` (some covariances indeterminate), ``not-converged`` (the
+final iterations hit their cap), each ``"doubtful"``.
 """
 
 from __future__ import annotations
@@ -27,18 +31,17 @@ import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.estimators.common import (
-    TrackerSettings,
-    check_model,
-    nis_gate,
-    region_prior,
-)
+from fgdoppler._text import first_line
+from fgdoppler.estimators.gating import NISGate
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.settings import FixedLagSettings
+from fgdoppler.estimators.verdict import Event, Reason
 from fgdoppler.estimators.window import feed_from_window_start
 from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
 from fgdoppler.measurements import Measurements
-from fgdoppler.models.measurement import MeasurementModel
+from fgdoppler.models.observation import check_channels
+from fgdoppler.models.tracking import TrackingModel
 
 __all__ = ["FixedLagTracker", "run_fixed_lag"]
 
@@ -66,27 +69,29 @@ class FixedLagTracker:
     Parameters
     ----------
     model
-        Measurement model.
+        Observation and motion model.
     settings
-        Lag, motion model, gate, Huber threshold.
+        Lag, gate, Huber threshold.
     prior
         Optional ``(mean, covariance)`` on the first state.
     """
 
-    def __init__(self, model: MeasurementModel, settings: TrackerSettings | None = None,
+    def __init__(self, model: TrackingModel, settings: FixedLagSettings | None = None,
                  prior: tuple[ArrayLike, ArrayLike] | None = None) -> None:
-        self.model = model
-        self.settings = settings or TrackerSettings()
+        self.model = model.observation
+        self.motion = model.motion
+        self.settings = settings or FixedLagSettings()
         self.smoother = gtsam.IncrementalFixedLagSmoother(self.settings.lag, _params())
         self.prior = prior
         self.times: list[float] = []
-        self.nis: list[tuple[float, int, float, bool]] = []
-        self.warnings: list[tuple[float, str]] = []
+        self.events: list[Event] = []
+        self.gate = NISGate(self.settings.gate_probability, self.events)
         self.lagged: dict[int, tuple[FloatArray, FloatArray | None]] = {}
+        self.rebuilds = 0
+        self.iterations = 0
+        self.converged = True
         self._first_live = 0
         self._last: tuple[FloatArray, FloatArray | None] | None = None
-        self._gate = self.settings.gate
-        self.failures = 0
 
     def add_window(self, times: ArrayLike, channels: list[ArrayLike], z: list[ArrayLike], sigma: list[ArrayLike],
                    guesses: ArrayLike) -> tuple[FloatArray, FloatArray | None]:
@@ -113,7 +118,7 @@ class FixedLagTracker:
         if c.size:
             graph.add(measurement_factor(X(k), self.model, c, z, s, huber_k=self.settings.huber_k))
         if k > self._first_live:
-            graph.add(motion_factor(X(k - 1), X(k), t - self.times[k - 1], self.settings.motion))
+            graph.add(motion_factor(X(k - 1), X(k), t - self.times[k - 1], self.motion))
 
     def add_scans(self, times: ArrayLike, channels: list[ArrayLike], z: list[ArrayLike], sigma: list[ArrayLike],
                   guesses: ArrayLike | None = None, *, gate: bool = True) -> tuple[FloatArray, FloatArray | None]:
@@ -129,7 +134,7 @@ class FixedLagTracker:
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         stamps: dict[Any, Any] = {}  # key -> time (gtsam's stub wants SupportsInt keys)
-        m = self.settings.motion
+        m = self.motion
         for j, t in enumerate(ts):
             t = float(t)
             if self.times and not t > self.times[-1]:
@@ -145,9 +150,8 @@ class FixedLagTracker:
             else:
                 raise ValueError("the first scan needs an initial guess")
             if gate and self._last is not None and self._last[1] is not None and cc.size:
-                dt = t - self.times[-1]
-                P_pred = m.F(dt) @ self._last[1] @ m.F(dt).T + m.Q(dt)
-                keep = nis_gate(self.model, x_pred, P_pred, t, cc, zz, ss, self._gate, self.nis, self.warnings)
+                P_pred = m.predict_covariance(self._last[1], t - self.times[-1])
+                keep = self.gate.scan(self.model, x_pred, P_pred, t, cc, zz, ss)
                 cc, zz, ss = cc[keep], zz[keep], ss[keep]
             self.times.append(t)
             if k == 0 and self.prior is not None:
@@ -162,7 +166,6 @@ class FixedLagTracker:
                 stamps: dict[Any, Any]) -> tuple[FloatArray, FloatArray | None]:
         k = len(self.times) - 1
         t = self.times[-1]
-        before: dict[int, FloatArray] = {}
         # States older than the lag are marginalised by this update: record them now, as
         # estimated by everything up to the previous scan (~lag seconds after their time).
         leaving = [j for j in range(self._first_live, k) if self.times[j] < t - self.settings.lag
@@ -177,10 +180,10 @@ class FixedLagTracker:
             if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
                 raise RuntimeError("non-finite estimate")
         except (RuntimeError, ValueError) as exc:  # ValueError: the model at a sensor position
-            self.failures += 1
-            msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            self.warnings.append((t, f"fixed-lag update failed ({msg}); smoother rebuilt from the last good estimate"))
-            return self._rebuild(k, t, graph, values, stamps, before)
+            self.rebuilds += 1
+            self.events.append(Event(time=t, message=(
+                f"fixed-lag update failed ({first_line(exc)}); smoother rebuilt from the last good estimate")))
+            return self._rebuild(k, t, graph)
         self._last = (x, P)
         return x, P
 
@@ -195,14 +198,16 @@ class FixedLagTracker:
             return
         prev = self._live_estimates()
         skip = max(1, int(self.smoother.params().relinearizeSkip))
-        for _ in range(self.settings.max_iterations):
+        for _ in range(self.settings.final_iterations):
             try:
                 # iSAM2 relinearises every ``skip`` updates: compare across a full cycle
                 for _ in range(skip):
                     self.smoother.update()
             except RuntimeError as exc:
-                self.warnings.append((self.times[-1], f"final fixed-lag iteration failed: {str(exc).strip().splitlines()[0]}"))
+                self.converged = False
+                self.events.append(Event(time=self.times[-1], message=f"final fixed-lag iteration failed: {first_line(exc)}"))
                 return
+            self.iterations += 1
             cur = self._live_estimates()
             diff = max((float(np.max(np.abs(cur[j] - prev[j]) / (1.0 + np.abs(prev[j])))) for j in cur if j in prev),
                        default=0.0)
@@ -210,7 +215,8 @@ class FixedLagTracker:
             if diff < tol:
                 break
         else:
-            self.warnings.append((self.times[-1], "final fixed-lag iterations did not converge"))
+            self.converged = False
+            self.events.append(Event(time=self.times[-1], message="final fixed-lag iterations did not converge"))
         self._record(self.smoother.calculateEstimate())
 
     def _live_estimates(self) -> dict[int, FloatArray]:
@@ -236,8 +242,7 @@ class FixedLagTracker:
         elif live:
             self._first_live = live[0]
 
-    def _rebuild(self, k: int, t: float, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
-                 stamps: dict[Any, Any], before: dict[int, FloatArray]) -> tuple[FloatArray, FloatArray | None]:
+    def _rebuild(self, k: int, t: float, graph: gtsam.NonlinearFactorGraph) -> tuple[FloatArray, FloatArray | None]:
         # Restart from the newest good estimate as a prior; the current scan's measurement
         # factors are re-added on top of it (motion factors to dead keys are dropped).
         if self._last is None or self._last[1] is None:
@@ -245,10 +250,10 @@ class FixedLagTracker:
         x_prev, P_prev = self._last
         assert P_prev is not None  # checked just above
         t_prev = self.times[-2] if len(self.times) > 1 else t
-        m = self.settings.motion
+        m = self.motion
         dt = t - t_prev
         x0 = m.propagate(x_prev, dt) if dt > 0 else x_prev
-        P0 = m.F(dt) @ P_prev @ m.F(dt).T + m.Q(dt) if dt > 0 else P_prev
+        P0 = m.predict_covariance(P_prev, dt) if dt > 0 else P_prev
         self.smoother = gtsam.IncrementalFixedLagSmoother(self.settings.lag, _params())
         self._first_live = k
         g2 = gtsam.NonlinearFactorGraph()
@@ -270,36 +275,45 @@ class FixedLagTracker:
 
 def run_fixed_lag(
     measurements: Measurements,
-    model: MeasurementModel,
+    model: TrackingModel,
     init: Initiation,
-    settings: TrackerSettings | None = None,
+    settings: FixedLagSettings | None = None,
 ) -> TrackResult:
     """Fixed-lag smoothing of a recording: the initiation window in one update, then one update per scan.
 
     The window's states start at the optimum of this tracker's window graph
     (:func:`~fgdoppler.estimators.window.window_start`).
 
-    ``filtered``: newest state after each update (from the window's end on).
-    ``lagged``: every state as estimated when it was ``lag`` seconds old (or
-    at the end of the recording); this is the primary output.
+    ``lagged`` (primary): every state as estimated when it was ``lag`` seconds
+    old (or at the end of the recording).  ``filtered``: the newest state
+    after each update (from the window's end on).
     """
-    settings = settings or TrackerSettings()
-    check_model(model, measurements)
+    settings = settings or FixedLagSettings()
+    check_channels(model.observation, measurements)
     t_begin = time.perf_counter()
-    prior = region_prior(settings.grid) if settings.weak_prior else None
-    tr = FixedLagTracker(model, settings, prior)
-    times, states, covs = feed_from_window_start(tr, model, measurements, init, settings, tr.warnings)
+    tr = FixedLagTracker(model, settings, model.prior())
+    times, states, covs = feed_from_window_start(tr, model, measurements, init, tr.events, huber_k=settings.huber_k)
     tr.finish()
     idx = sorted(tr.lagged)
-    lagged = Estimates.from_lists([tr.times[j] for j in idx], [tr.lagged[j][0] for j in idx],
+    lagged = Estimates.from_lists("lagged", [tr.times[j] for j in idx], [tr.lagged[j][0] for j in idx],
                                   [tr.lagged[j][1] for j in idx])
-    s = settings.to_dict()
+    reasons = []
+    if tr.rebuilds:
+        reasons.append(Reason(code="rebuilt", status="doubtful", message=(
+            f"the smoother failed and was rebuilt from its last good estimate {tr.rebuilds} time(s)")))
+    if not np.all(lagged.cov_ok):
+        reasons.append(Reason(code="covariance", status="doubtful", message=(
+            f"{int(np.sum(~lagged.cov_ok))} of {len(lagged)} covariances are indeterminate")))
+    if not tr.converged:
+        reasons.append(Reason(code="not-converged", status="doubtful",
+                              message="the final smoothing iterations did not converge"))
     return TrackResult(
         estimator="fixed-lag",
-        settings=s,
-        estimates={"lagged": lagged, "filtered": Estimates.from_lists(times, states, covs)},
-        primary="lagged",
-        nis=np.array(tr.nis, dtype=float).reshape(-1, 4),
-        warnings=tuple(tr.warnings),
+        settings=settings,
+        estimates=(lagged, Estimates.from_lists("filtered", times, states, covs)),
+        reasons=tuple(reasons),
+        events=tuple(tr.events),
+        nis=tr.gate.as_array(),
+        iterations=tr.iterations,
         wall_time=time.perf_counter() - t_begin,
     )

@@ -1,7 +1,10 @@
 r"""Multi-start grid search over initial states (paper Section 3, grid of Section 5).
 
-Every candidate :math:`\mathbf x_0^{0i}` on a regular grid of initial position,
-speed and heading is scored by its weighted residual
+The candidates fill the zone (:class:`~fgdoppler.zone.Zone`): a regular grid
+of initial position laid out in the zone's own frame, of speed up to the
+zone's bound, and of heading measured in that frame, so the candidate set
+moves with the sensors under any rigid motion.  Every candidate
+:math:`\mathbf x_0^{0i}` is scored by its weighted residual
 
 .. math:: e^i = \sum_j \Big(\frac{Z_j - g_j(\mathbf x_0^{0i})}{\sigma_j}\Big)^2
 
@@ -10,6 +13,16 @@ equal).  The grid is evaluated in chunks so memory stays bounded whatever its
 size, and the K best *distinct* candidates are returned: the local minima of
 the cost over the 4-D grid (heading wraps around), best first — separated
 optima, not K neighbours of one optimum.
+
+Resolution (:class:`GridSpec`)
+    Position step :math:`D/50`, with :math:`D` the sensors' extent along
+    the zone's first axis (the paper's 1 km for its 50 km baseline),
+    coarsened where the zone would need more than ``max_positions`` nodes
+    (then :math:`\sqrt{\text{area}/\texttt{max\_positions}}`) and refined
+    where a side would get fewer than 5 nodes; speed step
+    :math:`s_{\max}/20` (the paper's 10 m/s up to 200 m/s); heading step 20°.
+    Cost: (position nodes) × (speeds) × (headings) × (measurements) Doppler
+    evaluations, about 1 ns each — 50 ms for the paper's 517 × 19 × 18 × 20.
 
 Speed lower bound
     The paper starts the speed grid at the largest measured Doppler, but a
@@ -35,9 +48,10 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import minimum_filter
 
 from fgdoppler.geometry import Geometry
-from fgdoppler.models.doppler import BatchTimes, _batch
+from fgdoppler.models.doppler import StackedTimes, _cv
+from fgdoppler.zone import Zone
 
-__all__ = ["GridResult", "GridSpec", "HalfPlane", "grid_costs", "grid_search", "speed_lower_bound"]
+__all__ = ["GridResult", "GridSpec", "HalfPlane", "grid_costs", "grid_search", "grid_states", "speed_lower_bound"]
 
 FloatArray = NDArray[np.float64]
 
@@ -72,46 +86,81 @@ class HalfPlane:
 
 @dataclass(frozen=True, kw_only=True)
 class GridSpec:
-    """The candidate grid (defaults: the paper's Section 5 values).
+    """Resolution of the candidate grid over a zone (defaults: the rule of the module docstring).
 
     Parameters
     ----------
-    x, y
-        ``(start, stop, step)`` of the initial position grid in metres.
-    heading_deg
-        ``(start, stop, step)`` in degrees, clockwise from +y (the paper's
-        ``0..259°`` is a typo for ``0..340°``).
-    speed_max, speed_step
-        Upper end and step of the speed grid (m/s).
-    speed_min
-        Fixed lower end; ``None`` derives it from the data with
-        :func:`speed_lower_bound`.
-    n_sigma
+    position_step : float or None, default None
+        Spacing of the position nodes along both zone axes (m); ``None``
+        for the rule.
+    heading_step_deg : float, default 20.0
+        Heading spacing in degrees, clockwise from the zone frame's second
+        axis (the paper's ``0..259°`` is a typo for ``0..340°``).
+    speed_step : float or None, default None
+        Speed spacing (m/s); ``None`` for ``speed_max / 20``.
+    speed_min : float or None, default None
+        Fixed lower end of the speed grid; ``None`` derives it from the data
+        with :func:`speed_lower_bound`.
+    n_sigma : float, default 5.0
         Noise allowance of the derived lower bound.
+    max_positions : int, default 2000
+        Largest number of position nodes the rule may use.
     """
 
-    x: tuple[float, float, float] = (2e3, 48e3, 1e3)
-    y: tuple[float, float, float] = (-5e3, 5e3, 1e3)
-    heading_deg: tuple[float, float, float] = (0.0, 340.0, 20.0)
-    speed_max: float = 200.0
-    speed_step: float = 10.0
+    position_step: float | None = None
+    heading_step_deg: float = 20.0
+    speed_step: float | None = None
     speed_min: float | None = None
     n_sigma: float = 5.0
+    max_positions: int = 2000
 
-    def axes(self, s_min: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """The x, y, speed and heading (rad) axes for a given speed lower bound."""
+    def __post_init__(self) -> None:
+        for name in ("position_step", "speed_step"):
+            v = getattr(self, name)
+            if v is not None and not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be > 0 or None, got {v}")
+        if not (np.isfinite(self.heading_step_deg) and 0 < self.heading_step_deg <= 180):
+            raise ValueError(f"heading_step_deg must be in (0, 180], got {self.heading_step_deg}")
+        if self.max_positions < 4:
+            raise ValueError(f"max_positions must be >= 4, got {self.max_positions}")
+
+    def step(self, zone: Zone, extent: float) -> float:
+        """Position step over ``zone`` for sensors spanning ``extent`` metres along its first axis."""
+        if self.position_step is not None:
+            return float(self.position_step)
+        step = extent / 50
+        a, b = zone.extents
+        if (a / step + 1) * (b / step + 1) > self.max_positions:
+            step = float(np.sqrt(zone.area / self.max_positions))
+        return min(step, min(a, b) / 4)
+
+    def axes(self, zone: Zone, extent: float, s_min: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The along, across, speed and heading (rad) axes over ``zone`` for a speed lower bound."""
         lo = s_min if self.speed_min is None else self.speed_min
-        if lo > self.speed_max:
+        if lo > zone.speed_max:
             raise ValueError(
-                f"speed lower bound {lo:.1f} m/s exceeds speed_max {self.speed_max:.1f} m/s: "
-                "raise speed_max or check the data"
+                f"the data need a speed of at least {lo:.1f} m/s but the zone's speed bound is "
+                f"{zone.speed_max:.1f} m/s: raise the speed bound (--speed-max) or check the data's units"
             )
+        step = self.step(zone, extent)
+        speed_step = self.speed_step if self.speed_step is not None else zone.speed_max / 20
         return (
-            _axis(*self.x, name="x"),
-            _axis(*self.y, name="y"),
-            _axis(lo, self.speed_max, self.speed_step, name="speed"),
-            np.deg2rad(_axis(*self.heading_deg, name="heading")),
+            _axis(*zone.along, step, name="along"),
+            _axis(*zone.across, step, name="across"),
+            _axis(lo, zone.speed_max, speed_step, name="speed"),
+            np.deg2rad(_axis(0.0, 360.0 - self.heading_step_deg, self.heading_step_deg, name="heading")),
         )
+
+
+def grid_states(x: ArrayLike, y: float, speed: float, heading_deg: ArrayLike) -> FloatArray:
+    """States on an ``x × heading`` grid at fixed ``y`` and speed, shape ``(nx, nh, 4)``.
+
+    Heading is clockwise from +y: ``vx = v sin h``, ``vy = v cos h``.
+    """
+    xs = np.asarray(x, dtype=float).reshape(-1)
+    h = np.deg2rad(np.asarray(heading_deg, dtype=float).reshape(-1))
+    X_, H_ = np.meshgrid(xs, h, indexing="ij")
+    return np.stack([X_, np.full_like(X_, y), speed * np.sin(H_), speed * np.cos(H_)], axis=-1)
 
 
 def speed_lower_bound(doppler: ArrayLike, sigma: ArrayLike, n_sigma: float = 5.0) -> float:
@@ -121,18 +170,17 @@ def speed_lower_bound(doppler: ArrayLike, sigma: ArrayLike, n_sigma: float = 5.0
     return 0.5 * max(0.0, float(np.max(z - n_sigma * s))) if z.size else 0.0
 
 
-def _states_from_axes(xs: FloatArray, ys: FloatArray, speeds: FloatArray, headings: FloatArray,
+def _states_from_axes(zone: Zone, us: FloatArray, vs: FloatArray, speeds: FloatArray, headings: FloatArray,
                       flat: NDArray[np.intp]) -> FloatArray:
-    shape = (xs.size, ys.size, speeds.size, headings.size)
+    shape = (us.size, vs.size, speeds.size, headings.size)
     i, j, k, m = np.unravel_index(flat, shape)
-    return np.stack(
-        [xs[i], ys[j], speeds[k] * np.sin(headings[m]), speeds[k] * np.cos(headings[m])], axis=-1
-    )
+    local = np.stack([us[i], vs[j], speeds[k] * np.sin(headings[m]), speeds[k] * np.cos(headings[m])], axis=-1)
+    return zone.frame.states_to_world(local)
 
 
 def grid_costs(
     geometry: Geometry,
-    times: BatchTimes,
+    times: StackedTimes,
     doppler: ArrayLike,
     sigma: ArrayLike,
     states: ArrayLike,
@@ -152,7 +200,7 @@ def grid_costs(
     out = np.empty(x.shape[0])
     for start in range(0, x.shape[0], chunk):
         sl = slice(start, start + chunk)
-        g, _, mask = _batch(x[sl], geometry, times, jacobian=False, singular="mask")
+        g, _, mask = _cv(x[sl], geometry, times, jacobian=False, singular="mask")
         r = (z - g) * w
         c = np.einsum("ij,ij->i", r, r)
         if mask is not None:
@@ -178,7 +226,7 @@ class GridResult:
 
 def _product_costs(
     geometry: Geometry,
-    times: BatchTimes,
+    times: StackedTimes,
     z: FloatArray,
     w: FloatArray,
     pos: FloatArray,
@@ -243,29 +291,38 @@ def _product_costs(
 
 def grid_search(
     geometry: Geometry,
-    times: BatchTimes,
+    times: StackedTimes,
     doppler: ArrayLike,
     sigma: ArrayLike,
+    zone: Zone,
     spec: GridSpec | None = None,
     *,
     k_best: int = 5,
     half_plane: HalfPlane | None = None,
     chunk: int = 16384,
 ) -> GridResult:
-    """Score the whole grid and return the ``k_best`` best local minima.
+    """Score the whole grid over ``zone`` and return the ``k_best`` best local minima.
 
     Parameters
     ----------
     geometry, times, doppler, sigma
         The measurement window: times relative to the initial state's time.
+    zone
+        Where the candidates lie (positions and speeds), in its frame.
     spec
-        The grid (default: the paper's).
+        Resolution (default: the rule of the module docstring).
     k_best
         How many distinct candidates to return.
     half_plane
         If given, candidates outside it are excluded.
     chunk
         Candidates per vectorised evaluation (bounds memory).
+
+    Raises
+    ------
+    ValueError
+        If the data's speed lower bound exceeds the zone's speed bound, or no
+        candidate has a finite cost.
     """
     spec = spec or GridSpec()
     if k_best < 1:
@@ -273,15 +330,17 @@ def grid_search(
     z = np.asarray(doppler, dtype=float)
     sig = np.broadcast_to(np.asarray(sigma, dtype=float), z.shape)
     s_min = speed_lower_bound(z, sig, spec.n_sigma)
-    xs, ys, speeds, headings = spec.axes(s_min)
-    shape = (xs.size, ys.size, speeds.size, headings.size)
+    extent = float(np.ptp(zone.frame.points_to_local(geometry.sensors())[:, 0]))
+    us, vs, speeds, headings = spec.axes(zone, extent, s_min)
+    shape = (us.size, vs.size, speeds.size, headings.size)
     n = int(np.prod(shape))
-    P = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
+    local = np.stack(np.meshgrid(us, vs, indexing="ij"), axis=-1)
+    P = zone.frame.points_to_world(local.reshape(-1, 2))
     V = np.stack(np.meshgrid(speeds, headings, indexing="ij"), axis=-1).reshape(-1, 2)
-    V = np.stack([V[:, 0] * np.sin(V[:, 1]), V[:, 0] * np.cos(V[:, 1])], axis=-1)
+    V = zone.frame.vectors_to_world(np.stack([V[:, 0] * np.sin(V[:, 1]), V[:, 0] * np.cos(V[:, 1])], axis=-1))
     cost = _product_costs(geometry, times, z, 1.0 / sig, P, V, chunk).reshape(-1)
     if half_plane is not None:
-        pos_ok = half_plane.contains(np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1))
+        pos_ok = half_plane.contains(P).reshape(us.size, vs.size)
         cost[~np.broadcast_to(pos_ok[:, :, None, None], shape).reshape(-1)] = np.inf
     if not np.any(np.isfinite(cost)):
         raise ValueError("no grid candidate has a finite cost (all excluded or singular)")
@@ -290,11 +349,11 @@ def grid_search(
     full_circle = np.isclose((headings[-1] - headings[0]) + (headings[1] - headings[0] if headings.size > 1 else 0),
                              2 * np.pi)
     modes = ["nearest", "nearest", "nearest", "wrap" if full_circle else "nearest"]
-    local = (c4 == minimum_filter(c4, size=3, mode=modes)) & np.isfinite(c4)
-    flat = np.flatnonzero(local.reshape(-1))
+    local_min = (c4 == minimum_filter(c4, size=3, mode=modes)) & np.isfinite(c4)
+    flat = np.flatnonzero(local_min.reshape(-1))
     flat = flat[np.argsort(cost[flat], kind="stable")][:k_best]
     return GridResult(
-        states=_states_from_axes(xs, ys, speeds, headings, flat),
+        states=_states_from_axes(zone, us, vs, speeds, headings, flat),
         costs=cost[flat],
         n_candidates=n,
         speed_min=float(speeds[0]),

@@ -4,7 +4,7 @@ The paper (Section 3) estimates the initial state :math:`\mathbf x_0` of a
 constant-velocity target from a window of Doppler measurements:
 
 1. **Grid search** — :func:`fgdoppler.estimators.grid.grid_search` returns the K
-   best distinct candidates.
+   best distinct candidates in the model's zone.
 2. **Refinement**, one of
 
    ``"ils"``
@@ -16,130 +16,130 @@ constant-velocity target from a window of Doppler measurements:
        observation in Section 5 that forcing ILS there makes things worse.
    ``"lm"``
        Nonlinear least squares in GTSAM with Levenberg–Marquardt, started
-       from *each* of the K candidates; the lowest final cost wins.  To keep
-       Python callbacks few, LM first runs on the one-key batch factor from
-       each candidate, then on the per-state graph from each distinct result.  The
-       window is either one state per measurement time joined by
-       constant-velocity motion factors (``window="states"``, the default) or
-       the paper's batch factor on :math:`\mathbf x_0` alone
-       (``window="batch"``, the same objective as ILS).  The linear systems
-       are solved by multifrontal QR: GTSAM's default Cholesky rejects these
-       ill-conditioned problems.
+       from *each* of the K candidates; the lowest final objective wins.  To
+       keep Python callbacks few, LM first runs on the one-key
+       constant-velocity window from each candidate, then on the per-scan
+       graph from each distinct result.  The window is either one state per
+       scan joined by nearly-constant-velocity motion factors
+       (``window="ncv"``, the default) or the paper's exactly-constant-velocity
+       map on :math:`\mathbf x_0` alone (``window="cv"``, the objective of
+       ILS).  The linear systems are solved by multifrontal QR: GTSAM's
+       default Cholesky rejects these ill-conditioned problems.
    ``"grid"``
        No refinement (the paper's grid-only estimate).
 
 3. **Ambiguity** — every distinct refined solution whose cost passes the χ²
-   test is reported as an alternative and the result is flagged ambiguous
-   (near-collinear Tx/Rx admit a mirror-image trajectory).  A
-   :class:`~fgdoppler.estimators.grid.HalfPlane` restricts the search to one
-   side of a line.
+   test is reported as an alternative (near-collinear Tx/Rx admit a
+   mirror-image trajectory).  A :class:`~fgdoppler.estimators.grid.HalfPlane`
+   restricts the search to one side of a line.
 
-4. **Detectable zone** — with ``region_bound`` (default) the grid's x/y box
-   and ``speed_max`` bound the window's initial state (a steep wall,
-   :func:`fgdoppler.factors.region_factor`), as the paper's candidates are
-   drawn only from the detectable zone.  This removes a second likelihood
-   mode outside the zone (a slower target near a sensor moving along the
-   baseline) that otherwise wins in a few percent of well-observed windows.
+4. **Detectable zone** — with ``region_bound`` (default) the zone bounds the
+   window's initial state (a steep wall, :func:`fgdoppler.factors.region_factor`),
+   as the paper's candidates are drawn only from the detectable zone.  This
+   removes a second likelihood mode outside the zone (a slower target near a
+   sensor moving along the baseline) that otherwise wins in a few percent of
+   well-observed windows.
 
 The χ² test uses :math:`n_Z - 4` degrees of freedom at 95 % (scipy.stats)
 and the data cost only (Doppler and motion terms, not the weak prior or the
-wall).
-With motion factors the total whitened cost has
+wall).  With motion factors the total whitened cost has
 :math:`n_Z + 4(N-1)` terms and :math:`4N` unknowns, so the same number of
 degrees of freedom applies.
+
+Verdict reasons (:mod:`fgdoppler.estimators.verdict`): ``chi2`` (the cost
+fails the test), ``ambiguous`` (other solutions pass it), ``boundary`` (the
+start is held at the zone's edge), ``covariance`` (indeterminate),
+``refinement`` (no LM start succeeded) — each ``"doubtful"``.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
-from typing import Literal
+from typing import Literal, get_args
 
 import gtsam
 import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from fgdoppler.estimators.common import region_prior
-from fgdoppler.estimators.grid import GridResult, GridSpec, HalfPlane, grid_search
-from fgdoppler.estimators.marginals import marginal_covariances
-from fgdoppler.factors import (
-    X,
-    batch_factor,
-    doppler_factor,
-    motion_factor,
-    prior_factor,
-    region_excess,
-    region_factor,
+from fgdoppler._text import first_line
+from fgdoppler.estimators.grid import (
+    GridResult,
+    GridSpec,
+    HalfPlane,
+    grid_costs,
+    grid_search,
+    grid_states,
 )
+from fgdoppler.estimators.marginals import marginal_covariances
+from fgdoppler.estimators.verdict import Event, Judged, Reason
+from fgdoppler.factors import X, region_factor
 from fgdoppler.geometry import Geometry
+from fgdoppler.graphs import chain_graph, chain_values, cv_graph
 from fgdoppler.measurements import Measurements
-from fgdoppler.models.doppler import BatchTimes, batch_doppler, batch_doppler_and_jacobian
+from fgdoppler.models.doppler import StackedTimes, cv_doppler, cv_doppler_jacobian, cv_information
 from fgdoppler.models.motion import ConstantVelocity
+from fgdoppler.models.tracking import TrackingModel, as_tracking_model
 
-__all__ = ["Candidate", "Initiation", "InitiationSettings", "hypotheses", "initiate", "lm_params"]
+__all__ = ["METHODS", "Candidate", "Initiation", "InitiationSettings", "initiate", "lm_params",
+           "residual_landscape", "window_grid"]
 
 FloatArray = NDArray[np.float64]
-Method = Literal["lm", "ils", "grid"]
+Method = Literal["grid", "ils", "lm"]
+#: The refinement methods, also the initiation-only "estimators" of Monte Carlo studies.
+METHODS: tuple[Method, ...] = get_args(Method)
+WindowModel = Literal["ncv", "cv"]
 
 
 @dataclass(frozen=True, kw_only=True)
 class InitiationSettings:
-    """How to initiate a track.
+    """How to initiate a track (the model — motion, zone, weak prior — is the :class:`TrackingModel`'s).
 
     Parameters
     ----------
-    method
-        ``"lm"`` (default), ``"ils"`` or ``"grid"``.
-    grid
-        The candidate grid (default: the paper's).
-    k_best
+    method : {"lm", "ils", "grid"}, default "lm"
+        Refinement of the grid's candidates (module docstring).
+    grid : GridSpec, default GridSpec()
+        Resolution of the candidate grid over the zone.
+    k_best : int, default 5
         Number of distinct grid candidates to refine (LM) and report.
-    motion
-        Motion model of the window graph (``window="states"``).
-    window
-        ``"states"``: a state per measurement time with motion factors;
-        ``"batch"``: the paper's :math:`\\mathbf g(\\mathbf x_0)` on one state.
-    weak_prior
-        (default on) Add a weak Gaussian prior on :math:`\\mathbf x_0` centred on the grid
-        region with standard deviations equal to its half-widths (positions)
-        and ``grid.speed_max`` (velocity).  Regularises near-singular
-        windows: without it LM can run off to non-physical speeds of several
-        hundred m/s along the nearly flat cost valleys of a poorly observed
-        window.  Its effect on a well-posed window is negligible.
-    region_bound
-        (default on) Treat the search region as the support of the window's
-        initial state, as the paper does when it samples candidates only in
-        the detectable zone: a steep wall (:func:`fgdoppler.factors.region_factor`,
-        ``wall_sigma``) keeps the start position inside the grid's x/y box and
-        the speed at most ``grid.speed_max``.  Without it, in a few percent of
-        well-observed windows the lowest-cost solution is a second likelihood
-        mode *outside* the zone — a slower target about 1-2 km from a sensor,
-        moving along the baseline — about 4 km from the truth.
-    wall_sigma
-        Stiffness of the region wall: (position m, speed m/s).
-    half_plane
+    window : {"ncv", "cv"}, default "ncv"
+        LM's window: ``"ncv"`` a state per scan with motion factors; ``"cv"``
+        the paper's :math:`\\mathbf g(\\mathbf x_0)` on one state.
+    region_bound : bool, default True
+        Treat the zone as the support of the window's initial state, as the
+        paper does when it samples candidates only in the detectable zone: a
+        steep wall (:func:`fgdoppler.factors.region_factor`, ``wall_sigma``)
+        keeps the start inside the zone's box and below its speed bound.
+        Without it, in a few percent of well-observed windows the lowest-cost
+        solution is a second likelihood mode *outside* the zone — a slower
+        target about 1-2 km from a sensor, moving along the baseline — about
+        4 km from the truth.
+    wall_sigma : tuple of float, default (10.0, 0.1)
+        Stiffness of the zone wall: (position m, speed m/s).
+    half_plane : HalfPlane or None, default None
         Restrict candidates and solutions to one side of a line.
-    confidence
+    confidence : float, default 0.95
         χ² test level (0.95 in the paper).
-    max_iterations
+    max_iterations : int, default 100
         Iteration cap for ILS and LM.
-    ils_condition_limit
+    ils_condition_limit : float, default 1e10
         ILS keeps the grid estimate where cond(J'R⁻¹J) exceeds this.
-    ils_force
+    ils_force : bool, default False
         Iterate ILS even when the grid estimate already passes the χ² test
         (the paper's "forced" experiment).
-    same_solution_m, same_solution_mps
-        Refined solutions closer than this (position, velocity at the window
-        start) count as one.
+    same_solution_m : float, default 50.0
+        Refined solutions closer than this in position (m, at the window
+        start) and ...
+    same_solution_mps : float, default 0.5
+        ... than this in velocity (m/s) count as one.
     """
 
     method: Method = "lm"
     grid: GridSpec = field(default_factory=GridSpec)
     k_best: int = 5
-    motion: ConstantVelocity = field(default_factory=lambda: ConstantVelocity(q=1e-3))
-    window: Literal["states", "batch"] = "states"
-    weak_prior: bool = True
+    window: WindowModel = "ncv"
     region_bound: bool = True
     wall_sigma: tuple[float, float] = (10.0, 0.1)
     half_plane: HalfPlane | None = None
@@ -151,10 +151,10 @@ class InitiationSettings:
     same_solution_mps: float = 0.5
 
     def __post_init__(self) -> None:
-        if self.method not in ("lm", "ils", "grid"):
-            raise ValueError(f"method must be 'lm', 'ils' or 'grid', got {self.method!r}")
-        if self.window not in ("states", "batch"):
-            raise ValueError(f"window must be 'states' or 'batch', got {self.window!r}")
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {', '.join(METHODS)}, got {self.method!r}")
+        if self.window not in get_args(WindowModel):
+            raise ValueError(f"window must be 'ncv' or 'cv', got {self.window!r}")
         if not 0 < self.confidence < 1:
             raise ValueError(f"confidence must be in (0, 1), got {self.confidence}")
         if not (len(self.wall_sigma) == 2 and all(v > 0 for v in self.wall_sigma)):
@@ -180,7 +180,7 @@ class Candidate:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Initiation:
+class Initiation(Judged):
     """Result of :func:`initiate`.
 
     Attributes
@@ -192,17 +192,16 @@ class Initiation:
     x_start, x_end
         Estimated state at those times.
     P_start, P_end
-        Their covariances, or ``None`` with ``covariance_status ==
-        "indeterminate"`` and the reason in ``covariance_message``.  The
-        region wall does not enter them (it bounds the solution, it does not
-        measure it).
+        Their covariances, or ``None`` when indeterminate (a ``covariance``
+        reason says why).  The zone wall does not enter them (it bounds the
+        solution, it does not measure it).
     cost
         Sum of squared whitened data residuals at the solution (Doppler, and
-        the motion factors' terms with ``window="states"``): the statistic of
-        the χ² test, the paper's Eq. 16.
+        the motion factors' terms with ``window="ncv"``): the statistic of the
+        χ² test, the paper's Eq. 16.
     objective
         What the refinement minimised and ranked the solutions by: ``cost``
-        plus the weak prior and region wall terms (equal to ``cost`` for ILS
+        plus the weak prior and zone wall terms (equal to ``cost`` for ILS
         and grid).
     chi2_threshold, dof, passes_chi2
         The χ² test of ``cost``.
@@ -212,10 +211,10 @@ class Initiation:
         The K best distinct grid candidates (grid cost).
     alternatives
         Other distinct refined solutions that pass the χ² test.
-    ambiguous
-        True if there are alternatives.
-    notes
-        Diagnostics (e.g. "ILS kept the grid estimate: cond(J'R^-1 J) = ...").
+    n_measurements
+        Size of the window.
+    reasons, events
+        The verdict's findings and the log (:mod:`fgdoppler.estimators.verdict`).
     wall_time
         Seconds for the whole initiation.
     """
@@ -227,8 +226,6 @@ class Initiation:
     x_end: FloatArray
     P_start: FloatArray | None
     P_end: FloatArray | None
-    covariance_status: str
-    covariance_message: str
     cost: float
     objective: float
     chi2_threshold: float
@@ -237,37 +234,36 @@ class Initiation:
     iterations: int
     candidates: tuple[Candidate, ...]
     alternatives: tuple[Candidate, ...]
-    ambiguous: bool
     n_measurements: int
-    notes: tuple[str, ...] = ()
+    reasons: tuple[Reason, ...] = ()
+    events: tuple[Event, ...] = ()
     wall_time: float = 0.0
+
+    @property
+    def ambiguous(self) -> bool:
+        """True if other solutions pass the χ² test as well."""
+        return bool(self.alternatives)
+
+    @property
+    def covariance_ok(self) -> bool:
+        """True when ``P_start`` and ``P_end`` are available."""
+        return self.P_start is not None
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready form."""
         def mat(a: FloatArray | None) -> object:
             return None if a is None else a.tolist()
         return {
-            "method": self.method,
-            "t_start": self.t_start,
-            "t_end": self.t_end,
-            "x_start": self.x_start.tolist(),
-            "x_end": self.x_end.tolist(),
-            "P_start": mat(self.P_start),
-            "P_end": mat(self.P_end),
-            "covariance_status": self.covariance_status,
-            "covariance_message": self.covariance_message,
-            "cost": self.cost,
-            "objective": self.objective,
-            "chi2_threshold": self.chi2_threshold,
-            "dof": self.dof,
-            "passes_chi2": self.passes_chi2,
-            "iterations": self.iterations,
-            "n_measurements": self.n_measurements,
+            "method": self.method, "status": self.status, "message": self.message,
+            "reasons": [r.to_dict() for r in self.reasons],
+            "t_start": self.t_start, "t_end": self.t_end,
+            "x_start": self.x_start.tolist(), "x_end": self.x_end.tolist(),
+            "P_start": mat(self.P_start), "P_end": mat(self.P_end),
+            "cost": self.cost, "objective": self.objective, "chi2_threshold": self.chi2_threshold, "dof": self.dof,
+            "passes_chi2": self.passes_chi2, "iterations": self.iterations, "n_measurements": self.n_measurements,
             "candidates": [c.to_dict() for c in self.candidates],
             "alternatives": [c.to_dict() for c in self.alternatives],
-            "ambiguous": self.ambiguous,
-            "notes": list(self.notes),
-            "wall_time": self.wall_time,
+            "ambiguous": self.ambiguous, "events": [e.to_dict() for e in self.events], "wall_time": self.wall_time,
         }
 
 
@@ -286,64 +282,148 @@ class _Window:
     geometry: Geometry
     meas: Measurements
     t0: float
-    bt: BatchTimes  # paper order, relative to t0
+    times: StackedTimes  # paper order, relative to t0
     z: FloatArray
     sigma: FloatArray
     scan_times: FloatArray  # distinct times relative to t0
-    scan_of: NDArray[np.intp]  # per measurement (time order)
 
     @classmethod
     def build(cls, meas: Measurements, geometry: Geometry) -> _Window:
-        order = meas.batch_order()
+        order = meas.stacked_order()
         t0 = float(meas.time[0])
-        times, scan = meas.scan_index()
         return cls(
             geometry=geometry, meas=meas, t0=t0,
-            bt=BatchTimes(pair=meas.pair[order], t=meas.time[order] - t0),
-            z=meas.doppler[order], sigma=meas.sigma[order],
-            scan_times=times - t0, scan_of=scan,
+            times=StackedTimes(pair=meas.pair[order], t=meas.time[order] - t0),
+            z=meas.doppler[order], sigma=meas.sigma[order], scan_times=meas.scans().times - t0,
         )
 
     def cost(self, x0: FloatArray) -> float:
-        r = (self.z - batch_doppler(x0, self.geometry, self.bt)) / self.sigma
+        r = (self.z - cv_doppler(x0, self.geometry, self.times)) / self.sigma
         return float(r @ r)
 
+    def information(self, x0: FloatArray) -> FloatArray:
+        return cv_information(x0, self.geometry, self.times, self.sigma)
 
-def _graph(w: _Window, settings: InitiationSettings) -> tuple[gtsam.NonlinearFactorGraph, int]:
-    """The window graph and the number of its data factors (Doppler and motion).
 
-    The regularisers (weak prior, region wall) come last, so the data cost —
-    the statistic of the χ² test — is the error of the first factors.
+@dataclass(frozen=True, kw_only=True)
+class _Fit:
+    """A refinement's answer, before the result is assembled."""
+
+    x0: FloatArray
+    x1: FloatArray
+    P0: FloatArray | None
+    P1: FloatArray | None
+    cov_message: str
+    cost: float
+    objective: float
+    iterations: int
+    alternatives: list[Candidate]
+    notes: list[str]
+    reasons: list[Reason]
+
+
+def initiate(
+    measurements: Measurements,
+    model: TrackingModel | Geometry,
+    settings: InitiationSettings | None = None,
+    *,
+    grid_result: GridResult | None = None,
+) -> Initiation:
+    """Estimate the state of a constant-velocity target from a window of Doppler measurements.
+
+    Parameters
+    ----------
+    measurements
+        The initiation window (e.g. ``meas.first_per_pair(10)``, the paper's
+        20-measurement batch).  Synchronous or asynchronous, any number of pairs.
+    model
+        The tracking model (its geometry, motion model, zone and weak prior),
+        or a geometry (every default).
+    settings
+        Method and grid; defaults follow the paper with LM refinement.
+    grid_result
+        A grid search already run on this window with these settings (lets
+        several refinement methods share one search).
+
+    Returns
+    -------
+    Initiation
+        Never raises for ill-conditioned or indeterminate windows: they are
+        reported through its reasons.
+
+    Raises
+    ------
+    ValueError
+        For invalid input: fewer than 5 measurements (4 unknowns plus one
+        degree of freedom for the test), pair indices outside the geometry.
     """
-    g = gtsam.NonlinearFactorGraph()
-    if settings.window == "batch":
-        g.add(batch_factor(X(0), w.geometry, w.bt, w.z, w.sigma))
+    model = as_tracking_model(model)
+    settings = settings or InitiationSettings()
+    t_begin = time.perf_counter()
+    geometry = model.geometry
+    measurements.check(geometry)
+    if len(measurements) < 5:
+        raise ValueError(f"initiation needs at least 5 measurements (4 unknowns + 1 dof), got {len(measurements)}")
+    w = _Window.build(measurements, geometry)
+    dof = len(measurements) - 4
+    threshold = float(chi2.ppf(settings.confidence, dof))
+    grid = grid_result if grid_result is not None else window_grid(measurements, model, settings)
+    candidates = tuple(Candidate(state=s, cost=float(c), passes_chi2=bool(c <= threshold))
+                       for s, c in zip(grid.states, grid.costs, strict=True))
+    if settings.method == "lm":
+        fit = _refine_lm(w, model, settings, grid, threshold)
     else:
-        m = w.meas
-        bounds = np.searchsorted(w.scan_of, np.arange(w.scan_times.size + 1))
-        for k in range(w.scan_times.size):
-            sl = slice(bounds[k], bounds[k + 1])
-            g.add(doppler_factor(X(k), w.geometry, m.pair[sl], m.doppler[sl], m.sigma[sl]))
-            if k:
-                g.add(motion_factor(X(k - 1), X(k), w.scan_times[k] - w.scan_times[k - 1], settings.motion))
-    n_data = int(g.size())
-    spec = settings.grid
-    if settings.weak_prior:
-        g.add(prior_factor(X(0), *region_prior(spec)))
-    if settings.region_bound:
-        g.add(region_factor(X(0), spec.x[:2], spec.y[:2], spec.speed_max, wall_sigma=settings.wall_sigma))
-    return g, n_data
+        fit = _refine_closed_form(w, settings, grid, candidates, threshold)
+    return _assemble(w, settings, fit, candidates, threshold, dof, time.perf_counter() - t_begin)
 
 
-def _values(w: _Window, x0: FloatArray, settings: InitiationSettings) -> gtsam.Values:
-    v = gtsam.Values()
-    if settings.window == "batch":
-        v.insert(X(0), np.asarray(x0, dtype=float))
+def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: tuple[Candidate, ...],
+              threshold: float, dof: int, wall: float) -> Initiation:
+    # Each alternative gets the covariance of the deterministic window fit at its state, so a
+    # tracker can follow it as a hypothesis (see fgdoppler.estimators.ambiguity).
+    alternatives = tuple(replace(a, covariance=_inverse(w.information(a.state))[0]) for a in fit.alternatives)
+    passes = bool(fit.cost <= threshold)
+    reasons = list(fit.reasons)
+    if not passes:
+        reasons.append(Reason(code="chi2", status="doubtful", message=(
+            f"window cost {fit.cost:.2f} fails the {settings.confidence:.0%} chi-square test "
+            f"({threshold:.2f}, {dof} dof)")))
+    if fit.P0 is None:
+        reasons.append(Reason(code="covariance", status="doubtful",
+                              message=f"initiation covariance indeterminate: {fit.cov_message}"))
+    if alternatives:
+        far = max(float(np.linalg.norm(a.state[:2] - fit.x0[:2])) for a in alternatives)
+        reasons.append(Reason(code="ambiguous", status="doubtful", message=(
+            f"{len(alternatives)} other solution(s) fit the window as well (costs "
+            + ", ".join(f"{a.cost:.1f}" for a in alternatives) + f" vs {fit.cost:.1f}; up to {far / 1e3:.1f} km "
+            "away): the window alone cannot tell them apart")))
+    return Initiation(
+        method=settings.method, t_start=w.t0, t_end=w.t0 + float(w.scan_times[-1]),
+        x_start=np.asarray(fit.x0, dtype=float), x_end=np.asarray(fit.x1, dtype=float),
+        P_start=fit.P0, P_end=fit.P1, cost=float(fit.cost), objective=float(fit.objective),
+        chi2_threshold=threshold, dof=dof, passes_chi2=passes, iterations=fit.iterations,
+        candidates=candidates, alternatives=alternatives, n_measurements=len(w.meas),
+        reasons=tuple(reasons), events=tuple(Event(time=w.t0, message=n) for n in fit.notes), wall_time=wall,
+    )
+
+
+# -- LM ------------------------------------------------------------------------------------
+def _graph(w: _Window, model: TrackingModel, settings: InitiationSettings, window: WindowModel
+           ) -> tuple[gtsam.NonlinearFactorGraph, int]:
+    """The window graph, its data factors first, then the weak prior and the zone wall (last)."""
+    if window == "cv":
+        graph, n_data = cv_graph(w.geometry, w.times, w.z, w.sigma, prior=model.prior())
     else:
-        states = settings.motion.propagate(x0, w.scan_times)
-        for k, s in enumerate(states):
-            v.insert(X(k), s)
-    return v
+        graph, n_data = chain_graph(w.meas, model.observation, model.motion, prior=model.prior())
+    if settings.region_bound and model.zone is not None:
+        graph.add(region_factor(X(0), model.zone, wall_sigma=settings.wall_sigma))
+    return graph, n_data
+
+
+def _values(w: _Window, model: TrackingModel, x0: FloatArray, window: WindowModel) -> gtsam.Values:
+    if window == "cv":
+        return chain_values([np.asarray(x0, dtype=float)])
+    return chain_values(model.motion.propagate(x0, w.scan_times))
 
 
 @dataclass(frozen=True)
@@ -355,13 +435,13 @@ class _Solution:
     iterations: int
 
 
-def _lm(graph: gtsam.NonlinearFactorGraph, n_data: int, values: gtsam.Values, settings: InitiationSettings
+def _lm(graph: gtsam.NonlinearFactorGraph, n_data: int, values: gtsam.Values, max_iterations: int
         ) -> _Solution | str:
     try:
-        opt = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params(settings.max_iterations))
+        opt = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params(max_iterations))
         res = opt.optimize()
     except (RuntimeError, ValueError) as exc:  # ValueError: a step onto a sensor position
-        return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        return first_line(exc)
     objective = 2.0 * graph.error(res)
     regularisers = 2.0 * sum(graph.at(i).error(res) for i in range(n_data, int(graph.size())))
     if not np.isfinite(objective):
@@ -369,15 +449,16 @@ def _lm(graph: gtsam.NonlinearFactorGraph, n_data: int, values: gtsam.Values, se
     return _Solution(objective, max(objective - regularisers, 0.0), res.atVector(X(0)), res, int(opt.iterations()))
 
 
-def _without_wall(graph: gtsam.NonlinearFactorGraph, settings: InitiationSettings) -> gtsam.NonlinearFactorGraph:
-    """The graph without the region wall (the last factor when ``region_bound``).
+def _without_wall(graph: gtsam.NonlinearFactorGraph, model: TrackingModel, settings: InitiationSettings
+                  ) -> gtsam.NonlinearFactorGraph:
+    """The graph without the zone wall (its last factor when ``region_bound``).
 
     The wall is an inequality constraint: it says where the solution may be,
     not how precisely it is known.  Left in, an active wall (σ 0.1 m/s on the
     speed) would claim the speed to 0.1 m/s and a filter started from that
     covariance diverges (measured: one of 200 runs of case a at 45 km).
     """
-    if not settings.region_bound:
+    if not (settings.region_bound and model.zone is not None):
         return graph
     out = gtsam.NonlinearFactorGraph()
     for i in range(int(graph.size()) - 1):
@@ -385,32 +466,29 @@ def _without_wall(graph: gtsam.NonlinearFactorGraph, settings: InitiationSetting
     return out
 
 
-def _refine_lm(
-    w: _Window, settings: InitiationSettings, grid: GridResult
-) -> tuple[list[_Solution], gtsam.NonlinearFactorGraph, list[str]]:
+def _lm_solutions(w: _Window, model: TrackingModel, settings: InitiationSettings, grid: GridResult
+                  ) -> tuple[list[_Solution], gtsam.NonlinearFactorGraph, list[str]]:
     """LM from every grid candidate; returns solutions sorted by final objective.
 
-    With ``window="states"`` this runs in two stages to keep Python callbacks
-    few: LM on the one-key batch factor from each candidate, then LM on the
-    per-state graph from each *distinct* stage-1 solution.
+    With ``window="ncv"`` this runs in two stages to keep Python callbacks
+    few: LM on the one-key constant-velocity window from each candidate, then
+    LM on the per-scan graph from each *distinct* stage-1 solution.
     """
-    batch_settings = settings if settings.window == "batch" else replace(settings, window="batch")
-    batch_graph, n_batch = _graph(w, batch_settings)
+    cv, n_cv = _graph(w, model, settings, "cv")
     notes: list[str] = []
     stage1: list[_Solution] = []
     for x0 in grid.states:
-        out = _lm(batch_graph, n_batch, _values(w, x0, batch_settings), batch_settings)
+        out = _lm(cv, n_cv, _values(w, model, x0, "cv"), settings.max_iterations)
         if isinstance(out, str):
             notes.append(f"LM from {np.round(x0, 1).tolist()} failed: {out}")
-            continue
-        if not any(_same(out.x0, s.x0, settings) for s in stage1):
+        elif not any(_same(out.x0, s.x0, settings) for s in stage1):
             stage1.append(out)
-    if settings.window == "batch":
-        return sorted(stage1, key=lambda s: s.objective), batch_graph, notes
-    graph, n_data = _graph(w, settings)
+    if settings.window == "cv":
+        return sorted(stage1, key=lambda s: s.objective), cv, notes
+    graph, n_data = _graph(w, model, settings, "ncv")
     sols = []
     for first in stage1:
-        out = _lm(graph, n_data, _values(w, first.x0, settings), settings)
+        out = _lm(graph, n_data, _values(w, model, first.x0, "ncv"), settings.max_iterations)
         if isinstance(out, str):
             notes.append(f"window LM from {np.round(first.x0, 1).tolist()} failed: {out}")
             continue
@@ -418,12 +496,81 @@ def _refine_lm(
     return sorted(sols, key=lambda s: s.objective), graph, notes
 
 
-def _refine_ils(
-    w: _Window, settings: InitiationSettings, x_grid: FloatArray, threshold: float
-) -> tuple[FloatArray, int, list[str], FloatArray | None]:
+def _refine_lm(w: _Window, model: TrackingModel, settings: InitiationSettings, grid: GridResult,
+               threshold: float) -> _Fit:
+    """LM from every candidate; the best solution with its marginals, and the alternatives."""
+    sols, graph, notes = _lm_solutions(w, model, settings, grid)
+    if settings.half_plane is not None:
+        kept = [s for s in sols if settings.half_plane.contains(s.x0)]
+        if len(kept) < len(sols):
+            notes.append(f"{len(sols) - len(kept)} refined solution(s) outside the half plane discarded")
+        sols = kept
+    t_span = float(w.scan_times[-1])
+    if not sols:
+        x0 = grid.best.copy()
+        cost = float(grid.costs[0])
+        return _Fit(x0=x0, x1=model.motion.propagate(x0, t_span), P0=None, P1=None,
+                    cov_message="no refined solution", cost=cost, objective=cost, iterations=0, alternatives=[],
+                    notes=notes, reasons=[Reason(code="refinement", status="doubtful",
+                                                 message="no LM start succeeded: the best grid candidate is reported")])
+    best = sols[0]
+    reasons = []
+    if settings.region_bound and model.zone is not None:
+        excess, _ = model.zone.excess(best.x0)
+        if np.any(excess != 0.0):
+            reasons.append(Reason(code="boundary", status="doubtful", message=(
+                "the start state is held at the zone's boundary (excess along, across, speed: "
+                + ", ".join(f"{v:.3g}" for v in excess)
+                + "): the data may prefer a start outside the zone; widen it (--zone, --speed-max) or "
+                "lift the bound (--no-region-bound)")))
+    cv_window = settings.window == "cv"
+    last = X(0) if cv_window else X(w.scan_times.size - 1)
+    F_end = ConstantVelocity.F(t_span)
+    x1 = F_end @ best.x0 if cv_window else best.values.atVector(last)
+    marg = marginal_covariances(_without_wall(graph, model, settings), best.values,
+                                [X(0)] if cv_window else [X(0), last])
+    P0 = P1 = None
+    if marg.ok:
+        assert marg.covariances is not None
+        P0 = marg.covariances[0]
+        P1 = F_end @ P0 @ F_end.T if cv_window else marg.covariances[1]
+    alternatives: list[Candidate] = []
+    for sol in sols[1:]:
+        if sol.cost <= threshold and not any(_same(sol.x0, s, settings) for s in
+                                             [best.x0, *(a.state for a in alternatives)]):
+            alternatives.append(Candidate(state=sol.x0, cost=sol.cost, passes_chi2=True))
+    return _Fit(x0=best.x0, x1=x1, P0=P0, P1=P1, cov_message=marg.message, cost=best.cost,
+                objective=best.objective, iterations=best.iterations, alternatives=alternatives, notes=notes,
+                reasons=reasons)
+
+
+# -- ILS and grid ----------------------------------------------------------------------------
+def _refine_closed_form(w: _Window, settings: InitiationSettings, grid: GridResult,
+                        candidates: tuple[Candidate, ...], threshold: float) -> _Fit:
+    """ILS or grid-only: the estimate, the inverse window information, and passing grid optima."""
+    x_grid = grid.best.copy()
+    notes: list[str] = []
+    iterations = 0
+    info = None
+    if settings.method == "ils":
+        x0, iterations, notes, info = _ils(w, settings, x_grid, threshold)
+    else:
+        x0 = x_grid
+    if info is None:
+        info = w.information(x0)
+    cost = w.cost(x0)
+    F_end = ConstantVelocity.F(float(w.scan_times[-1]))
+    P0, message = _inverse(info)
+    # other grid optima that pass the test are alternatives as well
+    alternatives = [c for c in candidates[1:] if c.passes_chi2 and not _same(c.state, x0, settings)]
+    return _Fit(x0=x0, x1=F_end @ x0, P0=P0, P1=None if P0 is None else F_end @ P0 @ F_end.T, cov_message=message,
+                cost=cost, objective=cost, iterations=iterations, alternatives=alternatives, notes=notes, reasons=[])
+
+
+def _ils(w: _Window, settings: InitiationSettings, x_grid: FloatArray, threshold: float
+         ) -> tuple[FloatArray, int, list[str], FloatArray | None]:
     """The paper's ILS (Eq. 14) with its χ² stop and a conditioning guard; returns (x, iters, notes, info)."""
     x = x_grid.copy()
-    W = 1.0 / w.sigma
     cost = w.cost(x)
     notes: list[str] = []
     it = 0
@@ -432,15 +579,15 @@ def _refine_ils(
         if cost <= threshold and not settings.ils_force:
             it -= 1
             break
-        g, J = batch_doppler_and_jacobian(x, w.geometry, w.bt)
-        Jw = J * W[:, None]
+        g = cv_doppler(x, w.geometry, w.times)
+        Jw = cv_doppler_jacobian(x, w.geometry, w.times) / w.sigma[:, None]
         info = Jw.T @ Jw
         s = np.linalg.svd(Jw, compute_uv=False)
         cond = float((s[0] / s[-1]) ** 2) if s[-1] > 0 else np.inf
         if cond > settings.ils_condition_limit:
             notes.append(f"ILS kept the grid estimate: cond(J'R^-1 J) = {cond:.3g} > {settings.ils_condition_limit:.3g}")
             return x_grid.copy(), it - 1, notes, None
-        dx = np.linalg.solve(info, Jw.T @ ((w.z - g) * W))
+        dx = np.linalg.solve(info, Jw.T @ ((w.z - g) / w.sigma))
         try:
             new_cost = w.cost(x + dx)
         except ValueError as exc:  # stepped onto a sensor
@@ -453,10 +600,6 @@ def _refine_ils(
             break
     else:
         notes.append(f"ILS reached {settings.max_iterations} iterations")
-    if info is None:
-        _, J = batch_doppler_and_jacobian(x, w.geometry, w.bt)
-        Jw = J * W[:, None]
-        info = Jw.T @ Jw
     return x, it, notes, info
 
 
@@ -467,171 +610,31 @@ def _same(a: FloatArray, b: FloatArray, settings: InitiationSettings) -> bool:
     )
 
 
-def initiate(
-    measurements: Measurements,
-    geometry: Geometry,
-    settings: InitiationSettings | None = None,
-    *,
-    grid_result: GridResult | None = None,
-) -> Initiation:
-    """Estimate the state of a constant-velocity target from a window of Doppler measurements.
-
-    Parameters
-    ----------
-    measurements
-        The initiation window (e.g. ``meas.first_per_pair(10)``, the paper's
-        20-measurement batch).  Synchronous or asynchronous, any number of pairs.
-    geometry
-        Sensor pairs.
-    settings
-        Method and grid; defaults follow the paper with LM refinement.
-    grid_result
-        A grid search already run on this window with these settings (lets
-        several refinement methods share one search).
-
-    Returns
-    -------
-    Initiation
-        Never raises for ill-conditioned or indeterminate windows: they are
-        reported through ``covariance_status`` and ``notes``.
-
-    Raises
-    ------
-    ValueError
-        For invalid input: fewer than 5 measurements (4 unknowns plus one
-        degree of freedom for the test), pair indices outside the geometry.
-    """
-    settings = settings or InitiationSettings()
-    t_begin = time.perf_counter()
-    measurements.check(geometry)
-    if len(measurements) < 5:
-        raise ValueError(f"initiation needs at least 5 measurements (4 unknowns + 1 dof), got {len(measurements)}")
-    w = _Window.build(measurements, geometry)
-    dof = len(measurements) - 4
-    threshold = float(chi2.ppf(settings.confidence, dof))
-    grid = grid_result if grid_result is not None else grid_search(
-        geometry, w.bt, w.z, w.sigma, settings.grid, k_best=settings.k_best, half_plane=settings.half_plane
-    )
-    candidates = tuple(
-        Candidate(state=s, cost=float(c), passes_chi2=bool(c <= threshold))
-        for s, c in zip(grid.states, grid.costs, strict=True)
-    )
-    notes: list[str] = []
-    t_span = float(w.scan_times[-1])
-    F_end = ConstantVelocity.F(t_span)
-    alternatives: list[Candidate] = []
-    iterations = 0
-    P0: FloatArray | None = None
-    P1: FloatArray | None = None
-    cov_status, cov_msg = "indeterminate", ""
-
-    if settings.method == "lm":
-        sols, graph, lm_notes = _refine_lm(w, settings, grid)
-        notes += lm_notes
-        if settings.half_plane is not None:
-            kept = [s for s in sols if settings.half_plane.contains(s.x0)]
-            if len(kept) < len(sols):
-                notes.append(f"{len(sols) - len(kept)} refined solution(s) outside the half plane discarded")
-            sols = kept
-        if not sols:
-            notes.append("no LM start succeeded: returning the best grid candidate")
-            x0, cost = grid.best.copy(), float(grid.costs[0])
-            objective = cost
-            x1 = settings.motion.propagate(x0, t_span)
-        else:
-            best = sols[0]
-            cost, objective, x0, best_vals, iterations = best.cost, best.objective, best.x0, best.values, best.iterations
-            if settings.region_bound:
-                spec = settings.grid
-                excess, _ = region_excess(x0, spec.x[:2], spec.y[:2], spec.speed_max)
-                if np.any(excess != 0.0):
-                    notes.append(
-                        "the start state is held at the search region's boundary (excess x, y, speed: "
-                        + ", ".join(f"{v:.3g}" for v in excess)
-                        + "): the data may prefer a start outside it; widen the grid or set region_bound=False"
-                    )
-            last = X(0) if settings.window == "batch" else X(w.scan_times.size - 1)
-            x1 = F_end @ x0 if settings.window == "batch" else best_vals.atVector(last)
-            keys = [X(0)] if settings.window == "batch" else [X(0), last]
-            marg = marginal_covariances(_without_wall(graph, settings), best_vals, keys)
-            cov_status, cov_msg = marg.status, marg.message
-            if marg.ok:
-                assert marg.covariances is not None
-                P0 = marg.covariances[0]
-                P1 = F_end @ P0 @ F_end.T if settings.window == "batch" else marg.covariances[1]
-            distinct: list[tuple[float, FloatArray]] = [(cost, x0)]
-            for sol in sols[1:]:
-                if sol.cost <= threshold and not any(_same(sol.x0, d[1], settings) for d in distinct):
-                    distinct.append((sol.cost, sol.x0))
-                    alternatives.append(Candidate(state=sol.x0, cost=sol.cost, passes_chi2=True))
-    else:
-        x_grid = grid.best.copy()
-        if settings.method == "ils":
-            x0, iterations, ils_notes, info = _refine_ils(w, settings, x_grid, threshold)
-            notes += ils_notes
-        else:
-            x0, info = x_grid, None
-        cost = objective = w.cost(x0)
-        if info is None:
-            _, J = batch_doppler_and_jacobian(x0, geometry, w.bt)
-            Jw = J / w.sigma[:, None]
-            info = Jw.T @ Jw
-        x1 = F_end @ x0
-        P0, cov_status, cov_msg = _inverse(info)
-        P1 = None if P0 is None else F_end @ P0 @ F_end.T
-        # other grid optima that pass the test are alternatives as well
-        for cand in candidates[1:]:
-            if cand.passes_chi2 and not _same(cand.state, x0, settings):
-                alternatives.append(cand)
-
-    # Each alternative gets the covariance of the deterministic window fit at its state, so a
-    # tracker can follow it as a hypothesis (see :func:`hypotheses`).
-    with_cov = []
-    for a in alternatives:
-        _, J = batch_doppler_and_jacobian(a.state, geometry, w.bt)
-        Jw = J / w.sigma[:, None]
-        P_alt, _, _ = _inverse(Jw.T @ Jw)
-        with_cov.append(Candidate(state=a.state, cost=a.cost, passes_chi2=a.passes_chi2, covariance=P_alt))
-    alternatives = with_cov
-    passes = bool(cost <= threshold)
-    if not passes:
-        notes.append(f"final cost {cost:.2f} fails the {settings.confidence:.0%} chi-square test ({threshold:.2f}, {dof} dof)")
-    return Initiation(
-        method=settings.method,
-        t_start=w.t0,
-        t_end=w.t0 + t_span,
-        x_start=np.asarray(x0, dtype=float),
-        x_end=np.asarray(x1, dtype=float),
-        P_start=P0,
-        P_end=P1,
-        covariance_status=cov_status,
-        covariance_message=cov_msg,
-        cost=float(cost),
-        objective=float(objective),
-        chi2_threshold=threshold,
-        dof=dof,
-        passes_chi2=passes,
-        iterations=iterations,
-        candidates=candidates,
-        alternatives=tuple(alternatives),
-        ambiguous=bool(alternatives),
-        n_measurements=len(measurements),
-        notes=tuple(notes),
-        wall_time=time.perf_counter() - t_begin,
-    )
-
-
-def _inverse(info: FloatArray) -> tuple[FloatArray | None, str, str]:
+def _inverse(info: FloatArray) -> tuple[FloatArray | None, str]:
+    """Covariance from an information matrix, or ``None`` and why not."""
     s = np.linalg.svd(info, compute_uv=False)
     if s[-1] <= s[0] * 1e-15:
-        return None, "indeterminate", f"information matrix numerically singular (cond {s[0] / max(s[-1], 1e-300):.3g})"
+        return None, f"information matrix numerically singular (cond {s[0] / max(s[-1], 1e-300):.3g})"
     P = np.linalg.inv(info)
     P = 0.5 * (P + P.T)
     try:
         np.linalg.cholesky(P)
     except np.linalg.LinAlgError:
-        return None, "indeterminate", "covariance not positive definite"
-    return P, "ok", ""
+        return None, "covariance not positive definite"
+    return P, ""
+
+
+# -- helpers for studies and the CLI ------------------------------------------------------------
+def window_grid(measurements: Measurements, model: TrackingModel | Geometry,
+                settings: InitiationSettings | None = None) -> GridResult:
+    """The grid search of :func:`initiate` alone (to share between refinement methods)."""
+    model = as_tracking_model(model)
+    settings = settings or InitiationSettings()
+    if model.zone is None:
+        raise ValueError("the grid search needs a zone")
+    w = _Window.build(measurements, model.geometry)
+    return grid_search(model.geometry, w.times, w.z, w.sigma, model.zone, settings.grid, k_best=settings.k_best,
+                       half_plane=settings.half_plane)
 
 
 def residual_landscape(
@@ -648,38 +651,6 @@ def residual_landscape(
     Returns the cost, shape ``(x.size, heading_deg.size)`` — the landscape of
     the paper's Fig. 2 (many local optima; the start decides which is found).
     """
-    from fgdoppler.analysis.observability import grid_states
-    from fgdoppler.estimators.grid import grid_costs
-
     w = _Window.build(measurements, geometry)
     states = grid_states(x, y0, speed, heading_deg).reshape(-1, 4)
-    return grid_costs(geometry, w.bt, w.z, w.sigma, states).reshape(np.size(x), np.size(heading_deg))
-
-
-def hypotheses(init: Initiation) -> list[Initiation]:
-    """The initiation and one unambiguous copy per alternative (best first).
-
-    Each copy starts from the alternative's state and covariance at the
-    window start, propagated to the window end.  Alternatives without a
-    determinate covariance are skipped.  A copy's ``objective`` is its data
-    cost (the regularisers are not evaluated for alternatives).
-    """
-    out = [replace(init, alternatives=(), ambiguous=False)]
-    F = ConstantVelocity.F(init.t_end - init.t_start)
-    for a in init.alternatives:
-        if a.covariance is None:
-            continue
-        out.append(replace(
-            init, x_start=a.state, x_end=F @ a.state, P_start=a.covariance, P_end=F @ a.covariance @ F.T,
-            cost=a.cost, objective=a.cost, passes_chi2=a.passes_chi2, covariance_status="ok", covariance_message="",
-            alternatives=(), ambiguous=False, notes=(*init.notes, "hypothesis from an ambiguous initiation"),
-        ))
-    return out
-
-
-def window_grid(measurements: Measurements, geometry: Geometry, settings: InitiationSettings | None = None) -> GridResult:
-    """The grid search of :func:`initiate` alone (to share between refinement methods)."""
-    settings = settings or InitiationSettings()
-    w = _Window.build(measurements, geometry)
-    return grid_search(geometry, w.bt, w.z, w.sigma, settings.grid, k_best=settings.k_best,
-                       half_plane=settings.half_plane)
+    return grid_costs(geometry, w.times, w.z, w.sigma, states).reshape(np.size(x), np.size(heading_deg))

@@ -18,6 +18,10 @@ those whose state moved more than ``relinearize_position`` /
 (removed and re-added in the same update).  iSAM2's own relinearisation is
 switched off (all factors are linear), and the factorisation is QR, which
 survives the ill-conditioning of Doppler-only graphs.
+
+Verdict reasons: ``covariance`` (some filtered covariances indeterminate),
+``not-converged`` (the final relinearisation hit its pass cap), both
+``"doubtful"``.
 """
 
 from __future__ import annotations
@@ -29,19 +33,18 @@ import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.estimators.common import (
-    TrackerSettings,
-    check_model,
-    nis_gate,
-    region_prior,
-)
+from fgdoppler._text import first_line
+from fgdoppler.estimators.gating import NISGate
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
 from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.settings import ISAM2Settings
+from fgdoppler.estimators.verdict import Event, Reason
 from fgdoppler.estimators.window import feed_from_window_start
 from fgdoppler.factors import X, absolute_linear_factor
 from fgdoppler.measurements import Measurements
-from fgdoppler.models.measurement import MeasurementModel
+from fgdoppler.models.observation import check_channels
+from fgdoppler.models.tracking import TrackingModel
 
 __all__ = ["ISAM2Tracker", "run_isam2"]
 
@@ -63,17 +66,18 @@ class ISAM2Tracker:
     Parameters
     ----------
     model
-        Measurement model.
+        Observation and motion model.
     settings
-        Motion model, gate, Huber threshold, relinearisation thresholds.
+        Gate, Huber threshold, relinearisation thresholds.
     prior
         Optional ``(mean, covariance)`` on the first state.
     """
 
-    def __init__(self, model: MeasurementModel, settings: TrackerSettings | None = None,
+    def __init__(self, model: TrackingModel, settings: ISAM2Settings | None = None,
                  prior: tuple[ArrayLike, ArrayLike] | None = None) -> None:
-        self.model = model
-        self.settings = settings or TrackerSettings()
+        self.model = model.observation
+        self.motion_model = model.motion
+        self.settings = settings or ISAM2Settings()
         params = gtsam.ISAM2Params()
         params.setFactorization("QR")
         params.enableRelinearization = False
@@ -89,15 +93,16 @@ class ISAM2Tracker:
         gn.setWildfireThreshold(self.settings.wildfire_threshold)
         params.setOptimizationParams(gn)
         self.isam = gtsam.ISAM2(params)
-        self.motion = MotionBlocks(self.settings.motion)
+        self.motion = MotionBlocks(self.motion_model)
         self.prior = None if prior is None else (np.asarray(prior[0], float), np.asarray(prior[1], float))
         self.times: list[float] = []
         self.scans: list[_ScanData] = []
         self.relinearized: list[int] = []
-        self.nis: list[tuple[float, int, float, bool]] = []
-        self.warnings: list[tuple[float, str]] = []
+        self.events: list[Event] = []
+        self.gate = NISGate(self.settings.gate_probability, self.events)
+        self.final_passes = 0
+        self.converged = True
         self._last_cov: FloatArray | None = None
-        self._gate = self.settings.gate
         self._pending: tuple[gtsam.NonlinearFactorGraph, gtsam.Values, list[int], list[int]] | None = None
         self._n_updates = 0
 
@@ -110,7 +115,7 @@ class ISAM2Tracker:
             rows = linearize_rows(self.model, np.broadcast_to(x_lin, (sd.channels.size, 4)), sd.channels, sd.z,
                                   sd.sigma, self.settings.huber_k)
         except ValueError as exc:  # the predicted state sits on a sensor: drop this scan's factor
-            self.warnings.append((self.times[k], f"measurements skipped: {exc}"))
+            self.events.append(Event(time=self.times[k], message=f"measurements skipped: {exc}"))
             sd.channels = sd.channels[:0]
             return None
         return absolute_linear_factor([X(k)], [rows.A], rows.b + rows.A @ x_lin)
@@ -119,12 +124,6 @@ class ISAM2Tracker:
         # calculateEstimateVector(key) costs O(N) in the Python binding; the list form is O(1).
         key = X(k)
         return np.asarray(self.isam.calculateEstimate([key]).atVector(key), dtype=float)
-
-    def _moved(self, x: FloatArray, lin: FloatArray, scale: float = 1.0) -> bool:
-        d = np.abs(x - lin)
-        s = self.settings
-        return bool(d[0] > s.relinearize_position * scale or d[1] > s.relinearize_position * scale
-                    or d[2] > s.relinearize_velocity * scale or d[3] > s.relinearize_velocity * scale)
 
     def _update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, remove: list[int],
                 owners: list[int]) -> None:
@@ -216,47 +215,16 @@ class ISAM2Tracker:
         zz = np.asarray(z, dtype=float).reshape(-1)
         ss = np.broadcast_to(np.asarray(sigma, dtype=float), zz.shape).copy()
         k = len(self.times)
-        if k == 0:
-            if x_guess is None:
-                raise ValueError("the first scan needs an initial guess x_guess")
-            x_pred = np.asarray(x_guess, dtype=float)
-            P_pred = None
-        else:
-            dt = t - self.times[-1]
-            m = self.settings.motion
-            if x_guess is None:
-                x_pred = m.propagate(self._estimate(k - 1), dt)
-            else:
-                x_pred = np.asarray(x_guess, dtype=float)
-            P_pred = None if self._last_cov is None else m.F(dt) @ self._last_cov @ m.F(dt).T + m.Q(dt)
+        x_pred, P_pred = self._predict(t, x_guess)
         keep = np.ones(c.size, dtype=bool)
         if gate and P_pred is not None and c.size:
-            keep = nis_gate(self.model, x_pred, P_pred, t, c, zz, ss, self._gate, self.nis, self.warnings)
+            keep = self.gate.scan(self.model, x_pred, P_pred, t, c, zz, ss)
         self.times.append(t)
         self.scans.append(_ScanData(channels=c[keep], z=zz[keep], sigma=ss[keep]))
-        if self._pending is None:
-            owners: list[int] = []
-            remove: list[int] = []
-            graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        else:
-            graph, values, owners, remove = self._pending
-        values.insert(X(k), x_pred)
-        if k == 0 and self.prior is not None:
-            mean, cov = self.prior
-            L = np.linalg.cholesky(cov)
-            Ri = np.linalg.inv(L)
-            graph.add(absolute_linear_factor([X(0)], [Ri], Ri @ mean))
-            owners.append(-1)
-        if k:
-            Ap, An = self.motion(t - self.times[-2])
-            graph.add(absolute_linear_factor([X(k - 1), X(k)], [Ap, An], np.zeros(4)))
-            owners.append(-1)
-        f = self._meas_factor(k, x_pred)
-        if f is not None:
-            graph.add(f)
-            owners.append(k)
-            self.scans[k].lin = x_pred.copy()
+        graph, values, owners, remove = self._pending or (gtsam.NonlinearFactorGraph(), gtsam.Values(), [], [])
+        self._add_factors(k, x_pred, graph, values, owners)
         if _defer:
+            self._pending = (graph, values, owners, remove)
             return x_pred, None
         self._pending = None
         start = max(0, k - self.settings.relinearize_window)
@@ -266,7 +234,7 @@ class ISAM2Tracker:
             self._update(graph, values, remove, owners)
         except RuntimeError as exc:
             raise RuntimeError(
-                f"iSAM2 update at t = {t} failed: {str(exc).strip().splitlines()[0]} "
+                f"iSAM2 update at t = {t} failed: {first_line(exc)} "
                 "(an underdetermined start: add the initiation window in one update, or use a prior)"
             ) from exc
         self.relinearized.append(n_relin)
@@ -276,20 +244,52 @@ class ISAM2Tracker:
             if not np.all(np.isfinite(P)):
                 raise RuntimeError("non-finite covariance")
         except RuntimeError as exc:
-            self.warnings.append((t, f"marginal covariance indeterminate: {str(exc).strip().splitlines()[0]}"))
+            self.events.append(Event(time=t, message=f"marginal covariance indeterminate: {first_line(exc)}"))
             P = None
         self._last_cov = P
         return x, P
+
+    def _predict(self, t: float, x_guess: ArrayLike | None) -> tuple[FloatArray, FloatArray | None]:
+        """Initial value of the state at ``t`` and its predicted covariance (``None`` when unknown)."""
+        k = len(self.times)
+        if k == 0:
+            if x_guess is None:
+                raise ValueError("the first scan needs an initial guess x_guess")
+            return np.asarray(x_guess, dtype=float), None
+        dt = t - self.times[-1]
+        m = self.motion_model
+        x_pred = m.propagate(self._estimate(k - 1), dt) if x_guess is None else np.asarray(x_guess, dtype=float)
+        return x_pred, None if self._last_cov is None else m.predict_covariance(self._last_cov, dt)
+
+    def _add_factors(self, k: int, x_pred: FloatArray, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
+                     owners: list[int]) -> None:
+        """State ``k``'s value, its prior (first state), motion factor and measurement factor."""
+        values.insert(X(k), x_pred)
+        if k == 0 and self.prior is not None:
+            mean, cov = self.prior
+            L = np.linalg.cholesky(cov)
+            Ri = np.linalg.inv(L)
+            graph.add(absolute_linear_factor([X(0)], [Ri], Ri @ mean))
+            owners.append(-1)
+        if k:
+            Ap, An = self.motion(self.times[k] - self.times[k - 1])
+            graph.add(absolute_linear_factor([X(k - 1), X(k)], [Ap, An], np.zeros(4)))
+            owners.append(-1)
+        f = self._meas_factor(k, x_pred)
+        if f is not None:
+            graph.add(f)
+            owners.append(k)
+            self.scans[k].lin = x_pred.copy()
 
     def finish(self, *, covariances: bool = True, tol_scale: float = 1e-6) -> tuple[FloatArray, FloatArray | None]:
         """Relinearise every factor to convergence; returns smoothed states ``(n, 4)`` and covariances.
 
         A factor is relinearised when its state moved more than ``tol_scale``
         times the relinearisation thresholds; passes repeat until none moves
-        (at most ``settings.max_iterations``).
+        (at most ``settings.final_passes``).
         """
         n = len(self.times)
-        for _ in range(self.settings.max_iterations):
+        for _ in range(self.settings.final_passes):
             graph = gtsam.NonlinearFactorGraph()
             owners: list[int] = []
             remove: list[int] = []
@@ -299,8 +299,11 @@ class ISAM2Tracker:
                 break
             self._update(graph, gtsam.Values(), remove, owners)
             self.relinearized.append(cnt)
+            self.final_passes += 1
         else:
-            self.warnings.append((self.times[-1], f"final relinearisation did not converge in {self.settings.max_iterations} passes"))
+            self.converged = False
+            self.events.append(Event(time=self.times[-1], message=(
+                f"final relinearisation did not converge in {self.settings.final_passes} passes")))
         best = self.isam.calculateBestEstimate()
         states = np.array([best.atVector(X(j)) for j in range(n)])
         if not covariances:
@@ -313,37 +316,44 @@ class ISAM2Tracker:
 
 def run_isam2(
     measurements: Measurements,
-    model: MeasurementModel,
+    model: TrackingModel,
     init: Initiation,
-    settings: TrackerSettings | None = None,
+    settings: ISAM2Settings | None = None,
 ) -> TrackResult:
     """Initiation window in iSAM2, then one update per later scan; filtered and smoothed results.
 
     The window's states start at the optimum of this tracker's window graph
     (:func:`~fgdoppler.estimators.window.window_start`); its scans are added
-    ungated (they produced the initiation).  ``filtered`` holds the estimate of the newest state after
-    each update from the window's end on; ``smoothed`` the whole trajectory
-    after :meth:`ISAM2Tracker.finish`.
+    ungated (they produced the initiation).  ``filtered`` holds the estimate
+    of the newest state after each update from the window's end on;
+    ``smoothed`` the whole trajectory after :meth:`ISAM2Tracker.finish`.
     """
-    settings = settings or TrackerSettings()
-    check_model(model, measurements)
+    settings = settings or ISAM2Settings()
+    check_channels(model.observation, measurements)
     t_begin = time.perf_counter()
-    prior = region_prior(settings.grid) if settings.weak_prior else None
-    tracker = ISAM2Tracker(model, settings, prior)
-    times, states, covs = feed_from_window_start(tracker, model, measurements, init, settings, tracker.warnings)
+    tracker = ISAM2Tracker(model, settings, model.prior())
+    times, states, covs = feed_from_window_start(tracker, model, measurements, init, tracker.events,
+                                                 huber_k=settings.huber_k)
     n_online = len(tracker.relinearized)
     smoothed, scov = tracker.finish(covariances=settings.smoothed_covariances)
-    all_times = list(tracker.times)
-    smoothed_est = Estimates.from_lists(
-        all_times, list(smoothed), list(scov) if scov is not None else [None] * len(all_times)
-    )
+    filtered = Estimates.from_lists("filtered", times, states, covs)
+    smoothed_est = Estimates.from_lists("smoothed", list(tracker.times), list(smoothed),
+                                        list(scov) if scov is not None else [None] * len(tracker.times))
+    reasons = []
+    if not np.all(filtered.cov_ok):
+        reasons.append(Reason(code="covariance", status="doubtful", message=(
+            f"{int(np.sum(~filtered.cov_ok))} of {len(filtered)} filtered covariances are indeterminate")))
+    if not tracker.converged:
+        reasons.append(Reason(code="not-converged", status="doubtful",
+                              message="the final relinearisation did not converge"))
     return TrackResult(
         estimator="isam2",
-        settings=settings.to_dict(),
-        estimates={"filtered": Estimates.from_lists(times, states, covs), "smoothed": smoothed_est},
-        primary="filtered",
-        nis=np.array(tracker.nis, dtype=float).reshape(-1, 4),
+        settings=settings,
+        estimates=(filtered, smoothed_est),
+        reasons=tuple(reasons),
+        events=tuple(tracker.events),
+        nis=tracker.gate.as_array(),
         relinearizations=np.array(tracker.relinearized[:n_online], dtype=np.int64),
-        warnings=tuple(tracker.warnings),
+        iterations=tracker.final_passes,
         wall_time=time.perf_counter() - t_begin,
     )

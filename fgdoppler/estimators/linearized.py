@@ -20,9 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from fgdoppler.estimators.common import huber_weights
-from fgdoppler.models.measurement import MeasurementModel
+from fgdoppler.estimators.gating import huber_weights
 from fgdoppler.models.motion import ConstantVelocity
+from fgdoppler.models.observation import MeasurementModel
 
 __all__ = ["MotionBlocks", "linearize_rows"]
 
@@ -35,7 +35,6 @@ class LinearRows:
 
     A: FloatArray  # (m, 4)
     b: FloatArray  # (m,) whitened residual z - h at the point (Huber weighted)
-    whitened: FloatArray  # (m,) unweighted whitened residual (for NIS / Huber)
 
 
 def linearize_rows(
@@ -50,7 +49,7 @@ def linearize_rows(
     h, H = model.predict_and_jacobian(states, channels)
     r = (z - h) / sigma
     s = np.sqrt(huber_weights(r, huber_k)) / sigma
-    return LinearRows(A=H * s[:, None], b=(z - h) * s, whitened=r)
+    return LinearRows(A=H * s[:, None], b=(z - h) * s)
 
 
 class MotionBlocks:

@@ -29,6 +29,8 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
+from fgdoppler._text import first_line
+
 __all__ = ["MarginalResult", "chain_solve", "marginal_covariances"]
 
 Status = Literal["ok", "indeterminate"]
@@ -107,11 +109,9 @@ def marginal_covariances(
 
 
 def _short(exc: BaseException) -> str:
-    text = str(exc).strip().splitlines()
-    first = text[0] if text else type(exc).__name__
     if "indetermin" in str(exc).lower():
-        return "indeterminate linear system (singular information matrix): " + first
-    return first
+        return "indeterminate linear system (singular information matrix): " + first_line(exc)
+    return first_line(exc)
 
 
 def chain_solve(

@@ -1,12 +1,20 @@
-"""One result type for every estimator, with CSV and JSON output.
+"""One result type for every tracker, with CSV and JSON output.
 
 A :class:`TrackResult` holds one or more sets of :class:`Estimates` (times,
-states, covariances): ``"filtered"`` (EKF, iSAM2, the newest state of the
-fixed-lag smoother), ``"lagged"`` (the fixed-lag smoother's estimate of the
-state ``lag`` seconds back) and ``"smoothed"`` (batch, iSAM2 at the end).
-``primary`` names the one an estimator is "about"; CSV and the CLI's
-``--json`` report it.  Per-step diagnostics: normalised innovations (NIS)
-with gating decisions, relinearisation counts and warnings.
+states, covariances), each of a *kind*:
+
+``"filtered"``
+    The newest state given the data up to its time (EKF, iSAM2, the
+    fixed-lag smoother's newest state).
+``"lagged"``
+    Each state as estimated ``lag`` seconds after its time (fixed-lag).
+``"smoothed"``
+    Each state given all the data (offline smoother, iSAM2 at the end).
+
+The first set is the result's :attr:`TrackResult.primary` estimate — the one
+an estimator is "about", which CSV and the CLI's ``--json`` report.  The
+verdict (``status``, ``message``, ``reasons``) and the event log follow
+:mod:`fgdoppler.estimators.verdict`.
 """
 
 from __future__ import annotations
@@ -16,16 +24,21 @@ import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from fgdoppler._io import atomic_open, atomic_write_text
+from fgdoppler.estimators.settings import TrackerSettings
+from fgdoppler.estimators.verdict import Event, Judged, Reason
 
-__all__ = ["Estimates", "TrackResult"]
+__all__ = ["KINDS", "Estimates", "TrackResult"]
 
 FloatArray = NDArray[np.float64]
+Kind = Literal["filtered", "lagged", "smoothed"]
+#: The kinds of estimate.
+KINDS: tuple[Kind, ...] = ("filtered", "lagged", "smoothed")
 
 _IU = np.triu_indices(4)
 _COV_NAMES = [f"P{i}{j}" for i, j in zip(*_IU, strict=True)]
@@ -33,40 +46,43 @@ _COV_NAMES = [f"P{i}{j}" for i, j in zip(*_IU, strict=True)]
 
 @dataclass(frozen=True, kw_only=True)
 class Estimates:
-    """States ``(n, 4)`` and covariances ``(n, 4, 4)`` at times ``(n,)``.
+    """States ``(n, 4)`` and covariances ``(n, 4, 4)`` at times ``(n,)``, of one kind.
 
     ``cov_ok[k]`` is False where the covariance could not be computed
     (indeterminate system); the matrix there is filled with zeros and must
     not be used.
     """
 
+    kind: Kind
     times: FloatArray
     states: FloatArray
     covariances: FloatArray
     cov_ok: NDArray[np.bool_]
 
     def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"kind must be one of {KINDS}, got {self.kind!r}")
         n = np.asarray(self.times).size
         if np.shape(self.states) != (n, 4) or np.shape(self.covariances) != (n, 4, 4) or np.size(self.cov_ok) != n:
             raise ValueError("Estimates: inconsistent shapes")
 
     @classmethod
-    def empty(cls) -> Estimates:
+    def empty(cls, kind: Kind) -> Estimates:
         """No estimates."""
-        return cls(times=np.zeros(0), states=np.zeros((0, 4)), covariances=np.zeros((0, 4, 4)),
+        return cls(kind=kind, times=np.zeros(0), states=np.zeros((0, 4)), covariances=np.zeros((0, 4, 4)),
                    cov_ok=np.zeros(0, dtype=bool))
 
     @classmethod
-    def from_lists(cls, times: Sequence[float], states: Sequence[FloatArray],
+    def from_lists(cls, kind: Kind, times: Sequence[float], states: Sequence[FloatArray],
                    covs: Sequence[FloatArray | None]) -> Estimates:
         """Build from per-step lists; a ``None`` covariance marks an indeterminate step."""
         if not times:
-            return cls.empty()
+            return cls.empty(kind)
         ok = np.array([c is not None for c in covs], dtype=bool)
         P = np.array([np.zeros((4, 4)) if c is None else c for c in covs], dtype=float)
         P = 0.5 * (P + np.swapaxes(P, -1, -2))  # symmetric to the last bit (CSV keeps one triangle)
-        return cls(times=np.asarray(times, dtype=float), states=np.asarray(states, dtype=float).reshape(-1, 4),
-                   covariances=P, cov_ok=ok)
+        return cls(kind=kind, times=np.asarray(times, dtype=float),
+                   states=np.asarray(states, dtype=float).reshape(-1, 4), covariances=P, cov_ok=ok)
 
     def __len__(self) -> int:
         return int(np.size(self.times))
@@ -74,6 +90,7 @@ class Estimates:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: covariances as nested lists, ``null`` where indeterminate."""
         return {
+            "kind": self.kind,
             "times": self.times.tolist(),
             "states": self.states.tolist(),
             "covariances": [c.tolist() if ok else None for c, ok in zip(self.covariances, self.cov_ok, strict=True)],
@@ -81,67 +98,104 @@ class Estimates:
 
 
 @dataclass(frozen=True, kw_only=True)
-class TrackResult:
-    """Output of any estimator.
+class TrackResult(Judged):
+    """Output of any tracker.
 
     Attributes
     ----------
     estimator
-        ``"ekf"``, ``"isam2"``, ``"fixed-lag"`` or ``"batch"``.
+        Registry name: ``"ekf"``, ``"isam2"``, ``"fixed-lag"`` or ``"smoother"``.
     settings
-        The settings used (JSON-ready).
+        The estimator's settings.
     estimates
-        Name -> :class:`Estimates`.
-    primary
-        The key of ``estimates`` that CSV/JSON report.
+        The estimate sets, the primary first (see the module docstring).
+    reasons
+        The findings behind the verdict (:mod:`fgdoppler.estimators.verdict`).
+    events
+        What happened along the way (rejections, fallbacks, restarts).
     nis
         ``(m, 4)`` rows of ``time, pair, NIS, accepted`` for every
         measurement the estimator gated (EKF, iSAM2, fixed-lag).
     relinearizations
-        Per-step count of relinearised factors (iSAM2), or LM iterations (batch).
-    warnings
-        ``(time, message)`` of every problem handled.
-    wall_time
-        Seconds.
+        iSAM2: factors relinearised at each online update (empty otherwise).
+    iterations
+        Solver iterations: Levenberg–Marquardt iterations (smoother), final
+        relinearisation passes (iSAM2), final smoothing iterations
+        (fixed-lag); 0 for the EKF.
     log_likelihood
         EKF: cumulative predictive log-likelihood at each filtered time.
     cost
-        Batch: final sum of squared whitened residuals.
+        Smoother: final sum of squared whitened residuals.
     hypothesis
         Index of the initiation hypothesis reported at each primary time
         (all zero unless the initiation was ambiguous).
+    wall_time
+        Seconds.
     """
 
     estimator: str
-    settings: dict[str, Any]
-    estimates: dict[str, Estimates]
-    primary: str
+    settings: TrackerSettings
+    estimates: tuple[Estimates, ...]
+    reasons: tuple[Reason, ...] = ()
+    events: tuple[Event, ...] = ()
     nis: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
     relinearizations: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    warnings: tuple[tuple[float, str], ...] = ()
-    wall_time: float = 0.0
+    iterations: int = 0
     log_likelihood: FloatArray = field(default_factory=lambda: np.zeros(0))
     cost: float | None = None
     hypothesis: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    wall_time: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.primary not in self.estimates:
-            raise ValueError(f"primary {self.primary!r} not among {list(self.estimates)}")
+        if not self.estimates:
+            raise ValueError("a TrackResult needs at least one set of estimates")
+        kinds = [e.kind for e in self.estimates]
+        if len(set(kinds)) != len(kinds):
+            raise ValueError(f"duplicate estimate kinds {kinds}")
+        hyp = np.asarray(self.hypothesis, dtype=np.int64).reshape(-1)
+        if hyp.size == 0:
+            hyp = np.zeros(len(self.primary), dtype=np.int64)
+        elif hyp.size != len(self.primary):
+            raise ValueError(f"{hyp.size} hypothesis indices for {len(self.primary)} primary estimates")
+        object.__setattr__(self, "hypothesis", hyp)
+
+    @property
+    def primary(self) -> Estimates:
+        """The estimate the estimator is about (CSV and ``--json`` report it)."""
+        return self.estimates[0]
 
     @property
     def main(self) -> Estimates:
-        """The primary estimates."""
-        return self.estimates[self.primary]
+        """Deprecated name of :attr:`primary` (the documentation used it)."""
+        import warnings
+
+        warnings.warn("TrackResult.main is now TrackResult.primary", DeprecationWarning, stacklevel=2)
+        return self.primary
+
+    def estimate(self, kind: Kind) -> Estimates:
+        """The estimates of one kind.
+
+        Raises
+        ------
+        KeyError
+            If this result has none of that kind.
+        """
+        for e in self.estimates:
+            if e.kind == kind:
+                return e
+        raise KeyError(f"{self.estimator} has no {kind!r} estimates (it has {[e.kind for e in self.estimates]})")
 
     def to_dict(self, *, all_estimates: bool = True) -> dict[str, Any]:
-        """JSON-ready: ``estimator``, ``times``, ``states``, ``covariances`` (primary) and more."""
-        d: dict[str, Any] = {"estimator": self.estimator, "primary": self.primary, **self.main.to_dict()}
-        d["settings"] = self.settings
+        """JSON-ready: ``estimator``, the verdict, the primary ``times``/``states``/``covariances`` and more."""
+        d: dict[str, Any] = {"estimator": self.estimator, "status": self.status, "message": self.message,
+                             "reasons": [r.to_dict() for r in self.reasons], **self.primary.to_dict()}
+        d["settings"] = self.settings.to_dict()
         if all_estimates:
-            d["estimates"] = {k: v.to_dict() for k, v in self.estimates.items() if k != self.primary}
+            d["estimates"] = {e.kind: e.to_dict() for e in self.estimates[1:]}
         d["nis"] = [{"time": float(t), "pair": int(p), "nis": float(v), "accepted": bool(a)} for t, p, v, a in self.nis]
         d["relinearizations"] = self.relinearizations.tolist()
-        d["warnings"] = [{"time": t, "message": m} for t, m in self.warnings]
+        d["iterations"] = self.iterations
+        d["events"] = [e.to_dict() for e in self.events]
         d["hypothesis"] = self.hypothesis.tolist()
         if self.cost is not None:
             d["cost"] = self.cost
@@ -150,7 +204,7 @@ class TrackResult:
 
     def to_csv(self, path: str | Path) -> None:
         """One row per time: ``time, x, y, vx, vy`` and the covariance upper triangle (empty if indeterminate)."""
-        e = self.main
+        e = self.primary
         with atomic_open(Path(path)) as fh:
             w = csv.writer(fh, lineterminator="\n")
             w.writerow(["time", "x", "y", "vx", "vy", *_COV_NAMES])
@@ -163,8 +217,8 @@ class TrackResult:
         atomic_write_text(Path(path), json.dumps(self.to_dict(), indent=1, allow_nan=False))
 
     @staticmethod
-    def read_csv(path: str | Path) -> Estimates:
-        """Read a CSV written by :meth:`to_csv` back into :class:`Estimates`."""
+    def read_csv(path: str | Path, kind: Kind = "smoothed") -> Estimates:
+        """Read a CSV written by :meth:`to_csv` back into :class:`Estimates` (of the given kind)."""
         rows = list(csv.reader(Path(path).read_text(encoding="utf-8").splitlines()))
         body = rows[1:]
         t = np.array([float(r[0]) for r in body])
@@ -176,4 +230,4 @@ class TrackResult:
                 P[k][_IU] = [float(v) for v in r[5:]]
                 P[k] = P[k] + np.triu(P[k], 1).T
                 ok[k] = True
-        return Estimates(times=t, states=x, covariances=P, cov_ok=ok)
+        return Estimates(kind=kind, times=t, states=x, covariances=P, cov_ok=ok)

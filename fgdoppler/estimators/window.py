@@ -1,58 +1,57 @@
-"""Where trackers that re-solve the initiation window start its states.
+"""The initiation window inside the trackers: where it ends, and where trackers that re-solve it start.
 
-iSAM2 and the fixed-lag smoother take the initiation window into their own
-graph — measurement and motion factors and the weak search-region prior, but
-not the initiation's region wall (:func:`fgdoppler.factors.region_factor`).
-An iSAM2 update is a single undamped Gauss–Newton step.  Where the wall held
-the initiation's start on the region's boundary, the tracker's graph is not
-at its optimum there, and that one step can overshoot by tens of kilometres
-(measured: 98 km in case a at 5 km); the gate then rejects every later
-measurement.  So the window's states start at the optimum of the tracker's
-own window graph, reached by damped Levenberg–Marquardt (QR) from the
-initiation's constant-velocity track.  Where the wall was not active that
-optimum is the initiation's own solution and LM stops at once.
+Every tracker starts from an :class:`~fgdoppler.estimators.initiation.Initiation`
+of the same recording.  The *window* is every measurement at or before the
+initiation's ``t_end``; the *stream* is everything after it.  The EKF starts
+from the initiation's end state and covariance and processes the stream;
+iSAM2 and the fixed-lag smoother take the window into their own graph.
+
+Their graph has the window's measurement and motion factors and the weak
+prior, but not the initiation's zone wall
+(:func:`fgdoppler.factors.region_factor`).  An iSAM2 update is a single
+undamped Gauss–Newton step.  Where the wall held the initiation's start on
+the zone's boundary, the tracker's graph is not at its optimum there, and
+that one step can overshoot by tens of kilometres (measured: 98 km in case a
+at 5 km); the gate then rejects every later measurement.  So the window's
+states start at the optimum of the tracker's own window graph, reached by
+damped Levenberg–Marquardt (QR) from the initiation's constant-velocity
+track (:func:`window_start`).  Where the wall was not active that optimum is
+the initiation's own solution and LM stops at once.
 """
 
 from __future__ import annotations
 
+from typing import Protocol
+
 import gtsam
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.estimators.common import (
-    Scans,
-    StreamingTracker,
-    TrackerSettings,
-    feed,
-    region_prior,
-    split_window,
-)
+from fgdoppler._text import first_line
 from fgdoppler.estimators.initiation import Initiation, lm_params
-from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
+from fgdoppler.estimators.verdict import Event
+from fgdoppler.factors import X
+from fgdoppler.graphs import chain_graph, chain_values
 from fgdoppler.measurements import Measurements
-from fgdoppler.models.measurement import MeasurementModel
+from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["feed_from_window_start", "window_start"]
+__all__ = ["StreamingTracker", "feed_from_window_start", "split_window", "window_start"]
 
 FloatArray = NDArray[np.float64]
 
 
-def window_start(
-    model: MeasurementModel, window: Measurements, init: Initiation, settings: TrackerSettings
-) -> tuple[FloatArray, str | None]:
+def split_window(meas: Measurements, t_end: float) -> tuple[Measurements, Measurements]:
+    """(window, stream): measurements at or before ``t_end`` and after it."""
+    return meas.subset(meas.time <= t_end), meas.subset(meas.time > t_end)
+
+
+def window_start(model: TrackingModel, window: Measurements, init: Initiation, *, huber_k: float | None = None,
+                 max_iterations: int = 100) -> tuple[FloatArray, str | None]:
     r"""States at the window's scan times from which a tracker re-solves the window.
 
-    Minimises, by Levenberg–Marquardt from :math:`\mathbf F(t_k - t_0)\,\hat{\mathbf x}_0`,
-
-    .. math::
-
-        \sum_k \lVert \mathbf h(\mathbf x_k) - \mathbf z_k \rVert^2_{\mathbf R_k}
-        + \sum_k \lVert \mathbf x_{k+1} - \mathbf F\mathbf x_k \rVert^2_{\mathbf Q}
-        + \lVert \mathbf x_0 - \bar{\mathbf x} \rVert^2_{\mathbf P_0}
-
-    (the last term with ``settings.weak_prior``), the window graph of
-    :func:`~fgdoppler.estimators.isam2.run_isam2` and
-    :func:`~fgdoppler.estimators.fixed_lag.run_fixed_lag`.
+    Minimises the window's :func:`~fgdoppler.graphs.chain_graph` (with the
+    model's weak prior) by Levenberg–Marquardt from
+    :math:`\mathbf F(t_k - t_0)\,\hat{\mathbf x}_0`.
 
     Returns
     -------
@@ -60,38 +59,57 @@ def window_start(
         ``(n_scans, 4)`` states, and ``None`` or the reason LM failed (the
         constant-velocity track of ``init.x_start`` is returned then).
     """
-    scans = Scans.of(window)
-    guesses = settings.motion.propagate(init.x_start, scans.times - init.t_start)
-    graph = gtsam.NonlinearFactorGraph()
-    values = gtsam.Values()
-    for k in range(len(scans)):
-        rows = scans.rows(k)
-        graph.add(measurement_factor(X(k), model, window.pair[rows], window.doppler[rows], window.sigma[rows],
-                                     huber_k=settings.huber_k))
-        if k:
-            graph.add(motion_factor(X(k - 1), X(k), scans.times[k] - scans.times[k - 1], settings.motion))
-        values.insert(X(k), guesses[k])
-    if settings.weak_prior:
-        graph.add(prior_factor(X(0), *region_prior(settings.grid)))
+    guesses = model.motion.propagate(init.x_start, window.scans().times - init.t_start)
+    graph, _ = chain_graph(window, model.observation, model.motion, prior=model.prior(), huber_k=huber_k)
     try:
-        result = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params(settings.max_iterations)).optimize()
+        result = gtsam.LevenbergMarquardtOptimizer(graph, chain_values(guesses), lm_params(max_iterations)).optimize()
     except (RuntimeError, ValueError) as exc:  # ValueError: a state on a sensor
-        return guesses, f"window start: LM failed ({str(exc).strip().splitlines()[0]}); starting on the CV track"
-    states = np.array([result.atVector(X(k)) for k in range(len(scans))])
+        return guesses, f"window start: LM failed ({first_line(exc)}); starting on the CV track"
+    states = np.array([result.atVector(X(k)) for k in range(len(guesses))])
     if not np.all(np.isfinite(states)):
         return guesses, "window start: LM gave non-finite states; starting on the CV track"
     return states, None
 
 
-def feed_from_window_start(
-    tracker: StreamingTracker, model: MeasurementModel, measurements: Measurements, init: Initiation,
-    settings: TrackerSettings, warnings: list[tuple[float, str]],
-) -> tuple[list[float], list[FloatArray], list[FloatArray | None]]:
-    """:func:`~fgdoppler.estimators.common.feed` with the window's states started at :func:`window_start`.
+class StreamingTracker(Protocol):
+    """What :func:`feed_from_window_start` needs from a tracker (iSAM2 and fixed-lag implement it)."""
 
-    A failed LM start is recorded in ``warnings`` (the tracker's list).
+    def add_window(self, times: ArrayLike, channels: list[ArrayLike], z: list[ArrayLike], sigma: list[ArrayLike],
+                   guesses: ArrayLike) -> tuple[FloatArray, FloatArray | None]: ...
+
+    def add_scan(self, t: float, channels: ArrayLike, z: ArrayLike,
+                 sigma: ArrayLike) -> tuple[FloatArray, FloatArray | None]: ...
+
+
+def feed_from_window_start(
+    tracker: StreamingTracker, model: TrackingModel, measurements: Measurements, init: Initiation,
+    events: list[Event], *, huber_k: float | None = None, max_iterations: int = 100,
+) -> tuple[list[float], list[FloatArray], list[FloatArray | None]]:
+    """Feed the initiation window (one call, states from :func:`window_start`), then every later scan.
+
+    A failed LM start is recorded in ``events`` (the tracker's list).
+    Returns the filtered ``(times, states, covariances)`` from the window's end on.
     """
-    start, note = window_start(model, split_window(measurements, init.t_end)[0], init, settings)
-    if note:
-        warnings.append((init.t_start, note))
-    return feed(tracker, measurements, init, settings, guesses=start)
+    window, stream = split_window(measurements, init.t_end)
+    times: list[float] = []
+    states: list[FloatArray] = []
+    covs: list[FloatArray | None] = []
+    ws = window.scans()
+    if len(ws):
+        start, note = window_start(model, window, init, huber_k=huber_k, max_iterations=max_iterations)
+        if note:
+            events.append(Event(time=init.t_start, message=note))
+        rows = [ws.rows(k) for k in range(len(ws))]
+        x, P = tracker.add_window(ws.times, [window.pair[r] for r in rows], [window.doppler[r] for r in rows],
+                                  [window.sigma[r] for r in rows], start)
+        times.append(float(ws.times[-1]))
+        states.append(x)
+        covs.append(P)
+    ss = stream.scans()
+    for k in range(len(ss)):
+        sl = ss.rows(k)
+        x, P = tracker.add_scan(ss.times[k], stream.pair[sl], stream.doppler[sl], stream.sigma[sl])
+        times.append(float(ss.times[k]))
+        states.append(x)
+        covs.append(P)
+    return times, states, covs

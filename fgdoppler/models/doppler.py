@@ -19,8 +19,9 @@ Its Jacobian (paper Appendix A with :math:`t = 0`):
     \qquad
     \frac{\partial h}{\partial \mathbf v} = \sum_{S\in\{T,R\}} \frac{\Delta\mathbf p_S}{r_S}.
 
-The *batch map* of the paper's Section 3 evaluates :math:`h` along a
-constant-velocity trajectory from an initial state :math:`\mathbf x_0`:
+The paper's *batch map* (Section 3; called the constant-velocity map here,
+``cv_doppler``) evaluates :math:`h` along a constant-velocity trajectory from
+an initial state :math:`\mathbf x_0`:
 :math:`g_j(\mathbf x_0) = h_{i_j}(\mathbf p_0 + t_j \mathbf v, \mathbf v)`, with
 Jacobian :math:`\partial g/\partial\mathbf p_0 = \partial h/\partial\mathbf p`
 and :math:`\partial g/\partial\mathbf v = t_j\,\partial h/\partial\mathbf p + \partial h/\partial\mathbf v`.
@@ -40,13 +41,14 @@ from numpy.typing import ArrayLike, NDArray
 from fgdoppler.geometry import SENSOR_EPS, Geometry
 
 __all__ = [
-    "BatchTimes",
-    "batch_doppler",
-    "batch_doppler_and_jacobian",
-    "batch_doppler_jacobian",
+    "StackedTimes",
     "bistatic_doppler",
     "bistatic_doppler_and_jacobian",
     "bistatic_doppler_jacobian",
+    "cv_doppler",
+    "cv_doppler_and_jacobian",
+    "cv_doppler_jacobian",
+    "cv_information",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -150,8 +152,8 @@ def bistatic_doppler_jacobian(states: ArrayLike, geometry: Geometry) -> FloatArr
 
 
 @dataclass(frozen=True, kw_only=True)
-class BatchTimes:
-    """Measurement times of a batch, flattened in the paper's order.
+class StackedTimes:
+    """Times of a stacked measurement vector :math:`\\mathbf Z`, in the paper's order (Eq. 11).
 
     The paper stacks all of pair 1's measurements, then all of pair 2's
     (Eq. 11).  ``pair[j]`` and ``t[j]`` give the pair index and the time
@@ -167,14 +169,14 @@ class BatchTimes:
         if pair.shape != t.shape:
             raise ValueError(f"pair and t must have the same length, got {pair.size} and {t.size}")
         if not np.all(np.isfinite(t)):
-            raise ValueError("batch times must be finite")
+            raise ValueError("measurement times must be finite")
         if np.any(pair < 0):
             raise ValueError("pair indices must be non-negative")
         object.__setattr__(self, "pair", pair)
         object.__setattr__(self, "t", t)
 
     @classmethod
-    def from_per_pair(cls, times: Sequence[ArrayLike]) -> BatchTimes:
+    def from_per_pair(cls, times: Sequence[ArrayLike]) -> StackedTimes:
         """From one array of times per pair (pair ``i`` gets ``times[i]``)."""
         ts = [np.atleast_1d(np.asarray(t, dtype=float)).reshape(-1) for t in times]
         pair = np.concatenate([np.full(t.size, i, dtype=np.intp) for i, t in enumerate(ts)])
@@ -194,22 +196,22 @@ class BatchTimes:
             )
 
 
-def _batch_times(times: Sequence[ArrayLike] | BatchTimes, geometry: Geometry) -> BatchTimes:
-    bt = times if isinstance(times, BatchTimes) else BatchTimes.from_per_pair(times)
+def _stacked_times(times: Sequence[ArrayLike] | StackedTimes, geometry: Geometry) -> StackedTimes:
+    bt = times if isinstance(times, StackedTimes) else StackedTimes.from_per_pair(times)
     bt.check(geometry)
     return bt
 
 
-def _batch(
+def _cv(
     x0: ArrayLike,
     geometry: Geometry,
-    times: Sequence[ArrayLike] | BatchTimes,
+    times: Sequence[ArrayLike] | StackedTimes,
     *,
     jacobian: bool,
     singular: str = "raise",
 ) -> tuple[FloatArray, FloatArray | None, NDArray[np.bool_] | None]:
     x = _as_states(x0)
-    bt = _batch_times(times, geometry)
+    bt = _stacked_times(times, geometry)
     t = bt.t[:, None]
     vel = x[..., None, 2:]
     pos = x[..., None, :2] + t * vel
@@ -222,10 +224,10 @@ def _batch(
     return h, np.concatenate([dp, t * dp + dv], axis=-1), mask
 
 
-def batch_doppler(
-    x0: ArrayLike, geometry: Geometry, times: Sequence[ArrayLike] | BatchTimes
+def cv_doppler(
+    x0: ArrayLike, geometry: Geometry, times: Sequence[ArrayLike] | StackedTimes
 ) -> FloatArray:
-    r"""The paper's batch map :math:`\mathbf g(\mathbf x_0)` for a constant-velocity target.
+    r"""The paper's batch map :math:`\mathbf g(\mathbf x_0)`: Doppler along a constant-velocity trajectory.
 
     Parameters
     ----------
@@ -235,27 +237,27 @@ def batch_doppler(
         The sensor pairs.
     times
         One array of measurement times per pair, relative to the time of
-        ``x0`` (pair ``i`` gets ``times[i]``), or a :class:`BatchTimes`.
+        ``x0`` (pair ``i`` gets ``times[i]``), or a :class:`StackedTimes`.
 
     Returns
     -------
     ndarray, shape ``(..., n_Z)``
         Predicted Doppler, pair 0's times first (the paper's Eq. 11 order).
     """
-    return _batch(x0, geometry, times, jacobian=False)[0]
+    return _cv(x0, geometry, times, jacobian=False)[0]
 
 
-def batch_doppler_and_jacobian(
-    x0: ArrayLike, geometry: Geometry, times: Sequence[ArrayLike] | BatchTimes
+def cv_doppler_and_jacobian(
+    x0: ArrayLike, geometry: Geometry, times: Sequence[ArrayLike] | StackedTimes
 ) -> tuple[FloatArray, FloatArray]:
     r""":math:`\mathbf g(\mathbf x_0)` ``(..., n_Z)`` and :math:`\mathbf J(\mathbf x_0)` ``(..., n_Z, 4)``."""
-    g, jac, _ = _batch(x0, geometry, times, jacobian=True)
+    g, jac, _ = _cv(x0, geometry, times, jacobian=True)
     assert jac is not None
     return g, jac
 
 
-def batch_doppler_jacobian(
-    x0: ArrayLike, geometry: Geometry, times: Sequence[ArrayLike] | BatchTimes
+def cv_doppler_jacobian(
+    x0: ArrayLike, geometry: Geometry, times: Sequence[ArrayLike] | StackedTimes
 ) -> FloatArray:
     r"""The paper's Jacobian :math:`\mathbf J(\mathbf x_0) = \partial\mathbf g/\partial\mathbf x_0` (Eq. 15, Appendix A).
 
@@ -263,4 +265,20 @@ def batch_doppler_jacobian(
     -------
     ndarray, shape ``(..., n_Z, 4)``
     """
-    return batch_doppler_and_jacobian(x0, geometry, times)[1]
+    return cv_doppler_and_jacobian(x0, geometry, times)[1]
+
+
+def cv_information(
+    x0: ArrayLike, geometry: Geometry, times: Sequence[ArrayLike] | StackedTimes, sigma: ArrayLike
+) -> FloatArray:
+    r"""Fisher information of :math:`\mathbf x_0` from a stacked window: :math:`\mathbf J'\mathbf R^{-1}\mathbf J`.
+
+    :math:`\mathbf R = \mathrm{diag}(\sigma_j^2)`, :math:`\mathbf J` the constant-velocity map's
+    Jacobian (:func:`cv_doppler_jacobian`).
+
+    Returns
+    -------
+    ndarray, shape ``(..., 4, 4)``
+    """
+    Jw = cv_doppler_jacobian(x0, geometry, times) / np.asarray(sigma, dtype=float)[:, None]
+    return np.swapaxes(Jw, -1, -2) @ Jw

@@ -94,6 +94,11 @@ class ConstantVelocity:
         pos = x[..., :2] + dt * x[..., 2:]
         return np.concatenate([pos, np.broadcast_to(x[..., 2:], pos.shape)], axis=-1)
 
+    def predict_covariance(self, P: ArrayLike, dt: float) -> FloatArray:
+        r"""Covariance of the prediction over ``dt``: :math:`\mathbf F\mathbf P\mathbf F' + \mathbf Q(dt)`."""
+        F = self.F(dt)
+        return F @ np.asarray(P, dtype=float) @ F.T + self.Q(dt)
+
     def sqrt_information(self, dt: float) -> FloatArray:
         r"""Square-root information :math:`\mathbf R = \mathbf L^{-1}` (:math:`\mathbf Q = \mathbf L\mathbf L'`), so :math:`\mathbf R'\mathbf R = \mathbf Q(dt)^{-1}`.
 

@@ -9,7 +9,7 @@ import fgdoppler as fd
 from fgdoppler.analysis.montecarlo import MonteCarloResult, MonteCarloSpec, run_monte_carlo
 
 SPEC = MonteCarloSpec(scenarios=(fd.paper_scenario("a", 45e3), fd.paper_scenario("b", 5e3)), runs=3,
-                      estimators=("grid", "lm", "ekf", "batch"), seed=99)
+                      estimators=("grid", "lm", "ekf", "smoother"), seed=99)
 
 
 def _same(a: MonteCarloResult, b: MonteCarloResult) -> bool:

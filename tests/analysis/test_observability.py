@@ -10,7 +10,7 @@ import pytest
 
 import fgdoppler as fd
 from fgdoppler.analysis import observability as ob
-from fgdoppler.factors import X, batch_factor
+from fgdoppler.factors import X, cv_factor
 
 
 @pytest.mark.parametrize("group", [1, 3])
@@ -61,9 +61,9 @@ def test_numpy_JtJ_equals_gtsam_hessian(rng: np.random.Generator, paper_geom: fd
     times = [np.arange(10) * 0.5, 0.25 + np.arange(10) * 0.5]
     for x0 in [np.array([25e3, 2e3, 10.0, -100.0]), np.array([45e3, 2e3, 10.0, -100.0]),
                np.array([8e3, -3e3, 60.0, 40.0])]:
-        J = fd.batch_doppler_jacobian(x0, paper_geom, times)
+        J = fd.cv_doppler_jacobian(x0, paper_geom, times)
         graph = gtsam.NonlinearFactorGraph()
-        graph.add(batch_factor(X(0), paper_geom, times, fd.batch_doppler(x0, paper_geom, times), 1.0))
+        graph.add(cv_factor(X(0), paper_geom, times, fd.cv_doppler(x0, paper_geom, times), 1.0))
         v = gtsam.Values()
         v.insert(X(0), x0)
         H, _ = graph.linearize(v).hessian()
@@ -74,7 +74,7 @@ def test_measure_matches_direct_determinant() -> None:
     g = fd.paper_geometry("a")
     x0 = np.array([45e3, 2e3, 10.0, -100.0])
     times = [np.arange(10) * 0.5] * 2
-    J = fd.batch_doppler_jacobian(x0, g, times)
+    J = fd.cv_doppler_jacobian(x0, g, times)
     assert ob.observability_measure(x0, g, times) == pytest.approx(np.log10(np.linalg.det(J.T @ J)), abs=1e-8)
     # fewer measurements than unknowns: det(J'J) = 0 -> floor
     assert ob.observability_measure(x0, g, [[0.0], [0.0]]) == ob.O_FLOOR
@@ -89,7 +89,7 @@ def _numpy_inverse_fisher_chain(sim: fd.Simulation, motion: fd.ConstantVelocity)
     Inverting through the SVD of A, C = V S^-2 V', avoids squaring the condition number.
     """
     m = sim.measurements
-    times, scan = m.scan_index()
+    times, scan = m.scans().times, m.scans().scan_of
     states = sim.truth.at(times)
     n = times.size
     H = fd.bistatic_doppler_jacobian(states[scan], sim.scenario.geometry)[np.arange(len(m)), m.pair]
@@ -114,9 +114,9 @@ def test_report_marginals_equal_inverse_fisher_deterministic() -> None:
     rep = ob.observability_report(scen.geometry, sim.truth, sim.measurements)
     assert rep.status == "ok" and rep.covariances is not None
     m = sim.measurements
-    order = m.batch_order()
-    bt = fd.BatchTimes(pair=m.pair[order], t=m.time[order])
-    J = fd.batch_doppler_jacobian(np.asarray(scen.x0), scen.geometry, bt) / m.sigma[order][:, None]
+    order = m.stacked_order()
+    bt = fd.StackedTimes(pair=m.pair[order], t=m.time[order])
+    J = fd.cv_doppler_jacobian(np.asarray(scen.x0), scen.geometry, bt) / m.sigma[order][:, None]
     P0 = np.linalg.inv(J.T @ J)
     np.testing.assert_allclose(rep.covariances[0], P0, rtol=1e-6)
     F = fd.ConstantVelocity.F(rep.times[-1])

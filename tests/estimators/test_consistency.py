@@ -18,7 +18,7 @@ import fgdoppler as fd
 from fgdoppler.analysis.metrics import nees, nees_band
 from fgdoppler.estimators import run_estimator
 from fgdoppler.estimators.initiation import initiate
-from fgdoppler.models.measurement import DopplerModel
+from fgdoppler.models.observation import DopplerModel
 
 
 def _ekf_nees(n_runs: int = 200, seed: int = 7) -> tuple[np.ndarray, np.ndarray]:
@@ -28,7 +28,7 @@ def _ekf_nees(n_runs: int = 200, seed: int = 7) -> tuple[np.ndarray, np.ndarray]
     for seq in np.random.SeedSequence(seed).spawn(n_runs):
         sim = fd.simulate(sc, np.random.default_rng(seq))
         init = initiate(sim.measurements.first_per_pair(10), sc.geometry)
-        r = run_estimator("ekf", sim.measurements, model, init).main
+        r = run_estimator("ekf", sim.measurements, model, init).primary
         out.append(nees(r.states, r.covariances, sim.truth.at(r.times)))
     return r.times, np.array(out)
 

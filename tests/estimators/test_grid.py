@@ -20,18 +20,20 @@ from tests.conftest import random_geometry, random_states
 def _window(case: str = "a", x: float = 45e3, seed: int = 1):
     sim = fd.simulate(fd.paper_scenario(case, x), np.random.default_rng(seed))
     w = sim.measurements.first_per_pair(10)
-    o = w.batch_order()
-    return sim, fd.BatchTimes(pair=w.pair[o], t=w.time[o] - w.time[0]), w.doppler[o], w.sigma[o]
+    o = w.stacked_order()
+    return sim, fd.StackedTimes(pair=w.pair[o], t=w.time[o] - w.time[0]), w.doppler[o], w.sigma[o]
 
 
-SMALL = GridSpec(x=(40e3, 48e3, 1e3), y=(0.0, 4e3, 1e3), heading_deg=(0.0, 340.0, 20.0), speed_max=150.0)
+PAPER_ZONE = fd.paper_geometry("a").default_zone()
+SMALL_ZONE = fd.Zone(along=(40e3, 48e3), across=(0.0, 4e3), speed_max=150.0)
+KM = GridSpec(position_step=1e3)
 
 
 def test_chunked_and_unchunked_costs_identical() -> None:
     sim, bt, z, s = _window("b", 5e3)
-    spec = GridSpec(x=(2e3, 12e3, 1e3), y=(-2e3, 3e3, 1e3))
-    a = grid_search(sim.scenario.geometry, bt, z, s, spec, k_best=20, chunk=37)
-    b = grid_search(sim.scenario.geometry, bt, z, s, spec, k_best=20, chunk=10**8)
+    zone = fd.Zone(along=(2e3, 12e3), across=(-2e3, 3e3))
+    a = grid_search(sim.scenario.geometry, bt, z, s, zone, KM, k_best=20, chunk=37)
+    b = grid_search(sim.scenario.geometry, bt, z, s, zone, KM, k_best=20, chunk=10**8)
     np.testing.assert_array_equal(a.costs, b.costs)
     np.testing.assert_array_equal(a.states, b.states)
     # the generic per-state evaluation, chunked or not, agrees with the product kernel
@@ -43,9 +45,9 @@ def test_chunked_and_unchunked_costs_identical() -> None:
 
 def test_candidates_are_distinct_local_minima() -> None:
     sim, bt, z, s = _window("a", 25e3)
-    r = grid_search(sim.scenario.geometry, bt, z, s, k_best=8)
+    r = grid_search(sim.scenario.geometry, bt, z, s, PAPER_ZONE, k_best=8)
     assert np.all(np.diff(r.costs) >= 0)
-    xs, ys, speeds, heads = GridSpec().axes(r.speed_min)
+    xs, ys, speeds, heads = GridSpec().axes(PAPER_ZONE, 50e3, r.speed_min)
     # each returned candidate is no worse than every one of its 80 grid neighbours
     for st_, c in zip(r.states, r.costs, strict=True):
         sp = np.hypot(st_[2], st_[3])
@@ -77,17 +79,17 @@ def test_truth_is_near_the_best_candidate_noise_free() -> None:
     sc = fd.paper_scenario("a", 45e3)
     sim = fd.simulate(sc, np.random.default_rng(0))
     w = sim.measurements.first_per_pair(10)
-    o = w.batch_order()
-    bt = fd.BatchTimes(pair=w.pair[o], t=w.time[o] - w.time[0])
-    clean = fd.batch_doppler(np.array(sc.x0), sc.geometry, bt)
-    r = grid_search(sc.geometry, bt, clean, 1.0, SMALL, k_best=3)
+    o = w.stacked_order()
+    bt = fd.StackedTimes(pair=w.pair[o], t=w.time[o] - w.time[0])
+    clean = fd.cv_doppler(np.array(sc.x0), sc.geometry, bt)
+    r = grid_search(sc.geometry, bt, clean, 1.0, SMALL_ZONE, KM, k_best=3)
     assert np.linalg.norm(r.best[:2] - np.array(sc.x0[:2])) <= 1.5e3
 
 
 def test_half_plane_excludes_candidates() -> None:
     sim, bt, z, s = _window("a", 45e3)
     hp = HalfPlane(point=(0.0, 0.0), normal=(0.0, -1.0))  # south of the baseline only
-    r = grid_search(sim.scenario.geometry, bt, z, s, k_best=5, half_plane=hp)
+    r = grid_search(sim.scenario.geometry, bt, z, s, PAPER_ZONE, k_best=5, half_plane=hp)
     assert np.all(r.states[:, 1] <= 0)
 
 
@@ -115,3 +117,30 @@ def test_speed_bound_is_attained_beyond_the_sensors() -> None:
     assert speed_lower_bound(h, 1.0, n_sigma=0.0) == np.max(np.abs(h)) / 2
     # the paper's bound (max |Z|) would exclude the true speed 80 m/s here
     assert np.max(np.abs(h)) > 80.0
+
+
+def test_resolution_rule_gives_the_paper_grid_and_scales_with_the_zone() -> None:
+    # The paper's grid: 1 km steps over x 2-48 km, y -5..5 km; 10 m/s up to 200 m/s; 20 deg headings.
+    us, vs, speeds, heads = GridSpec().axes(PAPER_ZONE, 50e3, 0.0)
+    np.testing.assert_array_equal(us, np.arange(2e3, 48e3 + 1, 1e3))
+    np.testing.assert_array_equal(vs, np.arange(-5e3, 5e3 + 1, 1e3))
+    np.testing.assert_array_equal(speeds, np.arange(0.0, 201.0, 10.0))
+    np.testing.assert_allclose(np.rad2deg(heads), np.arange(0.0, 341.0, 20.0))
+    # a zone 20x the paper's area is coarsened to the node budget, never finer than D/50
+    big = fd.Zone(along=(0.0, 200e3), across=(-50e3, 50e3), speed_max=400.0)
+    spec = GridSpec()
+    step = spec.step(big, 50e3)
+    assert step == np.sqrt(big.area / spec.max_positions)
+    us, vs, speeds, _ = spec.axes(big, 50e3, 0.0)
+    assert us.size * vs.size <= spec.max_positions * 1.1
+    assert speeds[1] - speeds[0] == 20.0  # speed_max / 20
+    # a small zone gets at least 5 nodes a side
+    small = fd.Zone(along=(0.0, 2e3), across=(0.0, 1e3))
+    assert GridSpec().step(small, 50e3) == 250.0
+
+
+def test_speed_bound_above_the_zone_names_the_option() -> None:
+    import pytest
+
+    with pytest.raises(ValueError, match="--speed-max"):
+        GridSpec().axes(PAPER_ZONE, 50e3, 250.0)

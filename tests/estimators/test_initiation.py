@@ -17,22 +17,22 @@ def _noise_free_window(sc: fd.Scenario, n_per_pair: int = 10) -> fd.Measurements
     return fd.Measurements(time=m.time, pair=m.pair, doppler=clean, sigma=m.sigma)
 
 
-@pytest.mark.parametrize("window", ["states", "batch"])
+@pytest.mark.parametrize("window", ["ncv", "cv"])
 def test_noise_free_recovery_from_paper_grid(window: str) -> None:
     # Pure ML (no prior): with noise-free data the truth has zero cost.
     sc = fd.paper_scenario("a", 45e3)
-    r = initiate(_noise_free_window(sc), sc.geometry, InitiationSettings(window=window, weak_prior=False))
+    r = initiate(_noise_free_window(sc), fd.TrackingModel.of(sc.geometry, weak_prior=False), InitiationSettings(window=window))
     err = r.x_start - np.asarray(sc.x0)
     assert np.linalg.norm(err[:2]) < 1.0
     assert np.linalg.norm(err[2:]) < 0.01
-    assert r.passes_chi2 and r.covariance_status == "ok"
+    assert r.passes_chi2 and r.covariance_ok and r.status == "ok"
     assert r.cost < 1e-6
 
 
 def test_weak_prior_bias_is_small_against_the_crlb() -> None:
     sc = fd.paper_scenario("a", 45e3)
     w = _noise_free_window(sc)
-    r = initiate(w, sc.geometry, InitiationSettings(weak_prior=True))
+    r = initiate(w, sc.geometry)  # the weak prior is on by default
     assert r.P_start is not None
     err = r.x_start - np.asarray(sc.x0)
     # the prior's pull is a small fraction of one standard deviation in every component
@@ -44,8 +44,8 @@ def test_lm_and_ils_agree_where_well_conditioned() -> None:
     sim = fd.simulate(sc, np.random.default_rng(5))
     w = sim.measurements.first_per_pair(30)  # 15 s: well conditioned
     ils = initiate(w, sc.geometry, InitiationSettings(method="ils", ils_force=True))
-    lm = initiate(w, sc.geometry, InitiationSettings(method="lm", window="batch", weak_prior=False))
-    assert not ils.notes, ils.notes
+    lm = initiate(w, fd.TrackingModel.of(sc.geometry, weak_prior=False), InitiationSettings(method="lm", window="cv"))
+    assert not ils.events, ils.events
     np.testing.assert_allclose(ils.x_start, lm.x_start, rtol=1e-6, atol=1e-6)
     assert ils.cost == pytest.approx(lm.cost, rel=1e-8)
     assert ils.P_start is not None and lm.P_start is not None
@@ -59,7 +59,7 @@ def test_ils_keeps_grid_estimate_when_ill_conditioned() -> None:
     grid = initiate(w, sc.geometry, InitiationSettings(method="grid"))
     ils = initiate(w, sc.geometry, InitiationSettings(method="ils", ils_force=True))
     np.testing.assert_array_equal(ils.x_start, grid.x_start)
-    assert any("kept the grid estimate" in n for n in ils.notes)
+    assert any("kept the grid estimate" in e.message for e in ils.events)
     # the paper's default (chi-square stop) also keeps the grid estimate: it already passes
     plain = initiate(w, sc.geometry, InitiationSettings(method="ils"))
     np.testing.assert_array_equal(plain.x_start, grid.x_start)
@@ -74,7 +74,7 @@ def test_collinear_geometry_reports_mirror_and_half_plane_resolves_it() -> None:
     w = sim.measurements.first_per_pair(20)
     r = initiate(w, g, InitiationSettings())
     mirror = r.x_start * np.array([1, -1, 1, -1])
-    assert r.ambiguous
+    assert r.ambiguous and r.status == "doubtful" and any(x.code == "ambiguous" for x in r.reasons)
     # the mirror image is found to LM's convergence, far below the posterior uncertainty
     assert r.P_start is not None
     sd = np.sqrt(np.diag(r.P_start))
@@ -109,11 +109,11 @@ def test_degenerate_window_reports_instead_of_raising() -> None:
     sc = fd.Scenario(geometry=g, x0=(20e3, 0.0, 100.0, 0.0), duration=5.0)
     sim = fd.simulate(sc, np.random.default_rng(0))
     for method in ("lm", "ils", "grid"):
-        r = initiate(sim.measurements, g, InitiationSettings(method=method, weak_prior=False))
+        r = initiate(sim.measurements, fd.TrackingModel.of(g, weak_prior=False), InitiationSettings(method=method))
         assert np.all(np.isfinite(r.x_start))
-        assert r.covariance_status in ("ok", "indeterminate")
-        if r.covariance_status == "indeterminate":
-            assert r.P_start is None and r.covariance_message
+        if not r.covariance_ok:
+            assert r.P_start is None and r.status != "ok"
+            assert any(x.code == "covariance" and x.message for x in r.reasons)
 
 
 def test_input_validation() -> None:
@@ -130,9 +130,9 @@ def test_chi2_statistic_is_the_data_cost_without_regularisers() -> None:
     # truth, so the data cost (the χ² statistic) is ~0 while the objective also
     # holds the prior term, whose value at the truth is (x - c)' P^-1 (x - c).
     sc = fd.paper_scenario("a", 45e3)
-    settings = InitiationSettings(weak_prior=True)
-    r = initiate(_noise_free_window(sc), sc.geometry, settings)
-    centre, cov = fd.estimators.common.region_prior(settings.grid)
+    model = fd.TrackingModel.of(sc.geometry)
+    r = initiate(_noise_free_window(sc), model)
+    centre, cov = model.prior()
     d = np.asarray(sc.x0) - centre
     prior_at_truth = float(d @ np.linalg.solve(cov, d))
     assert r.cost < 1e-2 and r.passes_chi2
@@ -142,8 +142,9 @@ def test_chi2_statistic_is_the_data_cost_without_regularisers() -> None:
 def test_region_bound_is_inactive_inside_and_holds_the_start_inside() -> None:
     sc = fd.paper_scenario("a", 45e3)
     w = _noise_free_window(sc)
-    free = initiate(w, sc.geometry, InitiationSettings(weak_prior=False, region_bound=False))
-    bound = initiate(w, sc.geometry, InitiationSettings(weak_prior=False, region_bound=True))
+    plain = fd.TrackingModel.of(sc.geometry, weak_prior=False)
+    free = initiate(w, plain, InitiationSettings(region_bound=False))
+    bound = initiate(w, plain, InitiationSettings(region_bound=True))
     np.testing.assert_allclose(bound.x_start, free.x_start, rtol=0, atol=1e-6)
     assert bound.objective == pytest.approx(bound.cost, abs=1e-12)
     # A target 1.3 km beyond the zone's edge (x0 <= 48 km), near Tx at 50 km, moving
@@ -152,11 +153,12 @@ def test_region_bound_is_inactive_inside_and_holds_the_start_inside() -> None:
     # bimodal likelihood — kilometres away, fitting the data well but not exactly.
     out = fd.Scenario(geometry=sc.geometry, x0=(49.3e3, 1.9e3, -80.0, 9.0), duration=10.0, dt=0.5)
     w_out = _noise_free_window(out)
-    free = initiate(w_out, sc.geometry, InitiationSettings(weak_prior=False, region_bound=False))
+    free = initiate(w_out, plain, InitiationSettings(region_bound=False))
     assert np.linalg.norm(free.x_start[:2] - np.asarray(out.x0[:2])) < 1.0
-    settings = InitiationSettings(weak_prior=False)
-    bound = initiate(w_out, sc.geometry, settings)
-    assert bound.x_start[0] <= settings.grid.x[1] + 5 * settings.wall_sigma[0]
+    settings = InitiationSettings()
+    bound = initiate(w_out, plain, settings)
+    assert plain.zone is not None
+    assert bound.x_start[0] <= plain.zone.along[1] + 5 * settings.wall_sigma[0]
     assert np.linalg.norm(bound.x_start[:2] - np.asarray(out.x0[:2])) > 1e3
     assert 1e-3 < bound.cost < bound.chi2_threshold
 
@@ -179,12 +181,14 @@ def test_start_held_at_the_region_boundary_is_reported() -> None:
     # the boundary and the result says so.
     g = fd.paper_geometry("a")
     sc = fd.Scenario(geometry=g, x0=(55e3, 3e3, -50.0, -20.0), duration=10.0, dt=0.5)
-    settings = InitiationSettings(weak_prior=False)
-    r = initiate(_noise_free_window(sc), g, settings)
-    assert any("boundary" in n for n in r.notes)
+    settings = InitiationSettings()
+    model = fd.TrackingModel.of(g, weak_prior=False)
+    r = initiate(_noise_free_window(sc), model, settings)
+    assert r.status == "doubtful" and any(x.code == "boundary" for x in r.reasons)
     tol = 5 * settings.wall_sigma[0]
-    assert settings.grid.x[0] - tol <= r.x_start[0] <= settings.grid.x[1] + tol
-    assert settings.grid.y[0] - tol <= r.x_start[1] <= settings.grid.y[1] + tol
+    assert model.zone is not None
+    assert model.zone.along[0] - tol <= r.x_start[0] <= model.zone.along[1] + tol
+    assert model.zone.across[0] - tol <= r.x_start[1] <= model.zone.across[1] + tol
 
 
 def test_active_region_wall_does_not_shrink_the_covariance() -> None:
@@ -194,10 +198,10 @@ def test_active_region_wall_does_not_shrink_the_covariance() -> None:
     g = fd.paper_geometry("a")
     sc = fd.Scenario(geometry=g, x0=(55e3, 3e3, -50.0, -20.0), duration=10.0, dt=0.5)
     w = _noise_free_window(sc)
-    r = initiate(w, g, InitiationSettings(weak_prior=False, window="batch"))
-    assert any("boundary" in n for n in r.notes) and r.P_start is not None
+    r = initiate(w, fd.TrackingModel.of(g, weak_prior=False), InitiationSettings(window="cv"))
+    assert any(x.code == "boundary" for x in r.reasons) and r.P_start is not None
     times = [w.time[w.pair == p] - w.time[0] for p in range(2)]
-    J = fd.batch_doppler_jacobian(r.x_start, g, times)
+    J = fd.cv_doppler_jacobian(r.x_start, g, times)
     sigma = np.concatenate([w.sigma[w.pair == p] for p in range(2)])
     info = (J / sigma[:, None]).T @ (J / sigma[:, None])
     np.testing.assert_allclose(r.P_start, np.linalg.inv(info), rtol=1e-6)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import gtsam
 import numpy as np
@@ -10,22 +10,27 @@ import pytest
 
 import fgdoppler as fd
 from fgdoppler.estimators import run_estimator
-from fgdoppler.estimators.batch import run_batch
-from fgdoppler.estimators.common import Scans, TrackerSettings, region_prior
 from fgdoppler.estimators.ekf import ExtendedKalmanFilter, run_ekf
 from fgdoppler.estimators.fixed_lag import FixedLagTracker, run_fixed_lag
 from fgdoppler.estimators.initiation import initiate, lm_params
 from fgdoppler.estimators.isam2 import ISAM2Tracker, run_isam2
 from fgdoppler.estimators.results import TrackResult
+from fgdoppler.estimators.settings import (
+    EKFSettings,
+    FixedLagSettings,
+    ISAM2Settings,
+    SmootherSettings,
+)
+from fgdoppler.estimators.smoother import run_smoother
 from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
-from fgdoppler.models.measurement import DopplerModel
 
 
 def _setup(case: str = "a", x: float = 45e3, seed: int = 1):
     sc = fd.paper_scenario(case, x)
     sim = fd.simulate(sc, np.random.default_rng(seed))
-    init = initiate(sim.measurements.first_per_pair(10), sc.geometry)
-    return sc, sim, DopplerModel(geometry=sc.geometry), init
+    model = fd.TrackingModel.of(sc.geometry)
+    init = initiate(sim.measurements.first_per_pair(10), model)
+    return sc, sim, model, init
 
 
 def _rel(a: np.ndarray, b: np.ndarray) -> float:
@@ -34,18 +39,18 @@ def _rel(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(a - b) / scale))
 
 
-def _gtsam_lm(sim: fd.Simulation, model: DopplerModel, settings: TrackerSettings, start: np.ndarray):
-    """The same graph built from CustomFactors and solved by GTSAM's own LM."""
+def _gtsam_lm(sim: fd.Simulation, model: fd.TrackingModel, start: np.ndarray):
+    """The same graph built from CustomFactors one by one here and solved by GTSAM's own LM."""
     m = sim.measurements
-    sc = Scans.of(m)
+    sc = m.scans()
     g = gtsam.NonlinearFactorGraph()
     v = gtsam.Values()
-    g.add(prior_factor(X(0), *region_prior(settings.grid)))
+    g.add(prior_factor(X(0), *model.prior()))
     for k in range(len(sc)):
         sl = sc.rows(k)
-        g.add(measurement_factor(X(k), model, m.pair[sl], m.doppler[sl], m.sigma[sl]))
+        g.add(measurement_factor(X(k), model.observation, m.pair[sl], m.doppler[sl], m.sigma[sl]))
         if k:
-            g.add(motion_factor(X(k - 1), X(k), sc.times[k] - sc.times[k - 1], settings.motion))
+            g.add(motion_factor(X(k - 1), X(k), sc.times[k] - sc.times[k - 1], model.motion))
         v.insert(X(k), start[k])
     res = gtsam.LevenbergMarquardtOptimizer(g, v, lm_params(200)).optimize()
     keys = [X(k) for k in range(len(sc))]
@@ -63,11 +68,10 @@ def _gtsam_lm(sim: fd.Simulation, model: DopplerModel, settings: TrackerSettings
 @pytest.mark.parametrize(("case", "x"), [("a", 45e3), ("b", 5e3)])
 def test_isam2_and_batch_equal_gtsam_lm_on_the_same_graph(case: str, x: float) -> None:
     _, sim, model, init = _setup(case, x)
-    s = TrackerSettings()
-    isam = run_isam2(sim.measurements, model, init, s).estimates["smoothed"]
-    batch = run_batch(sim.measurements, model, init, s).main
+    isam = run_isam2(sim.measurements, model, init).estimate("smoothed")
+    batch = run_smoother(sim.measurements, model, init).primary
     # GTSAM LM started away from both answers
-    lm, lm_cov = _gtsam_lm(sim, model, s, sim.truth.states + np.array([50.0, -30.0, 1.0, -0.5]))
+    lm, lm_cov = _gtsam_lm(sim, model, sim.truth.states + np.array([50.0, -30.0, 1.0, -0.5]))
     assert _rel(isam.states, lm) <= 1e-6
     assert _rel(batch.states, lm) <= 1e-6
     for covs in (isam.covariances, batch.covariances):
@@ -77,9 +81,8 @@ def test_isam2_and_batch_equal_gtsam_lm_on_the_same_graph(case: str, x: float) -
 
 def test_fixed_lag_longer_than_track_equals_batch() -> None:
     _, sim, model, init = _setup("a", 45e3)
-    s = TrackerSettings()
-    batch = run_batch(sim.measurements, model, init, s).main
-    fl = run_fixed_lag(sim.measurements, model, init, replace(s, lag=1e3)).main
+    batch = run_smoother(sim.measurements, model, init).primary
+    fl = run_fixed_lag(sim.measurements, model, init, FixedLagSettings(lag=1e3)).primary
     np.testing.assert_array_equal(fl.times, batch.times)
     assert _rel(fl.states, batch.states) <= 1e-6
     scale = np.abs(batch.covariances).max(axis=(1, 2))[:, None, None]
@@ -88,12 +91,11 @@ def test_fixed_lag_longer_than_track_equals_batch() -> None:
 
 def test_fixed_lag_marginalises_and_stays_close_to_batch() -> None:
     _, sim, model, init = _setup("b", 5e3)
-    s = TrackerSettings(lag=3.0)
-    fl = run_fixed_lag(sim.measurements, model, init, s)
-    assert not fl.warnings
-    lag = fl.estimates["lagged"]
+    fl = run_fixed_lag(sim.measurements, model, init, FixedLagSettings(lag=3.0))
+    assert not fl.events and fl.status == "ok"
+    lag = fl.estimate("lagged")
     assert len(lag) == sim.truth.times.size
-    batch = run_batch(sim.measurements, model, init, s).main
+    batch = run_smoother(sim.measurements, model, init).primary
     # With marginalisation, old information is frozen at old linearisation points, so the
     # last state differs from the full batch only by that linearisation loss: small against
     # the posterior standard deviation.
@@ -147,7 +149,7 @@ def _kalman(x0, P0, t0, scans, motion):
 def test_linear_gaussian_surrogate_ekf_isam2_fixed_lag_agree_with_kalman() -> None:
     rng = np.random.default_rng(4)
     motion = fd.ConstantVelocity(q=0.5)
-    s = TrackerSettings(motion=motion, gate_probability=None)
+    tm = fd.TrackingModel(observation=PositionModel(), motion=motion)
     x0 = np.array([100.0, -50.0, 3.0, 1.0])
     P0 = np.diag([25.0, 25.0, 4.0, 4.0])
     times = np.cumsum(rng.uniform(0.2, 1.0, 40))
@@ -157,10 +159,9 @@ def test_linear_gaussian_surrogate_ekf_isam2_fixed_lag_agree_with_kalman() -> No
         truth = x0 + np.array([t * 3.0, t * 1.0, 0, 0])
         scans.append((t, ch, truth[ch] + rng.normal(0, 2.0, len(ch)), [2.0] * len(ch)))
     ref = _kalman(x0, P0, 0.0, scans, motion)
-    model = PositionModel()
-    ekf = ExtendedKalmanFilter(model, x0, P0, 0.0, s)
-    isam = ISAM2Tracker(model, s, prior=None)
-    fl = FixedLagTracker(model, replace(s, lag=2.5), prior=None)
+    ekf = ExtendedKalmanFilter(tm, x0, P0, 0.0, EKFSettings(gate_probability=None))
+    isam = ISAM2Tracker(tm, ISAM2Settings(gate_probability=None), prior=None)
+    fl = FixedLagTracker(tm, FixedLagSettings(gate_probability=None, lag=2.5), prior=None)
     # iSAM2/fixed-lag: a state at t = 0 with the prior and no measurement, then the scans
     isam.prior = (x0, P0)
     isam.add_scan(0.0, [], [], [], x0)
@@ -184,20 +185,20 @@ def test_outlier_is_gated_by_nis_and_downweighted_by_huber() -> None:
     j = int(np.flatnonzero(m.time == 20.0)[0])
     bad[j] += 60.0  # 60 sigma
     mo = fd.Measurements(time=m.time, pair=m.pair, doppler=bad, sigma=m.sigma)
-    clean = run_ekf(m, model, init).main
+    clean = run_ekf(m, model, init).primary
     for name in ("ekf", "isam2", "fixed-lag"):
-        r = run_estimator(name, mo, model, init, TrackerSettings())
+        r = run_estimator(name, mo, model, init)
         rejected = r.nis[r.nis[:, 3] == 0]
         assert rejected.shape[0] >= 1 and np.any(rejected[:, 0] == 20.0), name
-        assert any("rejected" in w for _, w in r.warnings), name
-    ekf_out = run_ekf(mo, model, init).main
+        assert any("rejected" in e.message for e in r.events), name
+    ekf_out = run_ekf(mo, model, init).primary
     # rejecting the outlier costs one measurement's information: a small fraction of sigma
     sd = np.sqrt(np.diag(clean.covariances[-1]))
     assert np.all(np.abs(ekf_out.states[-1] - clean.states[-1]) < 0.25 * sd)
     # batch: Huber limits the damage of the outlier compared with a plain Gaussian loss
     truth_end = sim.truth.states[-1]
-    plain = run_batch(mo, model, init, TrackerSettings()).main
-    robust = run_batch(mo, model, init, TrackerSettings(huber_k=1.345)).main
+    plain = run_smoother(mo, model, init).primary
+    robust = run_smoother(mo, model, init, SmootherSettings(huber_k=1.345)).primary
     assert np.linalg.norm(robust.states[-1, :2] - truth_end[:2]) < np.linalg.norm(plain.states[-1, :2] - truth_end[:2])
 
 
@@ -205,12 +206,12 @@ def test_gap_in_the_data_is_bridged() -> None:
     _, sim, model, init = _setup("a", 45e3)
     m = sim.measurements
     gapped = m.subset((m.time <= 10.0) | (m.time >= 20.0))
-    for name in ("ekf", "isam2", "fixed-lag", "batch"):
-        r = run_estimator(name, gapped, model, init, TrackerSettings())
-        full = run_estimator(name, m, model, init, TrackerSettings()).main
-        e = r.main
+    for name in fd.ESTIMATORS:
+        r = run_estimator(name, gapped, model, init)
+        full = run_estimator(name, m, model, init).primary
+        e = r.primary
         assert np.all(np.isfinite(e.states)) and np.all(e.cov_ok), name
-        assert not any("failed" in w for _, w in r.warnings), name
+        assert not any("failed" in ev.message for ev in r.events), name
         assert not np.any((e.times > 10.0) & (e.times < 20.0)), name
         # ten seconds without data leave the estimate at t = 20 s less certain than with them
         i, j = np.searchsorted(e.times, 20.0), np.searchsorted(full.times, 20.0)
@@ -218,7 +219,7 @@ def test_gap_in_the_data_is_bridged() -> None:
 
 
 def test_out_of_order_is_rejected_in_streaming_and_batch_input() -> None:
-    model = DopplerModel(geometry=fd.paper_geometry("a"))
+    model = fd.TrackingModel.of(fd.paper_geometry("a"))
     x0 = np.array([45e3, 2e3, 10.0, -100.0])
     ekf = ExtendedKalmanFilter(model, x0, np.eye(4), 1.0)
     with pytest.raises(ValueError, match="out of order"):
@@ -240,13 +241,13 @@ def test_ill_conditioned_steps_do_not_crash() -> None:
     g = fd.paper_geometry("a")
     sc = fd.Scenario(geometry=g, x0=(20e3, 0.0, 100.0, 0.0), duration=20.0)
     sim = fd.simulate(sc, np.random.default_rng(0))
-    model = DopplerModel(geometry=g)
-    init = initiate(sim.measurements.first_per_pair(10), g)
-    for name in ("ekf", "isam2", "fixed-lag", "batch"):
-        r = run_estimator(name, sim.measurements, model, init, TrackerSettings())
-        assert np.all(np.isfinite(r.main.states)), name
+    model = fd.TrackingModel.of(g)
+    init = initiate(sim.measurements.first_per_pair(10), model)
+    for name in fd.ESTIMATORS:
+        r = run_estimator(name, sim.measurements, model, init)
+        assert np.all(np.isfinite(r.primary.states)), name
         # indeterminate covariances are flagged, never NaN
-        assert np.all(np.isfinite(r.main.covariances)), name
+        assert np.all(np.isfinite(r.primary.covariances)), name
 
 
 def test_ekf_skips_update_on_bad_innovation_variance() -> None:
@@ -260,26 +261,27 @@ def test_ekf_skips_update_on_bad_innovation_variance() -> None:
         def predict_and_jacobian(self, states, channels):
             return np.zeros(1), np.full((1, 4), np.nan)
 
-    ekf = ExtendedKalmanFilter(Broken(), np.zeros(4), np.eye(4), 0.0)
+    ekf = ExtendedKalmanFilter(fd.TrackingModel(observation=Broken()), np.zeros(4), np.eye(4), 0.0)
     x_before = ekf.x.copy()
     assert np.isnan(ekf.update(1.0, 0, 1.0, 1.0))
-    assert ekf.warnings and "skipped" in ekf.warnings[0][1]
+    assert ekf.events and "skipped" in ekf.events[0].message
     assert np.all(np.isfinite(ekf.x))
     np.testing.assert_allclose(ekf.x[:2], x_before[:2])
 
 
 def test_result_csv_json_round_trip(tmp_path) -> None:
     _, sim, model, init = _setup("b", 5e3)
-    r = run_batch(sim.measurements, model, init)
+    r = run_smoother(sim.measurements, model, init)
     r.to_csv(tmp_path / "t.csv")
     back = TrackResult.read_csv(tmp_path / "t.csv")
-    np.testing.assert_array_equal(back.states, r.main.states)
-    np.testing.assert_allclose(back.covariances, r.main.covariances, rtol=1e-15)
+    np.testing.assert_array_equal(back.states, r.primary.states)
+    np.testing.assert_allclose(back.covariances, r.primary.covariances, rtol=1e-15)
     r.to_json(tmp_path / "t.json")
     import json
 
     d = json.loads((tmp_path / "t.json").read_text())
-    assert d["estimator"] == "batch" and len(d["states"]) == len(r.main)
+    assert d["estimator"] == "smoother" and d["kind"] == "smoothed" and len(d["states"]) == len(r.primary)
+    assert d["status"] == r.status and d["settings"]["type"] == "SmootherSettings"
     assert len(d["covariances"][0]) == 4
 
 
@@ -292,13 +294,12 @@ def test_unknown_estimator() -> None:
 def test_window_start_is_the_initiation_solution_where_the_wall_is_inactive() -> None:
     # Same window graph built two ways (initiation: Doppler factors; trackers: generic
     # measurement factors): where the region wall is inactive both optima coincide.
-    from fgdoppler.estimators.common import split_window
-    from fgdoppler.estimators.window import window_start
+    from fgdoppler.estimators.window import split_window, window_start
 
     _, sim, model, init = _setup("a", 45e3, seed=1)
-    assert not any("boundary" in n for n in init.notes)
+    assert not any(r.code == "boundary" for r in init.reasons)
     window = split_window(sim.measurements, init.t_end)[0]
-    states, note = window_start(model, window, init, TrackerSettings())
+    states, note = window_start(model, window, init)
     assert note is None
     assert np.linalg.norm(states[0, :2] - init.x_start[:2]) < 1e-2
     assert np.linalg.norm(states[-1, :2] - init.x_end[:2]) < 1e-2
@@ -311,23 +312,20 @@ def test_wall_held_initiation_does_not_throw_isam2_off() -> None:
     # update (one undamped Gauss-Newton step in this very ill-conditioned window, sd of
     # kilometres) moves the window end by well under one standard deviation.  Started on
     # the wall-held track instead, it moved about 6 km (Mahalanobis^2 5-10, seeds 0-2).
-    from fgdoppler.estimators.common import split_window
-    from fgdoppler.estimators.initiation import InitiationSettings
-    from fgdoppler.estimators.window import window_start
+    from fgdoppler.estimators.window import split_window, window_start
 
     g = fd.paper_geometry("a")
     sc = fd.Scenario(geometry=g, x0=(55e3, 3e3, -50.0, -20.0), duration=15.0, dt=0.5, sigma=1.0)
     sim = fd.simulate(sc, np.random.default_rng(2))
-    init = initiate(sim.measurements.first_per_pair(10), g, InitiationSettings())
-    assert any("boundary" in n for n in init.notes)
-    model = DopplerModel(geometry=g)
-    settings = TrackerSettings()
+    model = fd.TrackingModel.of(g)
+    init = initiate(sim.measurements.first_per_pair(10), model)
+    assert any(r.code == "boundary" for r in init.reasons)
     window = split_window(sim.measurements, init.t_end)[0]
-    start, note = window_start(model, window, init, settings)
+    start, note = window_start(model, window, init)
     assert note is None
     assert np.linalg.norm(start[0, :2] - init.x_start[:2]) > 100.0  # it left the wall
-    r = run_isam2(sim.measurements, model, init, settings)
-    first, P = r.estimates["filtered"].states[0], r.estimates["filtered"].covariances[0]
+    r = run_isam2(sim.measurements, model, init)
+    first, P = r.estimate("filtered").states[0], r.estimate("filtered").covariances[0]
     d = first - start[-1]
     assert float(d @ np.linalg.solve(P, d)) < 1.0
     # the track is kept: the gate accepts nearly all later measurements

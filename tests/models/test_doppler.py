@@ -50,8 +50,8 @@ def test_batch_jacobian_matches_central_differences(rng: np.random.Generator) ->
         times = [np.arange(10) * 0.5 + 0.1 * i for i in range(g.n_pairs)]
         # keep the whole 5 s trajectory away from the sensors
         x = random_states(rng, g, 250, min_dist=3e3)
-        J = fd.batch_doppler_jacobian(x, g, times)
-        Jfd = _central_diff(lambda s, g=g, times=times: fd.batch_doppler(s, g, times), x, STEPS)
+        J = fd.cv_doppler_jacobian(x, g, times)
+        Jfd = _central_diff(lambda s, g=g, times=times: fd.cv_doppler(s, g, times), x, STEPS)
         assert J.shape == (250, 10 * g.n_pairs, 4)
         assert np.max(_rel_err(J, Jfd)) <= 1e-6
         n_total += x.shape[0]
@@ -63,7 +63,7 @@ def test_paper_appendix_formula_for_batch_jacobian(rng: np.random.Generator) -> 
     g = fd.paper_geometry("a")
     x0 = random_states(rng, g, 50, min_dist=3e3)
     times = [np.arange(10) * 0.5, np.arange(10) * 0.5]
-    J = fd.batch_doppler_jacobian(x0, g, times)
+    J = fd.cv_doppler_jacobian(x0, g, times)
     col = 0
     for i in range(2):
         for t in times[i]:
@@ -140,7 +140,7 @@ def test_batch_map_equals_doppler_along_cv_trajectory(rng: np.random.Generator) 
     g = fd.paper_geometry("b")
     x0 = random_states(rng, g, 20, min_dist=3e3)
     times = [np.arange(10) * 0.5, 0.25 + np.arange(10) * 0.5]
-    gx = fd.batch_doppler(x0, g, times)
+    gx = fd.cv_doppler(x0, g, times)
     for i, ts in enumerate(times):
         for j, t in enumerate(ts):
             xt = x0 + t * np.concatenate([x0[:, 2:], np.zeros((20, 2))], axis=1)
@@ -155,7 +155,7 @@ def test_sensor_singularity_raises() -> None:
         fd.bistatic_doppler_jacobian([50e3, 1e3, 1.0, 1.0], g)
     # a trajectory that reaches the receiver at t = 1 s
     with pytest.raises(ValueError, match="coincide with a sensor"):
-        fd.batch_doppler([-100.0, 0.0, 100.0, 0.0], g, [[0.0, 1.0], [0.0]])
+        fd.cv_doppler([-100.0, 0.0, 100.0, 0.0], g, [[0.0, 1.0], [0.0]])
 
 
 def test_bad_inputs() -> None:
@@ -163,11 +163,11 @@ def test_bad_inputs() -> None:
     with pytest.raises(ValueError, match=r"\(\.\.\., 4\)"):
         fd.bistatic_doppler([1.0, 2.0, 3.0], g)
     with pytest.raises(ValueError, match="out of range"):
-        fd.batch_doppler([1e3, 2e3, 1.0, 1.0], g, [[0.0], [0.0], [0.0]])
+        fd.cv_doppler([1e3, 2e3, 1.0, 1.0], g, [[0.0], [0.0], [0.0]])
 
 
 def test_measurement_model_small_and_vectorised_paths_agree(rng: np.random.Generator) -> None:
-    from fgdoppler.models.measurement import DopplerModel
+    from fgdoppler.models.observation import DopplerModel
 
     g = random_geometry(rng, 3)
     model = DopplerModel(geometry=g)

@@ -1,8 +1,8 @@
-r"""Offline reconstruction: the whole recording's graph solved by Levenberg–Marquardt.
+r"""Offline smoother: the whole recording's graph solved by Levenberg–Marquardt.
 
 The graph has one state per distinct measurement time, a measurement factor
 per state, a constant-velocity motion factor per step and (optionally) the
-weak search-region prior.  It is started from the initiation (window) and an
+zone's weak prior.  It is started from the initiation (window) and an
 EKF pass (the rest), then solved by LM with Marquardt's diagonal scaling.
 
 Cost per iteration is O(N) in the number of states, with a small constant:
@@ -18,6 +18,11 @@ Cost per iteration is O(N) in the number of states, with a small constant:
 * per-time marginal covariances come from the QR conditionals of the final,
   undamped system by an O(N) backward recursion
   (:func:`~fgdoppler.estimators.marginals.chain_solve`).
+
+Verdict reasons: ``not-converged`` (LM hit its iteration cap or found no
+step that reduces the cost), ``covariance`` (indeterminate marginals),
+``chi2`` (the final cost fails a 99.9 % χ² check: it cannot explain the
+data), each ``"doubtful"``.
 """
 
 from __future__ import annotations
@@ -30,49 +35,68 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.stats import chi2
 
-from fgdoppler.estimators.common import (
-    Scans,
-    TrackerSettings,
-    check_model,
-    region_prior,
-)
+from fgdoppler._text import first_line
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
 from fgdoppler.estimators.marginals import chain_solve, check_covariances
 from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.settings import SmootherSettings
+from fgdoppler.estimators.verdict import Event, Judged, Reason
 from fgdoppler.factors import X
 from fgdoppler.measurements import Measurements
-from fgdoppler.models.measurement import DopplerModel, MeasurementModel
+from fgdoppler.models.motion import ConstantVelocity
+from fgdoppler.models.observation import DopplerModel, check_channels
+from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["BatchSolution", "initial_trajectory", "rts_smooth", "run_batch", "solve_batch"]
+__all__ = ["SmootherSolution", "initial_trajectory", "rts_smooth", "run_smoother", "solve_smoother"]
 
 FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True, kw_only=True)
-class BatchSolution:
-    """States, covariances (or ``None``), final cost, iterations and warnings of :func:`solve_batch`."""
+class SmootherSolution(Judged):
+    """Result of :func:`solve_smoother`.
+
+    Attributes
+    ----------
+    times
+        Scan times ``(n,)``.
+    states
+        Smoothed states ``(n, 4)``.
+    covariances
+        Marginal covariances ``(n, 4, 4)``, or ``None`` (not asked for, or
+        indeterminate: a ``covariance`` reason says which).
+    cost
+        Final sum of squared whitened residuals (Huber-weighted where robust).
+    iterations
+        Levenberg–Marquardt iterations.
+    reasons
+        The verdict's findings (:mod:`fgdoppler.estimators.verdict`).
+    notes
+        Messages of what happened (failed linear solves, ...).
+    """
 
     times: FloatArray
     states: FloatArray
     covariances: FloatArray | None
     cost: float
     iterations: int
-    converged: bool
-    warnings: tuple[str, ...]
+    reasons: tuple[Reason, ...] = ()
+    notes: tuple[str, ...] = ()
+
 
 
 class _Problem:
-    def __init__(self, model: MeasurementModel, meas: Measurements, settings: TrackerSettings,
+    def __init__(self, model: TrackingModel, meas: Measurements, huber_k: float | None,
                  prior: tuple[FloatArray, FloatArray] | None) -> None:
-        self.model = model
+        self.model = model.observation
         self.meas = meas
-        self.settings = settings
-        self.scans = Scans.of(meas)
+        self.huber_k = huber_k
+        self.scans = meas.scans()
         self.times = self.scans.times
         self.scan_of = self.scans.scan_of
-        self.motion = MotionBlocks(settings.motion)
+        self.motion = MotionBlocks(model.motion)
         self.n = len(self.scans)
         if prior is not None:
             Ri = np.linalg.inv(np.linalg.cholesky(prior[1]))
@@ -93,7 +117,7 @@ class _Problem:
     def cost(self, states: FloatArray) -> float:
         h = self.model.predict(states[self.scan_of], self.meas.pair)
         r = np.abs((self.meas.doppler - h) / self.meas.sigma)
-        k = self.settings.huber_k
+        k = self.huber_k
         rho = r * r if k is None else np.where(r <= k, r * r, 2 * k * r - k * k)
         c = float(np.sum(rho)) + float(np.sum(self.motion.residuals(states, self.times) ** 2))
         if self.prior is not None:
@@ -111,7 +135,7 @@ class _Problem:
         """
         n, m = self.n, self.m_max
         lin = linearize_rows(self.model, states[self.scan_of], self.meas.pair, self.meas.doppler,
-                             self.meas.sigma, self.settings.huber_k)
+                             self.meas.sigma, self.huber_k)
         # Marquardt scaling: the diagonal of J'J per state
         diag = np.zeros((n, 4))
         np.add.at(diag, self.scan_of, lin.A**2)
@@ -159,15 +183,14 @@ class _Problem:
         return chain_solve(gfg, self.keys, covariances=covariances)
 
 
-def solve_batch(
+def solve_smoother(
     measurements: Measurements,
-    model: MeasurementModel,
+    model: TrackingModel,
     initial: ArrayLike,
-    settings: TrackerSettings | None = None,
+    settings: SmootherSettings | None = None,
     *,
     prior: tuple[ArrayLike, ArrayLike] | None = None,
-    covariances: bool = True,
-) -> BatchSolution:
+) -> SmootherSolution:
     """Levenberg–Marquardt on the full trajectory graph.
 
     Parameters
@@ -175,37 +198,49 @@ def solve_batch(
     measurements
         The whole recording.
     model
-        Measurement model.
+        Observation and motion model.
     initial
         Initial states, one per distinct measurement time, ``(n, 4)``.
     settings
-        Motion model, Huber threshold, iteration cap.
+        Huber threshold, iteration cap, whether to compute covariances.
     prior
         Optional ``(mean, covariance)`` on the first state.
-    covariances
-        Compute per-time marginal covariances at the solution.
     """
-    settings = settings or TrackerSettings()
-    check_model(model, measurements)
+    settings = settings or SmootherSettings()
+    check_channels(model.observation, measurements)
     pr = None if prior is None else (np.asarray(prior[0], float), np.asarray(prior[1], float))
-    prob = _Problem(model, measurements, settings, pr)
+    prob = _Problem(model, measurements, settings.huber_k, pr)
     x = np.array(initial, dtype=float).reshape(-1, 4)
     if x.shape[0] != prob.n:
         raise ValueError(f"{x.shape[0]} initial states for {prob.n} measurement times")
-    warnings: list[str] = []
+    x, cost, it, stop, notes = _levenberg_marquardt(prob, x, settings.max_iterations)
+    reasons = [] if stop is None else [Reason(code="not-converged", status="doubtful", message=stop)]
+    covs = None
+    if settings.covariances:
+        covs, problem = _covariances(prob, x)
+        if problem:
+            reasons.append(Reason(code="covariance", status="doubtful",
+                                  message=f"marginal covariances indeterminate: {problem}"))
+    return SmootherSolution(times=prob.times, states=x, covariances=covs, cost=cost, iterations=it,
+                            reasons=tuple(reasons), notes=tuple(notes))
+
+
+def _levenberg_marquardt(prob: _Problem, x: FloatArray, max_iterations: int
+                         ) -> tuple[FloatArray, float, int, str | None, list[str]]:
+    """LM with Nielsen's damping update; returns (states, cost, iterations, why it did not converge, notes)."""
+    notes: list[str] = []
     cost = prob.cost(x)
     # Nielsen's damping update driven by the gain ratio rho = actual / predicted decrease.
     lam, nu = 1e-6, 2.0
-    converged = False
     it = 0
-    for it in range(1, settings.max_iterations + 1):
+    for it in range(1, max_iterations + 1):
         try:
             gfg = prob.system(x, lam)
             dx, _ = prob.solve(gfg)
         except RuntimeError as exc:
             lam *= nu
             nu *= 2.0
-            warnings.append(f"iteration {it}: linear solve failed ({str(exc).strip().splitlines()[0]}); damping raised")
+            notes.append(f"iteration {it}: linear solve failed ({first_line(exc)}); damping raised")
             continue
         predicted = cost - prob.model_cost(gfg, dx, lam)
         try:
@@ -221,36 +256,29 @@ def solve_batch(
             nu = 2.0
             # converged when the model predicts (and we got) a negligible decrease
             if predicted <= 1e-12 * max(cost, 1.0) or decrease <= 1e-13 * max(cost, 1.0):
-                converged = True
-                break
+                return x, cost, it, None, notes
         else:
             if predicted <= 1e-12 * max(cost, 1.0):
-                converged = True  # at the optimum up to round-off
-                break
+                return x, cost, it, None, notes  # at the optimum up to round-off
             lam *= nu
             nu *= 2.0
             if lam > 1e16:
-                warnings.append("LM stopped: no step reduces the cost (damping exhausted)")
-                converged = True
-                break
-    if not converged:
-        warnings.append(f"LM reached {settings.max_iterations} iterations without converging")
-    covs = None
-    if covariances:
-        try:
-            _, covs = prob.solve(prob.system(x, 0.0), covariances=True)
-            assert covs is not None
-            problem = check_covariances(covs)
-            if problem:
-                raise RuntimeError(problem)
-        except RuntimeError as exc:
-            warnings.append(f"marginal covariances indeterminate: {str(exc).strip().splitlines()[0]}")
-            covs = None
-    return BatchSolution(times=prob.times, states=x, covariances=covs, cost=cost, iterations=it,
-                         converged=converged, warnings=tuple(warnings))
+                return x, cost, it, "LM stopped: no step reduces the cost (damping exhausted)", notes
+    return x, cost, it, f"LM reached {max_iterations} iterations without converging", notes
 
 
-def rts_smooth(times: FloatArray, states: FloatArray, covs: FloatArray, settings: TrackerSettings) -> FloatArray:
+def _covariances(prob: _Problem, x: FloatArray) -> tuple[FloatArray | None, str]:
+    """Marginal covariances of the undamped system at ``x``, or ``None`` and why not."""
+    try:
+        _, covs = prob.solve(prob.system(x, 0.0), covariances=True)
+    except RuntimeError as exc:
+        return None, first_line(exc)
+    assert covs is not None
+    problem = check_covariances(covs)
+    return (None, problem) if problem else (covs, "")
+
+
+def rts_smooth(times: FloatArray, states: FloatArray, covs: FloatArray, motion: ConstantVelocity) -> FloatArray:
     r"""Rauch–Tung–Striebel backward pass over filtered estimates at consecutive scans.
 
     Between scans there are no measurements, so the prediction of scan
@@ -258,95 +286,95 @@ def rts_smooth(times: FloatArray, states: FloatArray, covs: FloatArray, settings
     :math:`\mathbf P^- = \mathbf F\mathbf P_k\mathbf F' + \mathbf Q`, and
     :math:`\mathbf x^s_k = \mathbf x_k + \mathbf P_k\mathbf F'(\mathbf P^-)^{-1}(\mathbf x^s_{k+1} - \mathbf F\mathbf x_k)`.
     """
-    m = settings.motion
     out = states.copy()
     for k in range(times.size - 2, -1, -1):
         dt = times[k + 1] - times[k]
-        F = m.F(dt)
-        P_pred = F @ covs[k] @ F.T + m.Q(dt)
+        F = motion.F(dt)
+        P_pred = motion.predict_covariance(covs[k], dt)
         G = np.linalg.solve(P_pred, F @ covs[k]).T
         out[k] = states[k] + G @ (out[k + 1] - F @ states[k])
     return out
 
 
-def initial_trajectory(measurements: Measurements, model: MeasurementModel, init: Initiation,
-                       settings: TrackerSettings) -> FloatArray:
+def initial_trajectory(measurements: Measurements, model: TrackingModel, init: Initiation,
+                       settings: SmootherSettings) -> FloatArray:
     """Starting trajectory: EKF after the window, RTS-smoothed, and its CV extrapolation back over the window.
 
     Raw EKF states violate a small process noise badly between scans (the
     cost of such a start can exceed 1e15); the RTS pass makes the start
     consistent with the motion model so LM begins near the optimum.
     """
-    times, _ = measurements.scan_index()
-    ekf = run_ekf(measurements, model, init, settings).main
-    smoothed = rts_smooth(ekf.times, ekf.states, ekf.covariances, settings) if np.all(ekf.cov_ok) else ekf.states
+    times = measurements.scans().times
+    ekf = run_ekf(measurements, model, init, settings.start()).primary
+    smoothed = rts_smooth(ekf.times, ekf.states, ekf.covariances, model.motion) if np.all(ekf.cov_ok) else ekf.states
     out = np.empty((times.size, 4))
     in_window = times <= init.t_end
-    out[in_window] = settings.motion.propagate(smoothed[0], times[in_window] - ekf.times[0])
+    out[in_window] = model.motion.propagate(smoothed[0], times[in_window] - ekf.times[0])
     idx = np.searchsorted(ekf.times, times[~in_window])
     out[~in_window] = smoothed[np.clip(idx, 0, len(ekf) - 1)]
     return out
 
 
-def _reinitiate(measurements: Measurements, model: DopplerModel, settings: TrackerSettings,
-                prior: tuple[FloatArray, FloatArray] | None) -> BatchSolution | None:
+def _reinitiate(measurements: Measurements, model: TrackingModel, settings: SmootherSettings) -> SmootherSolution | None:
     """Multi-start deterministic-CV ML over the whole recording, then the full smoother from it."""
     from fgdoppler.estimators.initiation import InitiationSettings, initiate, window_grid
 
-    init_settings = InitiationSettings(window="batch", motion=settings.motion, grid=settings.grid,
-                                       weak_prior=settings.weak_prior)
+    init_settings = InitiationSettings(window="cv")
     # The grid only has to find the basins: search on every 4th scan (a quarter of the cost),
     # then let LM refine each candidate against every measurement.
-    times, scan = measurements.scan_index()
-    grid = window_grid(measurements.subset(scan % 4 == 0), model.geometry, init_settings)
-    full = initiate(measurements, model.geometry, init_settings, grid_result=grid)
-    x0 = settings.motion.propagate(full.x_start, times - full.t_start)
+    scans = measurements.scans()
+    grid = window_grid(measurements.subset(scans.scan_of % 4 == 0), model, init_settings)
+    full = initiate(measurements, model, init_settings, grid_result=grid)
+    x0 = model.motion.propagate(full.x_start, scans.times - full.t_start)
     try:
-        return solve_batch(measurements, model, x0, settings, prior=prior, covariances=settings.smoothed_covariances)
+        return solve_smoother(measurements, model, x0, settings, prior=model.prior())
     except ValueError:
         return None
 
 
-def run_batch(
+def run_smoother(
     measurements: Measurements,
-    model: MeasurementModel,
+    model: TrackingModel,
     init: Initiation,
-    settings: TrackerSettings | None = None,
+    settings: SmootherSettings | None = None,
 ) -> TrackResult:
     """Offline reconstruction of a whole recording (initiation → EKF start → LM) with marginals.
 
     If the solution's cost fails a 99.9 % χ² check (it cannot explain the
-    data: the window's initiation led to a wrong basin), the whole recording
-    is initiated again (multi-start, deterministic constant velocity) and
-    smoothed from there; the lower cost wins and a warning says so.
+    data: the window's initiation led to a wrong basin) and
+    ``settings.reinitiate`` is set, the whole recording is initiated again
+    (multi-start, deterministic constant velocity) and smoothed from there;
+    the lower cost wins and an event says so.
     """
-    settings = settings or TrackerSettings()
+    settings = settings or SmootherSettings()
     t_begin = time.perf_counter()
     x_init = initial_trajectory(measurements, model, init, settings)
-    prior = region_prior(settings.grid) if settings.weak_prior else None
-    sol = solve_batch(measurements, model, x_init, settings, prior=prior, covariances=settings.smoothed_covariances)
-    notes = list(sol.warnings)
+    sol = solve_smoother(measurements, model, x_init, settings, prior=model.prior())
+    notes = list(sol.notes)
     threshold = float(chi2.ppf(0.999, max(len(measurements) - 4, 1)))
-    if sol.cost > threshold and isinstance(model, DopplerModel):
+    if sol.cost > threshold and settings.reinitiate and isinstance(model.observation, DopplerModel):
         # The solution cannot explain the data (a wrong basin inherited from the window):
         # offline, every measurement is available, so initiate again from all of them.
         notes.append(f"cost {sol.cost:.1f} fails the 99.9 % chi-square check ({threshold:.1f}): "
                      "re-initiated from the whole recording")
-        again = _reinitiate(measurements, model, settings, prior)
+        again = _reinitiate(measurements, model, settings)
         if again is not None and again.cost < sol.cost:
             sol = again
-            notes += list(again.warnings)
-        if sol.cost > threshold:
-            notes.append(f"final cost {sol.cost:.1f} still fails the chi-square check: the estimate is unreliable")
+            notes += list(again.notes)
+    reasons = list(sol.reasons)
+    if sol.cost > threshold:
+        reasons.append(Reason(code="chi2", status="doubtful", message=(
+            f"final cost {sol.cost:.1f} fails the 99.9 % chi-square check ({threshold:.1f}): "
+            "the track cannot explain the data")))
     covs = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
     t_last = float(sol.times[-1])
     return TrackResult(
-        estimator="batch",
-        settings=settings.to_dict(),
-        estimates={"smoothed": Estimates.from_lists(list(sol.times), list(sol.states), covs)},
-        primary="smoothed",
-        relinearizations=np.array([sol.iterations], dtype=np.int64),
+        estimator="smoother",
+        settings=settings,
+        estimates=(Estimates.from_lists("smoothed", list(sol.times), list(sol.states), covs),),
+        reasons=tuple(reasons),
+        events=tuple(Event(time=t_last, message=n) for n in notes),
+        iterations=sol.iterations,
         cost=sol.cost,
-        warnings=tuple((t_last, w) for w in notes),
         wall_time=time.perf_counter() - t_begin,
     )

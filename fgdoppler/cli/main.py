@@ -1,0 +1,60 @@
+"""The ``fgdoppler`` command line.
+
+Every subcommand has ``--help``; ``--json`` prints machine-readable output on
+stdout; figures are written only where asked (``--plot PATH``).  Errors in the
+input end the command with exit status 2 and a message naming the file and
+line; nothing is written then.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Sequence
+
+from fgdoppler import __version__
+from fgdoppler.cli.common import CLIError
+from fgdoppler.cli.montecarlo import add_montecarlo
+from fgdoppler.cli.observability import add_observability
+from fgdoppler.cli.reproduce import add_reproduce
+from fgdoppler.cli.simulate import add_simulate
+from fgdoppler.cli.track import add_track
+
+__all__ = ["build_parser", "main"]
+
+Handler = Callable[[argparse.Namespace], int]
+SUBCOMMANDS: tuple[Callable[[argparse._SubParsersAction], None], ...] = (
+    add_simulate, add_observability, add_track, add_montecarlo, add_reproduce)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every subcommand."""
+    parser = argparse.ArgumentParser(
+        prog="fgdoppler",
+        description="Doppler-only multistatic tracking near the Tx-Rx baseline "
+        "(factor graphs, EKF, observability, Monte Carlo).",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for add in SUBCOMMANDS:
+        add(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handler: Handler = args.handler
+    try:
+        return handler(args)
+    except BrokenPipeError:  # e.g. piped into `head`
+        sys.stderr.close()
+        return 0
+    except (CLIError, ValueError, OSError) as exc:
+        print(f"fgdoppler {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,166 @@
+"""``fgdoppler observability``: maps, the speed table, x-slices and the marginal-covariance report."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from fgdoppler.cli.common import CLIError, emit_json, progress_bar
+
+if TYPE_CHECKING:
+    from fgdoppler.analysis.observability import SamplingPattern
+
+__all__ = ["add_observability"]
+
+
+def add_observability(sub: argparse._SubParsersAction) -> None:
+    """Register the subcommand."""
+    p = sub.add_parser(
+        "observability",
+        help="observability maps (x × heading), O vs x slices, the speed table, a scenario report",
+        description="The paper's observability measure O = log10 det(J'J) (floor -40). By default a "
+        "map over initial x (1-49 km, 500 m) × heading (0-350 deg, 10 deg) for the paper's group 2 "
+        "(case a, 2 km off the baseline) at 100 m/s with the sampling that reproduces Table 2.",
+    )
+    p.add_argument("--group", type=int, choices=(1, 2, 3, 4), default=None,
+                   help="paper evaluation group (sets --case and --offset)")
+    p.add_argument("--case", default="a", help="geometry: a, b or a TOML file (default a)")
+    p.add_argument("--offset", type=float, default=2e3, help="y of the evaluation points in m (default 2000)")
+    p.add_argument("--speed", type=float, default=100.0, help="target speed in m/s (default 100)")
+    p.add_argument("--headings", type=float, nargs=3, metavar=("START", "STOP", "STEP"), default=None,
+                   help="heading grid in degrees (default 0 350 10)")
+    p.add_argument("--x", type=float, nargs=3, metavar=("START", "STOP", "STEP"), default=None,
+                   help="initial x grid in metres (default 1000 49000 500)")
+    p.add_argument("--samples", type=int, default=None, help="samples per pair of the sampling pattern (default 2)")
+    p.add_argument("--interval", type=float, default=None, help="sampling interval in s (default 1)")
+    p.add_argument("--pair-offsets", type=float, nargs="+", default=None, metavar="S",
+                   help="sampling time offset of each pair in s (default 0)")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--table", action="store_true", help="the speed table (paper Table 2)")
+    mode.add_argument("--slice", type=float, default=None, metavar="HEADING",
+                      help="O vs x at one heading for groups 2 and 4 (paper Fig. 8 uses 180)")
+    mode.add_argument("--report", type=float, default=None, metavar="START_X",
+                      help="marginal-covariance report of the paper scenario of --case starting at START_X m")
+    p.add_argument("--process-noise", type=float, default=0.0, metavar="Q",
+                   help="for --report: NCV process noise PSD (default 0: deterministic CV)")
+    p.add_argument("--json", action="store_true", help="machine-readable output on stdout")
+    p.add_argument("--plot", type=Path, default=None, metavar="PATH", help="write a figure")
+    p.set_defaults(handler=_run)
+
+
+def _grid(spec: Sequence[float] | None, default: np.ndarray) -> np.ndarray:
+    if spec is None:
+        return default
+    start, stop, step = spec
+    if step <= 0 or stop < start:
+        raise CLIError(f"bad grid {start} {stop} {step}: need START <= STOP and STEP > 0")
+    return np.arange(start, stop + step * 1e-9, step)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from fgdoppler.analysis import observability as ob
+
+    sampling = ob.SamplingPattern(
+        samples_per_pair=args.samples if args.samples is not None else ob.TABLE2_SAMPLING.samples_per_pair,
+        interval=args.interval if args.interval is not None else ob.TABLE2_SAMPLING.interval,
+        offsets=tuple(args.pair_offsets) if args.pair_offsets else None,
+    )
+    xs = _grid(args.x, ob.DEFAULT_X)
+    hs = _grid(args.headings, ob.DEFAULT_HEADINGS_DEG)
+    if args.table:
+        return _table(args, sampling, xs, hs)
+    if args.slice is not None:
+        return _slice(args, sampling, xs)
+    if args.report is not None:
+        return _report(args)
+    return _map(args, sampling, xs, hs)
+
+
+def _table(args: argparse.Namespace, sampling: SamplingPattern, xs: np.ndarray, hs: np.ndarray) -> int:
+    from fgdoppler import plotting
+    from fgdoppler.analysis import observability as ob
+
+    table = ob.speed_table(sampling=sampling, x=xs, heading_deg=hs)
+    if args.json:
+        emit_json({"sampling": table.sampling.describe(), "rows": table.compare()})
+    else:
+        print(table.to_markdown())
+    if args.plot:
+        plotting.save(plotting.plot_speed_table(table), args.plot)
+    return 0
+
+
+def _slice(args: argparse.Namespace, sampling: SamplingPattern, xs: np.ndarray) -> int:
+    from fgdoppler import plotting
+    from fgdoppler.analysis import observability as ob
+    from fgdoppler.geometry import resolve_geometry
+
+    curves = {}
+    for g in (2, 4):
+        case, y = ob.PAPER_GROUPS[g]
+        m = ob.observability_map(resolve_geometry(case), y=y, speed=args.speed, x=xs,
+                                 heading_deg=[args.slice], sampling=sampling)
+        curves[f"group {g}"] = (m.x, m.O[:, 0])
+    if args.json:
+        emit_json({"heading_deg": args.slice, "sampling": sampling.describe(),
+                   "curves": {k: {"x": v[0].tolist(), "O": v[1].tolist()} for k, v in curves.items()}})
+    else:
+        for k, (x, O) in curves.items():
+            i = int(np.argmin(O))
+            print(f"{k}: O from {O.min():.2f} (x = {x[i] / 1e3:g} km) to {O.max():.2f}")
+    if args.plot:
+        plotting.save(plotting.plot_observability_slice(curves, heading_deg=args.slice), args.plot)
+    return 0
+
+
+def _map(args: argparse.Namespace, sampling: SamplingPattern, xs: np.ndarray, hs: np.ndarray) -> int:
+    from fgdoppler import plotting
+    from fgdoppler.analysis import observability as ob
+    from fgdoppler.geometry import resolve_geometry
+
+    case, y = (ob.PAPER_GROUPS[args.group] if args.group else (args.case, args.offset))
+    geom = resolve_geometry(case)
+    with progress_bar(xs.size * hs.size, "observability map") as bar:
+        m = ob.observability_map(geom, y=y, speed=args.speed, x=xs, heading_deg=hs, sampling=sampling,
+                                 progress=bar.update)
+    if args.json:
+        emit_json(m.to_dict())
+    else:
+        i, j = (int(v) for v in np.unravel_index(np.argmin(m.O), m.O.shape))
+        print(f"geometry {geom.name or case}, y = {y:g} m, speed {args.speed:g} m/s; sampling: {sampling.describe()}")
+        print(f"O: max {m.O.max():.2f}, min {m.O.min():.2f} (x = {m.x[i] / 1e3:g} km, heading "
+              f"{m.heading_deg[j]:g} deg); {int(m.unobservable.sum())} of {m.O.size} cells at the -40 floor")
+    if args.plot:
+        plotting.save(plotting.plot_observability_map(m), args.plot)
+    return 0
+
+
+def _report(args: argparse.Namespace) -> int:
+    from fgdoppler import plotting
+    from fgdoppler.analysis.observability import observability_report
+    from fgdoppler.models.motion import ConstantVelocity
+    from fgdoppler.simulation import paper_scenario, simulate
+
+    scen = paper_scenario(args.case, args.report)
+    sim = simulate(scen, np.random.default_rng(0))
+    motion = ConstantVelocity(q=args.process_noise) if args.process_noise > 0 else None
+    rep = observability_report(scen.geometry, sim.truth, sim.measurements, motion=motion)
+    if args.json:
+        emit_json({"scenario": scen.name, **rep.to_dict()})
+    else:
+        print(f"{scen.name}: status {rep.status}{' (' + rep.message + ')' if rep.message else ''}")
+        print(f"O(x0) = {rep.O_x0:.2f}, cond(J'J) = {rep.cond_JtJ:.3g}")
+        ang = rep.tangent_angle_deg
+        print("heading vs ellipse tangent (deg), first/last: "
+              + ", ".join(f"pair {i + 1}: {ang[0, i]:.1f}/{ang[-1, i]:.1f}" for i in range(ang.shape[1])))
+        if rep.pos_std is not None and rep.weakest_std is not None:
+            print("  time   sigma_x  sigma_y  sigma_weakest (m)")
+            for k in np.unique(np.linspace(0, rep.times.size - 1, 7).astype(int)):
+                print(f"{rep.times[k]:6.2f} {rep.pos_std[k, 0]:8.1f} {rep.pos_std[k, 1]:8.1f} {rep.weakest_std[k]:10.1f}")
+    if args.plot:
+        plotting.save(plotting.plot_report_std(rep), args.plot)
+    return 0

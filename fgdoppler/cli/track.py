@@ -1,0 +1,181 @@
+"""``fgdoppler track``: initiate and track or smooth a recorded measurement CSV."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fgdoppler.cli.common import CLIError, emit_json
+from fgdoppler.estimators.initiation import METHODS
+from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
+
+__all__ = ["add_track"]
+
+
+def add_track(sub: argparse._SubParsersAction) -> None:
+    """Register the subcommand."""
+    p = sub.add_parser(
+        "track",
+        help="initiate and track/smooth a recorded measurement CSV",
+        description="Read FILE (CSV time,pair,doppler,sigma), initiate from the first --init-per-pair "
+        "measurements of each pair (multi-start grid + refinement), then run the chosen estimator.",
+    )
+    p.add_argument("file", type=Path, metavar="FILE", help="measurement CSV")
+    p.add_argument("--geometry", default="a", help="a, b or a geometry TOML file (default a)")
+    p.add_argument("--estimator", choices=("init", *ESTIMATORS, *ALIASES), default="init",
+                   help="what to run: init (initiation only), " + ", ".join(
+                       f"{k} ({v.summary})" for k, v in ESTIMATORS.items())
+                   + "; batch is the old name of smoother (default init)")
+    p.add_argument("--sigma", type=float, default=None, help="default Doppler sigma when FILE has no sigma column")
+    p.add_argument("--init-method", choices=METHODS, default="lm", help="initiation refinement (default lm)")
+    p.add_argument("--init-per-pair", type=int, default=10, help="initiation window: measurements per pair (default 10)")
+    p.add_argument("--k-best", type=int, default=5, help="grid candidates to refine (default 5)")
+    p.add_argument("--no-weak-prior", action="store_true", help="no weak zone prior on the first state")
+    p.add_argument("--no-region-bound", action="store_true",
+                   help="let the initiation's start state leave the zone (detectable zone)")
+    p.add_argument("--half-plane", type=float, nargs=4, metavar=("PX", "PY", "NX", "NY"), default=None,
+                   help="target known to satisfy (NX, NY) . (p - (PX, PY)) >= 0, e.g. 0 0 0 1 for y >= 0")
+    p.add_argument("--q", type=float, default=None, help="process noise PSD in m^2/s^3 (default 1e-3)")
+    p.add_argument("--lag", type=float, default=5.0, help="fixed-lag smoother lag in s (default 5)")
+    p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy) for --plot and errors")
+    p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
+    p.add_argument("--json", action="store_true", help="machine-readable result on stdout")
+    p.add_argument("--plot", type=Path, default=None, metavar="PATH", help="write a figure")
+    p.set_defaults(handler=_run)
+
+
+def _model(args: argparse.Namespace, geometry: Any) -> Any:
+    from fgdoppler.models.motion import ConstantVelocity
+    from fgdoppler.models.tracking import TrackingModel
+
+    kw: dict[str, Any] = {"weak_prior": not args.no_weak_prior}
+    if args.q is not None:
+        kw["motion"] = ConstantVelocity(q=args.q)
+    return TrackingModel.of(geometry, **kw)
+
+
+def _initiation_settings(args: argparse.Namespace) -> Any:
+    from fgdoppler.estimators.grid import HalfPlane
+    from fgdoppler.estimators.initiation import InitiationSettings
+
+    hp = None
+    if args.half_plane is not None:
+        px, py, nx, ny = args.half_plane
+        hp = HalfPlane(point=(px, py), normal=(nx, ny))
+    return InitiationSettings(method=args.init_method, k_best=args.k_best, region_bound=not args.no_region_bound,
+                              half_plane=hp)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from fgdoppler.estimators.initiation import initiate
+    from fgdoppler.geometry import resolve_geometry
+    from fgdoppler.measurements import Measurements
+    from fgdoppler.simulation import Trajectory
+
+    geom = resolve_geometry(args.geometry)
+    meas = Measurements.from_csv(args.file, geometry=geom, default_sigma=args.sigma)
+    truth = Trajectory.from_csv(args.truth) if args.truth else None
+    if args.init_per_pair < 3:
+        raise CLIError("--init-per-pair must be >= 3")
+    model = _model(args, geom)
+    window = meas.first_per_pair(args.init_per_pair)
+    init = initiate(window, model, _initiation_settings(args))
+    if args.estimator == "init":
+        return _report_initiation(args, init, window, geom, truth)
+    return _run_tracker(args, init, meas, model, truth)
+
+
+def _print_verdict(status: str, reasons: Any, events: Any, limit: int = 10) -> None:
+    print(f"  status: {status}")
+    for r in reasons:
+        print(f"  {r.status}: {r.message}")
+    for e in list(events)[:limit]:
+        print(f"  event at t = {e.time:g}: {e.message}")
+    if len(events) > limit:
+        print(f"  ... and {len(events) - limit} more event(s)")
+
+
+def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: Any, truth: Any) -> int:
+    if args.out is not None:
+        from fgdoppler._io import atomic_write_text
+
+        atomic_write_text(args.out, json.dumps(init.to_dict(), indent=1))
+    if args.json:
+        emit_json(init.to_dict())
+    else:
+        print(f"initiation ({init.method}) from {init.n_measurements} measurements, "
+              f"t = {init.t_start:g}..{init.t_end:g} s, {init.wall_time * 1e3:.0f} ms")
+        print(f"  state at t_end: x = {init.x_end[0]:.1f} m, y = {init.x_end[1]:.1f} m, "
+              f"vx = {init.x_end[2]:.2f} m/s, vy = {init.x_end[3]:.2f} m/s")
+        if init.P_end is not None:
+            sd = np.sqrt(np.diag(init.P_end))
+            print(f"  std: {sd[0]:.1f} m, {sd[1]:.1f} m, {sd[2]:.2f} m/s, {sd[3]:.2f} m/s")
+        verdict = "passes" if init.passes_chi2 else "FAILS"
+        print(f"  cost {init.cost:.2f} {verdict} the chi-square test ({init.chi2_threshold:.2f}, {init.dof} dof); "
+              f"objective with prior and zone terms {init.objective:.2f}")
+        for a in init.alternatives:
+            print(f"    alternative x0 = {np.round(a.state, 1).tolist()} cost {a.cost:.2f}")
+        _print_verdict(init.status, init.reasons, init.events)
+        if truth is not None:
+            err = init.x_end - truth.at([init.t_end])[0]
+            print(f"  error at t_end: position {np.hypot(err[0], err[1]):.1f} m, velocity {np.hypot(err[2], err[3]):.2f} m/s")
+    if args.plot:
+        _plot_landscape(args, init, window, geom, truth)
+    return 0
+
+
+def _plot_landscape(args: argparse.Namespace, init: Any, window: Any, geom: Any, truth: Any) -> None:
+    from fgdoppler import plotting
+    from fgdoppler.estimators.initiation import residual_landscape
+
+    xs = np.arange(1e3, 49e3 + 1, 250.0)
+    hs = np.arange(0.0, 360.0, 2.0)
+    speed = float(np.hypot(*init.x_start[2:]))
+    cost = residual_landscape(window, geom, x=xs, heading_deg=hs, y0=float(init.x_start[1]), speed=speed)
+    others = [c.state for c in init.candidates[1:]] + [a.state for a in init.alternatives]
+    t0 = truth.at([init.t_start])[0] if truth is not None else None
+    ax = plotting.plot_landscape(xs, hs, cost, best=init.x_start, others=others, truth=t0)
+    ax.set_title(f"residual over x0 x heading at y0 = {init.x_start[1] / 1e3:.2f} km, speed {speed:.0f} m/s",
+                 fontsize="small")
+    plotting.save(ax, args.plot)
+
+
+def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, truth: Any) -> int:
+    from fgdoppler import plotting
+    from fgdoppler.estimators.registry import run_estimator
+    from fgdoppler.estimators.settings import FixedLagSettings
+
+    name = args.estimator
+    if name in ALIASES:
+        print(f"note: --estimator {name} is now called {ALIASES[name]}", file=sys.stderr)
+        name = ALIASES[name]
+    settings = FixedLagSettings(lag=args.lag) if name == "fixed-lag" else ESTIMATORS[name].settings()
+    result = run_estimator(name, meas, model, init, settings)
+    if args.out is not None:
+        result.to_csv(args.out)
+        result.to_json(args.out.with_suffix(".json"))
+    e = result.primary
+    if args.json:
+        emit_json(result.to_dict(all_estimates=False))
+    else:
+        print(f"{name}: {len(e)} states ({e.kind}), t = {e.times[0]:g}..{e.times[-1]:g} s, "
+              f"{result.wall_time * 1e3:.0f} ms")
+        print(f"  last state: x = {e.states[-1, 0]:.1f} m, y = {e.states[-1, 1]:.1f} m, "
+              f"vx = {e.states[-1, 2]:.2f} m/s, vy = {e.states[-1, 3]:.2f} m/s")
+        _print_verdict(result.status, result.reasons, result.events)
+        if truth is not None:
+            err = e.states - truth.at(e.times)
+            rmse = float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1))))
+            print(f"  position RMSE vs truth: {rmse:.1f} m; final error {np.hypot(*err[-1, :2]):.1f} m")
+        if args.out is not None:
+            print(f"  wrote {args.out} and {args.out.with_suffix('.json')}")
+    if args.plot:
+        ax = plotting.plot_track(e.times, e.states, model.geometry, covariances=e.covariances, cov_ok=e.cov_ok,
+                                 truth=None if truth is None else truth.states, label=f"{name} ({e.kind})")
+        plotting.save(ax, args.plot)
+    return 0

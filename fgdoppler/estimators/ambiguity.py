@@ -1,0 +1,105 @@
+"""Ambiguous initiations: follow every hypothesis and let the later data decide.
+
+Near-collinear sensors admit a mirror-image trajectory and other distant
+solutions of equal window cost.  :func:`hypotheses` turns an ambiguous
+:class:`~fgdoppler.estimators.initiation.Initiation` into one unambiguous
+initiation per solution; :func:`resolve` runs an estimator from each and
+reports one track:
+
+* EKF, iSAM2, fixed-lag ("likelihood"): an EKF per hypothesis accumulates
+  the predictive log-likelihood of every measurement; each *filtered*
+  estimate comes from the hypothesis leading at that time (causal), the
+  smoothed or lagged estimates from the hypothesis leading at the end;
+* smoother ("cost"): the hypothesis with the lowest final cost.
+
+:attr:`TrackResult.hypothesis <fgdoppler.estimators.results.TrackResult>`
+records which hypothesis was reported when.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fgdoppler.estimators.ekf import run_ekf
+from fgdoppler.estimators.initiation import Initiation
+from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.settings import EKFSettings, TrackerSettings
+from fgdoppler.estimators.verdict import Event
+from fgdoppler.measurements import Measurements
+from fgdoppler.models.motion import ConstantVelocity
+from fgdoppler.models.tracking import TrackingModel
+
+__all__ = ["Resolution", "hypotheses", "resolve"]
+
+Resolution = Literal["likelihood", "cost"]
+Runner = Callable[[Measurements, TrackingModel, Initiation, Any], TrackResult]
+
+
+def hypotheses(init: Initiation) -> list[Initiation]:
+    """The initiation and one unambiguous copy per alternative (best first).
+
+    Each copy starts from the alternative's state and covariance at the
+    window start, propagated to the window end.  Alternatives without a
+    determinate covariance are skipped.  A copy's ``objective`` is its data
+    cost (the regularisers are not evaluated for alternatives).
+    """
+    kept = tuple(r for r in init.reasons if r.code != "ambiguous")
+    out = [replace(init, alternatives=(), reasons=kept)]
+    F = ConstantVelocity.F(init.t_end - init.t_start)
+    for a in init.alternatives:
+        if a.covariance is None:
+            continue
+        out.append(replace(
+            init, x_start=a.state, x_end=F @ a.state, P_start=a.covariance, P_end=F @ a.covariance @ F.T,
+            cost=a.cost, objective=a.cost, passes_chi2=a.passes_chi2, alternatives=(),
+            reasons=tuple(r for r in kept if r.code not in ("covariance", "boundary")),
+            events=(*init.events, Event(time=init.t_start, message="hypothesis from an ambiguous initiation")),
+        ))
+    return out
+
+
+def resolve(run: Runner, resolution: Resolution, measurements: Measurements, model: TrackingModel,
+            hyps: list[Initiation], settings: TrackerSettings) -> TrackResult:
+    """Run ``run`` from every hypothesis and report one track (module docstring)."""
+    t_begin = time.perf_counter()
+    results = [run(measurements, model, h, settings) for h in hyps]
+    note = f"ambiguous initiation: {len(hyps)} hypotheses run"
+    if resolution == "cost":
+        best = int(np.argmin([np.inf if r.cost is None else r.cost for r in results]))
+        r = results[best]
+        event = Event(time=float(r.primary.times[-1]), message=f"{note}; hypothesis {best} has the lowest cost")
+        return replace(r, hypothesis=np.full(len(r.primary), best), events=(*r.events, event),
+                       wall_time=time.perf_counter() - t_begin)
+    # an estimator that reports its own predictive likelihood (the EKF) is ranked by it
+    ekf_settings = EKFSettings(gate_probability=settings.gate_probability)
+    ekfs = results if results[0].log_likelihood.size else [run_ekf(measurements, model, h, ekf_settings)
+                                                           for h in hyps]
+    L = np.array([e.log_likelihood for e in ekfs])
+    t_ekf = ekfs[0].primary.times
+
+    def leaders(times: NDArray[np.float64]) -> NDArray[np.intp]:
+        idx = np.clip(np.searchsorted(t_ekf, times, side="right") - 1, 0, t_ekf.size - 1)
+        return np.argmax(L[:, idx], axis=0)
+
+    final = int(np.argmax(L[:, -1]))
+    stitched = []
+    for est in results[0].estimates:
+        choice = leaders(est.times) if est.kind == "filtered" else np.full(len(est), final)
+        parts = [results[h].estimate(est.kind) for h in choice]
+        stitched.append(Estimates(
+            kind=est.kind, times=est.times,
+            states=np.array([p.states[i] for i, p in enumerate(parts)]),
+            covariances=np.array([p.covariances[i] for i, p in enumerate(parts)]),
+            cov_ok=np.array([p.cov_ok[i] for i, p in enumerate(parts)], dtype=bool),
+        ))
+    primary = stitched[0]
+    hyp = leaders(primary.times) if primary.kind == "filtered" else np.full(len(primary), final)
+    event = Event(time=float(t_ekf[-1]), message=f"{note}; hypothesis {final} leads at the end")
+    return replace(results[final], estimates=tuple(stitched), hypothesis=np.asarray(hyp, dtype=np.int64),
+                   events=(*results[final].events, event), wall_time=time.perf_counter() - t_begin)

@@ -1,0 +1,150 @@
+"""The estimator registry: every tracker by name, and the functions that run one.
+
+:data:`ESTIMATORS` maps a name to an :class:`EstimatorInfo` (the runner, its
+settings class, how an ambiguous initiation is resolved, a one-line
+summary).  The command line's choices, Monte Carlo studies and the paper
+reproduction all read it.  Every runner has the signature
+``run(measurements, model, init, settings) -> TrackResult``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any
+
+from fgdoppler.estimators.ambiguity import Resolution, hypotheses, resolve
+from fgdoppler.estimators.ekf import run_ekf
+from fgdoppler.estimators.fixed_lag import run_fixed_lag
+from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate
+from fgdoppler.estimators.isam2 import run_isam2
+from fgdoppler.estimators.results import TrackResult
+from fgdoppler.estimators.settings import (
+    EKFSettings,
+    FixedLagSettings,
+    ISAM2Settings,
+    SmootherSettings,
+    TrackerSettings,
+)
+from fgdoppler.estimators.smoother import run_smoother
+from fgdoppler.geometry import Geometry
+from fgdoppler.measurements import Measurements
+from fgdoppler.models.tracking import TrackingModel, as_tracking_model
+
+__all__ = ["ALIASES", "ESTIMATORS", "EstimatorInfo", "estimator_info", "run_estimator", "track"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class EstimatorInfo:
+    """One registered tracker.
+
+    Attributes
+    ----------
+    name
+        Registry name.
+    run
+        ``run(measurements, model, init, settings) -> TrackResult``.
+    settings
+        Its settings class (``settings()`` gives the defaults).
+    resolution
+        How an ambiguous initiation is resolved
+        (:mod:`fgdoppler.estimators.ambiguity`).
+    online
+        True if its primary estimate at a time uses only the data up to then.
+    summary
+        One line for help texts.
+    """
+
+    name: str
+    run: Callable[[Measurements, TrackingModel, Initiation, Any], TrackResult]
+    settings: type[TrackerSettings]
+    resolution: Resolution
+    online: bool
+    summary: str
+
+
+ESTIMATORS: Mapping[str, EstimatorInfo] = MappingProxyType({
+    "ekf": EstimatorInfo(name="ekf", run=run_ekf, settings=EKFSettings, resolution="likelihood", online=True,
+                         summary="extended Kalman filter (the paper's dynamic estimator)"),
+    "isam2": EstimatorInfo(name="isam2", run=run_isam2, settings=ISAM2Settings, resolution="likelihood",
+                           online=True, summary="iSAM2: the factor graph updated scan by scan"),
+    "fixed-lag": EstimatorInfo(name="fixed-lag", run=run_fixed_lag, settings=FixedLagSettings,
+                               resolution="likelihood", online=False,
+                               summary="fixed-lag smoother: each state estimated lag seconds after its time"),
+    "smoother": EstimatorInfo(name="smoother", run=run_smoother, settings=SmootherSettings, resolution="cost",
+                              online=False, summary="offline smoother: the whole recording by Levenberg-Marquardt"),
+})
+
+#: Old names still accepted (the documentation used them), with a DeprecationWarning.
+ALIASES: Mapping[str, str] = MappingProxyType({"batch": "smoother"})
+
+
+def estimator_info(name: str) -> EstimatorInfo:
+    """The registry entry of ``name`` (or of a deprecated alias).
+
+    Raises
+    ------
+    ValueError
+        If no estimator has that name.
+    """
+    if name in ALIASES:
+        warnings.warn(f"estimator {name!r} is now called {ALIASES[name]!r}", DeprecationWarning, stacklevel=3)
+        name = ALIASES[name]
+    if name not in ESTIMATORS:
+        raise ValueError(f"unknown estimator {name!r}: expected one of {', '.join(ESTIMATORS)}")
+    return ESTIMATORS[name]
+
+
+def run_estimator(
+    name: str,
+    measurements: Measurements,
+    model: TrackingModel | Geometry,
+    init: Initiation,
+    settings: TrackerSettings | None = None,
+    *,
+    resolve_ambiguity: bool = True,
+) -> TrackResult:
+    """Run the estimator called ``name`` (a key of :data:`ESTIMATORS`).
+
+    If the initiation is ambiguous (other solutions pass its χ² test, e.g. a
+    mirror image) and ``resolve_ambiguity`` is set, the estimator is run from
+    every hypothesis and the later data decide
+    (:mod:`fgdoppler.estimators.ambiguity`).
+
+    Raises
+    ------
+    ValueError
+        For an unknown name.
+    TypeError
+        If ``settings`` belong to another estimator.
+    """
+    info = estimator_info(name)
+    model = as_tracking_model(model)
+    settings = settings if settings is not None else info.settings()
+    if type(settings) is not info.settings:
+        raise TypeError(f"{info.name} takes {info.settings.__name__}, got {type(settings).__name__}")
+    hyps = hypotheses(init) if (resolve_ambiguity and init.ambiguous) else [init]
+    if len(hyps) == 1:
+        return info.run(measurements, model, hyps[0], settings)
+    return resolve(info.run, info.resolution, measurements, model, hyps, settings)
+
+
+def track(
+    measurements: Measurements,
+    model: TrackingModel | Geometry,
+    estimator: str = "smoother",
+    *,
+    settings: TrackerSettings | None = None,
+    initiation: InitiationSettings | None = None,
+    init_per_pair: int = 10,
+) -> TrackResult:
+    """Initiate from the first ``init_per_pair`` measurements of each pair, then run ``estimator``.
+
+    The one-call form of :func:`~fgdoppler.estimators.initiation.initiate`
+    followed by :func:`run_estimator`.
+    """
+    model = as_tracking_model(model)
+    init = initiate(measurements.first_per_pair(init_per_pair), model, initiation)
+    return run_estimator(estimator, measurements, model, init, settings)

@@ -1,0 +1,107 @@
+"""How far to trust a result: one status vocabulary for every estimator.
+
+Every result (:class:`~fgdoppler.estimators.initiation.Initiation`,
+:class:`~fgdoppler.estimators.results.TrackResult`,
+:class:`~fgdoppler.estimators.smoother.SmootherSolution`) carries
+
+``reasons``
+    The findings behind its verdict, each a :class:`Reason` with a stable
+    ``code``, the status it alone would give and a message.
+``status``
+    The worst status among the reasons, from :data:`STATUSES`:
+
+    ``"ok"``
+        Nothing found that casts doubt on the estimate.
+    ``"doubtful"``
+        The estimate may be wrong: use it with care and read the reasons.
+    ``"failed"``
+        The estimate is not usable.
+``message``
+    The reasons that set the status, in one line (empty when ``ok``).
+``events``
+    What happened along the way (a rejected measurement, a fallback, a
+    restart), each an :class:`Event` with its time.  Events are the log;
+    reasons are the judgement.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Literal
+
+__all__ = ["STATUSES", "Event", "Judged", "Reason", "Status", "message_of", "status_of"]
+
+Status = Literal["ok", "doubtful", "failed"]
+#: The status vocabulary, from best to worst.
+STATUSES: tuple[Status, ...] = ("ok", "doubtful", "failed")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Reason:
+    """One finding behind a verdict.
+
+    Parameters
+    ----------
+    code
+        Stable short identifier (documented with the estimator that emits it).
+    status
+        The status this finding alone gives (``"ok"`` for purely
+        informational findings).
+    message
+        What was found, in words, with the numbers.
+    """
+
+    code: str
+    status: Status
+    message: str
+
+    def __post_init__(self) -> None:
+        if self.status not in STATUSES:
+            raise ValueError(f"status must be one of {STATUSES}, got {self.status!r}")
+
+    def to_dict(self) -> dict[str, str]:
+        """JSON-ready form."""
+        return {"code": self.code, "status": self.status, "message": self.message}
+
+
+@dataclass(frozen=True, kw_only=True)
+class Event:
+    """Something that happened while estimating, at a time (s)."""
+
+    time: float
+    message: str
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready form."""
+        return {"time": self.time, "message": self.message}
+
+
+def status_of(reasons: Iterable[Reason]) -> Status:
+    """The worst status among ``reasons`` (``"ok"`` if there are none)."""
+    return max((r.status for r in reasons), key=STATUSES.index, default="ok")
+
+
+def message_of(reasons: Iterable[Reason]) -> str:
+    """The messages of the reasons that set the status, joined (empty when the status is ``ok``)."""
+    reasons = tuple(reasons)
+    status = status_of(reasons)
+    if status == "ok":
+        return ""
+    return "; ".join(r.message for r in reasons if r.status == status)
+
+
+class Judged:
+    """Mixin of every result: ``status`` and ``message`` derived from its ``reasons``."""
+
+    reasons: tuple[Reason, ...]
+
+    @property
+    def status(self) -> Status:
+        """``"ok"``, ``"doubtful"`` or ``"failed"`` (:mod:`fgdoppler.estimators.verdict`)."""
+        return status_of(self.reasons)
+
+    @property
+    def message(self) -> str:
+        """Why the status is what it is (empty when ``ok``)."""
+        return message_of(self.reasons)

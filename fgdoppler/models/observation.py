@@ -1,0 +1,142 @@
+r"""Observation models: the scalar measurement models the estimators consume.
+
+Every estimator (EKF, iSAM2, fixed-lag, batch) consumes a
+:class:`MeasurementModel`: for states ``(n, 4)`` and one channel index per
+state (the bistatic pair for Doppler), it returns the predicted measurement
+``(n,)`` and, on request, its Jacobian ``(n, 4)``.  :class:`DopplerModel` is
+the bistatic Doppler of :mod:`fgdoppler.models.doppler`; other models (e.g. a
+linear-Gaussian surrogate in tests) plug into the same machinery.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fgdoppler.geometry import SENSOR_EPS, Geometry
+from fgdoppler.measurements import Measurements
+from fgdoppler.models.doppler import _as_states, _terms
+
+#: Up to this many rows the model is evaluated in plain floats (less overhead than numpy).
+_SMALL = 4
+
+__all__ = ["DopplerModel", "MeasurementModel", "check_channels"]
+
+FloatArray = NDArray[np.float64]
+
+
+@runtime_checkable
+class MeasurementModel(Protocol):
+    """A scalar measurement per (state, channel)."""
+
+    @property
+    def n_channels(self) -> int:
+        """Number of channels (valid channel indices are ``0 .. n_channels - 1``)."""
+        ...
+
+    def predict(self, states: ArrayLike, channels: ArrayLike) -> FloatArray:
+        """Predicted measurements ``(n,)`` for states ``(n, 4)`` and channels ``(n,)``."""
+        ...
+
+    def predict_and_jacobian(self, states: ArrayLike, channels: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Predictions ``(n,)`` and Jacobians ``(n, 4)``."""
+        ...
+
+
+@dataclass(frozen=True, kw_only=True)
+class DopplerModel:
+    """Bistatic Doppler of pair ``channels[j]`` at ``states[j]`` (one pair per row, no waste)."""
+
+    geometry: Geometry
+
+    @property
+    def n_channels(self) -> int:
+        """Number of pairs."""
+        return self.geometry.n_pairs
+
+    def _check(self, states: ArrayLike, channels: ArrayLike) -> tuple[FloatArray, NDArray[np.intp]]:
+        if isinstance(states, np.ndarray) and states.shape == (1, 4) and isinstance(channels, list) \
+                and len(channels) == 1:
+            # the filters' one-state, one-channel call: validate cheaply
+            k = channels[0]
+            if not 0 <= k < self.geometry.n_pairs:
+                raise ValueError(f"pair index out of range for a geometry of {self.geometry.n_pairs} pair(s)")
+            return states.astype(float, copy=False), np.array([k], dtype=np.intp)
+        x = _as_states(states).reshape(-1, 4)
+        c = np.asarray(channels, dtype=np.intp).reshape(-1)
+        if c.shape[0] != x.shape[0]:
+            raise ValueError(f"{x.shape[0]} states but {c.shape[0]} channels")
+        if c.size and (c.min() < 0 or c.max() >= self.geometry.n_pairs):
+            raise ValueError(f"pair index out of range for a geometry of {self.geometry.n_pairs} pair(s)")
+        return x, c
+
+    def predict(self, states: ArrayLike, channels: ArrayLike) -> FloatArray:
+        """Doppler ``(n,)``; raises :class:`ValueError` at a sensor position."""
+        x, c = self._check(states, channels)
+        if c.size <= _SMALL:
+            return self._small(x, c, jacobian=False)[0]
+        h, _, _, _ = _terms(x[:, :2], x[:, 2:], self.geometry.tx[c], self.geometry.rx[c], jacobian=False)
+        return h
+
+    def predict_and_jacobian(self, states: ArrayLike, channels: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Doppler ``(n,)`` and Jacobian ``(n, 4)``."""
+        x, c = self._check(states, channels)
+        if c.size <= _SMALL:
+            h, H = self._small(x, c, jacobian=True)
+            assert H is not None
+            return h, H
+        h, dp, dv, _ = _terms(x[:, :2], x[:, 2:], self.geometry.tx[c], self.geometry.rx[c], jacobian=True)
+        assert dp is not None and dv is not None
+        return h, np.concatenate([dp, dv], axis=-1)
+
+    def scalar(self, state: list[float], channel: int) -> tuple[float, list[float]]:
+        """Doppler of one pair at one state and its Jacobian row, in plain floats (no checks on ``channel``).
+
+        The same formulas as :func:`fgdoppler.models.doppler.bistatic_doppler_and_jacobian`;
+        the filters call this for their one-state, one-pair updates, where
+        numpy's per-call overhead would cost several times the arithmetic.
+        """
+        px, py, vx, vy = state
+        tx = self.geometry.tx[channel]
+        rx = self.geometry.rx[channel]
+        dpx = dpy = dvx = dvy = hv = 0.0
+        for sx, sy in ((float(tx[0]), float(tx[1])), (float(rx[0]), float(rx[1]))):
+            dx = px - sx
+            dy = py - sy
+            r = math.sqrt(dx * dx + dy * dy)
+            if r <= SENSOR_EPS:
+                raise ValueError(
+                    f"1 target position(s) coincide with a sensor (distance <= {SENSOR_EPS} m): "
+                    "the bistatic Doppler is undefined there"
+                )
+            ux = dx / r
+            uy = dy / r
+            rd = ux * vx + uy * vy
+            hv += rd
+            dpx += (vx - rd * ux) / r
+            dpy += (vy - rd * uy) / r
+            dvx += ux
+            dvy += uy
+        return hv, [dpx, dpy, dvx, dvy]
+
+    def _small(self, x: FloatArray, c: NDArray[np.intp], *, jacobian: bool) -> tuple[FloatArray, FloatArray | None]:
+        # Few rows: plain floats beat numpy's per-call overhead (see :meth:`scalar`).
+        n = c.size
+        h = np.empty(n)
+        H = np.empty((n, 4)) if jacobian else None
+        for i, (row, k) in enumerate(zip(x.tolist(), c.tolist(), strict=True)):
+            hv, Hrow = self.scalar(row, k)
+            h[i] = hv
+            if H is not None:
+                H[i] = Hrow
+        return h, H
+
+
+def check_channels(model: MeasurementModel, measurements: Measurements) -> None:
+    """Raise :class:`ValueError` if a measurement's channel (pair) is outside ``model``."""
+    if len(measurements) and int(measurements.pair.max()) >= model.n_channels:
+        raise ValueError(f"pair index {int(measurements.pair.max())} outside a model of {model.n_channels} channel(s)")

@@ -1,0 +1,112 @@
+"""The tracking model: what every estimator of one recording shares.
+
+A :class:`TrackingModel` bundles the observation model (how the target is
+measured), the motion model (how it moves) and the prior knowledge of where
+it starts (the zone and its weak prior).  The initiation, the EKF, iSAM2, the
+fixed-lag smoother and the offline smoother all take one, so the model is
+stated once; each estimator's own options live in its settings class.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fgdoppler.geometry import Geometry
+from fgdoppler.models.motion import ConstantVelocity
+from fgdoppler.models.observation import DopplerModel, MeasurementModel
+from fgdoppler.zone import Zone
+
+__all__ = ["TrackingModel", "as_tracking_model"]
+
+FloatArray = NDArray[np.float64]
+
+
+def _default_motion() -> ConstantVelocity:
+    return ConstantVelocity(q=1e-3)
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackingModel:
+    """Observation, motion and start-zone model shared by every estimator.
+
+    Parameters
+    ----------
+    observation
+        The measurement model, e.g. :class:`~fgdoppler.models.observation.DopplerModel`.
+    motion
+        Nearly-constant-velocity model with a full-rank process noise
+        (continuous white-noise acceleration, PSD ``q = 1e-3`` m²/s³ by default).
+    zone
+        Where a track may start: the initiation lays its candidate grid out in
+        it and bounds the start state by it; the weak prior spans it.
+        ``None``: the geometry's default zone
+        (:meth:`fgdoppler.geometry.Geometry.default_zone`) for a Doppler model,
+        no zone for other models.
+    weak_prior
+        Put the zone's weak Gaussian prior (:meth:`fgdoppler.zone.Zone.prior`)
+        on the first state of every graph.  It regularises near-singular
+        windows — without it Levenberg–Marquardt can run off to non-physical
+        speeds along the flat valleys of a poorly observed window — and
+        barely moves a well-posed one.
+    """
+
+    observation: MeasurementModel
+    motion: ConstantVelocity = field(default_factory=_default_motion)
+    zone: Zone | None = None
+    weak_prior: bool = True
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.observation, MeasurementModel):
+            raise TypeError(f"observation must be a MeasurementModel, got {type(self.observation).__name__}")
+        if not isinstance(self.motion, ConstantVelocity):
+            raise TypeError(f"motion must be a ConstantVelocity model, got {type(self.motion).__name__}")
+        if self.zone is None and isinstance(self.observation, DopplerModel):
+            object.__setattr__(self, "zone", self.observation.geometry.default_zone())
+
+    @classmethod
+    def of(cls, geometry: Geometry, **kwargs: Any) -> TrackingModel:
+        """The bistatic Doppler model of ``geometry`` with the given motion, zone and prior."""
+        return cls(observation=DopplerModel(geometry=geometry), **kwargs)
+
+    @property
+    def geometry(self) -> Geometry:
+        """The sensor geometry (Doppler models only).
+
+        Raises
+        ------
+        TypeError
+            If the observation model has no geometry.
+        """
+        if not isinstance(self.observation, DopplerModel):
+            raise TypeError(f"a {type(self.observation).__name__} has no sensor geometry")
+        return self.observation.geometry
+
+    def prior(self) -> tuple[FloatArray, FloatArray] | None:
+        """``(mean, covariance)`` of the weak prior on the first state, or ``None`` when it is off."""
+        if not self.weak_prior or self.zone is None:
+            return None
+        return self.zone.prior()
+
+    def with_zone(self, zone: Zone) -> TrackingModel:
+        """The same model with another zone."""
+        return replace(self, zone=zone)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (motion, zone, prior)."""
+        return {"motion": {"q": self.motion.q, "form": self.motion.form},
+                "zone": None if self.zone is None else self.zone.to_dict(), "weak_prior": self.weak_prior}
+
+
+def as_tracking_model(model: TrackingModel | Geometry | MeasurementModel) -> TrackingModel:
+    """A :class:`TrackingModel` from itself, a geometry or an observation model (every other default)."""
+    if isinstance(model, TrackingModel):
+        return model
+    if isinstance(model, Geometry):
+        return TrackingModel.of(model)
+    if isinstance(model, MeasurementModel):
+        return TrackingModel(observation=model)
+    raise TypeError(f"expected a TrackingModel, a Geometry or a MeasurementModel, got {type(model).__name__}")

@@ -1,0 +1,115 @@
+"""The zone: its default rule, its excess (the wall) and its prior, in any frame."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import fgdoppler as fd
+from fgdoppler.frames import Frame, sensor_frame
+from fgdoppler.zone import default_zone
+
+
+def _rotation(angle: float, reflect: bool = False) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    R = np.array([[c, -s], [s, c]])
+    return R @ np.diag([1.0, -1.0]) if reflect else R
+
+
+@pytest.mark.parametrize("case", ["a", "b"])
+def test_default_zone_of_the_paper_geometries_is_the_paper_box(case: str) -> None:
+    g = fd.paper_geometry(case)
+    z = g.default_zone()
+    assert g.frame.is_identity
+    assert z.along == (2e3, 48e3) and z.across == (-5e3, 5e3) and z.speed_max == 200.0
+
+
+@pytest.mark.parametrize(("angle", "reflect"), [(0.3, False), (2.0, True), (-1.1, False)])
+def test_default_zone_moves_with_the_sensors(angle: float, reflect: bool) -> None:
+    # A rigid motion of the sensors (rotation, translation, reflection) moves the frame with them:
+    # the zone's local box is the same and its world corners are the moved corners.
+    g = fd.paper_geometry("a")
+    R, t = _rotation(angle, reflect), np.array([3.7e5, -8.1e5])
+    moved = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=R @ np.array(p.tx) + t, rx=R @ np.array(p.rx) + t)
+                                    for p in g.pairs))
+    z0, z1 = g.default_zone(), moved.default_zone()
+    np.testing.assert_allclose(z1.along, z0.along, atol=1e-6)
+    np.testing.assert_allclose(z1.across, z0.across, atol=1e-6)
+    np.testing.assert_allclose(z1.corners(), z0.corners() @ R.T + t, atol=1e-6)
+    assert moved.frame.proper != reflect
+
+
+def test_default_zone_reaches_sensors_off_the_first_baseline() -> None:
+    # A triangle: the third sensor 40 km off the first baseline is inside the widened box.
+    g = fd.Geometry(pairs=(fd.BistaticPair(tx=(50e3, 0.0), rx=(0.0, 0.0)),
+                           fd.BistaticPair(tx=(25e3, 40e3), rx=(0.0, 0.0))))
+    z = g.default_zone()
+    assert z.along == (2e3, 48e3)
+    assert z.across == (-5e3, 42e3)
+
+
+def _zone(angle: float, reflect: bool) -> fd.Zone:
+    R = _rotation(angle, reflect)
+    return fd.Zone(frame=Frame(origin=(1e4, -2e4), basis=tuple(map(tuple, R.T))), along=(2e3, 48e3),
+                   across=(-5e3, 5e3), speed_max=200.0)
+
+
+@pytest.mark.parametrize(("angle", "reflect"), [(0.0, False), (0.7, False), (2.5, True)])
+@pytest.mark.parametrize(
+    "local",
+    [[49.3e3, 1.9e3, -80.0, 9.0], [1.0e3, -6.0e3, 30.0, 40.0], [10e3, 7e3, 180.0, 150.0], [20e3, 0.0, 10.0, 5.0]],
+)
+def test_excess_is_the_local_distance_outside_and_its_jacobian_matches_finite_differences(
+        angle: float, reflect: bool, local: list[float]) -> None:
+    zone = _zone(angle, reflect)
+    x = zone.frame.states_to_world(np.asarray(local))
+    e, J = zone.excess(x)
+    u = np.asarray(local[:2])
+    lo, hi = np.array([2e3, -5e3]), np.array([48e3, 5e3])
+    np.testing.assert_allclose(e[:2], np.minimum(0.0, u - lo) + np.maximum(0.0, u - hi), atol=1e-6)
+    assert e[2] == pytest.approx(max(0.0, float(np.hypot(*local[2:])) - 200.0))
+    h = 1e-3
+    fd_J = np.column_stack([(zone.excess(x + h * np.eye(4)[i])[0] - zone.excess(x - h * np.eye(4)[i])[0]) / (2 * h)
+                            for i in range(4)])
+    np.testing.assert_allclose(J, fd_J, atol=1e-8)
+    assert bool(zone.contains(x)) == (not np.any(e))
+
+
+def test_prior_spans_the_zone_in_its_frame() -> None:
+    zone = _zone(0.7, True)
+    mean, cov = zone.prior()
+    centre = zone.frame.points_to_world([25e3, 0.0])
+    np.testing.assert_allclose(mean, [*centre, 0.0, 0.0], atol=1e-9)
+    local = zone.frame.covariances_to_local(cov)
+    np.testing.assert_allclose(local, np.diag([23e3**2, 5e3**2, 200.0**2, 200.0**2]), rtol=1e-12, atol=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"along": (5.0, 1.0)}, "empty or inverted"),
+        ({"along": (1.0, 1.0)}, "empty or inverted"),
+        ({"across": (0.0, float("nan"))}, "finite"),
+        ({"across": (0.0, float("inf"))}, "finite"),
+        ({"across": "x"}, "two numbers"),
+        ({"speed_max": 0.0}, "speed_max"),
+        ({"speed_max": -5.0}, "speed_max"),
+        ({"speed_max": True}, "speed_max"),
+    ],
+)
+def test_bad_zones_are_refused(kwargs: dict, match: str) -> None:
+    args = {"along": (0.0, 1.0), "across": (0.0, 1.0), "speed_max": 10.0} | kwargs
+    with pytest.raises(ValueError, match=match):
+        fd.Zone(**args)
+
+
+def test_frame_round_trips_and_rejects_non_orthonormal_bases() -> None:
+    f = Frame(origin=(5.0, -3.0), basis=tuple(map(tuple, _rotation(1.2, True))))
+    x = np.array([[1.0, 2.0, 3.0, 4.0], [-7.0, 0.5, -1.0, 2.0]])
+    np.testing.assert_allclose(f.states_to_world(f.states_to_local(x)), x, atol=1e-12)
+    P = np.diag([1.0, 2.0, 3.0, 4.0])
+    np.testing.assert_allclose(f.covariances_to_local(f.covariances_to_world(P)), P, atol=1e-12)
+    with pytest.raises(ValueError, match="orthonormal"):
+        Frame(origin=(0.0, 0.0), basis=((1.0, 0.0), (1.0, 1.0)))
+    assert sensor_frame(np.array([[50e3, 0.0]]), np.array([[0.0, 0.0]])).is_identity
+    assert default_zone(Frame.identity(), [[50e3, 0.0]], [[0.0, 0.0]]).along == (2e3, 48e3)
