@@ -1,6 +1,8 @@
-"""Atomic file writes: a temporary file in the target folder, then a rename.
+"""File input and output: atomic writes, bounded reads.
 
-A failure while writing leaves neither a partial file nor a stray temporary.
+A write goes to a temporary file in the target folder, then a rename: a failure
+leaves neither a partial file nor a stray temporary.  A read stops at a size
+limit, so a device or a huge file is refused instead of exhausting memory.
 """
 
 from __future__ import annotations
@@ -36,3 +38,25 @@ def atomic_write_text(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` atomically."""
     with atomic_open(path, newline=None) as fh:
         fh.write(text)
+
+
+def read_text_bounded(path: Path, limit: int, *, what: str = "file") -> str:
+    """Read a UTF-8 text file of at most ``limit`` bytes; every failure is a one-line ``ValueError``.
+
+    Reading stops after ``limit + 1`` bytes, so a device or a huge file
+    (``/dev/zero``) is refused without exhausting memory.
+    """
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(limit + 1)
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
+    if len(data) > limit:
+        raise ValueError(f"{path}: the {what} is larger than {limit:,} bytes")
+    if b"\x00" in data:
+        raise ValueError(f"{path}: the {what} contains NUL bytes: not a text file")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: the {what} is not UTF-8 text (byte {exc.start})") from None

@@ -34,8 +34,9 @@ __all__ = ["Frame", "sensor_frame"]
 FloatArray = NDArray[np.float64]
 
 #: Where the sensors' mean offset across the reference baseline counts as zero
-#: (relative to their extent): the frame is then right-handed.
-_SIDE_TOL = 1e-9
+#: (relative to their extent): the frame is then right-handed.  Coarse enough
+#: that snapping the sensors to a millimetre lattice cannot flip the side.
+_SIDE_TOL = 1e-6
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -159,6 +160,18 @@ class Frame:
             return P.copy()
         T = self._state_map(False)
         return T @ P @ T.T
+
+    def relative_to(self, other: Frame) -> Frame:
+        r"""This frame expressed in ``other``'s local coordinates.
+
+        With :math:`\mathbf l = \mathbf B_2(\mathbf p - \mathbf o_2)` the
+        coordinates of ``other``, this frame's coordinates are
+        :math:`\mathbf B_1\mathbf B_2'(\mathbf l - \mathbf B_2(\mathbf o_1 - \mathbf o_2))`.
+        A frame relative to itself is exactly the identity.
+        """
+        if self == other:
+            return Frame.identity(self.dim)
+        return Frame(origin=tuple(other.B @ (self.o - other.o)), basis=tuple(map(tuple, self.B @ other.B.T)))
 
     def to_dict(self) -> dict[str, object]:
         """JSON/TOML-ready form."""

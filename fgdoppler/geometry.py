@@ -9,8 +9,7 @@ unobservability (Section 4).
 
 from __future__ import annotations
 
-import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 
@@ -18,12 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.frames import Frame, sensor_frame
-from fgdoppler.zone import DEFAULT_SPEED_MAX, Zone, default_zone
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
+from fgdoppler.zone import DEFAULT_SPEED_MAX, Zone, ZoneLimits, default_zone
 
 __all__ = [
     "BistaticPair",
@@ -35,10 +29,19 @@ __all__ = [
 
 #: Distance (m) below which a point counts as being at a sensor.
 SENSOR_EPS = 1e-6
+#: Lattice (m) the sensors are snapped to in their own frame (:meth:`Geometry.in_frame`).
+SNAP = 1e-3
+
+
+def _is_number(v: object) -> bool:
+    return isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool | np.bool_)
 
 
 def _point(value: ArrayLike, name: str) -> tuple[float, float]:
-    arr = np.asarray(value, dtype=float)
+    items = value.tolist() if isinstance(value, np.ndarray) else value
+    if not isinstance(items, list | tuple) or not all(_is_number(v) for v in items):
+        raise ValueError(f"{name} must be two numbers (x, y) in metres, got {value!r}")
+    arr = np.asarray(items, dtype=float)
     if arr.shape != (2,):
         raise ValueError(f"{name} must be a 2-vector (x, y) in metres, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -89,10 +92,14 @@ class Geometry:
         0-based index ``i`` in measurement files.
     name
         Optional label (e.g. ``"a"`` for the paper's case (a)).
+    zone_limits
+        Overrides of the default detectable zone in the sensors' frame
+        (the ``[zone]`` table of the geometry file); see :attr:`zone`.
     """
 
     pairs: tuple[BistaticPair, ...]
     name: str = ""
+    zone_limits: ZoneLimits = field(default_factory=ZoneLimits)
     _tx: NDArray[np.float64] = field(init=False, repr=False, compare=False)
     _rx: NDArray[np.float64] = field(init=False, repr=False, compare=False)
 
@@ -139,6 +146,51 @@ class Geometry:
         """The default detectable zone in :attr:`frame` (:func:`fgdoppler.zone.default_zone`)."""
         return default_zone(self.frame, self._tx, self._rx, speed_max=speed_max)
 
+    @cached_property
+    def zone(self) -> Zone:
+        """The detectable zone: the default rule with :attr:`zone_limits` applied."""
+        return self.zone_limits.apply(self.default_zone())
+
+    def with_zone(self, limits: ZoneLimits) -> Geometry:
+        """The same sensors with other zone overrides."""
+        return replace(self, zone_limits=limits)
+
+    def check_zone(self, reach: float = 10.0) -> None:
+        """Raise :class:`ValueError` if the zone lies more than ``reach`` sensor extents from every sensor.
+
+        The sensor extent is the largest distance between two sensors; a zone
+        farther away than ten of them is almost certainly a unit or sign
+        mistake (kilometres for metres, a flipped axis).
+        """
+        sensors = self.sensors()
+        extent = float(np.max(np.linalg.norm(sensors[:, None] - sensors[None], axis=-1)))
+        d = self.zone.distance_to(sensors)
+        if d > reach * extent:
+            raise ValueError(f"the zone (along {list(self.zone.along)}, across {list(self.zone.across)} m) lies "
+                             f"{d / 1e3:.1f} km from the nearest sensor, more than {reach:g} sensor extents "
+                             f"({extent / 1e3:.1f} km): check its units and signs")
+
+    def in_frame(self, frame: Frame, *, snap: float | None = SNAP) -> Geometry:
+        """The same pairs with positions in ``frame``'s local coordinates, snapped to a ``snap``-metre lattice.
+
+        Snapping makes the local geometry of a rigidly moved copy of the
+        problem identical to the bit, not only to rounding (a 1,000 km
+        translation leaves ~1e-10 m of rounding in every coordinate, and
+        Levenberg–Marquardt stopping in a flat valley amplifies that to
+        1e-5 of the answer).  ``None`` keeps the coordinates as computed.
+        """
+        def local(point: tuple[float, float]) -> NDArray[np.float64]:
+            u = frame.points_to_local(point)
+            return u if snap is None else np.round(u / snap) * snap + 0.0
+
+        return replace(self, pairs=tuple(BistaticPair(tx=local(p.tx), rx=local(p.rx)) for p in self.pairs))
+
+    @property
+    def on_lattice(self) -> bool:
+        """True if every sensor coordinate is already on the :data:`SNAP` lattice (nothing to snap)."""
+        xy = np.vstack([self._tx, self._rx])
+        return bool(np.array_equal(np.round(xy / SNAP) * SNAP + 0.0, xy))
+
     def mirrored_x(self, x_mirror: float) -> Geometry:
         """The geometry reflected about the vertical line ``x = x_mirror``."""
         return Geometry(
@@ -153,53 +205,18 @@ class Geometry:
 
     # -- TOML -----------------------------------------------------------------
     def to_toml(self, path: str | Path) -> None:
-        """Write the geometry as TOML (atomically: temporary file, then rename).
+        """Write the geometry as TOML, atomically (format: :mod:`fgdoppler.geometry_file`)."""
+        from fgdoppler.geometry_file import write_geometry
 
-        The format is::
-
-            name = "a"
-            [[pair]]
-            tx = [50000.0, 0.0]
-            rx = [0.0, 0.0]
-        """
-        import tomli_w
-
-        from fgdoppler._io import atomic_write_text
-
-        doc: dict[str, object] = {}
-        if self.name:
-            doc["name"] = self.name
-        doc["pair"] = [{"tx": list(p.tx), "rx": list(p.rx)} for p in self.pairs]
-        atomic_write_text(Path(path), tomli_w.dumps(doc))
+        write_geometry(self, path)
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Geometry:
-        """Read a geometry written by :meth:`to_toml`.
+        """Read a geometry file (format and errors: :func:`fgdoppler.geometry_file.read_geometry`)."""
+        from fgdoppler.geometry_file import read_geometry
 
-        Raises
-        ------
-        ValueError
-            Naming the file and the problem if the file is not valid TOML or
-            does not describe at least one valid pair.
-        """
-        path = Path(path)
-        try:
-            doc = tomllib.loads(path.read_text(encoding="utf-8"))
-        except tomllib.TOMLDecodeError as exc:
-            raise ValueError(f"{path}: not valid TOML: {exc}") from exc
-        raw = doc.get("pair")
-        if not isinstance(raw, list) or not raw:
-            raise ValueError(f"{path}: expected one or more [[pair]] tables with tx and rx")
-        pairs = []
-        for i, item in enumerate(raw):
-            if not isinstance(item, dict) or "tx" not in item or "rx" not in item:
-                raise ValueError(f"{path}: pair {i} needs both tx and rx")
-            try:
-                pairs.append(BistaticPair(tx=item["tx"], rx=item["rx"]))
-            except (ValueError, TypeError) as exc:
-                raise ValueError(f"{path}: pair {i}: {exc}") from exc
-        name = doc.get("name", "")
-        return cls(pairs=tuple(pairs), name=str(name))
+        geometry: Geometry = read_geometry(path)
+        return geometry
 
 
 def paper_geometry(case: str) -> Geometry:

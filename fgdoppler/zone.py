@@ -30,14 +30,14 @@ the weak prior spans it (:meth:`Zone.prior`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.frames import Frame
 
-__all__ = ["DEFAULT_SPEED_MAX", "Zone"]
+__all__ = ["DEFAULT_SPEED_MAX", "Zone", "ZoneLimits", "default_zone"]
 
 FloatArray = NDArray[np.float64]
 
@@ -46,10 +46,11 @@ DEFAULT_SPEED_MAX = 200.0
 
 
 def _interval(value: object, name: str) -> tuple[float, float]:
-    try:
-        lo, hi = (float(v) for v in value)  # type: ignore[attr-defined]
-    except (TypeError, ValueError):
-        raise ValueError(f"zone {name} must be two numbers [low, high] in metres, got {value!r}") from None
+    items = list(value) if isinstance(value, list | tuple | np.ndarray) else None
+    if items is None or len(items) != 2 or not all(
+            isinstance(v, int | float | np.floating | np.integer) and not isinstance(v, bool) for v in items):
+        raise ValueError(f"zone {name} must be two numbers [low, high] in metres, got {value!r}")
+    lo, hi = float(items[0]), float(items[1])
     if not (math.isfinite(lo) and math.isfinite(hi)):
         raise ValueError(f"zone {name} must be finite, got [{lo}, {hi}]")
     if not lo < hi:
@@ -167,6 +168,72 @@ class Zone:
         """JSON-ready form (the frame included)."""
         return {"along": list(self.along), "across": list(self.across), "speed_max": self.speed_max,
                 "frame": self.frame.to_dict()}
+
+    def relative_to(self, frame: Frame) -> Zone:
+        """The same zone with its frame expressed in ``frame``'s local coordinates."""
+        return replace(self, frame=self.frame.relative_to(frame))
+
+    def distance_to(self, points: ArrayLike) -> float:
+        """Smallest distance (m) from the box to any of the world ``points`` (0 if one is inside)."""
+        u = self.frame.points_to_local(np.asarray(points, dtype=float).reshape(-1, 2))
+        lo = np.array([self.along[0], self.across[0]])
+        hi = np.array([self.along[1], self.across[1]])
+        return float(np.min(np.linalg.norm(np.maximum(0.0, np.maximum(lo - u, u - hi)), axis=1)))
+
+
+@dataclass(frozen=True, kw_only=True)
+class ZoneLimits:
+    """A user's overrides of the default zone, in the geometry's frame (``None``: keep the rule's value).
+
+    Parameters
+    ----------
+    along : tuple of float or None, default None
+        ``(low, high)`` along the first pair's baseline (m).
+    across : tuple of float or None, default None
+        ``(low, high)`` across it (m).
+    speed_max : float or None, default None
+        Largest target speed (m/s).
+    """
+
+    along: tuple[float, float] | None = None
+    across: tuple[float, float] | None = None
+    speed_max: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.along is not None:
+            object.__setattr__(self, "along", _interval(self.along, "along"))
+        if self.across is not None:
+            object.__setattr__(self, "across", _interval(self.across, "across"))
+        sm = self.speed_max
+        if sm is not None and (isinstance(sm, bool) or not isinstance(sm, int | float)
+                               or not (math.isfinite(sm) and sm > 0)):
+            raise ValueError(f"zone speed_max must be a positive number of m/s, got {sm!r}")
+
+    @property
+    def empty(self) -> bool:
+        """True if nothing is overridden."""
+        return self.along is None and self.across is None and self.speed_max is None
+
+    def apply(self, zone: Zone) -> Zone:
+        """``zone`` with these overrides."""
+        return replace(zone, along=self.along or zone.along, across=self.across or zone.across,
+                       speed_max=zone.speed_max if self.speed_max is None else float(self.speed_max))
+
+    def merged(self, other: ZoneLimits) -> ZoneLimits:
+        """These limits with ``other``'s set values on top (e.g. command-line options over a TOML table)."""
+        return ZoneLimits(along=other.along or self.along, across=other.across or self.across,
+                          speed_max=self.speed_max if other.speed_max is None else other.speed_max)
+
+    def to_dict(self) -> dict[str, object]:
+        """The set values only (the TOML ``[zone]`` table)."""
+        d: dict[str, object] = {}
+        if self.along is not None:
+            d["along"] = list(self.along)
+        if self.across is not None:
+            d["across"] = list(self.across)
+        if self.speed_max is not None:
+            d["speed_max"] = float(self.speed_max)
+        return d
 
 
 def default_zone(frame: Frame, tx: ArrayLike, rx: ArrayLike, *, speed_max: float = DEFAULT_SPEED_MAX) -> Zone:

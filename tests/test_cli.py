@@ -95,7 +95,7 @@ def test_track_malformed_input_exits_2_and_writes_nothing(
     bad = tmp_path / "bad.csv"
     bad.write_text(content)
     out = tmp_path / "track.csv"
-    assert main(["track", str(bad), "--out", str(out)]) == 2
+    assert main(["track", str(bad), "--geometry", "a", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert str(bad) in err and msg in err
     assert not out.exists()

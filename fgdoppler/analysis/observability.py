@@ -50,6 +50,8 @@ __all__ = [
     "ObservabilityReport",
     "SamplingPattern",
     "SpeedTable",
+    "default_along",
+    "geometry_speed_table",
     "log10_det_information",
     "observability_map",
     "observability_measure",
@@ -157,9 +159,26 @@ def observability_measure(
     return float(O) if O.ndim == 0 else O
 
 
+def default_along(geometry: Geometry) -> FloatArray:
+    """The map's default along-baseline grid: :math:`D/50 .. D - D/50` every :math:`D/100` in the sensors' frame.
+
+    :math:`D` is the sensors' extent along the first pair's baseline; for the
+    paper's geometries this is :data:`DEFAULT_X` (1–49 km every 500 m).
+    """
+    u = geometry.frame.points_to_local(geometry.sensors())[:, 0]
+    lo, D = float(u.min()), float(np.ptp(u))
+    return np.arange(lo + D / 50, lo + D - D / 50 + D / 1e6, D / 100)
+
+
 @dataclass(frozen=True, kw_only=True)
 class ObservabilityMap:
-    """O over initial x × heading at fixed y and speed (paper Figs. 4–7)."""
+    """O over initial position × heading at a fixed offset and speed (paper Figs. 4–7).
+
+    Positions and headings are in the geometry's own frame
+    (:attr:`fgdoppler.geometry.Geometry.frame`): ``x`` along the first pair's
+    baseline, ``y`` across it, heading clockwise from the across axis — the
+    paper's x, y and heading for its geometries, whose frame is the identity.
+    """
 
     geometry: Geometry
     x: FloatArray
@@ -194,20 +213,20 @@ def observability_map(
     *,
     y: float,
     speed: float = 100.0,
-    x: ArrayLike = DEFAULT_X,
+    x: ArrayLike | None = None,
     heading_deg: ArrayLike = DEFAULT_HEADINGS_DEG,
     sampling: SamplingPattern = TABLE2_SAMPLING,
     chunk: int = 20_000,
     progress: Callable[[int], None] | None = None,
 ) -> ObservabilityMap:
-    """Evaluate O over an ``x × heading`` grid (vectorised, in chunks of ``chunk`` states).
+    """Evaluate O over an ``x × heading`` grid in the geometry's frame (vectorised, ``chunk`` states at a time).
 
-    ``progress``, if given, is called with the number of states done after
-    each chunk (for progress bars).
+    ``x`` defaults to :func:`default_along`.  ``progress``, if given, is
+    called with the number of states done after each chunk (for progress bars).
     """
-    xs = np.asarray(x, dtype=float).reshape(-1)
+    xs = (default_along(geometry) if x is None else np.asarray(x, dtype=float)).reshape(-1)
     hs = np.asarray(heading_deg, dtype=float).reshape(-1)
-    states = grid_states(xs, y, speed, hs).reshape(-1, 4)
+    states = geometry.frame.states_to_world(grid_states(xs, y, speed, hs).reshape(-1, 4))
     times = StackedTimes.from_per_pair(sampling.times(geometry.n_pairs))
     out = np.empty(states.shape[0])
     for start in range(0, states.shape[0], chunk):
@@ -223,13 +242,17 @@ def observability_map(
 
 @dataclass(frozen=True, kw_only=True)
 class SpeedTable:
-    """Max and min of O over each group's map at several speeds (paper Table 2)."""
+    """Max and min of O over each group's map at several speeds (paper Table 2).
 
-    groups: tuple[int, ...]
+    ``groups`` are the paper's group numbers, or a label for a geometry of
+    one's own (:func:`geometry_speed_table`).
+    """
+
+    groups: tuple[int | str, ...]
     speeds: tuple[float, ...]
     sampling: SamplingPattern
     #: ``values[g][s] = (max, min)``
-    values: dict[int, dict[float, tuple[float, float]]]
+    values: dict[int | str, dict[float, tuple[float, float]]]
 
     def compare(self) -> list[dict[str, Any]]:
         """Rows with ours and the paper's values side by side (where the paper has them)."""
@@ -237,7 +260,7 @@ class SpeedTable:
         for g in self.groups:
             for s in self.speeds:
                 mx, mn = self.values[g][s]
-                paper = PAPER_TABLE2.get(g, {}).get(s)
+                paper = PAPER_TABLE2.get(g, {}).get(s) if isinstance(g, int) else None
                 rows.append({
                     "group": g, "speed": s, "max": mx, "min": mn,
                     "paper_max": None if paper is None else paper[0],
@@ -269,15 +292,36 @@ def speed_table(
     heading_deg: ArrayLike = DEFAULT_HEADINGS_DEG,
 ) -> SpeedTable:
     """The paper's Table 2 (max and min of O over each group's map per speed)."""
-    values: dict[int, dict[float, tuple[float, float]]] = {}
+    values: dict[int | str, dict[float, tuple[float, float]]] = {}
     for g in groups:
         case, y = PAPER_GROUPS[g]
-        geom = paper_geometry(case)
-        values[g] = {}
-        for s in speeds:
-            m = observability_map(geom, y=y, speed=s, x=x, heading_deg=heading_deg, sampling=sampling)
-            values[g][float(s)] = (float(m.O.max()), float(m.O.min()))
+        values[g] = _speed_row(paper_geometry(case), y, speeds, sampling, x, heading_deg)
     return SpeedTable(groups=tuple(groups), speeds=tuple(float(s) for s in speeds), sampling=sampling, values=values)
+
+
+def geometry_speed_table(
+    geometry: Geometry,
+    *,
+    y: float,
+    speeds: Sequence[float] = (100.0, 75.0, 50.0, 25.0),
+    sampling: SamplingPattern = TABLE2_SAMPLING,
+    x: ArrayLike | None = None,
+    heading_deg: ArrayLike = DEFAULT_HEADINGS_DEG,
+    label: str | None = None,
+) -> SpeedTable:
+    """Table 2 for a geometry of one's own: max and min of O over its map at offset ``y``, per speed."""
+    name = label or geometry.name or "geometry"
+    return SpeedTable(groups=(name,), speeds=tuple(float(s) for s in speeds), sampling=sampling,
+                      values={name: _speed_row(geometry, y, speeds, sampling, x, heading_deg)})
+
+
+def _speed_row(geometry: Geometry, y: float, speeds: Sequence[float], sampling: SamplingPattern,
+               x: ArrayLike | None, heading_deg: ArrayLike) -> dict[float, tuple[float, float]]:
+    row = {}
+    for s in speeds:
+        m = observability_map(geometry, y=y, speed=s, x=x, heading_deg=heading_deg, sampling=sampling)
+        row[float(s)] = (float(m.O.max()), float(m.O.min()))
+    return row
 
 
 # -- the report -------------------------------------------------------------------

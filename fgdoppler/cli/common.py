@@ -37,3 +37,112 @@ def executor(args: argparse.Namespace) -> tuple[Any, Any]:
         raise CLIError("--scheduler needs the optional extra: pip install 'fgdoppler[distributed]'") from exc
     client = Client(args.scheduler)
     return client.get_executor(), client
+
+
+# -- shared option groups --------------------------------------------------------------
+def add_zone_options(p: argparse.ArgumentParser) -> None:
+    """``--zone``, ``--speed-max``, ``--speed-step``, ``--grid-step``: the zone and the grid's resolution."""
+    g = p.add_argument_group("zone (where a track may start; default: the geometry's rule and [zone] table)")
+    g.add_argument("--zone", type=float, nargs=4, metavar=("ALONG_LO", "ALONG_HI", "ACROSS_LO", "ACROSS_HI"),
+                   default=None, help="box in the sensors' frame in metres: along the first pair's baseline from "
+                   "its receiver, and across it (overrides the geometry file's [zone])")
+    g.add_argument("--speed-max", type=float, default=None, metavar="M/S",
+                   help="largest target speed in m/s (default: the [zone] table's, else 200)")
+    g.add_argument("--speed-step", type=float, default=None, metavar="M/S",
+                   help="speed step of the initiation grid (default speed-max / 20)")
+    g.add_argument("--grid-step", type=float, default=None, metavar="M",
+                   help="position step of the initiation grid (default: the sensors' extent / 50, "
+                   "coarsened to at most 2000 nodes)")
+
+
+def zone_limits(args: argparse.Namespace) -> Any:
+    """The :class:`~fgdoppler.zone.ZoneLimits` the zone options set (validated: bad values are a CLIError)."""
+    from fgdoppler.zone import ZoneLimits
+
+    try:
+        return ZoneLimits(along=None if args.zone is None else tuple(args.zone[:2]),
+                          across=None if args.zone is None else tuple(args.zone[2:]), speed_max=args.speed_max)
+    except ValueError as exc:
+        raise CLIError(f"--zone/--speed-max: {exc}") from None
+
+
+def grid_spec(args: argparse.Namespace) -> Any:
+    """The initiation grid's :class:`~fgdoppler.estimators.grid.GridSpec` from the options."""
+    from fgdoppler.estimators.grid import GridSpec
+
+    try:
+        return GridSpec(position_step=args.grid_step, speed_step=args.speed_step)
+    except ValueError as exc:
+        raise CLIError(f"--grid-step/--speed-step: {exc}") from None
+
+
+def geometry_with_zone(spec: str, args: argparse.Namespace) -> Any:
+    """A preset or TOML geometry with the zone options applied on top of its ``[zone]`` table."""
+    from fgdoppler.geometry import resolve_geometry
+
+    geometry = resolve_geometry(spec)
+    limits = zone_limits(args)
+    if limits.empty:
+        return geometry
+    moved = geometry.with_zone(geometry.zone_limits.merged(limits))
+    try:
+        moved.check_zone()
+    except ValueError as exc:
+        raise CLIError(f"--zone: {exc}") from None
+    return moved
+
+
+def add_scenario_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
+    """The options of a simulated target (velocity, duration, sampling, offsets, noise); returns the group.
+
+    The start position is each command's own (one start, or several for Monte Carlo).
+    """
+    g = p.add_argument_group("scenario (the simulated target)")
+    g.add_argument("--velocity", type=float, nargs=2, default=(10.0, -100.0), metavar=("VX", "VY"),
+                   help="velocity in m/s (default 10 -100)")
+    g.add_argument("--duration", type=float, default=30.0, help="seconds (default 30)")
+    g.add_argument("--dt", type=float, default=0.5, help="sampling interval of each pair in seconds (default 0.5)")
+    g.add_argument("--offsets", type=float, nargs="+", default=None, metavar="S",
+                   help="per-pair time offsets in s (default: 0 for every pair; 0 0.25 for the paper's case b)")
+    g.add_argument("--sigma", type=float, nargs="+", default=[1.0], metavar="M/S",
+                   help="Doppler noise std in m/s, one value or one per pair (default 1)")
+    g.add_argument("--process-noise", type=float, default=0.0, metavar="Q",
+                   help="truth process noise PSD in m^2/s^3 (default 0: constant velocity)")
+    return g
+
+
+#: The most samples a simulated scenario may have (guards against --dt 1e-9 and the like).
+MAX_SAMPLES = 10_000_000
+
+
+def scenario(args: argparse.Namespace, geometry: Any, start: tuple[float, float], name: str) -> Any:
+    """A :class:`~fgdoppler.simulation.Scenario` from the scenario options (every value checked first)."""
+    from fgdoppler.models.motion import ConstantVelocity
+    from fgdoppler.simulation import PAPER_CASE_B_OFFSET, Scenario
+
+    if not (args.dt > 0 and args.duration >= 0) or not all(map(_finite, (args.dt, args.duration))):
+        raise CLIError(f"--dt must be > 0 and --duration >= 0, got {args.dt} and {args.duration}")
+    if (args.duration / args.dt + 1) * geometry.n_pairs > MAX_SAMPLES:
+        raise CLIError(f"--duration {args.duration:g} s at --dt {args.dt:g} s gives more than {MAX_SAMPLES:,} "
+                       "samples: lengthen --dt or shorten --duration")
+    if not all(map(_finite, (*start, *args.velocity))):
+        raise CLIError(f"the start and --velocity must be finite, got {start} and {args.velocity}")
+    if not (args.process_noise >= 0 and _finite(args.process_noise)):
+        raise CLIError(f"--process-noise must be a finite number >= 0, got {args.process_noise}")
+    if args.offsets is not None:
+        offsets = tuple(args.offsets)
+    else:
+        offsets = (0.0, PAPER_CASE_B_OFFSET) if geometry.name == "b" else (0.0,) * geometry.n_pairs
+    sigma = args.sigma[0] if len(args.sigma) == 1 else tuple(args.sigma)
+    try:
+        return Scenario(geometry=geometry, x0=(*start, *args.velocity), duration=args.duration, dt=args.dt,
+                        sigma=sigma, time_offsets=offsets, name=name,
+                        process_noise=ConstantVelocity(q=args.process_noise) if args.process_noise > 0 else None)
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
+
+
+def _finite(v: float) -> bool:
+    import math
+
+    return math.isfinite(v)

@@ -6,7 +6,16 @@ import argparse
 from pathlib import Path
 
 from fgdoppler.analysis.montecarlo import DEFAULT_ESTIMATORS
-from fgdoppler.cli.common import CLIError, emit_json, executor
+from fgdoppler.cli.common import (
+    CLIError,
+    add_scenario_options,
+    add_zone_options,
+    emit_json,
+    executor,
+    geometry_with_zone,
+    grid_spec,
+    scenario,
+)
 
 __all__ = ["add_montecarlo"]
 
@@ -15,13 +24,17 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "montecarlo",
-        help="Monte Carlo RMSE / NEES study of paper scenarios",
-        description="Simulate paper scenarios --runs times each and run every estimator; writes "
-        "OUT.npz and OUT.json (reloadable) and prints time-averaged RMSE.",
+        help="Monte Carlo RMSE / NEES study of the paper's scenarios or your own",
+        description="Simulate scenarios --runs times each and run every estimator; writes OUT.npz and "
+        "OUT.json (reloadable) and prints time-averaged RMSE.  By default the paper's six scenarios; with "
+        "--geometry, targets starting at each --start-x on that geometry, with the scenario options.",
     )
     p.add_argument("--case", choices=("a", "b", "all"), default="all", help="paper geometry (default all)")
+    p.add_argument("--geometry", default=None, help="a geometry TOML file (or a, b) instead of --case")
     p.add_argument("--start-x", type=float, nargs="+", default=None, metavar="M",
                    help="start x positions in m (default 5000 25000 45000)")
+    p.add_argument("--start-y", type=float, default=2e3, help="start y in m (default 2000)")
+    p.add_argument("--q", type=float, default=None, help="estimators' process noise PSD in m^2/s^3 (default 1e-3)")
     p.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS),
                    help=f"estimators (default: {' '.join(DEFAULT_ESTIMATORS)}; also lag:SECONDS)")
     p.add_argument("--runs", type=int, default=100, help="runs per scenario (default 100)")
@@ -31,18 +44,31 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=Path("output/montecarlo/montecarlo"), help="output path stem")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--plot", type=Path, default=None, metavar="PATH", help="RMSE-vs-time figure of the first scenario")
+    add_scenario_options(p)
+    add_zone_options(p)
     p.set_defaults(handler=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
     from fgdoppler.analysis.montecarlo import MonteCarloSpec, run_monte_carlo
-    from fgdoppler.simulation import PAPER_START_X, paper_scenario
+    from fgdoppler.estimators.initiation import InitiationSettings
+    from fgdoppler.models.motion import ConstantVelocity
+    from fgdoppler.simulation import PAPER_START_X
 
-    cases = ("a", "b") if args.case == "all" else (args.case,)
+    if args.runs < 1 or args.workers < 1:
+        raise CLIError(f"--runs and --workers must be >= 1, got {args.runs} and {args.workers}")
+    specs = [args.geometry] if args.geometry else (["a", "b"] if args.case == "all" else [args.case])
     starts = tuple(args.start_x) if args.start_x else PAPER_START_X
-    scen = tuple(paper_scenario(c, x) for c in cases for x in starts)
+    scen = []
+    for g in specs:
+        geom = geometry_with_zone(g, args)
+        label = f"case {geom.name}" if geom.name in ("a", "b") and not args.geometry else str(g)
+        y_note = "" if args.start_y == 2e3 else f", y {args.start_y / 1e3:g} km"
+        scen += [scenario(args, geom, (x, args.start_y), f"{label}, start {x / 1e3:g} km{y_note}") for x in starts]
     try:
-        spec = MonteCarloSpec(scenarios=scen, estimators=tuple(args.estimators), runs=args.runs, seed=args.seed)
+        spec = MonteCarloSpec(scenarios=tuple(scen), estimators=tuple(args.estimators), runs=args.runs, seed=args.seed,
+                              initiation=InitiationSettings(grid=grid_spec(args)),
+                              motion=ConstantVelocity(q=1e-3 if args.q is None else args.q))
     except ValueError as exc:
         raise CLIError(str(exc)) from exc
     pool, client = executor(args)
@@ -57,10 +83,11 @@ def _run(args: argparse.Namespace) -> int:
         emit_json(summ)
     else:
         print(f"{res.runs} runs x {len(scen)} scenarios in {res.wall_time:.1f} s; wrote {npz} and {js}")
-        print(f"{'scenario':22s} " + " ".join(f"{e:>10s}" for e in res.estimators))
+        width = max(22, *(len(n) for n in res.scenario_names))
+        print(f"{'scenario':{width}s} " + " ".join(f"{e:>10s}" for e in res.estimators))
         for name in res.scenario_names:
             vals = [r["pos_rmse_mean"] for r in summ["rows"] if r["scenario"] == name]
-            print(f"{name:22s} " + " ".join(f"{v:10.1f}" if v is not None else f"{'-':>10s}" for v in vals))
+            print(f"{name:{width}s} " + " ".join(f"{v:10.1f}" if v is not None else f"{'-':>10s}" for v in vals))
     if args.plot:
         from fgdoppler import plotting
 

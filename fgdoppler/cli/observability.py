@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fgdoppler.cli.common import CLIError, emit_json, progress_bar
+from fgdoppler.cli.common import CLIError, add_scenario_options, emit_json, progress_bar, scenario
 
 if TYPE_CHECKING:
     from fgdoppler.analysis.observability import SamplingPattern
@@ -24,17 +24,25 @@ def add_observability(sub: argparse._SubParsersAction) -> None:
         help="observability maps (x × heading), O vs x slices, the speed table, a scenario report",
         description="The paper's observability measure O = log10 det(J'J) (floor -40). By default a "
         "map over initial x (1-49 km, 500 m) × heading (0-350 deg, 10 deg) for the paper's group 2 "
-        "(case a, 2 km off the baseline) at 100 m/s with the sampling that reproduces Table 2.",
+        "(case a, 2 km off the baseline) at 100 m/s with the sampling that reproduces Table 2.  With "
+        "--geometry every mode works on that geometry, in its own frame (x along the first pair's baseline "
+        "from its receiver, y across it, heading clockwise from the y axis; the paper's axes for a and b).",
     )
     p.add_argument("--group", type=int, choices=(1, 2, 3, 4), default=None,
-                   help="paper evaluation group (sets --case and --offset)")
-    p.add_argument("--case", default="a", help="geometry: a, b or a TOML file (default a)")
-    p.add_argument("--offset", type=float, default=2e3, help="y of the evaluation points in m (default 2000)")
+                   help="paper evaluation group (sets --geometry and --offset)")
+    p.add_argument("--geometry", "--case", dest="geometry", default=None,
+                   help="geometry: the paper's a or b, or a TOML file (default: a; the paper's groups 2 and 4 "
+                   "for --table and --slice; --case is the old name)")
+    p.add_argument("--offset", type=float, default=2e3,
+                   help="y of the evaluation points (and the start y of --report) in m (default 2000)")
     p.add_argument("--speed", type=float, default=100.0, help="target speed in m/s (default 100)")
+    p.add_argument("--speeds", type=float, nargs="+", default=[100.0, 75.0, 50.0, 25.0], metavar="M/S",
+                   help="speeds of --table (default 100 75 50 25)")
     p.add_argument("--headings", type=float, nargs=3, metavar=("START", "STOP", "STEP"), default=None,
                    help="heading grid in degrees (default 0 350 10)")
     p.add_argument("--x", type=float, nargs=3, metavar=("START", "STOP", "STEP"), default=None,
-                   help="initial x grid in metres (default 1000 49000 500)")
+                   help="initial x grid in metres (default: the sensors' extent D, D/50 to D - D/50 every "
+                   "D/100; 1000 49000 500 for the paper)")
     p.add_argument("--samples", type=int, default=None, help="samples per pair of the sampling pattern (default 2)")
     p.add_argument("--interval", type=float, default=None, help="sampling interval in s (default 1)")
     p.add_argument("--pair-offsets", type=float, nargs="+", default=None, metavar="S",
@@ -44,15 +52,15 @@ def add_observability(sub: argparse._SubParsersAction) -> None:
     mode.add_argument("--slice", type=float, default=None, metavar="HEADING",
                       help="O vs x at one heading for groups 2 and 4 (paper Fig. 8 uses 180)")
     mode.add_argument("--report", type=float, default=None, metavar="START_X",
-                      help="marginal-covariance report of the paper scenario of --case starting at START_X m")
-    p.add_argument("--process-noise", type=float, default=0.0, metavar="Q",
-                   help="for --report: NCV process noise PSD (default 0: deterministic CV)")
+                      help="marginal-covariance report of a target starting at (START_X, --offset) with the "
+                      "scenario options; --process-noise Q also puts Q in the graph (default 0: deterministic CV)")
+    add_scenario_options(p)
     p.add_argument("--json", action="store_true", help="machine-readable output on stdout")
     p.add_argument("--plot", type=Path, default=None, metavar="PATH", help="write a figure")
     p.set_defaults(handler=_run)
 
 
-def _grid(spec: Sequence[float] | None, default: np.ndarray) -> np.ndarray:
+def _grid(spec: Sequence[float] | None, default: np.ndarray | None) -> np.ndarray | None:
     if spec is None:
         return default
     start, stop, step = spec
@@ -69,8 +77,9 @@ def _run(args: argparse.Namespace) -> int:
         interval=args.interval if args.interval is not None else ob.TABLE2_SAMPLING.interval,
         offsets=tuple(args.pair_offsets) if args.pair_offsets else None,
     )
-    xs = _grid(args.x, ob.DEFAULT_X)
+    xs = _grid(args.x, None)
     hs = _grid(args.headings, ob.DEFAULT_HEADINGS_DEG)
+    assert hs is not None
     if args.table:
         return _table(args, sampling, xs, hs)
     if args.slice is not None:
@@ -80,11 +89,17 @@ def _run(args: argparse.Namespace) -> int:
     return _map(args, sampling, xs, hs)
 
 
-def _table(args: argparse.Namespace, sampling: SamplingPattern, xs: np.ndarray, hs: np.ndarray) -> int:
+def _table(args: argparse.Namespace, sampling: SamplingPattern, xs: np.ndarray | None, hs: np.ndarray) -> int:
     from fgdoppler import plotting
     from fgdoppler.analysis import observability as ob
+    from fgdoppler.geometry import resolve_geometry
 
-    table = ob.speed_table(sampling=sampling, x=xs, heading_deg=hs)
+    if args.geometry is None:
+        table = ob.speed_table(sampling=sampling, speeds=args.speeds,
+                               x=ob.DEFAULT_X if xs is None else xs, heading_deg=hs)
+    else:
+        table = ob.geometry_speed_table(resolve_geometry(args.geometry), y=args.offset, speeds=args.speeds,
+                                        sampling=sampling, x=xs, heading_deg=hs, label=str(args.geometry))
     if args.json:
         emit_json({"sampling": table.sampling.describe(), "rows": table.compare()})
     else:
@@ -94,17 +109,18 @@ def _table(args: argparse.Namespace, sampling: SamplingPattern, xs: np.ndarray, 
     return 0
 
 
-def _slice(args: argparse.Namespace, sampling: SamplingPattern, xs: np.ndarray) -> int:
+def _slice(args: argparse.Namespace, sampling: SamplingPattern, xs: np.ndarray | None) -> int:
     from fgdoppler import plotting
     from fgdoppler.analysis import observability as ob
     from fgdoppler.geometry import resolve_geometry
 
+    todo = ([(f"group {g}", *ob.PAPER_GROUPS[g]) for g in (2, 4)] if args.geometry is None
+            else [(str(args.geometry), args.geometry, args.offset)])
     curves = {}
-    for g in (2, 4):
-        case, y = ob.PAPER_GROUPS[g]
+    for label, case, y in todo:
         m = ob.observability_map(resolve_geometry(case), y=y, speed=args.speed, x=xs,
                                  heading_deg=[args.slice], sampling=sampling)
-        curves[f"group {g}"] = (m.x, m.O[:, 0])
+        curves[label] = (m.x, m.O[:, 0])
     if args.json:
         emit_json({"heading_deg": args.slice, "sampling": sampling.describe(),
                    "curves": {k: {"x": v[0].tolist(), "O": v[1].tolist()} for k, v in curves.items()}})
@@ -117,14 +133,15 @@ def _slice(args: argparse.Namespace, sampling: SamplingPattern, xs: np.ndarray) 
     return 0
 
 
-def _map(args: argparse.Namespace, sampling: SamplingPattern, xs: np.ndarray, hs: np.ndarray) -> int:
+def _map(args: argparse.Namespace, sampling: SamplingPattern, xs: np.ndarray | None, hs: np.ndarray) -> int:
     from fgdoppler import plotting
     from fgdoppler.analysis import observability as ob
     from fgdoppler.geometry import resolve_geometry
 
-    case, y = (ob.PAPER_GROUPS[args.group] if args.group else (args.case, args.offset))
+    case, y = (ob.PAPER_GROUPS[args.group] if args.group else (args.geometry or "a", args.offset))
     geom = resolve_geometry(case)
-    with progress_bar(xs.size * hs.size, "observability map") as bar:
+    n_x = ob.default_along(geom).size if xs is None else xs.size
+    with progress_bar(n_x * hs.size, "observability map") as bar:
         m = ob.observability_map(geom, y=y, speed=args.speed, x=xs, heading_deg=hs, sampling=sampling,
                                  progress=bar.update)
     if args.json:
@@ -142,10 +159,13 @@ def _map(args: argparse.Namespace, sampling: SamplingPattern, xs: np.ndarray, hs
 def _report(args: argparse.Namespace) -> int:
     from fgdoppler import plotting
     from fgdoppler.analysis.observability import observability_report
+    from fgdoppler.geometry import resolve_geometry
     from fgdoppler.models.motion import ConstantVelocity
-    from fgdoppler.simulation import paper_scenario, simulate
+    from fgdoppler.simulation import simulate
 
-    scen = paper_scenario(args.case, args.report)
+    geom = resolve_geometry(args.geometry or "a")
+    start = (args.report, args.offset)
+    scen = scenario(args, geom, start, f"{args.geometry or 'a'}, start ({start[0] / 1e3:g}, {start[1] / 1e3:g}) km")
     sim = simulate(scen, np.random.default_rng(0))
     motion = ConstantVelocity(q=args.process_noise) if args.process_noise > 0 else None
     rep = observability_report(scen.geometry, sim.truth, sim.measurements, motion=motion)

@@ -10,7 +10,13 @@ from typing import Any
 
 import numpy as np
 
-from fgdoppler.cli.common import CLIError, emit_json
+from fgdoppler.cli.common import (
+    CLIError,
+    add_zone_options,
+    emit_json,
+    geometry_with_zone,
+    grid_spec,
+)
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
 
@@ -23,10 +29,12 @@ def add_track(sub: argparse._SubParsersAction) -> None:
         "track",
         help="initiate and track/smooth a recorded measurement CSV",
         description="Read FILE (CSV time,pair,doppler,sigma), initiate from the first --init-per-pair "
-        "measurements of each pair (multi-start grid + refinement), then run the chosen estimator.",
+        "measurements of each pair (multi-start grid + refinement), then run the chosen estimator.  The "
+        "geometry is never assumed: give --geometry, or keep a geometry.toml beside FILE (as simulate writes).",
     )
     p.add_argument("file", type=Path, metavar="FILE", help="measurement CSV")
-    p.add_argument("--geometry", default="a", help="a, b or a geometry TOML file (default a)")
+    p.add_argument("--geometry", default=None,
+                   help="the paper's a or b, or a geometry TOML file (default: geometry.toml beside FILE)")
     p.add_argument("--estimator", choices=("init", *ESTIMATORS, *ALIASES), default="init",
                    help="what to run: init (initiation only), " + ", ".join(
                        f"{k} ({v.summary})" for k, v in ESTIMATORS.items())
@@ -46,7 +54,26 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
     p.add_argument("--json", action="store_true", help="machine-readable result on stdout")
     p.add_argument("--plot", type=Path, default=None, metavar="PATH", help="write a figure")
+    add_zone_options(p)
     p.set_defaults(handler=_run)
+
+
+def _geometry_spec(args: argparse.Namespace) -> str:
+    """The geometry to use: --geometry, else geometry.toml beside FILE; never a silent default."""
+    if args.geometry is not None:
+        return str(args.geometry)
+    beside = args.file.parent / "geometry.toml"
+    if beside.is_file():
+        return str(beside)
+    raise CLIError(f"no geometry for {args.file}: pass --geometry a|b|FILE.toml, or put a geometry.toml "
+                   "beside it (fgdoppler simulate writes one)")
+
+
+def _describe(geometry: Any, spec: str) -> dict[str, Any]:
+    """The geometry and its zone as recorded in every output."""
+    return {"geometry": {"source": spec, "name": geometry.name,
+                         "pairs": [{"tx": list(p.tx), "rx": list(p.rx)} for p in geometry.pairs]},
+            "zone": geometry.zone.to_dict()}
 
 
 def _model(args: argparse.Namespace, geometry: Any) -> Any:
@@ -68,26 +95,32 @@ def _initiation_settings(args: argparse.Namespace) -> Any:
         px, py, nx, ny = args.half_plane
         hp = HalfPlane(point=(px, py), normal=(nx, ny))
     return InitiationSettings(method=args.init_method, k_best=args.k_best, region_bound=not args.no_region_bound,
-                              half_plane=hp)
+                              half_plane=hp, grid=grid_spec(args))
 
 
 def _run(args: argparse.Namespace) -> int:
     from fgdoppler.estimators.initiation import initiate
-    from fgdoppler.geometry import resolve_geometry
     from fgdoppler.measurements import Measurements
     from fgdoppler.simulation import Trajectory
 
-    geom = resolve_geometry(args.geometry)
+    spec = _geometry_spec(args)
+    geom = geometry_with_zone(spec, args)
     meas = Measurements.from_csv(args.file, geometry=geom, default_sigma=args.sigma)
     truth = Trajectory.from_csv(args.truth) if args.truth else None
     if args.init_per_pair < 3:
         raise CLIError("--init-per-pair must be >= 3")
     model = _model(args, geom)
+    settings = _initiation_settings(args)
     window = meas.first_per_pair(args.init_per_pair)
-    init = initiate(window, model, _initiation_settings(args))
+    init = initiate(window, model, settings)
+    where = _describe(geom, spec)
+    if not args.json:
+        z = geom.zone
+        print(f"geometry {spec} ({geom.n_pairs} pair(s)); zone along {z.along[0]:g}..{z.along[1]:g} m, across "
+              f"{z.across[0]:g}..{z.across[1]:g} m in the sensors' frame, speed up to {z.speed_max:g} m/s")
     if args.estimator == "init":
-        return _report_initiation(args, init, window, geom, truth)
-    return _run_tracker(args, init, meas, model, truth)
+        return _report_initiation(args, init, window, geom, truth, where)
+    return _run_tracker(args, init, meas, model, truth, where)
 
 
 def _print_verdict(status: str, reasons: Any, events: Any, limit: int = 10) -> None:
@@ -100,13 +133,14 @@ def _print_verdict(status: str, reasons: Any, events: Any, limit: int = 10) -> N
         print(f"  ... and {len(events) - limit} more event(s)")
 
 
-def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: Any, truth: Any) -> int:
+def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: Any, truth: Any,
+                       where: dict[str, Any]) -> int:
     if args.out is not None:
         from fgdoppler._io import atomic_write_text
 
-        atomic_write_text(args.out, json.dumps(init.to_dict(), indent=1))
+        atomic_write_text(args.out, json.dumps({**init.to_dict(), **where}, indent=1))
     if args.json:
-        emit_json(init.to_dict())
+        emit_json({**init.to_dict(), **where})
     else:
         print(f"initiation ({init.method}) from {init.n_measurements} measurements, "
               f"t = {init.t_start:g}..{init.t_end:g} s, {init.wall_time * 1e3:.0f} ms")
@@ -145,7 +179,7 @@ def _plot_landscape(args: argparse.Namespace, init: Any, window: Any, geom: Any,
     plotting.save(ax, args.plot)
 
 
-def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, truth: Any) -> int:
+def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, truth: Any, where: dict[str, Any]) -> int:
     from fgdoppler import plotting
     from fgdoppler.estimators.registry import run_estimator
     from fgdoppler.estimators.settings import FixedLagSettings
@@ -157,11 +191,11 @@ def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, tru
     settings = FixedLagSettings(lag=args.lag) if name == "fixed-lag" else ESTIMATORS[name].settings()
     result = run_estimator(name, meas, model, init, settings)
     if args.out is not None:
-        result.to_csv(args.out)
-        result.to_json(args.out.with_suffix(".json"))
+        result.to_csv(args.out, header=_csv_header(where))
+        result.to_json(args.out.with_suffix(".json"), extra=where)
     e = result.primary
     if args.json:
-        emit_json(result.to_dict(all_estimates=False))
+        emit_json({**result.to_dict(all_estimates=False), **where})
     else:
         print(f"{name}: {len(e)} states ({e.kind}), t = {e.times[0]:g}..{e.times[-1]:g} s, "
               f"{result.wall_time * 1e3:.0f} ms")
@@ -179,3 +213,12 @@ def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, tru
                                  truth=None if truth is None else truth.states, label=f"{name} ({e.kind})")
         plotting.save(ax, args.plot)
     return 0
+
+
+def _csv_header(where: dict[str, Any]) -> list[str]:
+    """Comment lines that record the geometry and the zone in the track CSV."""
+    g, z = where["geometry"], where["zone"]
+    return [f"geometry: {g['source']} name={g['name'] or '-'} pairs="
+            + ";".join(f"tx={p['tx']} rx={p['rx']}" for p in g["pairs"]),
+            f"zone: along={z['along']} across={z['across']} speed_max={z['speed_max']} "
+            f"frame_origin={z['frame']['origin']} frame_basis={z['frame']['basis']}"]

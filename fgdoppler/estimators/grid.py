@@ -41,12 +41,13 @@ Speed lower bound
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import minimum_filter
 
+from fgdoppler.frames import Frame
 from fgdoppler.geometry import Geometry
 from fgdoppler.models.doppler import StackedTimes, _cv
 from fgdoppler.zone import Zone
@@ -82,6 +83,12 @@ class HalfPlane:
         """Whether each position ``(..., 2)`` (or state) lies in the half plane."""
         p = np.asarray(positions, dtype=float)[..., :2]
         return (p - np.asarray(self.point)) @ np.asarray(self.normal, dtype=float) >= 0
+
+    def in_frame(self, frame: Frame) -> HalfPlane:
+        """The same half plane in ``frame``'s local coordinates."""
+        if frame.is_identity:
+            return self
+        return HalfPlane(point=tuple(frame.points_to_local(self.point)), normal=tuple(frame.B @ np.asarray(self.normal)))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -222,6 +229,11 @@ class GridResult:
     def best(self) -> FloatArray:
         """The candidate with the least cost (the paper's :math:`\\hat{\\mathbf x}_0^0`)."""
         return self.states[0]
+
+    def transformed(self, frame: Frame, *, to_world: bool) -> GridResult:
+        """The candidates moved out of (``to_world``) or into ``frame``'s local coordinates."""
+        states = frame.states_to_world(self.states) if to_world else frame.states_to_local(self.states)
+        return replace(self, states=states)
 
 
 def _product_costs(

@@ -75,6 +75,7 @@ from fgdoppler.estimators.grid import (
 from fgdoppler.estimators.marginals import marginal_covariances
 from fgdoppler.estimators.verdict import Event, Judged, Reason
 from fgdoppler.factors import X, region_factor
+from fgdoppler.frames import Frame
 from fgdoppler.geometry import Geometry
 from fgdoppler.graphs import chain_graph, chain_values, cv_graph
 from fgdoppler.measurements import Measurements
@@ -162,6 +163,10 @@ class InitiationSettings:
         if self.k_best < 1 or self.max_iterations < 1:
             raise ValueError("k_best and max_iterations must be >= 1")
 
+    def in_frame(self, frame: Frame) -> InitiationSettings:
+        """The same settings with the half plane (the only positional option) in ``frame``'s coordinates."""
+        return self if self.half_plane is None else replace(self, half_plane=self.half_plane.in_frame(frame))
+
 
 @dataclass(frozen=True, kw_only=True)
 class Candidate:
@@ -177,6 +182,12 @@ class Candidate:
         """JSON-ready form."""
         return {"state": self.state.tolist(), "cost": self.cost, "passes_chi2": self.passes_chi2,
                 "covariance": None if self.covariance is None else self.covariance.tolist()}
+
+    def transformed(self, frame: Frame, *, to_world: bool) -> Candidate:
+        """The candidate moved out of (``to_world``) or into ``frame``'s local coordinates."""
+        x = frame.states_to_world if to_world else frame.states_to_local
+        P = frame.covariances_to_world if to_world else frame.covariances_to_local
+        return replace(self, state=x(self.state), covariance=None if self.covariance is None else P(self.covariance))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -238,6 +249,8 @@ class Initiation(Judged):
     reasons: tuple[Reason, ...] = ()
     events: tuple[Event, ...] = ()
     wall_time: float = 0.0
+    #: The same initiation in the frame it was computed in, with that frame (see :meth:`in_frame_of`).
+    computed_in: tuple[Frame, Initiation] | None = field(default=None, repr=False, compare=False)
 
     @property
     def ambiguous(self) -> bool:
@@ -248,6 +261,36 @@ class Initiation(Judged):
     def covariance_ok(self) -> bool:
         """True when ``P_start`` and ``P_end`` are available."""
         return self.P_start is not None
+
+    def in_frame_of(self, frame: Frame) -> Initiation:
+        """This initiation in ``frame``'s local coordinates, exactly as computed there where possible.
+
+        An initiation computed in ``frame`` keeps that answer; a round trip
+        through world coordinates 1,000 km from the origin would change it by
+        ~1e-10 m, which a tracker can amplify in a flat valley.  The kept copy
+        is used only while it still matches this initiation's fields (an
+        edited initiation is transformed afresh).
+        """
+        if self.computed_in is not None and self.computed_in[0] == frame:
+            local = self.computed_in[1]
+            if _same_numbers(local.transformed(frame, to_world=True), self):
+                return local
+        return self.transformed(frame, to_world=False)
+
+    def transformed(self, frame: Frame, *, to_world: bool) -> Initiation:
+        """The initiation moved out of (``to_world``) or into ``frame``'s local coordinates."""
+        if frame.is_identity:
+            return self
+        x = frame.states_to_world if to_world else frame.states_to_local
+        P = frame.covariances_to_world if to_world else frame.covariances_to_local
+        return replace(
+            self, x_start=x(self.x_start), x_end=x(self.x_end),
+            P_start=None if self.P_start is None else P(self.P_start),
+            P_end=None if self.P_end is None else P(self.P_end),
+            candidates=tuple(c.transformed(frame, to_world=to_world) for c in self.candidates),
+            alternatives=tuple(c.transformed(frame, to_world=to_world) for c in self.alternatives),
+            computed_in=None,
+        )
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready form."""
@@ -265,6 +308,17 @@ class Initiation(Judged):
             "alternatives": [c.to_dict() for c in self.alternatives],
             "ambiguous": self.ambiguous, "events": [e.to_dict() for e in self.events], "wall_time": self.wall_time,
         }
+
+
+def _same_numbers(a: Initiation, b: Initiation) -> bool:
+    """True if two initiations hold the same states and covariances, to the bit."""
+    def eq(u: FloatArray | None, v: FloatArray | None) -> bool:
+        return (u is None and v is None) or (u is not None and v is not None and np.array_equal(u, v))
+
+    return (eq(a.x_start, b.x_start) and eq(a.x_end, b.x_end) and eq(a.P_start, b.P_start) and eq(a.P_end, b.P_end)
+            and len(a.alternatives) == len(b.alternatives)
+            and all(eq(u.state, v.state) and eq(u.covariance, v.covariance)
+                    for u, v in zip(a.alternatives, b.alternatives, strict=True)))
 
 
 def lm_params(max_iterations: int = 100) -> gtsam.LevenbergMarquardtParams:
@@ -359,6 +413,11 @@ def initiate(
     """
     model = as_tracking_model(model)
     settings = settings or InitiationSettings()
+    frame = model.computation_frame
+    if not model.canonical:  # solve in the geometry's own frame, answer in the user's
+        grid = None if grid_result is None else grid_result.transformed(frame, to_world=False)
+        local = initiate(measurements, model.in_frame(frame), settings.in_frame(frame), grid_result=grid)
+        return replace(local.transformed(frame, to_world=True), computed_in=(frame, local))
     t_begin = time.perf_counter()
     geometry = model.geometry
     measurements.check(geometry)
@@ -467,8 +526,8 @@ def _without_wall(graph: gtsam.NonlinearFactorGraph, model: TrackingModel, setti
 
 
 def _lm_solutions(w: _Window, model: TrackingModel, settings: InitiationSettings, grid: GridResult
-                  ) -> tuple[list[_Solution], gtsam.NonlinearFactorGraph, list[str]]:
-    """LM from every grid candidate; returns solutions sorted by final objective.
+                  ) -> tuple[list[_Solution], gtsam.NonlinearFactorGraph, int, list[str]]:
+    """LM from every grid candidate; returns the solutions sorted by final objective, the graph and its data size.
 
     With ``window="ncv"`` this runs in two stages to keep Python callbacks
     few: LM on the one-key constant-velocity window from each candidate, then
@@ -484,7 +543,7 @@ def _lm_solutions(w: _Window, model: TrackingModel, settings: InitiationSettings
         elif not any(_same(out.x0, s.x0, settings) for s in stage1):
             stage1.append(out)
     if settings.window == "cv":
-        return sorted(stage1, key=lambda s: s.objective), cv, notes
+        return sorted(stage1, key=lambda s: s.objective), cv, n_cv, notes
     graph, n_data = _graph(w, model, settings, "ncv")
     sols = []
     for first in stage1:
@@ -493,13 +552,13 @@ def _lm_solutions(w: _Window, model: TrackingModel, settings: InitiationSettings
             notes.append(f"window LM from {np.round(first.x0, 1).tolist()} failed: {out}")
             continue
         sols.append(replace(out, iterations=first.iterations + out.iterations))
-    return sorted(sols, key=lambda s: s.objective), graph, notes
+    return sorted(sols, key=lambda s: s.objective), graph, n_data, notes
 
 
 def _refine_lm(w: _Window, model: TrackingModel, settings: InitiationSettings, grid: GridResult,
                threshold: float) -> _Fit:
     """LM from every candidate; the best solution with its marginals, and the alternatives."""
-    sols, graph, notes = _lm_solutions(w, model, settings, grid)
+    sols, graph, n_data, notes = _lm_solutions(w, model, settings, grid)
     if settings.half_plane is not None:
         kept = [s for s in sols if settings.half_plane.contains(s.x0)]
         if len(kept) < len(sols):
@@ -514,15 +573,7 @@ def _refine_lm(w: _Window, model: TrackingModel, settings: InitiationSettings, g
                     notes=notes, reasons=[Reason(code="refinement", status="doubtful",
                                                  message="no LM start succeeded: the best grid candidate is reported")])
     best = sols[0]
-    reasons = []
-    if settings.region_bound and model.zone is not None:
-        excess, _ = model.zone.excess(best.x0)
-        if np.any(excess != 0.0):
-            reasons.append(Reason(code="boundary", status="doubtful", message=(
-                "the start state is held at the zone's boundary (excess along, across, speed: "
-                + ", ".join(f"{v:.3g}" for v in excess)
-                + "): the data may prefer a start outside the zone; widen it (--zone, --speed-max) or "
-                "lift the bound (--no-region-bound)")))
+    reasons = [] if model.zone is None else _boundary_reasons(best, graph, n_data, model, settings)
     cv_window = settings.window == "cv"
     last = X(0) if cv_window else X(w.scan_times.size - 1)
     F_end = ConstantVelocity.F(t_span)
@@ -542,6 +593,24 @@ def _refine_lm(w: _Window, model: TrackingModel, settings: InitiationSettings, g
     return _Fit(x0=best.x0, x1=x1, P0=P0, P1=P1, cov_message=marg.message, cost=best.cost,
                 objective=best.objective, iterations=best.iterations, alternatives=alternatives, notes=notes,
                 reasons=reasons)
+
+
+def _boundary_reasons(best: _Solution, graph: gtsam.NonlinearFactorGraph, n_data: int, model: TrackingModel,
+                      settings: InitiationSettings) -> list[Reason]:
+    """A ``boundary`` reason if the wall holds the start, with the cost inside vs the best found without it."""
+    assert model.zone is not None
+    excess, _ = model.zone.excess(best.x0)
+    if not settings.region_bound or not np.any(excess != 0.0):
+        return []
+    free = _lm(_without_wall(graph, model, settings), n_data, best.values, settings.max_iterations)
+    outside = "" if isinstance(free, str) else (
+        f"; without the bound LM reaches window cost {free.cost:.2f} "
+        f"{np.linalg.norm(free.x0[:2] - best.x0[:2]) / 1e3:.1f} km away"
+        f" (speed {np.hypot(*free.x0[2:]):.0f} m/s)")
+    return [Reason(code="boundary", status="doubtful", message=(
+        "the start state is held at the zone's boundary (excess along, across, speed: "
+        + ", ".join(f"{v:.3g}" for v in excess) + f"; window cost {best.cost:.2f} inside the zone{outside}): the "
+        "target may start outside the zone; widen it (--zone, --speed-max) or lift the bound (--no-region-bound)"))]
 
 
 # -- ILS and grid ----------------------------------------------------------------------------
@@ -630,6 +699,10 @@ def window_grid(measurements: Measurements, model: TrackingModel | Geometry,
     """The grid search of :func:`initiate` alone (to share between refinement methods)."""
     model = as_tracking_model(model)
     settings = settings or InitiationSettings()
+    frame = model.computation_frame
+    if not model.canonical:
+        return window_grid(measurements, model.in_frame(frame), settings.in_frame(frame)).transformed(
+            frame, to_world=True)
     if model.zone is None:
         raise ValueError("the grid search needs a zone")
     w = _Window.build(measurements, model.geometry)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import MappingProxyType
 from typing import Any
 
@@ -29,6 +29,7 @@ from fgdoppler.estimators.settings import (
     TrackerSettings,
 )
 from fgdoppler.estimators.smoother import run_smoother
+from fgdoppler.estimators.verdict import Reason
 from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
@@ -113,6 +114,10 @@ def run_estimator(
     every hypothesis and the later data decide
     (:mod:`fgdoppler.estimators.ambiguity`).
 
+    The estimator runs in the model's computation frame (the geometry's own,
+    :attr:`~fgdoppler.models.tracking.TrackingModel.frame`) and the result is
+    reported in the user's coordinates.
+
     Raises
     ------
     ValueError
@@ -125,10 +130,24 @@ def run_estimator(
     settings = settings if settings is not None else info.settings()
     if type(settings) is not info.settings:
         raise TypeError(f"{info.name} takes {info.settings.__name__}, got {type(settings).__name__}")
+    frame = model.computation_frame
+    if not model.canonical:  # solve in the geometry's own frame, answer in the user's
+        local = run_estimator(info.name, measurements, model.in_frame(frame), init.in_frame_of(frame),
+                              settings, resolve_ambiguity=resolve_ambiguity)
+        return local.transformed(frame, to_world=True)
     hyps = hypotheses(init) if (resolve_ambiguity and init.ambiguous) else [init]
     if len(hyps) == 1:
-        return info.run(measurements, model, hyps[0], settings)
-    return resolve(info.run, info.resolution, measurements, model, hyps, settings)
+        result = info.run(measurements, model, hyps[0], settings)
+    else:
+        result = resolve(info.run, info.resolution, measurements, model, hyps, settings)
+    return _with_initiation_reasons(result, hyps[0])
+
+
+def _with_initiation_reasons(result: TrackResult, init: Initiation) -> TrackResult:
+    """The track's reasons with those of the initiation it started from (an ambiguity resolved by the track is not one)."""
+    inherited = tuple(Reason(code=f"initiation-{r.code}", status=r.status, message=f"initiation: {r.message}")
+                      for r in init.reasons if r.code != "ambiguous")
+    return replace(result, reasons=inherited + result.reasons) if inherited else result
 
 
 def track(

@@ -22,7 +22,7 @@ from __future__ import annotations
 import csv
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from fgdoppler._io import atomic_open, atomic_write_text
 from fgdoppler.estimators.settings import TrackerSettings
 from fgdoppler.estimators.verdict import Event, Judged, Reason
+from fgdoppler.frames import Frame
 
 __all__ = ["KINDS", "Estimates", "TrackResult"]
 
@@ -86,6 +87,15 @@ class Estimates:
 
     def __len__(self) -> int:
         return int(np.size(self.times))
+
+    def transformed(self, frame: Frame, *, to_world: bool) -> Estimates:
+        """The estimates moved out of (``to_world``) or into ``frame``'s local coordinates."""
+        if frame.is_identity or len(self) == 0:
+            return self
+        x = frame.states_to_world if to_world else frame.states_to_local
+        P = frame.covariances_to_world if to_world else frame.covariances_to_local
+        return replace(self, states=x(self.states), covariances=np.where(self.cov_ok[:, None, None],
+                                                                          P(self.covariances), 0.0))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: covariances as nested lists, ``null`` where indeterminate."""
@@ -164,6 +174,12 @@ class TrackResult(Judged):
         """The estimate the estimator is about (CSV and ``--json`` report it)."""
         return self.estimates[0]
 
+    def transformed(self, frame: Frame, *, to_world: bool) -> TrackResult:
+        """The result with every estimate moved out of (``to_world``) or into ``frame``'s local coordinates."""
+        if frame.is_identity:
+            return self
+        return replace(self, estimates=tuple(e.transformed(frame, to_world=to_world) for e in self.estimates))
+
     @property
     def main(self) -> Estimates:
         """Deprecated name of :attr:`primary` (the documentation used it)."""
@@ -202,24 +218,33 @@ class TrackResult(Judged):
         d["wall_time"] = self.wall_time
         return d
 
-    def to_csv(self, path: str | Path) -> None:
-        """One row per time: ``time, x, y, vx, vy`` and the covariance upper triangle (empty if indeterminate)."""
+    def to_csv(self, path: str | Path, *, header: Sequence[str] = ()) -> None:
+        """One row per time: ``time, x, y, vx, vy`` and the covariance upper triangle (empty if indeterminate).
+
+        The file starts with ``#`` comment lines: the estimator, the estimate's
+        kind and the verdict, then each line of ``header`` (the command line
+        records the geometry and the zone there).
+        """
         e = self.primary
         with atomic_open(Path(path)) as fh:
+            fh.write(f"# fgdoppler {self.estimator}: {e.kind} estimates, status {self.status}\n")
+            for line in header:
+                fh.write(f"# {line}\n")
             w = csv.writer(fh, lineterminator="\n")
             w.writerow(["time", "x", "y", "vx", "vy", *_COV_NAMES])
             for t, x, P, ok in zip(e.times, e.states, e.covariances, e.cov_ok, strict=True):
                 cov = [repr(float(v)) for v in P[_IU]] if ok else [""] * len(_COV_NAMES)
                 w.writerow([repr(float(t)), *(repr(float(v)) for v in x), *cov])
 
-    def to_json(self, path: str | Path) -> None:
-        """Write :meth:`to_dict` atomically."""
-        atomic_write_text(Path(path), json.dumps(self.to_dict(), indent=1, allow_nan=False))
+    def to_json(self, path: str | Path, *, extra: dict[str, Any] | None = None) -> None:
+        """Write :meth:`to_dict` (with ``extra`` keys, e.g. the geometry) atomically."""
+        atomic_write_text(Path(path), json.dumps({**self.to_dict(), **(extra or {})}, indent=1, allow_nan=False))
 
     @staticmethod
     def read_csv(path: str | Path, kind: Kind = "smoothed") -> Estimates:
         """Read a CSV written by :meth:`to_csv` back into :class:`Estimates` (of the given kind)."""
-        rows = list(csv.reader(Path(path).read_text(encoding="utf-8").splitlines()))
+        lines = [ln for ln in Path(path).read_text(encoding="utf-8").splitlines() if not ln.startswith("#")]
+        rows = list(csv.reader(lines))
         body = rows[1:]
         t = np.array([float(r[0]) for r in body])
         x = np.array([[float(v) for v in r[1:5]] for r in body]).reshape(-1, 4)

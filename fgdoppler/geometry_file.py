@@ -1,0 +1,139 @@
+"""The geometry TOML file: strict reading (every problem named with its line) and atomic writing.
+
+Format (metres, m/s)::
+
+    name = "my site"            # optional
+    [zone]                      # optional: overrides of the default zone, in the sensors' frame
+    along = [2000.0, 48000.0]   #   along the first pair's baseline, from its receiver
+    across = [-5000.0, 5000.0]  #   across it
+    speed_max = 200.0           #   largest target speed
+    [[pair]]                    # one table per bistatic pair, pair 0 first
+    tx = [50000.0, 0.0]
+    rx = [0.0, 0.0]
+
+Coordinates are TOML numbers (a string such as ``"50000"`` or a boolean is an
+error, not a number); unknown keys are errors (a misspelt ``speed_max`` must
+not be ignored silently).
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+from typing import Any
+
+from fgdoppler._io import read_text_bounded
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+__all__ = ["MAX_GEOMETRY_BYTES", "read_geometry", "write_geometry"]
+
+#: A geometry file larger than this is refused (it is a few lines of numbers).
+MAX_GEOMETRY_BYTES = 1 << 20
+
+_TOP = ("name", "zone", "pair")
+_ZONE = ("along", "across", "speed_max")
+_PAIR = ("tx", "rx")
+
+
+def _line_of(text: str, key: str, occurrence: int = 0, table: str | None = None) -> int | None:
+    """1-based line of the ``occurrence``-th ``key = ...`` (inside ``[table]``/``[[table]]`` if given)."""
+    seen = 0
+    current: str | None = None
+    for i, line in enumerate(text.splitlines(), start=1):
+        header = re.match(r"\s*\[\[?\s*([\w.-]+)\s*\]\]?", line)
+        if header:
+            current = header.group(1)
+            continue
+        if re.match(rf"\s*{re.escape(key)}\s*=", line) and (table is None or current == table):
+            if seen == occurrence:
+                return i
+            seen += 1
+    return None
+
+
+def _where(path: Path, line: int | None) -> str:
+    return f"{path}:{line}" if line else f"{path}"
+
+
+def _check_keys(path: Path, text: str, table: dict[str, Any], allowed: tuple[str, ...], what: str,
+                table_name: str | None = None) -> None:
+    for key in table:
+        if key not in allowed:
+            raise ValueError(f"{_where(path, _line_of(text, key, table=table_name))}: unknown key {key!r} in "
+                             f"{what} (expected {', '.join(allowed)})")
+
+
+def read_geometry(path: str | Path) -> Any:
+    """Read and validate a geometry TOML file.
+
+    Returns
+    -------
+    fgdoppler.geometry.Geometry
+
+    Raises
+    ------
+    ValueError
+        Naming the file (and the line where it can be found) and the problem:
+        not valid TOML, not UTF-8, too large, no pairs, an unknown key, a
+        coordinate that is not a finite number, Tx equal to Rx, an empty,
+        inverted or non-finite zone, a zone far from every sensor.
+    """
+    from fgdoppler.geometry import BistaticPair, Geometry
+    from fgdoppler.zone import ZoneLimits
+
+    path = Path(path)
+    text = read_text_bounded(path, MAX_GEOMETRY_BYTES, what="geometry file")
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"at line (\d+)", str(exc))
+        raise ValueError(f"{_where(path, int(m.group(1)) if m else None)}: not valid TOML: {exc}") from None
+    _check_keys(path, text, doc, _TOP, "the geometry")
+    raw = doc.get("pair")
+    if not isinstance(raw, list) or not raw:
+        raise ValueError(f"{path}: expected one or more [[pair]] tables with tx and rx")
+    pairs = []
+    for i, item in enumerate(raw):
+        if not isinstance(item, dict) or "tx" not in item or "rx" not in item:
+            raise ValueError(f"{path}: pair {i} needs both tx and rx")
+        _check_keys(path, text, item, _PAIR, f"pair {i}", "pair")
+        try:
+            pairs.append(BistaticPair(tx=item["tx"], rx=item["rx"]))
+        except (ValueError, TypeError) as exc:
+            raise ValueError(f"{_where(path, _line_of(text, 'tx', i, 'pair'))}: pair {i}: {exc}") from None
+    name = doc.get("name", "")
+    if not isinstance(name, str):
+        raise ValueError(f"{_where(path, _line_of(text, 'name'))}: name must be a string, got {name!r}")
+    zone = doc.get("zone", {})
+    if not isinstance(zone, dict):
+        raise ValueError(f"{_where(path, _line_of(text, 'zone'))}: zone must be a table [zone]")
+    _check_keys(path, text, zone, _ZONE, "[zone]", "zone")
+    try:
+        limits = ZoneLimits(**zone)
+        geometry = Geometry(pairs=tuple(pairs), name=name, zone_limits=limits)
+        geometry.check_zone()
+    except ValueError as exc:
+        key = next((k for k in _ZONE if k in str(exc)), None)
+        line = _line_of(text, key, table="zone") if key else None
+        raise ValueError(f"{_where(path, line)}: {exc}") from None
+    return geometry
+
+
+def write_geometry(geometry: Any, path: str | Path) -> None:
+    """Write a geometry atomically (temporary file, then rename); :func:`read_geometry` reads it back exactly."""
+    import tomli_w
+
+    from fgdoppler._io import atomic_write_text
+
+    doc: dict[str, object] = {}
+    if geometry.name:
+        doc["name"] = geometry.name
+    if not geometry.zone_limits.empty:
+        doc["zone"] = geometry.zone_limits.to_dict()
+    doc["pair"] = [{"tx": list(p.tx), "rx": list(p.rx)} for p in geometry.pairs]
+    atomic_write_text(Path(path), tomli_w.dumps(doc))
