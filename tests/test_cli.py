@@ -134,3 +134,127 @@ def test_montecarlo_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert (tmp_path / "mc.npz").exists() and (tmp_path / "r.png").stat().st_size > 0
     assert main(["montecarlo", "--estimators", "ukf", "--runs", "1", "--out", str(stem)]) == 2
     assert "unknown estimator" in capsys.readouterr().err
+
+
+# -- geometries and zones (issue: your sensors, your frame) ---------------------------------
+def _files(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir())
+
+
+def test_track_never_assumes_a_geometry(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--geometry", "b", "--start-x", "5000", "--out", str(sim)]) == 0
+    capsys.readouterr()
+    # alone in a folder: refused, with the way out named
+    lone = tmp_path / "lone"
+    lone.mkdir()
+    (lone / "m.csv").write_text((sim / "measurements.csv").read_text())
+    assert main(["track", str(lone / "m.csv"), "--estimator", "ekf", "--out", str(lone / "t.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "no geometry" in err and "--geometry" in err and err.count("\n") == 1
+    assert _files(lone) == ["m.csv"]
+    # beside the file: found and named in the summary and the outputs
+    assert main(["track", str(sim / "measurements.csv"), "--estimator", "ekf", "--out", str(tmp_path / "t.csv")]) == 0
+    out = capsys.readouterr().out
+    assert f"geometry {sim / 'geometry.toml'} (2 pair(s))" in out and "zone along 2000..48000 m" in out
+    header = [ln for ln in (tmp_path / "t.csv").read_text().splitlines() if ln.startswith("#")]
+    assert any("geometry.toml" in ln for ln in header) and any(ln.startswith("# zone: along=[2000.0, 48000.0]")
+                                                                for ln in header)
+    js = json.loads((tmp_path / "t.json").read_text())
+    assert js["geometry"]["source"].endswith("geometry.toml") and js["zone"]["across"] == [-5000.0, 5000.0]
+
+
+def test_zone_options_and_the_zone_table_are_used(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    sim = tmp_path / "sim"
+    # simulate writes the zone options into the geometry file's [zone] table
+    assert main(["simulate", "--start-x", "44000", "--start-y", "7000", "--velocity", "-40", "-100",
+                 "--zone", "2000", "48000", "-5000", "12000", "--out", str(sim)]) == 0
+    assert fd.Geometry.from_toml(sim / "geometry.toml").zone.across == (-5e3, 12e3)
+    capsys.readouterr()
+    args = ["track", str(sim / "measurements.csv"), "--json"]
+    assert main(args) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["zone"]["across"] == [-5000.0, 12000.0] and d["zone"]["speed_max"] == 200.0
+    # command-line options go on top of the table
+    assert main([*args, "--speed-max", "350", "--zone", "0", "50000", "-6000", "15000", "--grid-step", "2000"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["zone"]["along"] == [0.0, 50000.0] and d["zone"]["across"] == [-6000.0, 15000.0]
+    assert d["zone"]["speed_max"] == 350.0
+
+
+def test_a_fast_target_needs_and_gets_a_higher_speed_bound(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--start-x", "20000", "--velocity", "1400", "-1400", "--duration", "10",
+                 "--out", str(sim)]) == 0
+    capsys.readouterr()
+    assert main(["track", str(sim / "measurements.csv"), "--out", str(tmp_path / "t.json")]) == 2
+    err = capsys.readouterr().err
+    assert "--speed-max" in err and err.count("\n") == 1 and str(sim / "measurements.csv") in err
+    assert not (tmp_path / "t.json").exists()
+    assert main(["track", str(sim / "measurements.csv"), "--speed-max", "2500", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert np.hypot(*d["x_start"][2:]) > 1500
+
+
+@pytest.mark.parametrize(
+    ("options", "match"),
+    [
+        (["--zone", "48000", "2000", "-5000", "5000"], "empty or inverted"),
+        (["--zone", "2000", "48000", "5000", "5000"], "empty or inverted"),
+        (["--zone", "2000", "nan", "-5000", "5000"], "finite"),
+        (["--zone", "2000", "inf", "-5000", "5000"], "finite"),
+        (["--zone", "5e8", "6e8", "0", "1"], "from the nearest sensor"),
+        (["--speed-max", "0"], "speed_max"),
+        (["--speed-max", "-3"], "speed_max"),
+        (["--grid-step", "0"], "position_step"),
+        (["--speed-step", "-1"], "speed_step"),
+    ],
+)
+def test_bad_zones_are_refused_in_one_line_and_nothing_is_written(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], options: list[str], match: str) -> None:
+    sim = tmp_path / "sim"
+    main(["simulate", "--out", str(sim)])
+    capsys.readouterr()
+    out = tmp_path / "out"
+    assert main(["track", str(sim / "measurements.csv"), "--estimator", "ekf", *options,
+                 "--out", str(out / "t.csv")]) == 2
+    err = capsys.readouterr().err
+    assert match in err and err.count("\n") == 1 and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_bad_zone_table_is_refused_with_file_and_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    sim = tmp_path / "sim"
+    main(["simulate", "--out", str(sim)])
+    capsys.readouterr()
+    geometry = sim / "geometry.toml"
+    geometry.write_text('name = "a"\n[zone]\nacross = [5000.0, -5000.0]\n[[pair]]\ntx = [50000.0, 0.0]\n'
+                        'rx = [0.0, 0.0]\n[[pair]]\ntx = [50000.0, 1000.0]\nrx = [0.0, 0.0]\n')
+    assert main(["track", str(sim / "measurements.csv"), "--out", str(tmp_path / "t.csv")]) == 2
+    err = capsys.readouterr().err
+    assert f"{geometry}:3:" in err and "empty or inverted" in err
+    assert not (tmp_path / "t.csv").exists()
+
+
+def test_montecarlo_and_observability_on_a_geometry_of_ones_own(tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    geometry = tmp_path / "three.toml"
+    fd.Geometry(pairs=(fd.BistaticPair(tx=(40e3, 0.0), rx=(0.0, 0.0)),
+                       fd.BistaticPair(tx=(40e3, 0.0), rx=(15e3, 25e3)),
+                       fd.BistaticPair(tx=(5e3, 30e3), rx=(0.0, 0.0)))).to_toml(geometry)
+    assert main(["montecarlo", "--geometry", str(geometry), "--start-x", "20000", "--start-y", "10000",
+                 "--velocity", "-60", "70", "--offsets", "0", "0.2", "0.35", "--runs", "2", "--workers", "1",
+                 "--estimators", "lm", "ekf", "--out", str(tmp_path / "mc"), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["scenarios"] == [f"{geometry}, start 20 km, y 10 km"] and d["estimators"] == ["lm", "ekf"]
+    assert all(r["pos_rmse_mean"] is not None for r in d["rows"])
+    assert main(["observability", "--geometry", str(geometry), "--offset", "10000", "--json"]) == 0
+    m = json.loads(capsys.readouterr().out)
+    assert len(m["x"]) == 97 and m["x"][0] == pytest.approx(800.0)  # D = 40 km: D/50 .. D - D/50 every D/100
+    assert main(["observability", "--geometry", str(geometry), "--offset", "10000", "--table", "--speeds", "100",
+                 "50", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["rows"]
+    assert [r["speed"] for r in rows] == [100.0, 50.0] and rows[0]["max"] > rows[1]["max"]
+    assert main(["observability", "--geometry", str(geometry), "--report", "20000", "--offset", "10000",
+                 "--velocity", "-60", "70", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["status"] == "ok"

@@ -69,21 +69,74 @@ def test_toml_round_trip(tmp_path) -> None:
     assert resolve_geometry("a") == fd.paper_geometry("a")
 
 
+def test_toml_round_trip_with_a_zone_table(tmp_path) -> None:
+    from fgdoppler.zone import ZoneLimits
+
+    g = fd.paper_geometry("a").with_zone(ZoneLimits(across=(-5e3, 12e3), speed_max=350.0))
+    path = tmp_path / "g.toml"
+    g.to_toml(path)
+    assert "[zone]" in path.read_text()
+    back = fd.Geometry.from_toml(path)
+    assert back == g
+    assert back.zone.across == (-5e3, 12e3) and back.zone.along == (2e3, 48e3) and back.zone.speed_max == 350.0
+
+
+PAIR = "[[pair]]\ntx = [50000.0, 0.0]\nrx = [0.0, 0.0]\n"
+
+
 @pytest.mark.parametrize(
-    ("text", "msg"),
+    ("text", "msg", "line"),
     [
-        ("not toml [", "not valid TOML"),
-        ("name = 'x'\n", "one or more"),
-        ("[[pair]]\ntx = [0.0, 0.0]\n", "needs both"),
-        ("[[pair]]\ntx = [0.0, 0.0]\nrx = [0.0, 0.0]\n", "must differ"),
+        ("not toml [", "not valid TOML", 1),
+        ("name = 'x'\n", "one or more", None),
+        ("[[pair]]\ntx = [0.0, 0.0]\n", "needs both", None),
+        ("[[pair]]\ntx = [0.0, 0.0]\nrx = [0.0, 0.0]\n", "must differ", 2),
+        ('[[pair]]\ntx = ["50000", 0.0]\nrx = [0.0, 0.0]\n', "two numbers", 2),
+        ("[[pair]]\ntx = [true, 0.0]\nrx = [0.0, 0.0]\n", "two numbers", 2),
+        ("[[pair]]\ntx = [1.0, 0.0, 0.0, 0.0]\nrx = [0.0, 0.0]\n", "2-vector", 2),
+        ("[[pair]]\ntx = [50000.0, nan]\nrx = [0.0, 0.0]\n", "finite", 2),
+        ("nmae = 'x'\n" + PAIR, "unknown key 'nmae'", 1),
+        (PAIR + "txx = 1.0\n", "unknown key 'txx'", 4),
+        ("name = 3\n" + PAIR, "name must be a string", 1),
+        ("zone = 5\n" + PAIR, "zone must be a table", 1),
+        ("[zone]\nspeed_mx = 3.0\n" + PAIR, "unknown key 'speed_mx'", 2),
+        ("[zone]\nalong = [48000.0, 2000.0]\n" + PAIR, "empty or inverted", 2),
+        ("[zone]\nalong = [2000.0, 2000.0]\n" + PAIR, "empty or inverted", 2),
+        ("[zone]\nacross = [0.0, inf]\n" + PAIR, "finite", 2),
+        ('[zone]\nacross = ["0", "5"]\n' + PAIR, "two numbers", 2),
+        ("[zone]\nacross = [0.0]\n" + PAIR, "two numbers", 2),
+        ("[zone]\nspeed_max = -1.0\n" + PAIR, "speed_max", 2),
+        ("[zone]\nspeed_max = true\n" + PAIR, "speed_max", 2),
+        ("[zone]\nalong = [5e7, 6e7]\n" + PAIR, "from the nearest sensor", None),
     ],
 )
-def test_toml_errors_name_the_file(tmp_path, text: str, msg: str) -> None:
+def test_toml_errors_name_the_file_and_line(tmp_path, text: str, msg: str, line: int | None) -> None:
     path = tmp_path / "bad.toml"
     path.write_text(text)
     with pytest.raises(ValueError, match=msg) as info:
         fd.Geometry.from_toml(path)
-    assert str(path) in str(info.value)
+    text = str(info.value)
+    assert text.startswith(f"{path}:{line}:" if line else f"{path}:"), text
+    assert "\n" not in text
+
+
+def test_toml_reads_are_bounded(tmp_path) -> None:
+    from fgdoppler.geometry_file import MAX_GEOMETRY_BYTES
+
+    big = tmp_path / "big.toml"
+    big.write_text(PAIR + "#" * (MAX_GEOMETRY_BYTES + 10))
+    with pytest.raises(ValueError, match="larger than"):
+        fd.Geometry.from_toml(big)
+    with pytest.raises(ValueError, match="larger than"):
+        fd.Geometry.from_toml("/dev/zero")  # an endless device: refused at the bound, not read to the end
+    nul = tmp_path / "nul.toml"
+    nul.write_bytes(PAIR.encode() + b"\x00")
+    with pytest.raises(ValueError, match="NUL"):
+        fd.Geometry.from_toml(nul)
+    binary = tmp_path / "bin.toml"
+    binary.write_bytes(b"\xff\xfe" + PAIR.encode())
+    with pytest.raises(ValueError, match="UTF-8"):
+        fd.Geometry.from_toml(binary)
 
 
 def test_resolve_geometry_unknown() -> None:

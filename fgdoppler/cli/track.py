@@ -112,7 +112,10 @@ def _run(args: argparse.Namespace) -> int:
     model = _model(args, geom)
     settings = _initiation_settings(args)
     window = meas.first_per_pair(args.init_per_pair)
-    init = initiate(window, model, settings)
+    try:
+        init = initiate(window, model, settings)
+    except ValueError as exc:  # e.g. the data need a speed above the zone's bound
+        raise CLIError(f"{args.file}: {exc}") from None
     where = _describe(geom, spec)
     if not args.json:
         z = geom.zone
