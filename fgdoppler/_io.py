@@ -15,9 +15,16 @@ from pathlib import Path
 from typing import IO
 
 
+def _file_mode() -> int:
+    """Permissions of a new file under the process umask (0644 with the usual umask 022)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 @contextlib.contextmanager
 def atomic_open(path: Path, mode: str = "w", *, newline: str | None = "") -> Iterator[IO[str]]:
-    """Open ``path`` for writing so that it appears only if the block succeeds."""
+    """Open ``path`` for writing so that it appears only if the block succeeds (with the umask's permissions)."""
     path = Path(path)
     parent = path.parent if str(path.parent) else Path(".")
     parent.mkdir(parents=True, exist_ok=True)
@@ -27,6 +34,8 @@ def atomic_open(path: Path, mode: str = "w", *, newline: str | None = "") -> Ite
             yield fh
             fh.flush()
             os.fsync(fh.fileno())
+        # mkstemp creates 0600; a result file is for colleagues too
+        os.chmod(tmp, _file_mode())
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
@@ -60,3 +69,31 @@ def read_text_bounded(path: Path, limit: int, *, what: str = "file") -> str:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path}: the {what} is not UTF-8 text (byte {exc.start})") from None
+
+
+def write_all(files: dict[Path, str | bytes]) -> None:
+    """Write several files all or nothing: every one to a temporary beside it first, then all renamed.
+
+    A failure before the renames (a full disk, a missing folder that cannot
+    be made) leaves none of them and no temporaries.
+    """
+    temps: list[tuple[str, Path]] = []
+    try:
+        for path, content in files.items():
+            path = Path(path)
+            parent = path.parent if str(path.parent) else Path(".")
+            parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
+            temps.append((tmp, path))
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(content.encode("utf-8") if isinstance(content, str) else content)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.chmod(tmp, _file_mode())
+    except BaseException:
+        for tmp, _ in temps:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+        raise
+    for tmp, path in temps:
+        os.replace(tmp, path)

@@ -204,6 +204,12 @@ class Geometry:
         )
 
     # -- TOML -----------------------------------------------------------------
+    def toml_text(self) -> str:
+        """The geometry file's text (format: :mod:`fgdoppler.geometry_file`)."""
+        from fgdoppler.geometry_file import geometry_text
+
+        return geometry_text(self)
+
     def to_toml(self, path: str | Path) -> None:
         """Write the geometry as TOML, atomically (format: :mod:`fgdoppler.geometry_file`)."""
         from fgdoppler.geometry_file import write_geometry

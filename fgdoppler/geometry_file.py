@@ -30,7 +30,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-__all__ = ["MAX_GEOMETRY_BYTES", "read_geometry", "write_geometry"]
+__all__ = ["MAX_GEOMETRY_BYTES", "geometry_text", "read_geometry", "write_geometry"]
 
 #: A geometry file larger than this is refused (it is a few lines of numbers).
 MAX_GEOMETRY_BYTES = 1 << 20
@@ -124,11 +124,9 @@ def read_geometry(path: str | Path) -> Any:
     return geometry
 
 
-def write_geometry(geometry: Any, path: str | Path) -> None:
-    """Write a geometry atomically (temporary file, then rename); :func:`read_geometry` reads it back exactly."""
+def geometry_text(geometry: Any) -> str:
+    """The geometry file's text; :func:`read_geometry` reads it back exactly."""
     import tomli_w
-
-    from fgdoppler._io import atomic_write_text
 
     doc: dict[str, object] = {}
     if geometry.name:
@@ -136,4 +134,11 @@ def write_geometry(geometry: Any, path: str | Path) -> None:
     if not geometry.zone_limits.empty:
         doc["zone"] = geometry.zone_limits.to_dict()
     doc["pair"] = [{"tx": list(p.tx), "rx": list(p.rx)} for p in geometry.pairs]
-    atomic_write_text(Path(path), tomli_w.dumps(doc))
+    return str(tomli_w.dumps(doc))
+
+
+def write_geometry(geometry: Any, path: str | Path) -> None:
+    """Write :func:`geometry_text` atomically (temporary file, then rename)."""
+    from fgdoppler._io import atomic_write_text
+
+    atomic_write_text(Path(path), geometry_text(geometry))

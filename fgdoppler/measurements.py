@@ -15,6 +15,7 @@ non-decreasing time order; every problem is reported with the file and line.
 from __future__ import annotations
 
 import csv
+import io
 import math
 from dataclasses import dataclass
 from functools import cached_property
@@ -23,7 +24,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler._io import atomic_open
+from fgdoppler._io import atomic_write_text
 from fgdoppler.geometry import Geometry
 
 __all__ = ["MeasurementError", "Measurements", "Scans"]
@@ -108,6 +109,12 @@ class Measurements:
         bad = np.flatnonzero(s <= 0)
         if bad.size:
             raise MeasurementError(f"entry {bad[0]}: sigma must be > 0, got {s[bad[0]]}")
+        for name, col in (("time", t), ("doppler", z), ("sigma", s)):
+            lo, hi = LIMITS[name]
+            bad = np.flatnonzero((col < lo) | (col > hi))
+            if bad.size:
+                raise MeasurementError(f"entry {bad[0]}: {name} {col[bad[0]]:g} is outside [{lo:g}, {hi:g}]: "
+                                       "a corrupt or mis-scaled value")
         bad = np.flatnonzero(p < 0)
         if bad.size:
             raise MeasurementError(f"entry {bad[0]}: pair index must be >= 0, got {p[bad[0]]}")
@@ -198,13 +205,18 @@ class Measurements:
         return np.lexsort((self.time, self.pair)).astype(np.intp)
 
     # -- CSV --------------------------------------------------------------------
+    def csv_text(self) -> str:
+        """The ``time,pair,doppler,sigma`` CSV as text; values round-trip exactly."""
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(HEADER)
+        for t, p, z, s in zip(self.time, self.pair, self.doppler, self.sigma, strict=True):
+            w.writerow((repr(float(t)), int(p), repr(float(z)), repr(float(s))))
+        return buf.getvalue()
+
     def to_csv(self, path: str | Path) -> None:
-        """Write ``time,pair,doppler,sigma`` atomically; values round-trip exactly."""
-        with atomic_open(Path(path)) as fh:
-            w = csv.writer(fh, lineterminator="\n")
-            w.writerow(HEADER)
-            for t, p, z, s in zip(self.time, self.pair, self.doppler, self.sigma, strict=True):
-                w.writerow((repr(float(t)), int(p), repr(float(z)), repr(float(s))))
+        """Write :meth:`csv_text` atomically."""
+        atomic_write_text(Path(path), self.csv_text())
 
     @classmethod
     def from_csv(
@@ -214,7 +226,7 @@ class Measurements:
         geometry: Geometry | None = None,
         default_sigma: float | None = None,
     ) -> Measurements:
-        """Read and validate a measurement CSV.
+        """Read and validate a measurement CSV (:mod:`fgdoppler.csvfile` reads it strictly and boundedly).
 
         Parameters
         ----------
@@ -228,90 +240,63 @@ class Measurements:
         Raises
         ------
         MeasurementError
-            Naming the file, the line and the problem: missing or bad header,
-            wrong number of fields, a non-numeric or non-finite value, a
-            non-integer or unknown pair index, sigma <= 0, a time earlier than
-            the previous row's, a duplicated (time, pair), or no data rows.
+            Naming the file, the line and the problem: unreadable or not text,
+            missing or bad header, wrong number of fields, an empty or
+            non-numeric field, a value outside :data:`LIMITS`, a non-integer
+            or unknown pair index, a time earlier than the previous row's, a
+            duplicated (time, pair), or no data rows.
         """
+        from fgdoppler.csvfile import CSVError, read_table
+
         path = Path(path)
         try:
-            text = path.read_text(encoding="utf-8-sig")
-        except OSError as exc:
-            raise MeasurementError(f"{path}: cannot read: {exc.strerror or exc}") from exc
-        rows = list(csv.reader(text.splitlines()))
-        # Blank lines are tolerated (e.g. a trailing newline); line numbers stay 1-based.
-        numbered = [(i + 1, r) for i, r in enumerate(rows) if r and any(c.strip() for c in r)]
-        if not numbered:
-            raise MeasurementError(f"{path}: empty file: expected the header {','.join(HEADER)}")
-        has_sigma = _header(path, *numbered[0], default_sigma)
-        data = numbered[1:]
-        if not data:
-            raise MeasurementError(f"{path}: no measurement rows after the header")
-        n = len(data)
-        t = np.empty(n)
+            table = read_table(path, header=HEADER[:3], optional=HEADER[3:], what="measurement file")
+        except CSVError as exc:
+            raise MeasurementError(str(exc)) from None
+        if table.values.shape[1] == 3:
+            if default_sigma is None:
+                raise MeasurementError(f"{path}: no sigma column and no default sigma given "
+                                       "(pass --sigma or add a sigma column)")
+            _check_value(default_sigma, "sigma", f"{path}: default sigma")
+        n = table.values.shape[0]
+        t, z = table.values[:, 0], table.values[:, 2]
+        s = table.values[:, 3] if table.values.shape[1] == 4 else np.full(n, float(default_sigma))  # type: ignore[arg-type]
         p = np.empty(n, dtype=np.intp)
-        z = np.empty(n)
-        s = np.empty(n)
         seen: dict[tuple[float, int], int] = {}
-        for j, (line, row) in enumerate(data):
-            where = f"{path}:{line}"
-            tv, pv, zv, sv = _row(where, row, has_sigma, default_sigma, geometry)
-            if j and tv < t[j - 1]:
-                raise MeasurementError(
-                    f"{where}: time {tv} is earlier than the previous row's {t[j - 1]}; "
-                    "rows must be in time order"
-                )
-            if (tv, pv) in seen:
-                raise MeasurementError(
-                    f"{where}: duplicate measurement for time {tv}, pair {pv} (first at line {seen[(tv, pv)]})"
-                )
-            seen[(tv, pv)] = line
-            t[j], p[j], z[j], s[j] = tv, pv, zv, sv
-        return cls(time=t, pair=p, doppler=z, sigma=s)
+        for j in range(n):
+            where = table.where(j)
+            p[j] = _pair(table.values[j, 1], where, geometry)
+            for name, value in (("time", t[j]), ("doppler", z[j]), ("sigma", s[j])):
+                _check_value(value, name, where)
+            if j and t[j] < t[j - 1]:
+                raise MeasurementError(f"{where}: time {t[j]} is earlier than the previous row's {t[j - 1]}; "
+                                       "rows must be in time order")
+            key = (float(t[j]), int(p[j]))
+            if key in seen:
+                raise MeasurementError(f"{where}: duplicate measurement for time {t[j]}, pair {p[j]} "
+                                       f"(first at line {seen[key]})")
+            seen[key] = int(table.lines[j])
+        return cls(time=t.copy(), pair=p, doppler=z.copy(), sigma=s.copy())
 
 
-def _header(path: Path, line: int, header: list[str], default_sigma: float | None) -> bool:
-    """Check the header row; True if it has a sigma column."""
-    names = [h.strip().lower() for h in header]
-    if names == list(HEADER):
-        return True
-    if names != list(HEADER[:3]):
-        raise MeasurementError(
-            f"{path}:{line}: bad header {','.join(names)!r}: expected {','.join(HEADER)!r} (sigma optional)"
-        )
-    if default_sigma is None:
-        raise MeasurementError(
-            f"{path}:{line}: no sigma column and no default sigma given (pass --sigma or add a sigma column)"
-        )
-    if not (math.isfinite(default_sigma) and default_sigma > 0):
-        raise MeasurementError(f"{path}: default sigma must be finite and > 0, got {default_sigma}")
-    return False
+#: Physical bounds of every value (inclusive): a time beyond 30,000 years, a bistatic range rate
+#: above twice the speed of light or a sigma outside 1 µm/s .. 1,000 km/s is a corrupt or mis-scaled file.
+LIMITS: dict[str, tuple[float, float]] = {"time": (-1e12, 1e12), "doppler": (-6e8, 6e8), "sigma": (1e-6, 1e6)}
 
 
-def _row(where: str, row: list[str], has_sigma: bool, default_sigma: float | None,
-         geometry: Geometry | None) -> tuple[float, int, float, float]:
-    """One data row as ``(time, pair, doppler, sigma)``, checked on its own."""
-    ncol = 4 if has_sigma else 3
-    if len(row) != ncol:
-        raise MeasurementError(f"{where}: expected {ncol} fields, got {len(row)}")
-    vals = []
-    for name, cell in zip(HEADER, row, strict=False):
-        try:
-            v = float(cell)
-        except ValueError:
-            raise MeasurementError(f"{where}: {name} is not a number: {cell.strip()!r}") from None
-        if not math.isfinite(v):
-            raise MeasurementError(f"{where}: {name} is not finite: {cell.strip()!r}")
-        vals.append(v)
-    tv, pv, zv = vals[0], vals[1], vals[2]
-    sv = vals[3] if has_sigma else float(default_sigma)  # type: ignore[arg-type]
-    if pv != int(pv) or pv < 0:
-        raise MeasurementError(f"{where}: pair must be a non-negative integer, got {row[1].strip()!r}")
-    if geometry is not None and int(pv) >= geometry.n_pairs:
-        raise MeasurementError(
-            f"{where}: unknown pair index {int(pv)}: the geometry has {geometry.n_pairs} "
-            f"pair(s), indices 0..{geometry.n_pairs - 1}"
-        )
-    if sv <= 0:
-        raise MeasurementError(f"{where}: sigma must be > 0, got {sv}")
-    return tv, int(pv), zv, sv
+def _check_value(value: float, name: str, where: str) -> None:
+    lo, hi = LIMITS[name]
+    if not (math.isfinite(value) and lo <= value <= hi):
+        if name == "sigma" and value <= 0:
+            raise MeasurementError(f"{where}: sigma must be > 0, got {value}")
+        raise MeasurementError(f"{where}: {name} {value:g} is outside [{lo:g}, {hi:g}]: a corrupt or mis-scaled file")
+
+
+def _pair(value: float, where: str, geometry: Geometry | None) -> int:
+    if value != int(value) or value < 0:
+        raise MeasurementError(f"{where}: pair must be a non-negative integer, got {value:g}")
+    k = int(value)
+    if geometry is not None and k >= geometry.n_pairs:
+        raise MeasurementError(f"{where}: unknown pair index {k}: the geometry has {geometry.n_pairs} "
+                               f"pair(s), indices 0..{geometry.n_pairs - 1}")
+    return k

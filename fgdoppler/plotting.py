@@ -22,6 +22,8 @@ if TYPE_CHECKING:
 __all__ = [
     "covariance_ellipse",
     "ellipse_points",
+    "figure_bytes",
+    "figure_formats",
     "plot_geometry",
     "plot_lag_sweep",
     "plot_landscape",
@@ -56,6 +58,27 @@ def save(ax: Axes, path: str | Path, *, dpi: int = 120) -> Path:
     fig.savefig(path, dpi=dpi)
     plt.close(fig)
     return path
+
+
+def figure_bytes(ax: Axes, fmt: str, *, dpi: int = 120) -> bytes:
+    """The axes' figure rendered in format ``fmt`` (``"png"``, ``"svg"``, ...), and closed; nothing is written."""
+    import io
+
+    import matplotlib.pyplot as plt
+
+    fig = ax.get_figure(root=True)
+    assert fig is not None
+    buf = io.BytesIO()
+    fig.savefig(buf, format=fmt, dpi=dpi)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def figure_formats() -> set[str]:
+    """File suffixes (without the dot) matplotlib can write."""
+    from matplotlib.figure import Figure
+
+    return set(Figure().canvas.get_supported_filetypes())
 
 
 def ellipse_points(geometry: Geometry, pair: int, point: ArrayLike, n: int = 361) -> np.ndarray:

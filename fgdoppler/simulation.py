@@ -12,13 +12,14 @@ which makes every measurement time distinct.
 from __future__ import annotations
 
 import csv
+import io
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler._io import atomic_open
+from fgdoppler._io import atomic_write_text
 from fgdoppler.geometry import Geometry, paper_geometry
 from fgdoppler.measurements import MeasurementError, Measurements
 from fgdoppler.models.doppler import bistatic_doppler
@@ -65,30 +66,49 @@ class Trajectory:
             raise ValueError("requested times are not on the trajectory's time grid")
         return self.states[idx]
 
+    def csv_text(self) -> str:
+        """The ``time,x,y,vx,vy`` CSV as text; values round-trip exactly."""
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(("time", "x", "y", "vx", "vy"))
+        for t, s in zip(self.times, self.states, strict=True):
+            w.writerow((repr(float(t)), *(repr(float(v)) for v in s)))
+        return buf.getvalue()
+
     def to_csv(self, path: str | Path) -> None:
-        """Write ``time,x,y,vx,vy`` atomically."""
-        with atomic_open(Path(path)) as fh:
-            w = csv.writer(fh, lineterminator="\n")
-            w.writerow(("time", "x", "y", "vx", "vy"))
-            for t, s in zip(self.times, self.states, strict=True):
-                w.writerow((repr(float(t)), *(repr(float(v)) for v in s)))
+        """Write :meth:`csv_text` atomically."""
+        atomic_write_text(Path(path), self.csv_text())
 
     @classmethod
     def from_csv(cls, path: str | Path) -> Trajectory:
-        """Read a file written by :meth:`to_csv`."""
-        path = Path(path)
-        rows = [r for r in csv.reader(path.read_text(encoding="utf-8").splitlines()) if r]
-        if not rows or [c.strip() for c in rows[0]] != ["time", "x", "y", "vx", "vy"]:
-            raise MeasurementError(f"{path}:1: expected header time,x,y,vx,vy")
-        vals = np.empty((len(rows) - 1, 5))
-        for i, r in enumerate(rows[1:]):
-            try:
-                vals[i] = [float(c) for c in r]
-            except ValueError:
-                raise MeasurementError(f"{path}:{i + 2}: expected 5 numbers, got {r}") from None
-        if not np.all(np.isfinite(vals)):
-            raise MeasurementError(f"{path}: non-finite value")
-        return cls(times=vals[:, 0], states=vals[:, 1:])
+        """Read a truth CSV ``time,x,y,vx,vy`` (strict: :mod:`fgdoppler.csvfile`); times strictly increasing.
+
+        Raises
+        ------
+        MeasurementError
+            Naming the file and the line.
+        """
+        from fgdoppler.csvfile import CSVError, read_table
+
+        try:
+            table = read_table(path, header=("time", "x", "y", "vx", "vy"), what="truth file")
+        except CSVError as exc:
+            raise MeasurementError(str(exc)) from None
+        t = table.values[:, 0]
+        back = np.flatnonzero(np.diff(t) <= 0)
+        if back.size:
+            raise MeasurementError(f"{table.where(int(back[0]) + 1)}: time {t[back[0] + 1]} is not after the "
+                                   f"previous row's {t[back[0]]}; truth rows must be in increasing time order")
+        return cls(times=t.copy(), states=table.values[:, 1:].copy())
+
+    def check_covers(self, times: ArrayLike, source: str) -> None:
+        """Raise :class:`MeasurementError` naming ``source`` unless every one of ``times`` is a truth time."""
+        t = np.asarray(times, dtype=float)
+        idx = np.clip(np.searchsorted(self.times, t), 0, self.times.size - 1)
+        missing = np.flatnonzero(np.abs(self.times[idx] - t) > 1e-9)
+        if missing.size:
+            raise MeasurementError(f"{source}: no truth at t = {t[missing[0]]:g} s ({missing.size} measurement "
+                                   "time(s) missing): the truth must have a row at every measurement time")
 
 
 @dataclass(frozen=True, kw_only=True)

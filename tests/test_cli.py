@@ -86,7 +86,7 @@ def test_track_init_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     [
         ("time,pair,doppler,sigma\n0,0,abc,1\n", ":2: doppler is not a number"),
         ("time,pair,doppler,sigma\n0,5,1,1\n", ":2: unknown pair index 5"),
-        ("", "empty file"),
+        ("", "empty measurement file"),
     ],
 )
 def test_track_malformed_input_exits_2_and_writes_nothing(
@@ -187,10 +187,10 @@ def test_a_fast_target_needs_and_gets_a_higher_speed_bound(tmp_path: Path, capsy
     assert main(["simulate", "--start-x", "20000", "--velocity", "1400", "-1400", "--duration", "10",
                  "--out", str(sim)]) == 0
     capsys.readouterr()
-    assert main(["track", str(sim / "measurements.csv"), "--out", str(tmp_path / "t.json")]) == 2
+    assert main(["track", str(sim / "measurements.csv"), "--out", str(tmp_path / "t.csv")]) == 2
     err = capsys.readouterr().err
     assert "--speed-max" in err and err.count("\n") == 1 and str(sim / "measurements.csv") in err
-    assert not (tmp_path / "t.json").exists()
+    assert _files(tmp_path) == ["sim"]
     assert main(["track", str(sim / "measurements.csv"), "--speed-max", "2500", "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert np.hypot(*d["x_start"][2:]) > 1500

@@ -45,13 +45,27 @@ def test_reads_good_file_and_default_sigma(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("text", "line", "msg"),
     [
-        ("", None, "empty file"),
-        ("\n\n", None, "empty file"),
-        ("time,pair,doppler,sigma\n", None, "no measurement rows"),
+        ("", None, "empty measurement file"),
+        ("\n\n", None, "empty measurement file"),
+        ("time,pair,doppler,sigma\n", None, "no data rows"),
         ("t,p,d,s\n0,0,1,1\n", 1, "bad header"),
         ("time,pair,doppler,sigma\n0,0,abc,1\n", 2, "doppler is not a number"),
-        ("time,pair,doppler,sigma\n0,0,1,1\n0.5,0,nan,1\n", 3, "doppler is not finite"),
-        ("time,pair,doppler,sigma\n0,0,1,1\ninf,0,1,1\n", 3, "time is not finite"),
+        ("time,pair,doppler,sigma\n0,0,1,1\n0.5,0,nan,1\n", 3, "doppler is not a number: 'nan'"),
+        ("time,pair,doppler,sigma\n0,0,1,1\ninf,0,1,1\n", 3, "time is not a number: 'inf'"),
+        # what Python's float() would have taken
+        ("time,pair,doppler,sigma\n,,,\n", 2, "time is empty"),
+        ("time,pair,doppler,sigma\n0,0,1_000,1\n", 2, "doppler is not a number: '1_000'"),
+        ("time,pair,doppler,sigma\n0,0,\u0661\u0662,1\n", 2, "doppler is not a number"),
+        ("time,pair,doppler,sigma\n0,0,0x10,1\n", 2, "doppler is not a number"),
+        ("time,pair,doppler,sigma\n0,0, ,1\n", 2, "doppler is empty"),
+        # values no real file holds: each would overflow or underflow downstream
+        ("time,pair,doppler,sigma\n0,0,1,5e-324\n", 2, "sigma 4.94066e-324 is outside"),
+        ("time,pair,doppler,sigma\n0,0,1e308,1\n", 2, "doppler 1e\\+308 is outside"),
+        ("time,pair,doppler,sigma\n1e300,0,1,1\n", 2, "time 1e\\+300 is outside"),
+        ("time,pair,doppler,sigma\n0,0,1e999,1\n", 2, "doppler is too large"),
+        # bounded reads
+        ("time,pair,doppler,sigma\n0,0," + "1" * 200_000 + ",1\n", 2, "longer than 4096 bytes"),
+        ("time,pair,doppler,sigma\n0,0,1\x00,1\n", 2, "NUL"),
         ("time,pair,doppler,sigma\n0,0,1,0\n", 2, "sigma must be > 0"),
         ("time,pair,doppler,sigma\n0,0,1,-1\n", 2, "sigma must be > 0"),
         ("time,pair,doppler,sigma\n0,2,1,1\n", 2, "unknown pair index 2"),
@@ -73,6 +87,22 @@ def test_malformed_csv(tmp_path: Path, text: str, line: int | None, msg: str) ->
 def test_missing_file(tmp_path: Path) -> None:
     with pytest.raises(MeasurementError, match="cannot read"):
         fd.Measurements.from_csv(tmp_path / "nope.csv")
+
+
+def test_endless_and_binary_inputs_are_refused_at_once(tmp_path: Path) -> None:
+    with pytest.raises(MeasurementError, match="/dev/zero:1: line longer than"):
+        fd.Measurements.from_csv("/dev/zero")
+    binary = tmp_path / "latin1.csv"
+    binary.write_bytes(b"time,pair,doppler,sigma\n0,0,1,1\n# caf\xe9\n")
+    with pytest.raises(MeasurementError, match="latin1.csv:3: not UTF-8"):
+        fd.Measurements.from_csv(binary)
+
+
+def test_constructor_refuses_values_no_file_may_hold() -> None:
+    with pytest.raises(MeasurementError, match="sigma .* is outside"):
+        fd.Measurements.from_arrays([0.0], [0], [1.0], 1e-9)
+    with pytest.raises(MeasurementError, match="doppler .* is outside"):
+        fd.Measurements.from_arrays([0.0], [0], [7e8], 1.0)
 
 
 def test_container_validation() -> None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from typing import Any
 
@@ -15,9 +14,10 @@ class CLIError(Exception):
 
 
 def emit_json(obj: Any) -> None:
-    """Print ``obj`` as JSON on stdout (no NaN or infinity)."""
-    json.dump(obj, sys.stdout, indent=2, allow_nan=False)
-    sys.stdout.write("\n")
+    """Print ``obj`` as JSON on stdout (non-finite numbers as ``null``: strict JSON has no NaN)."""
+    from fgdoppler.estimators.results import json_dumps
+
+    sys.stdout.write(json_dumps(obj) + "\n")
 
 
 def progress_bar(total: int, desc: str, unit: str = "state") -> Any:

@@ -9,7 +9,9 @@ line; nothing is written then.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 
 from fgdoppler import __version__
@@ -41,19 +43,36 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Exit statuses: 0 success, 1 an internal error, 2 bad input (nothing written), 3 a ``failed`` verdict.
+EXIT_OK, EXIT_INTERNAL, EXIT_INPUT = 0, 1, 2
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the exit status."""
+    """Run the command line; returns the exit status (:data:`EXIT_OK` ... and 3 for a failed track)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     handler: Handler = args.handler
     try:
-        return handler(args)
+        # Warnings are for programmers; users get the messages the commands print themselves.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return handler(args)
     except BrokenPipeError:  # e.g. piped into `head`
         sys.stderr.close()
-        return 0
+        return EXIT_OK
     except (CLIError, ValueError, OSError) as exc:
-        print(f"fgdoppler {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        print(f"fgdoppler {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_INPUT
+    except Exception as exc:  # a bug, not the user's input: one line, the traceback on request
+        if os.environ.get("FGDOPPLER_DEBUG"):
+            raise
+        print(f"fgdoppler {args.command}: internal error: {type(exc).__name__}: {_one_line(exc)} "
+              "(please report it; FGDOPPLER_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return EXIT_INTERNAL
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 if __name__ == "__main__":  # pragma: no cover

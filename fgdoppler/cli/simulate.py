@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from fgdoppler._io import write_all
 from fgdoppler.cli.common import (
     add_scenario_options,
     add_zone_options,
@@ -47,10 +48,8 @@ def _run(args: argparse.Namespace) -> int:
                     f"{geom.name or 'custom geometry'}, start ({args.start_x / 1e3:g}, {args.start_y / 1e3:g}) km")
     sim = simulate(scen, np.random.default_rng(args.seed))
     out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    sim.measurements.to_csv(out / "measurements.csv")
-    sim.truth.to_csv(out / "truth.csv")
-    geom.to_toml(out / "geometry.toml")
+    write_all({out / "measurements.csv": sim.measurements.csv_text(), out / "truth.csv": sim.truth.csv_text(),
+               out / "geometry.toml": geom.toml_text()})
     summary: dict[str, Any] = {
         "scenario": scen.name,
         "measurements": len(sim.measurements),

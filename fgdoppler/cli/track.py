@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -53,7 +52,9 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy) for --plot and errors")
     p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
     p.add_argument("--json", action="store_true", help="machine-readable result on stdout")
-    p.add_argument("--plot", type=Path, default=None, metavar="PATH", help="write a figure")
+    p.add_argument("--plot", type=Path, default=None, metavar="PATH", help="write a figure (format from the suffix)")
+    p.add_argument("--allow-failed", action="store_true",
+                   help=f"exit 0 even when the verdict is 'failed' (default: exit status {3})")
     add_zone_options(p)
     p.set_defaults(handler=_run)
 
@@ -98,17 +99,34 @@ def _initiation_settings(args: argparse.Namespace) -> Any:
                               half_plane=hp, grid=grid_spec(args))
 
 
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Refuse output paths that cannot be written as asked, before anything runs."""
+    from fgdoppler import plotting
+
+    if args.out is not None and args.out.suffix.lower() != ".csv":
+        raise CLIError(f"--out {args.out}: give a .csv path (the JSON is written beside it, with .json)")
+    if args.plot is not None:
+        fmt = args.plot.suffix.lower().lstrip(".")
+        if fmt not in plotting.figure_formats():
+            raise CLIError(f"--plot {args.plot}: unknown figure format {fmt!r} (use one of "
+                           f"{', '.join(sorted(plotting.figure_formats()))})")
+
+
 def _run(args: argparse.Namespace) -> int:
     from fgdoppler.estimators.initiation import initiate
     from fgdoppler.measurements import Measurements
     from fgdoppler.simulation import Trajectory
 
+    _check_outputs(args)
+    if args.init_per_pair < 3:
+        raise CLIError("--init-per-pair must be >= 3")
     spec = _geometry_spec(args)
     geom = geometry_with_zone(spec, args)
     meas = Measurements.from_csv(args.file, geometry=geom, default_sigma=args.sigma)
-    truth = Trajectory.from_csv(args.truth) if args.truth else None
-    if args.init_per_pair < 3:
-        raise CLIError("--init-per-pair must be >= 3")
+    truth = None
+    if args.truth:
+        truth = Trajectory.from_csv(args.truth)
+        truth.check_covers(meas.scans().times, str(args.truth))
     model = _model(args, geom)
     settings = _initiation_settings(args)
     window = meas.first_per_pair(args.init_per_pair)
@@ -122,67 +140,103 @@ def _run(args: argparse.Namespace) -> int:
         print(f"geometry {spec} ({geom.n_pairs} pair(s)); zone along {z.along[0]:g}..{z.along[1]:g} m, across "
               f"{z.across[0]:g}..{z.across[1]:g} m in the sensors' frame, speed up to {z.speed_max:g} m/s")
     if args.estimator == "init":
-        return _report_initiation(args, init, window, geom, truth, where)
-    return _run_tracker(args, init, meas, model, truth, where)
+        status = _report_initiation(args, init, window, geom, truth, where)
+    else:
+        status = _run_tracker(args, init, meas, model, truth, where)
+    return _exit_status(status, args)
 
 
-def _print_verdict(status: str, reasons: Any, events: Any, limit: int = 10) -> None:
-    print(f"  status: {status}")
+#: Exit status of ``track`` when the verdict is ``failed`` (without ``--allow-failed``).
+EXIT_FAILED = 3
+
+
+def _exit_status(status: str, args: argparse.Namespace) -> int:
+    if status == "failed" and not args.allow_failed:
+        print(f"fgdoppler track: the verdict is 'failed' (exit status {EXIT_FAILED}; --allow-failed to exit 0)",
+              file=sys.stderr)
+        return EXIT_FAILED
+    return 0
+
+
+def _print_verdict(status: str, reasons: Any) -> None:
+    """The verdict, on stderr (also with --json)."""
+    print(f"fgdoppler track: status {status}", file=sys.stderr)
     for r in reasons:
-        print(f"  {r.status}: {r.message}")
+        print(f"  {r.status}: {r.message}", file=sys.stderr)
+
+
+def _print_events(events: Any, limit: int = 10) -> None:
     for e in list(events)[:limit]:
         print(f"  event at t = {e.time:g}: {e.message}")
     if len(events) > limit:
         print(f"  ... and {len(events) - limit} more event(s)")
 
 
-def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: Any, truth: Any,
-                       where: dict[str, Any]) -> int:
+def _write(args: argparse.Namespace, csv_text: str, json_text: str, figure: bytes | None) -> None:
+    """Every output at once: nothing is written unless all of them can be."""
+    from fgdoppler._io import write_all
+
+    files: dict[Path, str | bytes] = {}
     if args.out is not None:
-        from fgdoppler._io import atomic_write_text
+        files[args.out] = csv_text
+        files[args.out.with_suffix(".json")] = json_text
+    if figure is not None:
+        files[args.plot] = figure
+    write_all(files)
 
-        atomic_write_text(args.out, json.dumps({**init.to_dict(), **where}, indent=1))
+
+def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: Any, truth: Any,
+                       where: dict[str, Any]) -> str:
+    from fgdoppler.estimators.results import json_dumps
+
+    payload = {**init.to_dict(), **where}
+    text = json_dumps(payload)
+    figure = _plot_landscape(args, init, window, geom, truth) if args.plot else None
+    _write(args, init.csv_text(header=tuple(_csv_header(where))), text, figure)
+    _print_verdict(init.status, init.reasons)
     if args.json:
-        emit_json({**init.to_dict(), **where})
-    else:
-        print(f"initiation ({init.method}) from {init.n_measurements} measurements, "
-              f"t = {init.t_start:g}..{init.t_end:g} s, {init.wall_time * 1e3:.0f} ms")
-        print(f"  state at t_end: x = {init.x_end[0]:.1f} m, y = {init.x_end[1]:.1f} m, "
-              f"vx = {init.x_end[2]:.2f} m/s, vy = {init.x_end[3]:.2f} m/s")
-        if init.P_end is not None:
-            sd = np.sqrt(np.diag(init.P_end))
-            print(f"  std: {sd[0]:.1f} m, {sd[1]:.1f} m, {sd[2]:.2f} m/s, {sd[3]:.2f} m/s")
-        verdict = "passes" if init.passes_chi2 else "FAILS"
-        print(f"  cost {init.cost:.2f} {verdict} the chi-square test ({init.chi2_threshold:.2f}, {init.dof} dof); "
-              f"objective with prior and zone terms {init.objective:.2f}")
-        for a in init.alternatives:
-            print(f"    alternative x0 = {np.round(a.state, 1).tolist()} cost {a.cost:.2f}")
-        _print_verdict(init.status, init.reasons, init.events)
-        if truth is not None:
-            err = init.x_end - truth.at([init.t_end])[0]
-            print(f"  error at t_end: position {np.hypot(err[0], err[1]):.1f} m, velocity {np.hypot(err[2], err[3]):.2f} m/s")
-    if args.plot:
-        _plot_landscape(args, init, window, geom, truth)
-    return 0
+        emit_json(payload)
+        return str(init.status)
+    print(f"initiation ({init.method}) from {init.n_measurements} measurements, "
+          f"t = {init.t_start:g}..{init.t_end:g} s, {init.wall_time * 1e3:.0f} ms")
+    print(f"  state at t_end: x = {init.x_end[0]:.1f} m, y = {init.x_end[1]:.1f} m, "
+          f"vx = {init.x_end[2]:.2f} m/s, vy = {init.x_end[3]:.2f} m/s")
+    if init.P_end is not None:
+        sd = np.sqrt(np.diag(init.P_end))
+        print(f"  std: {sd[0]:.1f} m, {sd[1]:.1f} m, {sd[2]:.2f} m/s, {sd[3]:.2f} m/s")
+    verdict = "passes" if init.passes_chi2 else "FAILS"
+    print(f"  cost {init.cost:.2f} {verdict} the chi-square test ({init.chi2_threshold:.2f}, {init.dof} dof); "
+          f"objective with prior and zone terms {init.objective:.2f}")
+    for a in init.alternatives:
+        print(f"    alternative x0 = {np.round(a.state, 1).tolist()} cost {a.cost:.2f}")
+    _print_events(init.events)
+    if truth is not None:
+        err = init.x_end - truth.at([init.t_end])[0]
+        print(f"  error at t_end: position {np.hypot(err[0], err[1]):.1f} m, velocity {np.hypot(err[2], err[3]):.2f} m/s")
+    if args.out is not None:
+        print(f"  wrote {args.out} and {args.out.with_suffix('.json')}")
+    return str(init.status)
 
 
-def _plot_landscape(args: argparse.Namespace, init: Any, window: Any, geom: Any, truth: Any) -> None:
+def _plot_landscape(args: argparse.Namespace, init: Any, window: Any, geom: Any, truth: Any) -> bytes:
     from fgdoppler import plotting
+    from fgdoppler.analysis.observability import default_along
     from fgdoppler.estimators.initiation import residual_landscape
 
-    xs = np.arange(1e3, 49e3 + 1, 250.0)
+    xs = default_along(geom)
     hs = np.arange(0.0, 360.0, 2.0)
-    speed = float(np.hypot(*init.x_start[2:]))
-    cost = residual_landscape(window, geom, x=xs, heading_deg=hs, y0=float(init.x_start[1]), speed=speed)
-    others = [c.state for c in init.candidates[1:]] + [a.state for a in init.alternatives]
-    t0 = truth.at([init.t_start])[0] if truth is not None else None
-    ax = plotting.plot_landscape(xs, hs, cost, best=init.x_start, others=others, truth=t0)
-    ax.set_title(f"residual over x0 x heading at y0 = {init.x_start[1] / 1e3:.2f} km, speed {speed:.0f} m/s",
-                 fontsize="small")
-    plotting.save(ax, args.plot)
+    start = geom.frame.states_to_local(init.x_start)
+    speed = float(np.hypot(*start[2:]))
+    cost = residual_landscape(window, geom, x=xs, heading_deg=hs, y0=float(start[1]), speed=speed)
+    others = [geom.frame.states_to_local(c.state) for c in (*init.candidates[1:], *init.alternatives)]
+    t0 = geom.frame.states_to_local(truth.at([init.t_start])[0]) if truth is not None else None
+    ax = plotting.plot_landscape(xs, hs, cost, best=start, others=others, truth=t0)
+    ax.set_title(f"residual over x0 x heading at y0 = {start[1] / 1e3:.2f} km, speed {speed:.0f} m/s "
+                 "(sensors' frame)", fontsize="small")
+    return plotting.figure_bytes(ax, args.plot.suffix.lower().lstrip("."))
 
 
-def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, truth: Any, where: dict[str, Any]) -> int:
+def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, truth: Any, where: dict[str, Any]) -> str:
     from fgdoppler import plotting
     from fgdoppler.estimators.registry import run_estimator
     from fgdoppler.estimators.settings import FixedLagSettings
@@ -193,29 +247,29 @@ def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, tru
         name = ALIASES[name]
     settings = FixedLagSettings(lag=args.lag) if name == "fixed-lag" else ESTIMATORS[name].settings()
     result = run_estimator(name, meas, model, init, settings)
-    if args.out is not None:
-        result.to_csv(args.out, header=_csv_header(where))
-        result.to_json(args.out.with_suffix(".json"), extra=where)
     e = result.primary
-    if args.json:
-        emit_json({**result.to_dict(all_estimates=False), **where})
-    else:
-        print(f"{name}: {len(e)} states ({e.kind}), t = {e.times[0]:g}..{e.times[-1]:g} s, "
-              f"{result.wall_time * 1e3:.0f} ms")
-        print(f"  last state: x = {e.states[-1, 0]:.1f} m, y = {e.states[-1, 1]:.1f} m, "
-              f"vx = {e.states[-1, 2]:.2f} m/s, vy = {e.states[-1, 3]:.2f} m/s")
-        _print_verdict(result.status, result.reasons, result.events)
-        if truth is not None:
-            err = e.states - truth.at(e.times)
-            rmse = float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1))))
-            print(f"  position RMSE vs truth: {rmse:.1f} m; final error {np.hypot(*err[-1, :2]):.1f} m")
-        if args.out is not None:
-            print(f"  wrote {args.out} and {args.out.with_suffix('.json')}")
+    figure = None
     if args.plot:
         ax = plotting.plot_track(e.times, e.states, model.geometry, covariances=e.covariances, cov_ok=e.cov_ok,
                                  truth=None if truth is None else truth.states, label=f"{name} ({e.kind})")
-        plotting.save(ax, args.plot)
-    return 0
+        figure = plotting.figure_bytes(ax, args.plot.suffix.lower().lstrip("."))
+    _write(args, result.csv_text(header=_csv_header(where)), result.json_text(extra=where), figure)
+    _print_verdict(result.status, result.reasons)
+    if args.json:
+        emit_json({**result.to_dict(all_estimates=False), **where})
+        return str(result.status)
+    print(f"{name}: {len(e)} states ({e.kind}), t = {e.times[0]:g}..{e.times[-1]:g} s, "
+          f"{result.wall_time * 1e3:.0f} ms")
+    print(f"  last state: x = {e.states[-1, 0]:.1f} m, y = {e.states[-1, 1]:.1f} m, "
+          f"vx = {e.states[-1, 2]:.2f} m/s, vy = {e.states[-1, 3]:.2f} m/s")
+    _print_events(result.events)
+    if truth is not None:
+        err = e.states - truth.at(e.times)
+        rmse = float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1))))
+        print(f"  position RMSE vs truth: {rmse:.1f} m; final error {np.hypot(*err[-1, :2]):.1f} m")
+    if args.out is not None:
+        print(f"  wrote {args.out} and {args.out.with_suffix('.json')}")
+    return str(result.status)
 
 
 def _csv_header(where: dict[str, Any]) -> list[str]:

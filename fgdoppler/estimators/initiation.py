@@ -263,6 +263,16 @@ class Initiation(Judged):
         """True when ``P_start`` and ``P_end`` are available."""
         return self.P_start is not None
 
+    def csv_text(self, *, header: tuple[str, ...] = ()) -> str:
+        """The window's first and last states in the track CSV format (:func:`~fgdoppler.estimators.results.states_csv`)."""
+        from fgdoppler.estimators.results import states_csv
+
+        P = [np.zeros((4, 4)) if c is None else c for c in (self.P_start, self.P_end)]
+        return states_csv(np.array([self.t_start, self.t_end]), np.array([self.x_start, self.x_end]), np.array(P),
+                          np.array([self.covariance_ok] * 2),
+                          [f"fgdoppler initiation ({self.method}): window start and end, status {self.status}",
+                           *header])
+
     def in_frame_of(self, frame: Frame) -> Initiation:
         """This initiation in ``frame``'s local coordinates, exactly as computed there where possible.
 
@@ -733,9 +743,11 @@ def residual_landscape(
 ) -> NDArray[np.float64]:
     """Weighted residual cost over an initial-x × heading slice at fixed y0 and speed.
 
-    Returns the cost, shape ``(x.size, heading_deg.size)`` — the landscape of
-    the paper's Fig. 2 (many local optima; the start decides which is found).
+    ``x``, ``y0`` and the heading are in the geometry's own frame (the paper's
+    axes for its geometries).  Returns the cost, shape ``(x.size,
+    heading_deg.size)`` — the landscape of the paper's Fig. 2 (many local
+    optima; the start decides which is found).
     """
     w = _Window.build(measurements, geometry)
-    states = grid_states(x, y0, speed, heading_deg).reshape(-1, 4)
+    states = geometry.frame.states_to_world(grid_states(x, y0, speed, heading_deg).reshape(-1, 4))
     return grid_costs(geometry, w.times, w.z, w.sigma, states).reshape(np.size(x), np.size(heading_deg))

@@ -20,6 +20,7 @@ verdict (``status``, ``message``, ``reasons``) and the event log follow
 from __future__ import annotations
 
 import csv
+import io
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -29,12 +30,12 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from fgdoppler._io import atomic_open, atomic_write_text
+from fgdoppler._io import atomic_write_text
 from fgdoppler.estimators.settings import TrackerSettings
 from fgdoppler.estimators.verdict import Event, Judged, Reason
 from fgdoppler.frames import Frame
 
-__all__ = ["KINDS", "Estimates", "TrackResult"]
+__all__ = ["KINDS", "Estimates", "TrackResult", "json_dumps", "states_csv"]
 
 FloatArray = NDArray[np.float64]
 Kind = Literal["filtered", "lagged", "smoothed"]
@@ -43,6 +44,34 @@ KINDS: tuple[Kind, ...] = ("filtered", "lagged", "smoothed")
 
 _IU = np.triu_indices(4)
 _COV_NAMES = [f"P{i}{j}" for i, j in zip(*_IU, strict=True)]
+
+
+def states_csv(times: FloatArray, states: FloatArray, covariances: FloatArray, cov_ok: NDArray[np.bool_],
+               comments: Sequence[str] = ()) -> str:
+    """The track CSV: ``#`` comment lines, the header, a row per time with the covariance's upper triangle."""
+    buf = io.StringIO()
+    for line in comments:
+        buf.write(f"# {line}\n")
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["time", "x", "y", "vx", "vy", *_COV_NAMES])
+    for t, x, P, ok in zip(times, states, covariances, cov_ok, strict=True):
+        cov = [repr(float(v)) for v in P[_IU]] if ok else [""] * len(_COV_NAMES)
+        w.writerow([repr(float(t)), *(repr(float(v)) for v in x), *cov])
+    return buf.getvalue()
+
+
+def json_dumps(obj: Any) -> str:
+    """JSON with non-finite numbers as ``null`` (strict JSON has no NaN or infinity)."""
+    def clean(o: Any) -> Any:
+        if isinstance(o, float | np.floating):
+            return float(o) if np.isfinite(o) else None
+        if isinstance(o, dict):
+            return {k: clean(v) for k, v in o.items()}
+        if isinstance(o, list | tuple):
+            return [clean(v) for v in o]
+        return o
+
+    return json.dumps(clean(obj), indent=1, allow_nan=False)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -218,41 +247,47 @@ class TrackResult(Judged):
         d["wall_time"] = self.wall_time
         return d
 
+    def csv_text(self, *, header: Sequence[str] = ()) -> str:
+        """The track CSV (see :meth:`to_csv`) as text."""
+        e = self.primary
+        return states_csv(e.times, e.states, e.covariances, e.cov_ok,
+                          [f"fgdoppler {self.estimator}: {e.kind} estimates, status {self.status}", *header])
+
     def to_csv(self, path: str | Path, *, header: Sequence[str] = ()) -> None:
         """One row per time: ``time, x, y, vx, vy`` and the covariance upper triangle (empty if indeterminate).
 
         The file starts with ``#`` comment lines: the estimator, the estimate's
         kind and the verdict, then each line of ``header`` (the command line
-        records the geometry and the zone there).
+        records the geometry and the zone there).  Written atomically.
         """
-        e = self.primary
-        with atomic_open(Path(path)) as fh:
-            fh.write(f"# fgdoppler {self.estimator}: {e.kind} estimates, status {self.status}\n")
-            for line in header:
-                fh.write(f"# {line}\n")
-            w = csv.writer(fh, lineterminator="\n")
-            w.writerow(["time", "x", "y", "vx", "vy", *_COV_NAMES])
-            for t, x, P, ok in zip(e.times, e.states, e.covariances, e.cov_ok, strict=True):
-                cov = [repr(float(v)) for v in P[_IU]] if ok else [""] * len(_COV_NAMES)
-                w.writerow([repr(float(t)), *(repr(float(v)) for v in x), *cov])
+        atomic_write_text(Path(path), self.csv_text(header=header))
+
+    def json_text(self, *, extra: dict[str, Any] | None = None) -> str:
+        """:meth:`to_dict` (with ``extra`` keys, e.g. the geometry) as JSON; non-finite numbers become ``null``."""
+        return json_dumps({**self.to_dict(), **(extra or {})})
 
     def to_json(self, path: str | Path, *, extra: dict[str, Any] | None = None) -> None:
-        """Write :meth:`to_dict` (with ``extra`` keys, e.g. the geometry) atomically."""
-        atomic_write_text(Path(path), json.dumps({**self.to_dict(), **(extra or {})}, indent=1, allow_nan=False))
+        """Write :meth:`json_text` atomically."""
+        atomic_write_text(Path(path), self.json_text(extra=extra))
 
     @staticmethod
     def read_csv(path: str | Path, kind: Kind = "smoothed") -> Estimates:
-        """Read a CSV written by :meth:`to_csv` back into :class:`Estimates` (of the given kind)."""
-        lines = [ln for ln in Path(path).read_text(encoding="utf-8").splitlines() if not ln.startswith("#")]
-        rows = list(csv.reader(lines))
-        body = rows[1:]
-        t = np.array([float(r[0]) for r in body])
-        x = np.array([[float(v) for v in r[1:5]] for r in body]).reshape(-1, 4)
-        P = np.zeros((len(body), 4, 4))
-        ok = np.zeros(len(body), dtype=bool)
-        for k, r in enumerate(body):
-            if r[5]:
-                P[k][_IU] = [float(v) for v in r[5:]]
+        """Read a CSV written by :meth:`to_csv` back into :class:`Estimates` (of the given kind).
+
+        Indeterminate covariances (empty cells) come back with ``cov_ok`` False.
+        """
+        from fgdoppler.csvfile import parse_number
+
+        lines = [ln for ln in Path(path).read_text(encoding="utf-8").splitlines() if ln and not ln.startswith("#")]
+        body = list(csv.reader(lines))[1:]
+        n = len(body)
+        t, x, P, ok = np.empty(n), np.empty((n, 4)), np.zeros((n, 4, 4)), np.zeros(n, dtype=bool)
+        for k, row in enumerate(body):
+            where = f"{path}: row {k + 1}"
+            t[k] = parse_number(row[0], where, "time")
+            x[k] = [parse_number(v, where, "state") for v in row[1:5]]
+            if row[5]:
+                P[k][_IU] = [parse_number(v, where, "covariance") for v in row[5:]]
                 P[k] = P[k] + np.triu(P[k], 1).T
                 ok[k] = True
         return Estimates(kind=kind, times=t, states=x, covariances=P, cov_ok=ok)

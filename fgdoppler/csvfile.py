@@ -1,0 +1,136 @@
+"""One strict reader for every CSV fgdoppler reads (measurements, truth, tracks).
+
+Numbers are ASCII decimals with an optional exponent (``-12.5``, ``3e-4``):
+Python's ``float()`` would also take ``1_000``, non-ASCII digits, ``nan`` and
+``inf``, none of which belong in these files.  Reads are bounded — a line
+longer than :data:`MAX_LINE_BYTES` is refused, so a device such as
+``/dev/zero`` or a corrupted file with one enormous field is an error, not an
+exhausted memory — and every problem names the file and the line.  Blank
+lines and (where allowed) ``#`` comment lines are skipped; a row of empty
+fields is an error.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["MAX_LINE_BYTES", "CSVError", "Table", "parse_number", "read_table"]
+
+#: Longest line accepted (a row of fifteen full-precision numbers takes about 400 bytes).
+MAX_LINE_BYTES = 4096
+
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+
+
+class CSVError(ValueError):
+    """A malformed CSV file; the message names the file and the line."""
+
+
+def parse_number(text: str, where: str, name: str) -> float:
+    """A strict ASCII decimal; :class:`CSVError` naming ``where`` and the column ``name`` otherwise."""
+    t = text.strip()
+    if not t:
+        raise CSVError(f"{where}: {name} is empty")
+    if not _NUMBER.fullmatch(t):
+        shown = t if len(t) <= 40 else t[:40] + "..."
+        raise CSVError(f"{where}: {name} is not a number: {shown!r}")
+    value = float(t)
+    if not np.isfinite(value):
+        raise CSVError(f"{where}: {name} is too large: {t!r}")
+    return value
+
+
+@dataclass(frozen=True, kw_only=True)
+class Table:
+    """A numeric CSV: its header, the values ``(n, k)`` and the file line of every row."""
+
+    path: Path
+    header: tuple[str, ...]
+    values: NDArray[np.float64]
+    lines: NDArray[np.intp]
+
+    def where(self, row: int) -> str:
+        """``file:line`` of a data row."""
+        return f"{self.path}:{int(self.lines[row])}"
+
+
+def _lines(path: Path, comments: bool) -> list[tuple[int, str]]:
+    """(line number, text) of the non-blank lines, bounded and checked for text."""
+    out = []
+    try:
+        fh = open(path, "rb")
+    except OSError as exc:
+        raise CSVError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    with fh:
+        number = 0
+        while True:
+            raw = fh.readline(MAX_LINE_BYTES + 1)
+            if not raw:
+                break
+            number += 1
+            if len(raw) > MAX_LINE_BYTES:
+                raise CSVError(f"{path}:{number}: line longer than {MAX_LINE_BYTES} bytes: not a measurement file")
+            if b"\x00" in raw:
+                raise CSVError(f"{path}:{number}: contains NUL bytes: not a text file")
+            try:
+                text = raw.decode("utf-8-sig" if number == 1 else "utf-8").rstrip("\r\n")
+            except UnicodeDecodeError:
+                raise CSVError(f"{path}:{number}: not UTF-8 text") from None
+            if not text.strip() or (comments and text.lstrip().startswith("#")):
+                continue
+            out.append((number, text))
+    return out
+
+
+def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str, ...] = (),
+               what: str = "file", comments: bool = False) -> Table:
+    """Read a numeric CSV whose header is ``header`` followed by any prefix of ``optional``.
+
+    Parameters
+    ----------
+    path
+        The file.
+    header
+        Required column names, in order (matched case-insensitively).
+    optional
+        Columns that may follow, in order.
+    what
+        What the file is, for messages ("measurement file").
+    comments
+        Skip lines starting with ``#``.
+
+    Raises
+    ------
+    CSVError
+        Naming the file and the line: unreadable, not text, a line too long,
+        a bad header, a row with the wrong number of fields, a field that is
+        empty or not an ASCII decimal, no data rows.
+    """
+    path = Path(path)
+    rows = _lines(path, comments)
+    if not rows:
+        raise CSVError(f"{path}: empty {what}: expected the header {','.join(header)}")
+    line0, text0 = rows[0]
+    names = tuple(h.strip().lower() for h in next(csv.reader([text0])))
+    allowed = [(*header, *optional[:i]) for i in range(len(optional) + 1)]
+    if names not in allowed:
+        expected = ",".join(header) + (f" (then optionally {','.join(optional)})" if optional else "")
+        raise CSVError(f"{path}:{line0}: bad header {','.join(names)!r}: expected {expected}")
+    if len(rows) == 1:
+        raise CSVError(f"{path}: no data rows after the header")
+    values = np.empty((len(rows) - 1, len(names)))
+    lines = np.empty(len(rows) - 1, dtype=np.intp)
+    for j, (line, text) in enumerate(rows[1:]):
+        fields = next(csv.reader([text]))
+        where = f"{path}:{line}"
+        if len(fields) != len(names):
+            raise CSVError(f"{where}: expected {len(names)} fields, got {len(fields)}")
+        values[j] = [parse_number(f, where, n) for f, n in zip(fields, names, strict=True)]
+        lines[j] = line
+    return Table(path=path, header=names, values=values, lines=lines)
