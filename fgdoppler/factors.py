@@ -44,6 +44,7 @@ from fgdoppler.geometry import Geometry
 from fgdoppler.models.doppler import StackedTimes, _cv
 from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.observation import DopplerModel, MeasurementModel
+from fgdoppler.models.robust import huber_residuals
 from fgdoppler.zone import Zone
 
 __all__ = [
@@ -61,25 +62,26 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 
 
-def noise_model(sigma: ArrayLike, huber_k: float | None = None) -> gtsam.noiseModel.Base:
-    """Diagonal noise model, optionally wrapped in a Huber robust estimator.
-
-    Parameters
-    ----------
-    sigma
-        Standard deviations, one per error component.
-    huber_k
-        Huber threshold in whitened units (e.g. 1.345); ``None`` for Gaussian.
-    """
+def noise_model(sigma: ArrayLike) -> gtsam.noiseModel.Base:
+    """Diagonal Gaussian noise model with the given standard deviations (one per error component)."""
     s = np.asarray(sigma, dtype=float).reshape(-1)
     if not np.all(np.isfinite(s) & (s > 0)):
         raise ValueError(f"sigmas must be finite and > 0, got {s}")
-    base = gtsam.noiseModel.Diagonal.Sigmas(s)
+    return gtsam.noiseModel.Diagonal.Sigmas(s)
+
+
+def _robust(residual: FloatArray, jacobian: FloatArray | None, sigma: FloatArray, huber_k: float | None
+            ) -> tuple[FloatArray, FloatArray | None]:
+    """Residuals (and Jacobian rows) transformed so their whitened squares are the Huber loss, per row."""
     if huber_k is None:
-        return base
-    if not huber_k > 0:
+        return residual, jacobian
+    e, d = huber_residuals(residual / sigma, huber_k)
+    return e * sigma, None if jacobian is None else jacobian * d[:, None]
+
+
+def _check_huber(huber_k: float | None) -> None:
+    if huber_k is not None and not (np.isfinite(huber_k) and huber_k > 0):
         raise ValueError(f"huber_k must be > 0, got {huber_k}")
-    return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(huber_k), base)
 
 
 def _checked(jac: FloatArray, rows: int, cols: int, what: str) -> FloatArray:
@@ -96,6 +98,8 @@ def _measurement_error(
     model: MeasurementModel,
     channels: NDArray[np.intp],
     z: FloatArray,
+    sigma: FloatArray,
+    huber_k: float | None,
     this: gtsam.CustomFactor,
     values: gtsam.Values,
     jacobians: list[FloatArray] | None,
@@ -103,10 +107,12 @@ def _measurement_error(
     state = values.atVector(this.keys()[0])
     x = np.broadcast_to(state, (channels.size, state.size))
     if jacobians is None:
-        return model.predict(x, channels) - z
+        return _robust(model.predict(x, channels) - z, None, sigma, huber_k)[0]
     h, H = model.predict_and_jacobian(x, channels)
-    jacobians[0] = _checked(H, channels.size, state.size, "measurement factor")
-    return h - z
+    e, J = _robust(h - z, H, sigma, huber_k)
+    assert J is not None
+    jacobians[0] = _checked(J, channels.size, state.size, "measurement factor")
+    return e
 
 
 def measurement_factor(
@@ -118,9 +124,11 @@ def measurement_factor(
     *,
     huber_k: float | None = None,
 ) -> gtsam.CustomFactor:
-    """All scalar measurements of any :class:`~fgdoppler.models.measurement.MeasurementModel` at one state.
+    """All scalar measurements of any :class:`~fgdoppler.models.observation.MeasurementModel` at one state.
 
-    Error ``h(x)[channels] - z``; one Python callback per state.
+    Error ``h(x)[channels] - z``; one Python callback per state.  With
+    ``huber_k`` each row is robust on its own
+    (:func:`~fgdoppler.estimators.gating.huber_residuals`).
     """
     c = np.asarray(channels, dtype=np.intp).reshape(-1)
     z = np.asarray(values, dtype=float).reshape(-1)
@@ -128,11 +136,9 @@ def measurement_factor(
         raise ValueError(f"need one or more measurements with matching channels, got {c.size} and {z.size}")
     if c.max() >= model.n_channels or c.min() < 0:
         raise ValueError(f"pair index out of range for a model of {model.n_channels} channel(s)")
-    return gtsam.CustomFactor(
-        noise_model(np.broadcast_to(sigma, z.shape), huber_k),
-        [int(key)],
-        partial(_measurement_error, model, c, z.copy()),
-    )
+    _check_huber(huber_k)
+    s = np.broadcast_to(np.asarray(sigma, dtype=float), z.shape).copy()
+    return gtsam.CustomFactor(noise_model(s), [int(key)], partial(_measurement_error, model, c, z.copy(), s, huber_k))
 
 
 def doppler_factor(
@@ -156,7 +162,7 @@ def doppler_factor(
         Pair index, measured Doppler (m/s) and its standard deviation, one
         entry per measurement at this state.
     huber_k
-        Optional Huber threshold (robust to outliers).
+        Optional Huber threshold, per measurement (robust to outliers).
     """
     return measurement_factor(key, DopplerModel(geometry=geometry), pairs, doppler, sigma, huber_k=huber_k)
 
@@ -239,16 +245,19 @@ def _cv_error(
     geometry: Geometry,
     times: StackedTimes,
     z: FloatArray,
+    sigma: FloatArray,
+    huber_k: float | None,
     this: gtsam.CustomFactor,
     values: gtsam.Values,
     jacobians: list[FloatArray] | None,
 ) -> FloatArray:
     x0 = values.atVector(this.keys()[0])
     g, J, _ = _cv(x0, geometry, times, jacobian=jacobians is not None)
+    e, J = _robust(g - z, J, sigma, huber_k)
     if jacobians is not None:
         assert J is not None
         jacobians[0] = _checked(J, z.size, 4, "cv_factor")
-    return g - z
+    return e
 
 
 def cv_factor(
@@ -257,18 +266,20 @@ def cv_factor(
     times: Sequence[ArrayLike] | StackedTimes,
     doppler: ArrayLike,
     sigma: ArrayLike,
+    *,
+    huber_k: float | None = None,
 ) -> gtsam.CustomFactor:
     r"""The paper's window factor :math:`\mathbf g(\mathbf x_0) - \mathbf Z` on one initial-state key.
 
     ``times`` are relative to the time of :math:`\mathbf x_0`, one array per pair
     (or a :class:`~fgdoppler.models.StackedTimes`); ``doppler`` and ``sigma`` are
-    stacked in the same order.
+    stacked in the same order.  ``huber_k`` makes every row robust on its own.
     """
     bt = times if isinstance(times, StackedTimes) else StackedTimes.from_per_pair(times)
     bt.check(geometry)
     z = np.asarray(doppler, dtype=float).reshape(-1)
     if z.size != bt.size or z.size == 0:
         raise ValueError(f"{z.size} measurements for {bt.size} batch times")
-    return gtsam.CustomFactor(
-        noise_model(np.broadcast_to(sigma, z.shape)), [int(key)], partial(_cv_error, geometry, bt, z.copy())
-    )
+    _check_huber(huber_k)
+    s = np.broadcast_to(np.asarray(sigma, dtype=float), z.shape).copy()
+    return gtsam.CustomFactor(noise_model(s), [int(key)], partial(_cv_error, geometry, bt, z.copy(), s, huber_k))

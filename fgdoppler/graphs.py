@@ -91,6 +91,7 @@ def cv_graph(
     sigma: ArrayLike,
     *,
     prior: Prior | None = None,
+    huber_k: float | None = None,
 ) -> tuple[gtsam.NonlinearFactorGraph, int]:
     """The exactly-constant-velocity window on one key ``X(0)`` (``times`` relative to it), and the prior.
 
@@ -100,7 +101,7 @@ def cv_graph(
         The graph and its number of data factors (1).
     """
     graph = gtsam.NonlinearFactorGraph()
-    graph.add(cv_factor(X(0), geometry, times, doppler, sigma))
+    graph.add(cv_factor(X(0), geometry, times, doppler, sigma, huber_k=huber_k))
     if prior is not None:
         graph.add(prior_factor(X(0), *prior))
     return graph, 1

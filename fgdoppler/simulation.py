@@ -155,7 +155,10 @@ class Scenario:
         if not (self.duration >= 0 and np.isfinite(self.duration)):
             raise ValueError(f"duration must be >= 0, got {self.duration}")
         n = self.geometry.n_pairs
-        sig = np.broadcast_to(np.asarray(self.sigma, dtype=float), (n,)).copy()
+        sig_in = np.asarray(self.sigma, dtype=float).reshape(-1)
+        if sig_in.size not in (1, n):
+            raise ValueError(f"sigma must be one value or one per pair ({n}), got {sig_in.size} values")
+        sig = np.broadcast_to(sig_in, (n,)).copy()
         if not np.all(np.isfinite(sig) & (sig > 0)):
             raise ValueError(f"sigma must be > 0, got {self.sigma}")
         off = np.zeros(n) if self.time_offsets is None else np.asarray(self.time_offsets, dtype=float)

@@ -146,3 +146,19 @@ def _finite(v: float) -> bool:
     import math
 
     return math.isfinite(v)
+
+
+def add_huber_option(p: argparse.ArgumentParser) -> None:
+    """``--huber [K]``: the robust loss in the initiation and every estimator."""
+    p.add_argument("--huber", type=float, nargs="?", const=1.345, default=None, metavar="K",
+                   help="Huber loss with threshold K (whitened units; K = 1.345 when given alone) on every "
+                   "Doppler residual, in the initiation and every estimator: a few gross outliers cannot drag "
+                   "the track (default: Gaussian loss)")
+
+
+def huber(args: argparse.Namespace) -> float | None:
+    """The ``--huber`` threshold, checked."""
+    k = args.huber
+    if k is not None and not (_finite(k) and k > 0):
+        raise CLIError(f"--huber must be a positive number, got {k}")
+    return k

@@ -8,12 +8,14 @@ from pathlib import Path
 from fgdoppler.analysis.montecarlo import DEFAULT_ESTIMATORS
 from fgdoppler.cli.common import (
     CLIError,
+    add_huber_option,
     add_scenario_options,
     add_zone_options,
     emit_json,
     executor,
     geometry_with_zone,
     grid_spec,
+    huber,
     scenario,
 )
 
@@ -35,6 +37,7 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
                    help="start x positions in m (default 5000 25000 45000)")
     p.add_argument("--start-y", type=float, default=2e3, help="start y in m (default 2000)")
     p.add_argument("--q", type=float, default=None, help="estimators' process noise PSD in m^2/s^3 (default 1e-3)")
+    add_huber_option(p)
     p.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS),
                    help=f"estimators (default: {' '.join(DEFAULT_ESTIMATORS)}; also lag:SECONDS)")
     p.add_argument("--runs", type=int, default=100, help="runs per scenario (default 100)")
@@ -65,9 +68,13 @@ def _run(args: argparse.Namespace) -> int:
         label = f"case {geom.name}" if geom.name in ("a", "b") and not args.geometry else str(g)
         y_note = "" if args.start_y == 2e3 else f", y {args.start_y / 1e3:g} km"
         scen += [scenario(args, geom, (x, args.start_y), f"{label}, start {x / 1e3:g} km{y_note}") for x in starts]
+    from fgdoppler.estimators.registry import ESTIMATORS
+
+    k = huber(args)
     try:
         spec = MonteCarloSpec(scenarios=tuple(scen), estimators=tuple(args.estimators), runs=args.runs, seed=args.seed,
-                              initiation=InitiationSettings(grid=grid_spec(args)),
+                              initiation=InitiationSettings(grid=grid_spec(args), huber_k=k),
+                              settings={n: e.settings(huber_k=k) for n, e in ESTIMATORS.items()},
                               motion=ConstantVelocity(q=1e-3 if args.q is None else args.q))
     except ValueError as exc:
         raise CLIError(str(exc)) from exc

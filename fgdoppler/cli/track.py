@@ -11,10 +11,12 @@ import numpy as np
 
 from fgdoppler.cli.common import (
     CLIError,
+    add_huber_option,
     add_zone_options,
     emit_json,
     geometry_with_zone,
     grid_spec,
+    huber,
 )
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
@@ -49,6 +51,7 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    help="target known to satisfy (NX, NY) . (p - (PX, PY)) >= 0, e.g. 0 0 0 1 for y >= 0")
     p.add_argument("--q", type=float, default=None, help="process noise PSD in m^2/s^3 (default 1e-3)")
     p.add_argument("--lag", type=float, default=5.0, help="fixed-lag smoother lag in s (default 5)")
+    add_huber_option(p)
     p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy) for --plot and errors")
     p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
     p.add_argument("--json", action="store_true", help="machine-readable result on stdout")
@@ -96,7 +99,7 @@ def _initiation_settings(args: argparse.Namespace) -> Any:
         px, py, nx, ny = args.half_plane
         hp = HalfPlane(point=(px, py), normal=(nx, ny))
     return InitiationSettings(method=args.init_method, k_best=args.k_best, region_bound=not args.no_region_bound,
-                              half_plane=hp, grid=grid_spec(args))
+                              half_plane=hp, grid=grid_spec(args), huber_k=huber(args))
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
@@ -245,7 +248,12 @@ def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, tru
     if name in ALIASES:
         print(f"note: --estimator {name} is now called {ALIASES[name]}", file=sys.stderr)
         name = ALIASES[name]
-    settings = FixedLagSettings(lag=args.lag) if name == "fixed-lag" else ESTIMATORS[name].settings()
+    k = huber(args)
+    try:
+        settings = (FixedLagSettings(lag=args.lag, huber_k=k) if name == "fixed-lag"
+                    else ESTIMATORS[name].settings(huber_k=k))
+    except ValueError as exc:
+        raise CLIError(f"--lag: {exc}") from None
     result = run_estimator(name, meas, model, init, settings)
     e = result.primary
     figure = None

@@ -77,7 +77,7 @@ def resolve(run: Runner, resolution: Resolution, measurements: Measurements, mod
         return replace(r, hypothesis=np.full(len(r.primary), best), events=(*r.events, event),
                        wall_time=time.perf_counter() - t_begin)
     # an estimator that reports its own predictive likelihood (the EKF) is ranked by it
-    ekf_settings = EKFSettings(gate_probability=settings.gate_probability)
+    ekf_settings = EKFSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k)
     ekfs = results if results[0].log_likelihood.size else [run_ekf(measurements, model, h, ekf_settings)
                                                            for h in hyps]
     L = np.array([e.log_likelihood for e in ekfs])

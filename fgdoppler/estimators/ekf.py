@@ -16,6 +16,10 @@ need nothing special):
 
 The normalised innovation :math:`\mathrm{NIS} = (z - h)^2/S` is recorded for
 every measurement; above the gate the measurement is rejected and reported.
+With a Huber threshold :math:`k` a measurement with :math:`|r| = \sqrt{\mathrm{NIS}} > k`
+updates with weight :math:`w = k/|r|`: its variance grows until
+:math:`S_w = S/w` (an M-estimate of the update, which bounds any one
+measurement's pull).
 A non-finite or non-positive :math:`S`, or a covariance that stops being
 positive definite, skips the update with a warning instead of propagating
 garbage.
@@ -30,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.estimators.gating import NISGate
-from fgdoppler.estimators.initiation import Initiation
+from fgdoppler.estimators.initiation import OUTLIER_CUT, Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import EKFSettings
 from fgdoppler.estimators.verdict import Event, Reason
@@ -42,6 +46,8 @@ from fgdoppler.models.tracking import TrackingModel
 __all__ = ["ExtendedKalmanFilter", "run_ekf"]
 
 FloatArray = NDArray[np.float64]
+#: Largest contribution of one measurement to a robust filter's log-likelihood (χ²₁ at 0.9999).
+OUTLIER_CUT2 = OUTLIER_CUT**2
 
 
 class ExtendedKalmanFilter:
@@ -85,8 +91,10 @@ class ExtendedKalmanFilter:
         self._Q: dict[float, list[list[float]]] = {}
         self.events: list[Event] = []
         self.gate = NISGate(self.settings.gate_probability, self.events)
+        self._huber = self.settings.huber_k
         #: Cumulative predictive log-likelihood of all measurements (gated ones
-        #: included), sum of -0.5 (log(2 pi S) + NIS).
+        #: included), sum of -0.5 (log(2 pi S) + NIS); with a Huber threshold each
+        #: NIS is capped at the outlier cut (χ²₁ at 0.9999).
         self.log_likelihood = 0.0
 
     @property
@@ -154,10 +162,18 @@ class ExtendedKalmanFilter:
             return float("nan")
         nis = r * r / S
         # Every measurement counts in the likelihood, gated or not: a hypothesis must not
-        # gain by rejecting the data that contradict it.
-        self.log_likelihood -= 0.5 * (math.log(2 * math.pi * S) + nis)
+        # gain by rejecting the data that contradict it.  Robust filters cap each term at the
+        # outlier cut, so that a gross outlier costs every hypothesis the same.
+        self.log_likelihood -= 0.5 * (math.log(2 * math.pi * S) + (nis if self._huber is None else
+                                                                   min(nis, OUTLIER_CUT2)))
         if not self.gate.accept(self.t, int(channel), nis):
             return nis
+        k = self._huber
+        if k is not None and nis > k * k:
+            # Huber M-estimate: a measurement beyond k normalised units counts with weight
+            # w = k / |r|, i.e. its variance is inflated so that S grows by 1 / w
+            s2 += (S * (math.sqrt(nis) / k - 1.0))
+            S = H[0] * PH[0] + H[1] * PH[1] + H[2] * PH[2] + H[3] * PH[3] + s2
         K = [v / S for v in PH]
         # Joseph form, exactly: A = (I - K H) P = P - K (P H')', then A (I - K H)' + s2 K K'
         A = [[P[i][j] - K[i] * PH[j] for j in range(4)] for i in range(4)]

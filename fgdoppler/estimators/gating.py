@@ -22,7 +22,7 @@ from scipy.stats import chi2
 from fgdoppler.estimators.verdict import Event
 from fgdoppler.models.observation import MeasurementModel
 
-__all__ = ["NISGate", "huber_weights"]
+__all__ = ["NISGate"]
 
 FloatArray = NDArray[np.float64]
 
@@ -64,11 +64,3 @@ class NISGate:
     def as_array(self) -> FloatArray:
         """The log as an ``(m, 4)`` array: time, channel, NIS, accepted (1/0)."""
         return np.array(self.log, dtype=float).reshape(-1, 4)
-
-
-def huber_weights(whitened: FloatArray, k: float | None) -> FloatArray:
-    r"""IRLS weights of the Huber loss: :math:`w = \min(1, k/|r|)` for whitened residuals ``r``."""
-    r = np.abs(np.asarray(whitened, dtype=float))
-    if k is None:
-        return np.ones_like(r)
-    return np.minimum(1.0, k / np.maximum(r, 1e-300))

@@ -50,6 +50,7 @@ from scipy.ndimage import minimum_filter
 from fgdoppler.frames import Frame
 from fgdoppler.geometry import Geometry
 from fgdoppler.models.doppler import StackedTimes, _cv
+from fgdoppler.models.robust import huber_rho
 from fgdoppler.zone import Zone
 
 __all__ = ["GridResult", "GridSpec", "HalfPlane", "grid_costs", "grid_search", "grid_states", "speed_lower_bound"]
@@ -193,11 +194,13 @@ def grid_costs(
     states: ArrayLike,
     *,
     chunk: int = 4096,
+    huber_k: float | None = None,
 ) -> FloatArray:
     """Weighted residual cost of each candidate state, evaluated ``chunk`` candidates at a time.
 
-    Candidates whose trajectory passes through a sensor get ``inf`` (they
-    cannot explain finite Doppler).
+    The cost is :math:`\\sum_j \rho(r_j)` with :func:`huber_rho` (the sum of
+    squares without ``huber_k``).  Candidates whose trajectory passes through
+    a sensor get ``inf`` (they cannot explain finite Doppler).
     """
     if chunk < 1:
         raise ValueError(f"chunk must be >= 1, got {chunk}")
@@ -209,7 +212,7 @@ def grid_costs(
         sl = slice(start, start + chunk)
         g, _, mask = _cv(x[sl], geometry, times, jacobian=False, singular="mask")
         r = (z - g) * w
-        c = np.einsum("ij,ij->i", r, r)
+        c = np.einsum("ij,ij->i", r, r) if huber_k is None else huber_rho(r, huber_k).sum(axis=-1)
         if mask is not None:
             c[np.any(mask, axis=-1)] = np.inf
         out[sl] = c
@@ -244,6 +247,7 @@ def _product_costs(
     pos: FloatArray,
     vel: FloatArray,
     chunk: int,
+    huber_k: float | None = None,
 ) -> FloatArray:
     r"""Costs ``(n_pos, n_vel)`` of every (initial position, velocity) combination.
 
@@ -294,7 +298,10 @@ def _product_costs(
                     h += num
                 np.subtract(z[j], h, out=h)
                 h *= w[j]
-                h *= h
+                if huber_k is None:
+                    h *= h
+                else:
+                    h = huber_rho(h, huber_k)
                 acc += h
         acc[~np.isfinite(acc)] = np.inf
         out[start:start + step] = acc
@@ -312,6 +319,7 @@ def grid_search(
     k_best: int = 5,
     half_plane: HalfPlane | None = None,
     chunk: int = 16384,
+    huber_k: float | None = None,
 ) -> GridResult:
     """Score the whole grid over ``zone`` and return the ``k_best`` best local minima.
 
@@ -329,6 +337,8 @@ def grid_search(
         If given, candidates outside it are excluded.
     chunk
         Candidates per vectorised evaluation (bounds memory).
+    huber_k
+        Score with the Huber loss (:func:`huber_rho`) instead of squares.
 
     Raises
     ------
@@ -350,7 +360,7 @@ def grid_search(
     P = zone.frame.points_to_world(local.reshape(-1, 2))
     V = np.stack(np.meshgrid(speeds, headings, indexing="ij"), axis=-1).reshape(-1, 2)
     V = zone.frame.vectors_to_world(np.stack([V[:, 0] * np.sin(V[:, 1]), V[:, 0] * np.cos(V[:, 1])], axis=-1))
-    cost = _product_costs(geometry, times, z, 1.0 / sig, P, V, chunk).reshape(-1)
+    cost = _product_costs(geometry, times, z, 1.0 / sig, P, V, chunk, huber_k).reshape(-1)
     if half_plane is not None:
         pos_ok = half_plane.contains(P).reshape(us.size, vs.size)
         cost[~np.broadcast_to(pos_ok[:, :, None, None], shape).reshape(-1)] = np.inf

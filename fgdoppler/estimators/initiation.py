@@ -92,6 +92,9 @@ Method = Literal["grid", "ils", "lm"]
 #: The refinement methods, also the initiation-only "estimators" of Monte Carlo studies.
 METHODS: tuple[Method, ...] = get_args(Method)
 WindowModel = Literal["ncv", "cv"]
+#: Whitened residual beyond which a robust initiation counts a measurement as an outlier: the 0.9999
+#: quantile of |N(0, 1)|, where the trackers' default gate rejects.
+OUTLIER_CUT = float(np.sqrt(chi2.ppf(0.9999, 1)))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -136,6 +139,12 @@ class InitiationSettings:
         start) and ...
     same_solution_mps : float, default 0.5
         ... than this in velocity (m/s) count as one.
+    huber_k : float or None, default None
+        Huber loss (:mod:`fgdoppler.models.robust`) on every Doppler residual
+        of the grid cost and the LM window; the χ² test then runs on the
+        inliers — residuals within the 0.9999 quantile of a standard normal,
+        3.89 σ, the trackers' default gate — and counts the outliers.  ILS
+        stays the paper's Gaussian method.
     """
 
     method: Method = "lm"
@@ -151,6 +160,7 @@ class InitiationSettings:
     ils_force: bool = False
     same_solution_m: float = 50.0
     same_solution_mps: float = 0.5
+    huber_k: float | None = None
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -163,6 +173,8 @@ class InitiationSettings:
             raise ValueError(f"wall_sigma must be two positive numbers, got {self.wall_sigma}")
         if self.k_best < 1 or self.max_iterations < 1:
             raise ValueError("k_best and max_iterations must be >= 1")
+        if self.huber_k is not None and not (np.isfinite(self.huber_k) and self.huber_k > 0):
+            raise ValueError(f"huber_k must be > 0, got {self.huber_k}")
 
     def in_frame(self, frame: Frame) -> InitiationSettings:
         """The same settings with the half plane (the only positional option) in ``frame``'s coordinates."""
@@ -369,6 +381,20 @@ class _Window:
     def information(self, x0: FloatArray) -> FloatArray:
         return cv_information(x0, self.geometry, self.times, self.sigma)
 
+    def inlier_cost(self, model: TrackingModel, states: FloatArray) -> tuple[float, int]:
+        """χ² statistic over the inliers (|r| <= :data:`OUTLIER_CUT`) plus the motion terms, and the outlier count.
+
+        ``states`` holds one state per scan (a constant-velocity window passes
+        its propagated start, whose motion terms are zero).
+        """
+        from fgdoppler.estimators.linearized import MotionBlocks
+
+        scans = self.meas.scans()
+        r = (self.meas.doppler - model.observation.predict(states[scans.scan_of], self.meas.pair)) / self.meas.sigma
+        inlier = np.abs(r) <= OUTLIER_CUT
+        motion = MotionBlocks(model.motion).residuals(states, self.scan_times)
+        return float(r[inlier] @ r[inlier] + np.sum(motion**2)), int(np.sum(~inlier))
+
 
 @dataclass(frozen=True, kw_only=True)
 class _Fit:
@@ -385,6 +411,7 @@ class _Fit:
     alternatives: list[Candidate]
     notes: list[str]
     reasons: list[Reason]
+    n_outliers: int = 0
 
 
 def initiate(
@@ -435,25 +462,30 @@ def initiate(
     if len(measurements) < 5:
         raise ValueError(f"initiation needs at least 5 measurements (4 unknowns + 1 dof), got {len(measurements)}")
     w = _Window.build(measurements, geometry)
-    dof = len(measurements) - 4
-    threshold = float(chi2.ppf(settings.confidence, dof))
+    threshold = _threshold(w, settings, 0)
     grid = grid_result if grid_result is not None else window_grid(measurements, model, settings)
     candidates = tuple(Candidate(state=s, cost=float(c), passes_chi2=bool(c <= threshold))
                        for s, c in zip(grid.states, grid.costs, strict=True))
     if settings.method == "lm":
         fit = _refine_lm(w, model, settings, grid, threshold)
     else:
-        fit = _refine_closed_form(w, settings, grid, candidates, threshold)
-    return _assemble(w, settings, fit, candidates, threshold, dof, time.perf_counter() - t_begin)
+        fit = _refine_closed_form(w, model, settings, grid, candidates, threshold)
+    return _assemble(w, settings, fit, candidates, time.perf_counter() - t_begin)
 
 
 def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: tuple[Candidate, ...],
-              threshold: float, dof: int, wall: float) -> Initiation:
+              wall: float) -> Initiation:
     # Each alternative gets the covariance of the deterministic window fit at its state, so a
     # tracker can follow it as a hypothesis (see fgdoppler.estimators.ambiguity).
     alternatives = tuple(replace(a, covariance=_inverse(w.information(a.state))[0]) for a in fit.alternatives)
+    dof = len(w.meas) - 4 - fit.n_outliers
+    threshold = _threshold(w, settings, fit.n_outliers)
     passes = bool(fit.cost <= threshold)
     reasons = list(fit.reasons)
+    if fit.n_outliers:
+        reasons.append(Reason(code="outliers", status="ok", message=(
+            f"{fit.n_outliers} of {len(w.meas)} window measurements are outliers (beyond {OUTLIER_CUT:.2f} sigma): "
+            "down-weighted by the Huber loss and left out of the chi-square test")))
     if not passes:
         reasons.append(Reason(code="chi2", status="doubtful", message=(
             f"window cost {fit.cost:.2f} fails the {settings.confidence:.0%} chi-square test "
@@ -482,9 +514,10 @@ def _graph(w: _Window, model: TrackingModel, settings: InitiationSettings, windo
            ) -> tuple[gtsam.NonlinearFactorGraph, int]:
     """The window graph, its data factors first, then the weak prior and the zone wall (last)."""
     if window == "cv":
-        graph, n_data = cv_graph(w.geometry, w.times, w.z, w.sigma, prior=model.prior())
+        graph, n_data = cv_graph(w.geometry, w.times, w.z, w.sigma, prior=model.prior(), huber_k=settings.huber_k)
     else:
-        graph, n_data = chain_graph(w.meas, model.observation, model.motion, prior=model.prior())
+        graph, n_data = chain_graph(w.meas, model.observation, model.motion, prior=model.prior(),
+                                    huber_k=settings.huber_k)
     if settings.region_bound and model.zone is not None:
         graph.add(region_factor(X(0), model.zone, wall_sigma=settings.wall_sigma))
     return graph, n_data
@@ -503,6 +536,7 @@ class _Solution:
     x0: FloatArray
     values: gtsam.Values
     iterations: int
+    n_outliers: int = 0  # robust windows: measurements left out of the χ² statistic
 
 
 def _lm(graph: gtsam.NonlinearFactorGraph, n_data: int, values: gtsam.Values, max_iterations: int
@@ -570,6 +604,8 @@ def _refine_lm(w: _Window, model: TrackingModel, settings: InitiationSettings, g
                threshold: float) -> _Fit:
     """LM from every candidate; the best solution with its marginals, and the alternatives."""
     sols, graph, n_data, notes = _lm_solutions(w, model, settings, grid)
+    if settings.huber_k is not None:
+        sols = [_robust_solution(w, model, s, settings) for s in sols]
     if settings.half_plane is not None:
         kept = [s for s in sols if settings.half_plane.contains(s.x0)]
         if len(kept) < len(sols):
@@ -598,12 +634,27 @@ def _refine_lm(w: _Window, model: TrackingModel, settings: InitiationSettings, g
         P1 = F_end @ P0 @ F_end.T if cv_window else marg.covariances[1]
     alternatives: list[Candidate] = []
     for sol in sols[1:]:
-        if sol.cost <= threshold and not any(_same(sol.x0, s, settings) for s in
-                                             [best.x0, *(a.state for a in alternatives)]):
+        passes = sol.cost <= _threshold(w, settings, sol.n_outliers)
+        if passes and not any(_same(sol.x0, s, settings) for s in [best.x0, *(a.state for a in alternatives)]):
             alternatives.append(Candidate(state=sol.x0, cost=sol.cost, passes_chi2=True))
     return _Fit(x0=best.x0, x1=x1, P0=P0, P1=P1, cov_message=marg.message, cost=best.cost,
                 objective=best.objective, iterations=best.iterations, alternatives=alternatives, notes=notes,
-                reasons=reasons)
+                reasons=reasons, n_outliers=best.n_outliers)
+
+
+def _threshold(w: _Window, settings: InitiationSettings, n_outliers: int) -> float:
+    """The χ² threshold of the window's test with ``n_outliers`` measurements left out."""
+    return float(chi2.ppf(settings.confidence, max(len(w.meas) - 4 - n_outliers, 1)))
+
+
+def _robust_solution(w: _Window, model: TrackingModel, sol: _Solution, settings: InitiationSettings) -> _Solution:
+    """``sol`` with its χ² statistic over the inliers (robust windows)."""
+    if settings.window == "cv":
+        states = model.motion.propagate(sol.x0, w.scan_times)
+    else:
+        states = np.array([sol.values.atVector(X(k)) for k in range(w.scan_times.size)])
+    cost, n_out = w.inlier_cost(model, states)
+    return replace(sol, cost=cost, n_outliers=n_out)
 
 
 def _boundary_reasons(best: _Solution, graph: gtsam.NonlinearFactorGraph, n_data: int, model: TrackingModel,
@@ -636,7 +687,7 @@ def _boundary_reasons(best: _Solution, graph: gtsam.NonlinearFactorGraph, n_data
 
 
 # -- ILS and grid ----------------------------------------------------------------------------
-def _refine_closed_form(w: _Window, settings: InitiationSettings, grid: GridResult,
+def _refine_closed_form(w: _Window, model: TrackingModel, settings: InitiationSettings, grid: GridResult,
                         candidates: tuple[Candidate, ...], threshold: float) -> _Fit:
     """ILS or grid-only: the estimate, the inverse window information, and passing grid optima."""
     x_grid = grid.best.copy()
@@ -649,13 +700,15 @@ def _refine_closed_form(w: _Window, settings: InitiationSettings, grid: GridResu
         x0 = x_grid
     if info is None:
         info = w.information(x0)
-    cost = w.cost(x0)
+    cost, n_out = (w.cost(x0), 0) if settings.huber_k is None else w.inlier_cost(
+        model, model.motion.propagate(x0, w.scan_times))
     F_end = ConstantVelocity.F(float(w.scan_times[-1]))
     P0, message = _inverse(info)
     # other grid optima that pass the test are alternatives as well
     alternatives = [c for c in candidates[1:] if c.passes_chi2 and not _same(c.state, x0, settings)]
     return _Fit(x0=x0, x1=F_end @ x0, P0=P0, P1=None if P0 is None else F_end @ P0 @ F_end.T, cov_message=message,
-                cost=cost, objective=cost, iterations=iterations, alternatives=alternatives, notes=notes, reasons=[])
+                cost=cost, objective=cost, iterations=iterations, alternatives=alternatives, notes=notes, reasons=[],
+                n_outliers=n_out)
 
 
 def _ils(w: _Window, settings: InitiationSettings, x_grid: FloatArray, threshold: float
@@ -729,7 +782,7 @@ def window_grid(measurements: Measurements, model: TrackingModel | Geometry,
         raise ValueError("the grid search needs a zone")
     w = _Window.build(measurements, model.geometry)
     return grid_search(model.geometry, w.times, w.z, w.sigma, model.zone, settings.grid, k_best=settings.k_best,
-                       half_plane=settings.half_plane)
+                       half_plane=settings.half_plane, huber_k=settings.huber_k)
 
 
 def residual_landscape(

@@ -20,9 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from fgdoppler.estimators.gating import huber_weights
 from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.observation import MeasurementModel
+from fgdoppler.models.robust import huber_weights
 
 __all__ = ["MotionBlocks", "linearize_rows"]
 

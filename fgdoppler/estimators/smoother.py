@@ -47,6 +47,7 @@ from fgdoppler.factors import X
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.observation import DopplerModel, check_channels
+from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel
 
 __all__ = ["SmootherSolution", "initial_trajectory", "rts_smooth", "run_smoother", "solve_smoother"]
@@ -116,9 +117,7 @@ class _Problem:
 
     def cost(self, states: FloatArray) -> float:
         h = self.model.predict(states[self.scan_of], self.meas.pair)
-        r = np.abs((self.meas.doppler - h) / self.meas.sigma)
-        k = self.huber_k
-        rho = r * r if k is None else np.where(r <= k, r * r, 2 * k * r - k * k)
+        rho = huber_rho((self.meas.doppler - h) / self.meas.sigma, self.huber_k)
         c = float(np.sum(rho)) + float(np.sum(self.motion.residuals(states, self.times) ** 2))
         if self.prior is not None:
             e = self.prior[0] @ states[0] - self.prior[1]
@@ -319,7 +318,7 @@ def _reinitiate(measurements: Measurements, model: TrackingModel, settings: Smoo
     """Multi-start deterministic-CV ML over the whole recording, then the full smoother from it."""
     from fgdoppler.estimators.initiation import InitiationSettings, initiate, window_grid
 
-    init_settings = InitiationSettings(window="cv")
+    init_settings = InitiationSettings(window="cv", huber_k=settings.huber_k)
     # The grid only has to find the basins: search on every 4th scan (a quarter of the cost),
     # then let LM refine each candidate against every measurement.
     scans = measurements.scans()
