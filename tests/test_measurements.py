@@ -94,14 +94,14 @@ def test_endless_and_binary_inputs_are_refused_at_once(tmp_path: Path) -> None:
         fd.Measurements.from_csv("/dev/zero")
     binary = tmp_path / "latin1.csv"
     binary.write_bytes(b"time,pair,doppler,sigma\n0,0,1,1\n# caf\xe9\n")
-    with pytest.raises(MeasurementError, match="latin1.csv:3: not UTF-8"):
+    with pytest.raises(MeasurementError, match=r"latin1\.csv:3: not UTF-8"):
         fd.Measurements.from_csv(binary)
 
 
 def test_constructor_refuses_values_no_file_may_hold() -> None:
-    with pytest.raises(MeasurementError, match="sigma .* is outside"):
+    with pytest.raises(MeasurementError, match=r"sigma .* is outside"):
         fd.Measurements.from_arrays([0.0], [0], [1.0], 1e-9)
-    with pytest.raises(MeasurementError, match="doppler .* is outside"):
+    with pytest.raises(MeasurementError, match=r"doppler .* is outside"):
         fd.Measurements.from_arrays([0.0], [0], [7e8], 1.0)
 
 
