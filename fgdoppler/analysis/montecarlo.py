@@ -42,7 +42,8 @@ from fgdoppler._io import atomic_write_text
 from fgdoppler.analysis.metrics import errors, nees, nees_band, rmse
 from fgdoppler.estimators.initiation import METHODS, InitiationSettings, Method
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
-from fgdoppler.estimators.settings import FixedLagSettings, TrackerSettings
+from fgdoppler.estimators.settings import FixedLagSettings, SmootherSettings, TrackerSettings
+from fgdoppler.estimators.verdict import STATUSES
 from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.simulation import Scenario, simulate
@@ -96,6 +97,9 @@ class MonteCarloSpec:
         Motion model of every estimator (the tracking model's).
     weak_prior
         Whether the estimators use the zone's weak prior.
+    verify
+        Give the filters' verdicts their check against the offline smoother
+        (one smoother run per simulated run, shared by the filters).
     """
 
     scenarios: tuple[Scenario, ...]
@@ -107,6 +111,7 @@ class MonteCarloSpec:
     settings: Mapping[str, TrackerSettings] = field(default_factory=dict)
     motion: ConstantVelocity = field(default_factory=_motion)
     weak_prior: bool = True
+    verify: bool = True
 
     def __post_init__(self) -> None:
         if self.runs < 1:
@@ -173,7 +178,20 @@ def _run_one_unlimited(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.ran
 
     n_t = truth_t.size
     out: dict[str, Any] = {}
+    verdicts: dict[str, str] = {}
     timing: dict[str, float] = {}
+    references: dict[str, Any] = {}
+
+    def reference(estimator: str, settings: Any) -> Any:
+        """The smoother's result with the gate and loss of ``settings``, shared by the filters (verify only)."""
+        if not spec.verify or estimator == "smoother":
+            return None
+        key = f"{settings.gate_probability}/{settings.huber_k}"
+        if key not in references:
+            ref_settings = SmootherSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k)
+            references[key] = run_estimator("smoother", meas, model, init_of("lm"), ref_settings)
+        return references[key]
+
     for name in spec.estimators:
         t_begin = time.perf_counter()
         est = np.full((n_t, 4), np.nan)
@@ -184,12 +202,16 @@ def _run_one_unlimited(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.ran
             est = F @ ini.x_start
             if ini.P_start is not None:
                 cov = F @ ini.P_start @ np.swapaxes(F, -1, -2)
+            verdicts[name] = ini.status
         else:
             estimator, settings = spec.tracker(name)
-            res = run_estimator(estimator, meas, model, init_of("lm"), settings).primary
+            result = run_estimator(estimator, meas, model, init_of("lm"), settings, verify=spec.verify,
+                                   reference=reference(estimator, settings))
+            res = result.primary
             idx = np.searchsorted(truth_t, res.times)
             est[idx] = res.states
             cov[idx] = np.where(res.cov_ok[:, None, None], res.covariances, np.nan)
+            verdicts[name] = result.status
         pe, ve = errors(est, truth_x)
         with np.errstate(invalid="ignore"):
             ne = np.full(n_t, np.nan)
@@ -198,7 +220,7 @@ def _run_one_unlimited(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.ran
                 ne[ok] = nees(est[ok], cov[ok], truth_x[ok])
         out[name] = (pe, ve, ne)
         timing[name] = time.perf_counter() - t_begin
-    return {"s": s_idx, "r": r_idx, "data": out, "timing": timing,
+    return {"s": s_idx, "r": r_idx, "data": out, "verdicts": verdicts, "timing": timing,
             "ambiguous": bool(inits["lm"].ambiguous) if "lm" in inits else False}
 
 
@@ -208,7 +230,8 @@ class MonteCarloResult:
 
     ``pos_se[s][name]``, ``vel_se[s][name]`` and ``nees[s][name]`` are
     ``(runs, n_times)`` arrays for scenario index ``s``; ``times[s]`` the
-    scenario's truth times.
+    scenario's truth times; ``verdicts[s][name]`` the status of every run
+    (``"ok"``, ``"doubtful"``, ``"failed"``).
     """
 
     scenario_names: tuple[str, ...]
@@ -220,6 +243,7 @@ class MonteCarloResult:
     vel_se: tuple[dict[str, FloatArray], ...]
     nees: tuple[dict[str, FloatArray], ...]
     ambiguous: FloatArray
+    verdicts: tuple[dict[str, NDArray[np.str_]], ...]
     wall_time: float
     workers: int
     timing: dict[str, float]
@@ -257,9 +281,11 @@ class MonteCarloResult:
         for s, name in enumerate(self.scenario_names):
             for e in self.estimators:
                 r = self.pos_rmse(s, e)
+                v = self.verdicts[s][e]
                 rows.append({"scenario": name, "estimator": e,
                              "pos_rmse_mean": _nanmean(r), "pos_rmse_final": float(r[-1]) if np.isfinite(r[-1]) else None,
-                             "vel_rmse_mean": _nanmean(self.vel_rmse(s, e))})
+                             "vel_rmse_mean": _nanmean(self.vel_rmse(s, e)),
+                             "verdicts": {k: int(np.sum(v == k)) for k in STATUSES}})
         return {"runs": self.runs, "seed": self.seed, "workers": self.workers, "wall_time": self.wall_time,
                 "scenarios": list(self.scenario_names), "estimators": list(self.estimators),
                 "ambiguous_fraction": self.ambiguous.tolist(), "timing_per_run": self.timing, "rows": rows}
@@ -275,6 +301,7 @@ class MonteCarloResult:
                 arrays[f"pos_{s}_{e}"] = self.pos_se[s][e]
                 arrays[f"vel_{s}_{e}"] = self.vel_se[s][e]
                 arrays[f"nees_{s}_{e}"] = self.nees[s][e]
+                arrays[f"verdict_{s}_{e}"] = self.verdicts[s][e]
         arrays["ambiguous"] = self.ambiguous
         npz = path.with_suffix(".npz")
         tmp = npz.with_name(f".{npz.name}.tmp.npz")
@@ -301,6 +328,7 @@ class MonteCarloResult:
             pos_se=tuple({e: data[f"pos_{s}_{e}"] for e in ests} for s in range(n)),
             vel_se=tuple({e: data[f"vel_{s}_{e}"] for e in ests} for s in range(n)),
             nees=tuple({e: data[f"nees_{s}_{e}"] for e in ests} for s in range(n)),
+            verdicts=tuple({e: data[f"verdict_{s}_{e}"] for e in ests} for s in range(n)),
             ambiguous=data["ambiguous"], wall_time=float(meta["wall_time"]), workers=int(meta["workers"]),
             timing=dict(meta["timing"]),
         )
@@ -366,7 +394,7 @@ def run_monte_carlo(
         if own is not None:
             own.shutdown()
     times = []
-    pos, vel, nes = [], [], []
+    pos, vel, nes, ver = [], [], [], []
     amb = np.zeros(n_s)
     timing: dict[str, float] = {e: 0.0 for e in spec.estimators}
     for s in range(n_s):
@@ -375,6 +403,7 @@ def run_monte_carlo(
         pos.append({e: np.array([x["data"][e][0] for x in recs]) for e in spec.estimators})
         vel.append({e: np.array([x["data"][e][1] for x in recs]) for e in spec.estimators})
         nes.append({e: np.array([x["data"][e][2] for x in recs]) for e in spec.estimators})
+        ver.append({e: np.array([x["verdicts"][e] for x in recs], dtype=np.str_) for e in spec.estimators})
         amb[s] = np.mean([x["ambiguous"] for x in recs])
         for x in recs:
             for e, v in x["timing"].items():
@@ -382,6 +411,7 @@ def run_monte_carlo(
     return MonteCarloResult(
         scenario_names=tuple(sc.name for sc in spec.scenarios), estimators=spec.estimators, runs=spec.runs,
         seed=spec.seed, times=tuple(times), pos_se=tuple(pos), vel_se=tuple(vel), nees=tuple(nes), ambiguous=amb,
+        verdicts=tuple(ver),
         wall_time=time.perf_counter() - t_begin, workers=workers if executor is None or own is not None else -1,
         timing=timing,
     )

@@ -25,12 +25,13 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import chi2
 
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import EKFSettings, TrackerSettings
-from fgdoppler.estimators.verdict import Event
+from fgdoppler.estimators.verdict import Event, Reason
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.tracking import TrackingModel
@@ -71,10 +72,12 @@ def resolve(run: Runner, resolution: Resolution, measurements: Measurements, mod
     results = [run(measurements, model, h, settings) for h in hyps]
     note = f"ambiguous initiation: {len(hyps)} hypotheses run"
     if resolution == "cost":
-        best = int(np.argmin([np.inf if r.cost is None else r.cost for r in results]))
+        costs = np.array([np.inf if r.cost is None else r.cost for r in results])
+        best = int(np.argmin(costs))
         r = results[best]
         event = Event(time=float(r.primary.times[-1]), message=f"{note}; hypothesis {best} has the lowest cost")
         return replace(r, hypothesis=np.full(len(r.primary), best), events=(*r.events, event),
+                       reasons=(*r.reasons, *_competing(costs, results, best)),
                        wall_time=time.perf_counter() - t_begin)
     # an estimator that reports its own predictive likelihood (the EKF) is ranked by it
     ekf_settings = EKFSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k)
@@ -102,4 +105,37 @@ def resolve(run: Runner, resolution: Resolution, measurements: Measurements, mod
     hyp = leaders(primary.times) if primary.kind == "filtered" else np.full(len(primary), final)
     event = Event(time=float(t_ekf[-1]), message=f"{note}; hypothesis {final} leads at the end")
     return replace(results[final], estimates=tuple(stitched), hypothesis=np.asarray(hyp, dtype=np.int64),
-                   events=(*results[final].events, event), wall_time=time.perf_counter() - t_begin)
+                   events=(*results[final].events, event),
+                   reasons=(*results[final].reasons, *_competing(-2.0 * L[:, -1], results, final)),
+                   wall_time=time.perf_counter() - t_begin)
+
+
+#: Two hypotheses closer than this in cost (χ²₁ at 95 %) cannot be told apart by the data.
+COMPETING = float(chi2.ppf(0.95, 1))
+
+
+def _distinct(a: TrackResult, b: TrackResult) -> bool:
+    """Two tracks end at different places: farther apart than 50 m and three of ``a``'s standard deviations."""
+    d = b.primary.states[-1, :2] - a.primary.states[-1, :2]
+    P = a.primary.covariances[-1, :2, :2]
+    sd = float(np.sqrt(np.max(np.linalg.eigvalsh(P)))) if a.primary.cov_ok[-1] else 0.0
+    return bool(np.linalg.norm(d) > max(50.0, 3.0 * sd))
+
+
+def _competing(costs: NDArray[np.float64], results: list[TrackResult], best: int) -> tuple[Reason, ...]:
+    """A ``competing`` finding if a distinct solution explains the data about as well as the one reported."""
+    others = [h for h in range(len(results))
+              if h != best and np.isfinite(costs[h]) and _distinct(results[best], results[h])]
+    if not others:
+        return (Reason(code="competing", status="ok", message=(
+            f"{len(results)} hypotheses from an ambiguous initiation all converge to the track reported")),)
+    second = min(others, key=lambda h: costs[h])
+    margin = float(costs[second] - costs[best])
+    apart = float(np.linalg.norm(results[second].primary.states[-1, :2] - results[best].primary.states[-1, :2]))
+    if margin >= COMPETING:
+        return (Reason(code="competing", status="ok", message=(
+            f"{len(results)} hypotheses from an ambiguous initiation; the data prefer the one reported by "
+            f"{margin:.1f} in cost (> {COMPETING:.2f}) over one ending {apart / 1e3:.1f} km away")),)
+    return (Reason(code="competing", status="doubtful", message=(
+        f"a competing solution explains the data about as well (cost higher by only {margin:.2f} < {COMPETING:.2f}) "
+        f"and ends {apart / 1e3:.1f} km away: the data cannot tell them apart")),)

@@ -20,6 +20,7 @@ from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.fixed_lag import run_fixed_lag
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate
 from fgdoppler.estimators.isam2 import run_isam2
+from fgdoppler.estimators.judge import judge
 from fgdoppler.estimators.results import TrackResult
 from fgdoppler.estimators.settings import (
     EKFSettings,
@@ -106,6 +107,8 @@ def run_estimator(
     settings: TrackerSettings | None = None,
     *,
     resolve_ambiguity: bool = True,
+    verify: bool = True,
+    reference: TrackResult | None = None,
 ) -> TrackResult:
     """Run the estimator called ``name`` (a key of :data:`ESTIMATORS`).
 
@@ -116,7 +119,12 @@ def run_estimator(
 
     The estimator runs in the model's computation frame (the geometry's own,
     :attr:`~fgdoppler.models.tracking.TrackingModel.frame`) and the result is
-    reported in the user's coordinates.
+    reported in the user's coordinates, with its verdict
+    (:func:`~fgdoppler.estimators.judge.judge` and the initiation's findings).
+    With ``verify`` (default) a filter's final state is checked against the
+    offline smoother's, which costs a smoother run unless ``reference`` — the
+    result of ``run_estimator("smoother", ...)`` on the same data and
+    initiation — is given.
 
     Raises
     ------
@@ -132,15 +140,27 @@ def run_estimator(
         raise TypeError(f"{info.name} takes {info.settings.__name__}, got {type(settings).__name__}")
     frame = model.computation_frame
     if not model.canonical:  # solve in the geometry's own frame, answer in the user's
+        local_ref = None if reference is None else reference.transformed(frame, to_world=False)
         local = run_estimator(info.name, measurements, model.in_frame(frame), init.in_frame_of(frame),
-                              settings, resolve_ambiguity=resolve_ambiguity)
+                              settings, resolve_ambiguity=resolve_ambiguity, verify=verify, reference=local_ref)
         return local.transformed(frame, to_world=True)
     hyps = hypotheses(init) if (resolve_ambiguity and init.ambiguous) else [init]
+    result = _solve(info, measurements, model, hyps, settings)
+    if verify and reference is None and result.primary.kind != "smoothed":
+        ref_settings = SmootherSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k)
+        reference = run_estimator("smoother", measurements, model, init, ref_settings,
+                                  resolve_ambiguity=resolve_ambiguity)
+    if result.primary.kind == "smoothed" or not verify:
+        reference = None
+    half = init.half_plane
+    return _with_initiation_reasons(judge(result, measurements, model, settings, reference, half_plane=half), hyps[0])
+
+
+def _solve(info: EstimatorInfo, measurements: Measurements, model: TrackingModel, hyps: list[Initiation],
+           settings: TrackerSettings) -> TrackResult:
     if len(hyps) == 1:
-        result = info.run(measurements, model, hyps[0], settings)
-    else:
-        result = resolve(info.run, info.resolution, measurements, model, hyps, settings)
-    return _with_initiation_reasons(result, hyps[0])
+        return info.run(measurements, model, hyps[0], settings)
+    return resolve(info.run, info.resolution, measurements, model, hyps, settings)
 
 
 def _with_initiation_reasons(result: TrackResult, init: Initiation) -> TrackResult:

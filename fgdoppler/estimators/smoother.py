@@ -20,9 +20,9 @@ Cost per iteration is O(N) in the number of states, with a small constant:
   (:func:`~fgdoppler.estimators.marginals.chain_solve`).
 
 Verdict reasons: ``not-converged`` (LM hit its iteration cap or found no
-step that reduces the cost), ``covariance`` (indeterminate marginals),
-``chi2`` (the final cost fails a 99.9 % χ² check: it cannot explain the
-data), each ``"doubtful"``.
+step that reduces the cost), ``covariance`` (indeterminate marginals), each
+``"doubtful"``; the χ² test of the solution is the judge's
+(:mod:`fgdoppler.estimators.judge`).
 """
 
 from __future__ import annotations
@@ -361,10 +361,6 @@ def run_smoother(
             sol = again
             notes += list(again.notes)
     reasons = list(sol.reasons)
-    if sol.cost > threshold:
-        reasons.append(Reason(code="chi2", status="doubtful", message=(
-            f"final cost {sol.cost:.1f} fails the 99.9 % chi-square check ({threshold:.1f}): "
-            "the track cannot explain the data")))
     covs = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
     t_last = float(sol.times[-1])
     return TrackResult(

@@ -1,0 +1,253 @@
+r"""The verdict of a track: the findings every tracker's result is judged by.
+
+:func:`judge` adds to a :class:`~fgdoppler.estimators.results.TrackResult`
+the findings below (each a :class:`~fgdoppler.estimators.verdict.Reason`;
+the status is the worst of them, :mod:`fgdoppler.estimators.verdict`).
+
+``fit`` — the whole-track χ² test, the paper's Eq. 16 generalised to the track.
+    For the filters (EKF, iSAM2, fixed-lag) the statistic is the sum of the
+    normalised innovations of the accepted measurements after the window,
+    :math:`\sum_j \nu_j^2/S_j \sim \chi^2_n` for a consistent filter; for the
+    offline smoother it is the sum of squared whitened residuals at the
+    solution plus the motion terms, :math:`\sim \chi^2_{n-4}`.  Residuals beyond
+    the gate (or the outlier cut, :data:`~fgdoppler.estimators.initiation.OUTLIER_CUT`)
+    are left out and counted instead.  ``"doubtful"`` when the statistic
+    exceeds its :data:`LEVEL` quantile.
+``rejections`` — measurements rejected by the gate or counted as outliers.
+    ``"doubtful"`` above :data:`REJECT_DOUBTFUL` of them (:data:`REJECT_ROBUST`
+    with the Huber loss, which is there to absorb outliers; informational up
+    to that); ``"failed"`` above :data:`REJECT_FAILED`: the track explains
+    less than half the data.
+``lost`` — ``"failed"`` when the filter rejects more than :data:`LOST` of
+    the last quarter of the measurements: it has lost the target.
+``reference`` — for estimators that report filtered or lagged states, the
+    final state against the offline smoother's.  At the last time both
+    condition on every measurement, so an exact filter and the smoother
+    coincide, in mean and in covariance.  ``"doubtful"`` when the difference
+    of the means exceeds the χ²₄ :data:`LEVEL` quantile of the filter's own
+    covariance, when the smoother is more than :data:`COVARIANCE_RATIO` times
+    less certain in some direction (variance), or when the smoother's own
+    verdict is not ``ok``.  In poorly observed geometries a filter carried
+    along a curved valley of the likelihood ends several of its standard
+    deviations from where the whole recording puts the target, while its
+    innovations still look consistent.
+``data`` — ``"doubtful"`` with fewer than :data:`MIN_MEASUREMENTS`
+    measurements (the paper's initiation window: below it the Gaussian
+    covariance of this nonlinear problem understates the error), or when the
+    sensors of the pairs that reported all lie on one line: then the mirror
+    image of any track across that line fits the data exactly (a
+    :class:`~fgdoppler.estimators.grid.HalfPlane` on the initiation settles
+    it).
+``zone`` — ``"doubtful"`` when a smoothed track starts more than
+    :data:`ZONE_TOLERANCE` outside the zone: the initiation assumed a start
+    inside it, and the whole recording says otherwise (or cannot place the
+    start at all — a target moving along a bistatic ellipse and a slow target
+    next to a sensor both give near-zero Doppler).
+``units`` — ``"doubtful"`` when the track moves faster than
+    :data:`SPEED_FACTOR` times the zone's speed bound, or lies more than
+    :data:`REMOTE_FACTOR` sensor extents from every sensor: the signature of
+    times in milliseconds or positions in kilometres.
+
+The initiation's findings are added by
+:func:`~fgdoppler.estimators.registry.run_estimator` (``initiation-…``), and
+competing hypotheses by :mod:`fgdoppler.estimators.ambiguity`
+(``competing``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from scipy.stats import chi2
+
+from fgdoppler.estimators.initiation import OUTLIER_CUT
+from fgdoppler.estimators.linearized import MotionBlocks
+from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.settings import TrackerSettings
+from fgdoppler.estimators.verdict import Reason, message_of, status_of
+from fgdoppler.measurements import Measurements
+from fgdoppler.models.observation import DopplerModel
+from fgdoppler.models.tracking import TrackingModel
+
+__all__ = ["COVARIANCE_RATIO", "LEVEL", "LOST", "MIN_MEASUREMENTS", "REJECT_DOUBTFUL", "REJECT_FAILED",
+           "REJECT_ROBUST", "REMOTE_FACTOR", "SPEED_FACTOR", "ZONE_TOLERANCE", "judge"]
+
+#: Level of the verdict's χ² tests: a consistent track fails one in a thousand times.
+LEVEL = 0.999
+#: Rejected or outlying fraction above which a track is doubtful (Gaussian loss) ...
+REJECT_DOUBTFUL = 0.01
+#: ... and with the Huber loss.
+REJECT_ROBUST = 0.10
+#: Rejected fraction above which a track has failed.
+REJECT_FAILED = 0.5
+#: Rejected fraction of the last quarter of the measurements that means the target is lost.
+LOST = 0.8
+#: A track faster than this many times the zone's speed bound is implausible.
+SPEED_FACTOR = 2.0
+#: A track farther than this many sensor extents from every sensor is implausible.
+REMOTE_FACTOR = 100.0
+#: The smoother more uncertain than a filter by this factor (variance, in some direction) at the last time.
+COVARIANCE_RATIO = 9.0
+#: Fewer measurements than the paper's initiation window make a track doubtful.
+MIN_MEASUREMENTS = 20
+#: How far (m, m/s) a smoothed track may start outside the zone before it contradicts it.
+ZONE_TOLERANCE = 100.0
+
+
+def judge(result: TrackResult, measurements: Measurements, model: TrackingModel,
+          settings: TrackerSettings, reference: TrackResult | None = None, *, half_plane: bool = False
+          ) -> TrackResult:
+    """``result`` with the findings of the module docstring added to its reasons.
+
+    ``reference`` is the offline smoother's judged result for the same data
+    (for the ``reference`` finding; ``None`` skips it).  ``half_plane`` says
+    the initiation was restricted to one side of a line (no mirror ambiguity).
+    """
+    if result.nis.size or result.cost is None:
+        inlier, statistic, dof, n, lost = _predictive(result, settings)
+    else:
+        inlier, statistic, dof, n, lost = _residual(result, measurements, model)
+    reasons = list(result.reasons)
+    if n:
+        reasons += _fit_reasons(statistic, dof, n, n - inlier, lost, settings.huber_k is not None)
+    if reference is not None:
+        reasons += _reference_reasons(result.primary, reference)
+    reasons += _data_reasons(measurements, model, half_plane)
+    reasons += _zone_reasons(result, model)
+    reasons += _unit_reasons(result, model)
+    return replace(result, reasons=tuple(reasons))
+
+
+def _zone_reasons(result: TrackResult, model: TrackingModel) -> list[Reason]:
+    est = result.primary
+    if est.kind != "smoothed" or not len(est) or model.zone is None:
+        return []
+    excess, _ = model.zone.excess(est.states[0])
+    if np.max(np.abs(excess)) <= ZONE_TOLERANCE:
+        return []
+    return [Reason(code="zone", status="doubtful", message=(
+        "the track starts outside the zone the initiation assumed (excess along, across, speed: "
+        + ", ".join(f"{v:.0f}" for v in excess) + "): the data prefer another start, or cannot place it "
+        "(a target moving along a bistatic ellipse and a slow one next to a sensor look alike)"))]
+
+
+def _data_reasons(measurements: Measurements, model: TrackingModel, half_plane: bool) -> list[Reason]:
+    out: list[Reason] = []
+    if len(measurements) < MIN_MEASUREMENTS:
+        out.append(Reason(code="data", status="doubtful", message=(
+            f"only {len(measurements)} measurements (fewer than the paper's {MIN_MEASUREMENTS}-measurement "
+            "window): the covariance of this nonlinear problem may understate the error")))
+    if isinstance(model.observation, DopplerModel) and not half_plane:
+        g = model.observation.geometry
+        used = np.unique(measurements.pair)
+        pts = np.vstack([g.tx[used], g.rx[used]])
+        centred = pts - pts.mean(axis=0)
+        spread = np.linalg.svd(centred, compute_uv=False)
+        if spread.size < 2 or spread[1] <= 1e-9 * max(spread[0], 1.0):
+            out.append(Reason(code="data", status="doubtful", message=(
+                f"the sensors of the pairs that reported ({', '.join(str(int(k)) for k in used)}) lie on one "
+                "line: the mirror image of the track across it fits the data exactly (restrict the initiation "
+                "to one side with a half plane, --half-plane)")))
+    return out
+
+
+def _reference_reasons(est: Estimates, reference: TrackResult) -> list[Reason]:
+    out: list[Reason] = []
+    own = [r for r in reference.reasons if not r.code.startswith("initiation-")]  # the track has those already
+    worst = status_of(own)
+    if worst != "ok":
+        out.append(Reason(code="reference", status="doubtful", message=(
+            f"the offline smoother of the same data is {worst}: {message_of(own)}")))
+    ref = reference.primary
+    if not (len(est) and len(ref) and abs(est.times[-1] - ref.times[-1]) < 1e-9 and est.cov_ok[-1] and ref.cov_ok[-1]):
+        return out
+    d = est.states[-1] - ref.states[-1]
+    try:
+        m2 = float(d @ np.linalg.solve(est.covariances[-1], d))
+        ratio = float(np.max(np.real(np.linalg.eigvals(np.linalg.solve(est.covariances[-1], ref.covariances[-1])))))
+    except np.linalg.LinAlgError:
+        return out
+    if ratio > COVARIANCE_RATIO:
+        out.append(Reason(code="reference", status="doubtful", message=(
+            f"the offline smoother, with the same data, is {np.sqrt(ratio):.1f} times less certain in some "
+            f"direction at the last time: the {est.kind} covariance understates the error (poor observability)")))
+    limit = float(chi2.ppf(LEVEL, 4))
+    if m2 <= limit:
+        return out
+    return [*out, Reason(code="reference", status="doubtful", message=(
+        f"the final state lies {np.sqrt(m2):.1f} of its own sigma ({np.hypot(*d[:2]) / 1e3:.2f} km) from the "
+        f"offline smoother's, which uses the same data (chi-square {m2:.1f} > {limit:.1f}, 4 dof): the {est.kind} "
+        "estimates understate their error here (poor observability)"))]
+
+
+def _predictive(result: TrackResult, settings: TrackerSettings) -> tuple[int, float, int, int, int | None]:
+    """(inliers, χ² statistic, dof, measurements, rejections at the end) from the filter's NIS log."""
+    nis, accepted = result.nis[:, 2], result.nis[:, 3] > 0
+    cut = OUTLIER_CUT**2 if settings.huber_k is not None else np.inf
+    inlier = accepted & (nis <= cut)
+    tail = max(len(nis) // 4, 8)
+    lost = int(np.sum(~accepted[-tail:])) if len(nis) >= 2 * tail else None
+    return int(inlier.sum()), float(nis[inlier].sum()), int(inlier.sum()), len(nis), lost
+
+
+def _residual(result: TrackResult, measurements: Measurements, model: TrackingModel
+              ) -> tuple[int, float, int, int, int | None]:
+    """(inliers, χ² statistic, dof, measurements, None) from the smoothed track's residuals."""
+    est = result.primary
+    scans = measurements.scans()
+    if len(est) != len(scans):  # not a state per scan: nothing to test
+        return 0, 0.0, 0, 0, None
+    h = model.observation.predict(est.states[scans.scan_of], measurements.pair)
+    r = (measurements.doppler - h) / measurements.sigma
+    inlier = np.abs(r) <= OUTLIER_CUT
+    motion = MotionBlocks(model.motion).residuals(est.states, est.times)
+    statistic = float(r[inlier] @ r[inlier] + np.sum(motion**2))
+    return int(inlier.sum()), statistic, max(int(inlier.sum()) - 4, 1), len(r), None
+
+
+def _fit_reasons(statistic: float, dof: int, n: int, rejected: int, lost: int | None, robust: bool) -> list[Reason]:
+    out = []
+    fraction = rejected / n
+    if fraction > REJECT_FAILED:
+        out.append(Reason(code="rejections", status="failed", message=(
+            f"{rejected} of {n} measurements are rejected or outliers: the track explains less than half the data")))
+    elif rejected:
+        limit = REJECT_ROBUST if robust else REJECT_DOUBTFUL
+        doubtful = fraction > limit and rejected >= 2
+        hint = "" if robust or not doubtful else "; if the data have outliers, try the Huber loss (--huber)"
+        out.append(Reason(code="rejections", status="doubtful" if doubtful else "ok", message=(
+            f"{rejected} of {n} measurements ({fraction:.1%}) are rejected or outliers{hint}")))
+    if lost is not None and lost > LOST * max(n // 4, 8):
+        out.append(Reason(code="lost", status="failed", message=(
+            f"the filter rejects {lost} of the last {max(n // 4, 8)} measurements: it has lost the target")))
+    if dof > 0:
+        limit_stat = float(chi2.ppf(LEVEL, dof))
+        if statistic > limit_stat:
+            out.append(Reason(code="fit", status="doubtful", message=(
+                f"the track does not fit the data: chi-square {statistic:.1f} > {limit_stat:.1f} "
+                f"({LEVEL:.1%}, {dof} dof; {statistic / dof:.2f} per dof): its covariance is too small "
+                "for its errors, or the model (motion, sigma) does not hold")))
+    return out
+
+
+def _unit_reasons(result: TrackResult, model: TrackingModel) -> list[Reason]:
+    out: list[Reason] = []
+    states = result.primary.states
+    if not len(states):
+        return out
+    if model.zone is not None:
+        speed = float(np.max(np.linalg.norm(states[:, 2:], axis=1)))
+        if speed > SPEED_FACTOR * model.zone.speed_max:
+            out.append(Reason(code="units", status="doubtful", message=(
+                f"the track reaches {speed:.0f} m/s, more than {SPEED_FACTOR:g} times the zone's bound "
+                f"({model.zone.speed_max:g} m/s): check the units of the times (seconds?) and the positions")))
+    if isinstance(model.observation, DopplerModel):
+        sensors = model.observation.geometry.sensors()
+        extent = float(np.max(np.linalg.norm(sensors[:, None] - sensors[None], axis=-1)))
+        d = float(np.max(np.min(np.linalg.norm(states[:, None, :2] - sensors[None], axis=-1), axis=1)))
+        if d > REMOTE_FACTOR * extent:
+            out.append(Reason(code="units", status="doubtful", message=(
+                f"the track lies {d / 1e3:.0f} km from sensors that span {extent:.0f} m: are the sensor positions "
+                "in metres?")))
+    return out
