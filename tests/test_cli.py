@@ -258,3 +258,23 @@ def test_montecarlo_and_observability_on_a_geometry_of_ones_own(tmp_path: Path,
     assert main(["observability", "--geometry", str(geometry), "--report", "20000", "--offset", "10000",
                  "--velocity", "-60", "70", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["status"] == "ok"
+
+
+def test_track_reports_the_verdict_on_stderr_and_exits_3_when_failed(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    sim = tmp_path / "sim"
+    main(["simulate", "--start-x", "45000", "--out", str(sim)])
+    capsys.readouterr()
+    assert main(["track", str(sim / "measurements.csv"), "--estimator", "smoother", "--json"]) == 0
+    captured = capsys.readouterr()
+    assert captured.err.startswith("fgdoppler track: status ok") and json.loads(captured.out)["status"] == "ok"
+    # the same recording with every Doppler 50 sigma off: the track cannot explain the data
+    m = fd.Measurements.from_csv(sim / "measurements.csv")
+    noisy = fd.Measurements(time=m.time, pair=m.pair, doppler=m.doppler + 50.0 * np.sin(7.0 * m.time), sigma=m.sigma)
+    noisy.to_csv(sim / "noisy.csv")
+    out = tmp_path / "t.csv"
+    assert main(["track", str(sim / "noisy.csv"), "--estimator", "ekf", "--out", str(out)]) == 3
+    err = capsys.readouterr().err
+    assert "status failed" in err and "exit status 3" in err
+    assert out.exists()  # the outputs are written so that they can be looked at
+    assert main(["track", str(sim / "noisy.csv"), "--estimator", "ekf", "--allow-failed"]) == 0
