@@ -188,6 +188,23 @@ class Measurements:
             keep[np.flatnonzero(self.pair == k)[:n]] = True
         return self.subset(keep)
 
+    def spread(self, per_pair: int) -> Measurements:
+        """At most ``per_pair`` measurements of every pair, evenly spread over its record.
+
+        Each pair keeps its first and last measurement and, between them,
+        the ones nearest to evenly spaced positions in its own sequence, so a
+        staggered schedule still gives every pair its share (taking every
+        k-th scan would not).
+        """
+        if per_pair < 2:
+            raise ValueError(f"per_pair must be >= 2, got {per_pair}")
+        keep = np.zeros(len(self), dtype=bool)
+        for k in np.unique(self.pair):
+            rows = np.flatnonzero(self.pair == k)
+            pick = np.unique(np.round(np.linspace(0, rows.size - 1, min(per_pair, rows.size))).astype(np.intp))
+            keep[rows[pick]] = True
+        return self.subset(keep)
+
     def scans(self) -> Scans:
         """The measurements grouped by time (:class:`Scans`; computed once)."""
         return self._scans

@@ -154,3 +154,21 @@ def test_scans_and_windows() -> None:
     np.testing.assert_array_equal(first.time, [0, 0])
     np.testing.assert_array_equal(m.between(0.2, 0.5).time, [0.25, 0.5, 0.5])
     np.testing.assert_array_equal(m.pair[m.stacked_order()], [0, 0, 1, 1, 1])
+
+
+def test_spread_keeps_every_pair_evenly_with_ends() -> None:
+    # A staggered schedule (pairs alternate): taking every 4th scan would keep pair 0 only.
+    t = np.arange(400) * 0.25
+    m = fd.Measurements.from_arrays(t, np.arange(400) % 2, np.zeros(400), 1.0)
+    s = m.spread(10)
+    for k in (0, 1):
+        ts = s.time[s.pair == k]
+        all_k = m.time[m.pair == k]
+        assert ts.size == 10
+        assert ts[0] == all_k[0] and ts[-1] == all_k[-1]
+        # evenly spread: gaps differ by at most one step of that pair's own sequence
+        gaps = np.diff(ts)
+        assert gaps.max() - gaps.min() <= 0.5 + 1e-12
+    assert len(m.spread(1000)) == len(m)  # fewer than asked: all of them
+    with pytest.raises(ValueError, match="per_pair"):
+        m.spread(1)

@@ -243,6 +243,7 @@ def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, tru
     from fgdoppler import plotting
     from fgdoppler.estimators.registry import run_estimator
     from fgdoppler.estimators.settings import FixedLagSettings
+    from fgdoppler.progress import TqdmProgress
 
     name = args.estimator
     if name in ALIASES:
@@ -254,7 +255,8 @@ def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, tru
                     else ESTIMATORS[name].settings(huber_k=k))
     except ValueError as exc:
         raise CLIError(f"--lag: {exc}") from None
-    result = run_estimator(name, meas, model, init, settings)
+    with TqdmProgress() as bar:  # drawn on stderr only when it is a terminal
+        result = run_estimator(name, meas, model, init, settings, progress=bar)
     e = result.primary
     figure = None
     if args.plot:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,11 +35,13 @@ from fgdoppler.estimators.verdict import Event, Reason
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.tracking import TrackingModel
+from fgdoppler.progress import Progress, prefixed
 
 __all__ = ["Resolution", "hypotheses", "resolve"]
 
 Resolution = Literal["likelihood", "cost"]
-Runner = Callable[[Measurements, TrackingModel, Initiation, Any], TrackResult]
+Runner = Callable[..., TrackResult]
+"""``run(measurements, model, init, settings, *, progress=None) -> TrackResult``."""
 
 
 def hypotheses(init: Initiation) -> list[Initiation]:
@@ -66,10 +68,15 @@ def hypotheses(init: Initiation) -> list[Initiation]:
 
 
 def resolve(run: Runner, resolution: Resolution, measurements: Measurements, model: TrackingModel,
-            hyps: list[Initiation], settings: TrackerSettings) -> TrackResult:
-    """Run ``run`` from every hypothesis and report one track (module docstring)."""
+            hyps: list[Initiation], settings: TrackerSettings, progress: Progress | None = None) -> TrackResult:
+    """Run ``run`` from every hypothesis and report one track (module docstring).
+
+    ``progress`` sees each run's tasks prefixed with ``"hypothesis i/n"``.
+    """
     t_begin = time.perf_counter()
-    results = [run(measurements, model, h, settings) for h in hyps]
+    n = len(hyps)
+    results = [run(measurements, model, h, settings, progress=prefixed(progress, f"hypothesis {i + 1}/{n}"))
+               for i, h in enumerate(hyps)]
     note = f"ambiguous initiation: {len(hyps)} hypotheses run"
     if resolution == "cost":
         costs = np.array([np.inf if r.cost is None else r.cost for r in results])
@@ -81,8 +88,9 @@ def resolve(run: Runner, resolution: Resolution, measurements: Measurements, mod
                        wall_time=time.perf_counter() - t_begin)
     # an estimator that reports its own predictive likelihood (the EKF) is ranked by it
     ekf_settings = EKFSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k)
-    ekfs = results if results[0].log_likelihood.size else [run_ekf(measurements, model, h, ekf_settings)
-                                                           for h in hyps]
+    ekfs = results if results[0].log_likelihood.size else [
+        run_ekf(measurements, model, h, ekf_settings, progress=prefixed(progress, f"ranking {i + 1}/{n}"))
+        for i, h in enumerate(hyps)]
     L = np.array([e.log_likelihood for e in ekfs])
     t_ekf = ekfs[0].primary.times
 

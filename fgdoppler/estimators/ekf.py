@@ -42,6 +42,7 @@ from fgdoppler.estimators.window import split_window
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import check_channels
 from fgdoppler.models.tracking import TrackingModel
+from fgdoppler.progress import Progress, advance, start_task
 
 __all__ = ["ExtendedKalmanFilter", "run_ekf"]
 
@@ -195,13 +196,15 @@ def run_ekf(
     settings: EKFSettings | None = None,
     *,
     fallback_covariance: ArrayLike | None = None,
+    progress: Progress | None = None,
 ) -> TrackResult:
     """Run the EKF over every measurement after the initiation window.
 
     Starts from ``init.x_end`` / ``init.P_end`` at ``init.t_end``.  If the
     initiation covariance is indeterminate, ``fallback_covariance`` (default:
     the zone's weak-prior covariance) is used and the verdict says so.
-    Reports the filtered estimate after each scan, including the start.
+    Reports the filtered estimate after each scan, including the start;
+    ``progress`` (:mod:`fgdoppler.progress`) is advanced scan by scan.
     """
     settings = settings or EKFSettings()
     check_channels(model.observation, measurements)
@@ -219,6 +222,7 @@ def run_ekf(
             "the initiation covariance is indeterminate: the EKF started from a broad covariance")))
     ekf = ExtendedKalmanFilter(model, init.x_end, P0, init.t_end, settings)
     _, stream = split_window(measurements, init.t_end)
+    start_task(progress, "ekf", len(stream.scans()))
     times, states, covs, loglik = [init.t_end], [ekf.x.copy()], [ekf.P.copy()], [0.0]
     t_prev = None
     for t, p, z, s in zip(stream.time, stream.pair, stream.doppler, stream.sigma, strict=True):
@@ -227,6 +231,7 @@ def run_ekf(
             states.append(ekf.x.copy())
             covs.append(ekf.P.copy())
             loglik.append(ekf.log_likelihood)
+            advance(progress)
         ekf.update(float(t), int(p), float(z), float(s))
         t_prev = t
     if t_prev is not None:
@@ -234,6 +239,7 @@ def run_ekf(
         states.append(ekf.x.copy())
         covs.append(ekf.P.copy())
         loglik.append(ekf.log_likelihood)
+        advance(progress)
     return TrackResult(
         estimator="ekf",
         settings=settings,

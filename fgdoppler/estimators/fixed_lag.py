@@ -42,6 +42,7 @@ from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import check_channels
 from fgdoppler.models.tracking import TrackingModel
+from fgdoppler.progress import Progress
 
 __all__ = ["FixedLagTracker", "run_fixed_lag"]
 
@@ -278,6 +279,8 @@ def run_fixed_lag(
     model: TrackingModel,
     init: Initiation,
     settings: FixedLagSettings | None = None,
+    *,
+    progress: Progress | None = None,
 ) -> TrackResult:
     """Fixed-lag smoothing of a recording: the initiation window in one update, then one update per scan.
 
@@ -292,7 +295,8 @@ def run_fixed_lag(
     check_channels(model.observation, measurements)
     t_begin = time.perf_counter()
     tr = FixedLagTracker(model, settings, model.prior())
-    times, states, covs = feed_from_window_start(tr, model, measurements, init, tr.events, huber_k=settings.huber_k)
+    times, states, covs = feed_from_window_start(tr, model, measurements, init, tr.events, huber_k=settings.huber_k,
+                                                 progress=progress, name="fixed-lag")
     tr.finish()
     idx = sorted(tr.lagged)
     lagged = Estimates.from_lists("lagged", [tr.times[j] for j in idx], [tr.lagged[j][0] for j in idx],

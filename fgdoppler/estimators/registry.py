@@ -4,7 +4,7 @@
 settings class, how an ambiguous initiation is resolved, a one-line
 summary).  The command line's choices, Monte Carlo studies and the paper
 reproduction all read it.  Every runner has the signature
-``run(measurements, model, init, settings) -> TrackResult``.
+``run(measurements, model, init, settings, *, progress=None) -> TrackResult``.
 """
 
 from __future__ import annotations
@@ -13,7 +13,6 @@ import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from types import MappingProxyType
-from typing import Any
 
 from fgdoppler.estimators.ambiguity import Resolution, hypotheses, resolve
 from fgdoppler.estimators.ekf import run_ekf
@@ -34,6 +33,7 @@ from fgdoppler.estimators.verdict import Reason
 from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
+from fgdoppler.progress import Progress, prefixed
 
 __all__ = ["ALIASES", "ESTIMATORS", "EstimatorInfo", "estimator_info", "run_estimator", "track"]
 
@@ -47,7 +47,8 @@ class EstimatorInfo:
     name
         Registry name.
     run
-        ``run(measurements, model, init, settings) -> TrackResult``.
+        ``run(measurements, model, init, settings, *, progress=None) -> TrackResult``
+        (``progress``: :mod:`fgdoppler.progress`).
     settings
         Its settings class (``settings()`` gives the defaults).
     resolution
@@ -60,7 +61,7 @@ class EstimatorInfo:
     """
 
     name: str
-    run: Callable[[Measurements, TrackingModel, Initiation, Any], TrackResult]
+    run: Callable[..., TrackResult]
     settings: type[TrackerSettings]
     resolution: Resolution
     online: bool
@@ -109,6 +110,7 @@ def run_estimator(
     resolve_ambiguity: bool = True,
     verify: bool = True,
     reference: TrackResult | None = None,
+    progress: Progress | None = None,
 ) -> TrackResult:
     """Run the estimator called ``name`` (a key of :data:`ESTIMATORS`).
 
@@ -124,7 +126,8 @@ def run_estimator(
     With ``verify`` (default) a filter's final state is checked against the
     offline smoother's, which costs a smoother run unless ``reference`` — the
     result of ``run_estimator("smoother", ...)`` on the same data and
-    initiation — is given.
+    initiation — is given.  ``progress`` (:mod:`fgdoppler.progress`) is told
+    of every task: each hypothesis's run, the reference smoother's.
 
     Raises
     ------
@@ -142,14 +145,15 @@ def run_estimator(
     if not model.canonical:  # solve in the geometry's own frame, answer in the user's
         local_ref = None if reference is None else reference.transformed(frame, to_world=False)
         local = run_estimator(info.name, measurements, model.in_frame(frame), init.in_frame_of(frame),
-                              settings, resolve_ambiguity=resolve_ambiguity, verify=verify, reference=local_ref)
+                              settings, resolve_ambiguity=resolve_ambiguity, verify=verify, reference=local_ref,
+                              progress=progress)
         return local.transformed(frame, to_world=True)
     hyps = hypotheses(init) if (resolve_ambiguity and init.ambiguous) else [init]
-    result = _solve(info, measurements, model, hyps, settings)
+    result = _solve(info, measurements, model, hyps, settings, progress)
     if verify and reference is None and result.primary.kind != "smoothed":
         ref_settings = SmootherSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k)
         reference = run_estimator("smoother", measurements, model, init, ref_settings,
-                                  resolve_ambiguity=resolve_ambiguity)
+                                  resolve_ambiguity=resolve_ambiguity, progress=prefixed(progress, "reference"))
     if result.primary.kind == "smoothed" or not verify:
         reference = None
     half = init.half_plane
@@ -157,10 +161,10 @@ def run_estimator(
 
 
 def _solve(info: EstimatorInfo, measurements: Measurements, model: TrackingModel, hyps: list[Initiation],
-           settings: TrackerSettings) -> TrackResult:
+           settings: TrackerSettings, progress: Progress | None = None) -> TrackResult:
     if len(hyps) == 1:
-        return info.run(measurements, model, hyps[0], settings)
-    return resolve(info.run, info.resolution, measurements, model, hyps, settings)
+        return info.run(measurements, model, hyps[0], settings, progress=progress)
+    return resolve(info.run, info.resolution, measurements, model, hyps, settings, progress)
 
 
 def _with_initiation_reasons(result: TrackResult, init: Initiation) -> TrackResult:

@@ -100,14 +100,15 @@ class ISAM2Settings(TrackerSettings):
         The same for velocity (m/s).
     relinearize_window : int, default 10
         How many of the most recent scans are checked for relinearisation at
-        every update (older states barely move); all are relinearised to
+        every update (older states barely move); the whole graph is solved to
         convergence at the end.
     wildfire_threshold : float, default 0.01
         Back-substitution threshold (m and m/s): changes smaller than this are
         not propagated to older states until the end (GTSAM's default 0.001
         made the per-scan cost grow with the track length).
     final_passes : int, default 100
-        Cap on the relinearisation passes of the final smoothing.
+        Cap on the Levenberg–Marquardt iterations of the final smoothing
+        (:meth:`~fgdoppler.estimators.isam2.ISAM2Tracker.finish`).
     smoothed_covariances : bool, default True
         Compute the marginal covariance of every smoothed state at the end.
     """

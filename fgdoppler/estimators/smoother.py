@@ -44,15 +44,19 @@ from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.estimators.verdict import Event, Judged, Reason
 from fgdoppler.factors import X
-from fgdoppler.measurements import Measurements
+from fgdoppler.measurements import Measurements, Scans
 from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.observation import DopplerModel, check_channels
 from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel
+from fgdoppler.progress import Progress, advance, prefixed, start_task
 
 __all__ = ["SmootherSolution", "initial_trajectory", "rts_smooth", "run_smoother", "solve_smoother"]
 
 FloatArray = NDArray[np.float64]
+
+REINITIATE_PER_PAIR = 64
+"""Measurements per pair the re-initiation's grid scores (evenly spread over the recording)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -88,13 +92,25 @@ class SmootherSolution(Judged):
 
 
 
+def _scans_at(meas: Measurements, times: FloatArray) -> Scans:
+    """Scans at the given times, some possibly without measurements (a state with motion factors only)."""
+    t = np.asarray(times, dtype=float).reshape(-1)
+    if t.size == 0 or np.any(np.diff(t) <= 0):
+        raise ValueError("times must be strictly increasing and not empty")
+    bounds = np.searchsorted(meas.time, t, side="left")
+    covered = np.searchsorted(meas.time, t, side="right") - bounds
+    if int(covered.sum()) != len(meas):
+        raise ValueError("every measurement time must be one of the given times")
+    return Scans(times=t, bounds=np.append(bounds, len(meas)).astype(np.intp))
+
+
 class _Problem:
     def __init__(self, model: TrackingModel, meas: Measurements, huber_k: float | None,
-                 prior: tuple[FloatArray, FloatArray] | None) -> None:
+                 prior: tuple[FloatArray, FloatArray] | None, times: FloatArray | None = None) -> None:
         self.model = model.observation
         self.meas = meas
         self.huber_k = huber_k
-        self.scans = meas.scans()
+        self.scans = meas.scans() if times is None else _scans_at(meas, times)
         self.times = self.scans.times
         self.scan_of = self.scans.scan_of
         self.motion = MotionBlocks(model.motion)
@@ -189,6 +205,8 @@ def solve_smoother(
     settings: SmootherSettings | None = None,
     *,
     prior: tuple[ArrayLike, ArrayLike] | None = None,
+    times: ArrayLike | None = None,
+    progress: Progress | None = None,
 ) -> SmootherSolution:
     """Levenberg–Marquardt on the full trajectory graph.
 
@@ -204,15 +222,31 @@ def solve_smoother(
         Huber threshold, iteration cap, whether to compute covariances.
     prior
         Optional ``(mean, covariance)`` on the first state.
+    times
+        The states' times, strictly increasing, a superset of the
+        measurement times (default: the distinct measurement times).  A
+        time without measurements keeps a state tied by motion alone, as in
+        a tracker whose gate rejected a whole scan.
+    progress
+        Told of a task "Levenberg-Marquardt" advanced once per iteration
+        (:mod:`fgdoppler.progress`).
+
+    Raises
+    ------
+    ValueError
+        If ``initial`` does not have one state per time, or ``times`` does
+        not cover every measurement time.
     """
     settings = settings or SmootherSettings()
     check_channels(model.observation, measurements)
     pr = None if prior is None else (np.asarray(prior[0], float), np.asarray(prior[1], float))
-    prob = _Problem(model, measurements, settings.huber_k, pr)
+    ts = None if times is None else np.asarray(times, dtype=float)
+    prob = _Problem(model, measurements, settings.huber_k, pr, ts)
     x = np.array(initial, dtype=float).reshape(-1, 4)
     if x.shape[0] != prob.n:
         raise ValueError(f"{x.shape[0]} initial states for {prob.n} measurement times")
-    x, cost, it, stop, notes = _levenberg_marquardt(prob, x, settings.max_iterations)
+    start_task(progress, "Levenberg-Marquardt", None)
+    x, cost, it, stop, notes = _levenberg_marquardt(prob, x, settings.max_iterations, progress)
     reasons = [] if stop is None else [Reason(code="not-converged", status="doubtful", message=stop)]
     covs = None
     if settings.covariances:
@@ -224,7 +258,7 @@ def solve_smoother(
                             reasons=tuple(reasons), notes=tuple(notes))
 
 
-def _levenberg_marquardt(prob: _Problem, x: FloatArray, max_iterations: int
+def _levenberg_marquardt(prob: _Problem, x: FloatArray, max_iterations: int, progress: Progress | None = None
                          ) -> tuple[FloatArray, float, int, str | None, list[str]]:
     """LM with Nielsen's damping update; returns (states, cost, iterations, why it did not converge, notes)."""
     notes: list[str] = []
@@ -233,6 +267,7 @@ def _levenberg_marquardt(prob: _Problem, x: FloatArray, max_iterations: int
     lam, nu = 1e-6, 2.0
     it = 0
     for it in range(1, max_iterations + 1):
+        advance(progress)
         try:
             gfg = prob.system(x, lam)
             dx, _ = prob.solve(gfg)
@@ -296,7 +331,7 @@ def rts_smooth(times: FloatArray, states: FloatArray, covs: FloatArray, motion: 
 
 
 def initial_trajectory(measurements: Measurements, model: TrackingModel, init: Initiation,
-                       settings: SmootherSettings) -> FloatArray:
+                       settings: SmootherSettings, progress: Progress | None = None) -> FloatArray:
     """Starting trajectory: EKF after the window, RTS-smoothed, and its CV extrapolation back over the window.
 
     Raw EKF states violate a small process noise badly between scans (the
@@ -304,7 +339,7 @@ def initial_trajectory(measurements: Measurements, model: TrackingModel, init: I
     consistent with the motion model so LM begins near the optimum.
     """
     times = measurements.scans().times
-    ekf = run_ekf(measurements, model, init, settings.start()).primary
+    ekf = run_ekf(measurements, model, init, settings.start(), progress=prefixed(progress, "start")).primary
     smoothed = rts_smooth(ekf.times, ekf.states, ekf.covariances, model.motion) if np.all(ekf.cov_ok) else ekf.states
     out = np.empty((times.size, 4))
     in_window = times <= init.t_end
@@ -314,19 +349,23 @@ def initial_trajectory(measurements: Measurements, model: TrackingModel, init: I
     return out
 
 
-def _reinitiate(measurements: Measurements, model: TrackingModel, settings: SmootherSettings) -> SmootherSolution | None:
+def _reinitiate(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
+                progress: Progress | None = None) -> SmootherSolution | None:
     """Multi-start deterministic-CV ML over the whole recording, then the full smoother from it."""
     from fgdoppler.estimators.initiation import InitiationSettings, initiate, window_grid
 
     init_settings = InitiationSettings(window="cv", huber_k=settings.huber_k)
-    # The grid only has to find the basins: search on every 4th scan (a quarter of the cost),
-    # then let LM refine each candidate against every measurement.
+    # The grid only has to find the basins, and its cost grows with the measurements it
+    # scores: search a bounded, evenly spread subset, then let LM refine each candidate
+    # against every measurement.
     scans = measurements.scans()
-    grid = window_grid(measurements.subset(scans.scan_of % 4 == 0), model, init_settings)
+    start_task(progress, "re-initiation", None)
+    grid = window_grid(measurements.spread(REINITIATE_PER_PAIR), model, init_settings)
     full = initiate(measurements, model, init_settings, grid_result=grid)
     x0 = model.motion.propagate(full.x_start, scans.times - full.t_start)
     try:
-        return solve_smoother(measurements, model, x0, settings, prior=model.prior())
+        return solve_smoother(measurements, model, x0, settings, prior=model.prior(),
+                              progress=prefixed(progress, "re-initiated"))
     except ValueError:
         return None
 
@@ -336,6 +375,8 @@ def run_smoother(
     model: TrackingModel,
     init: Initiation,
     settings: SmootherSettings | None = None,
+    *,
+    progress: Progress | None = None,
 ) -> TrackResult:
     """Offline reconstruction of a whole recording (initiation → EKF start → LM) with marginals.
 
@@ -347,8 +388,9 @@ def run_smoother(
     """
     settings = settings or SmootherSettings()
     t_begin = time.perf_counter()
-    x_init = initial_trajectory(measurements, model, init, settings)
-    sol = solve_smoother(measurements, model, x_init, settings, prior=model.prior())
+    progress = prefixed(progress, "smoother")
+    x_init = initial_trajectory(measurements, model, init, settings, progress)
+    sol = solve_smoother(measurements, model, x_init, settings, prior=model.prior(), progress=progress)
     notes = list(sol.notes)
     threshold = float(chi2.ppf(0.999, max(len(measurements) - 4, 1)))
     if sol.cost > threshold and settings.reinitiate and isinstance(model.observation, DopplerModel):
@@ -356,7 +398,7 @@ def run_smoother(
         # offline, every measurement is available, so initiate again from all of them.
         notes.append(f"cost {sol.cost:.1f} fails the 99.9 % chi-square check ({threshold:.1f}): "
                      "re-initiated from the whole recording")
-        again = _reinitiate(measurements, model, settings)
+        again = _reinitiate(measurements, model, settings, progress)
         if again is not None and again.cost < sol.cost:
             sol = again
             notes += list(again.notes)

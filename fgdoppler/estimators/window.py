@@ -34,6 +34,7 @@ from fgdoppler.factors import X
 from fgdoppler.graphs import chain_graph, chain_values
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
+from fgdoppler.progress import Progress, advance, start_task
 
 __all__ = ["StreamingTracker", "feed_from_window_start", "split_window", "window_start"]
 
@@ -84,10 +85,13 @@ class StreamingTracker(Protocol):
 def feed_from_window_start(
     tracker: StreamingTracker, model: TrackingModel, measurements: Measurements, init: Initiation,
     events: list[Event], *, huber_k: float | None = None, max_iterations: int = 100,
+    progress: Progress | None = None, name: str = "tracking",
 ) -> tuple[list[float], list[FloatArray], list[FloatArray | None]]:
     """Feed the initiation window (one call, states from :func:`window_start`), then every later scan.
 
     A failed LM start is recorded in ``events`` (the tracker's list).
+    ``progress`` gets a task ``name`` with one step for the window and one
+    per later scan.
     Returns the filtered ``(times, states, covariances)`` from the window's end on.
     """
     window, stream = split_window(measurements, init.t_end)
@@ -95,6 +99,8 @@ def feed_from_window_start(
     states: list[FloatArray] = []
     covs: list[FloatArray | None] = []
     ws = window.scans()
+    ss = stream.scans()
+    start_task(progress, name, len(ss) + (1 if len(ws) else 0))
     if len(ws):
         start, note = window_start(model, window, init, huber_k=huber_k, max_iterations=max_iterations)
         if note:
@@ -105,11 +111,12 @@ def feed_from_window_start(
         times.append(float(ws.times[-1]))
         states.append(x)
         covs.append(P)
-    ss = stream.scans()
+        advance(progress)
     for k in range(len(ss)):
         sl = ss.rows(k)
         x, P = tracker.add_scan(ss.times[k], stream.pair[sl], stream.doppler[sl], stream.sigma[sl])
         times.append(float(ss.times[k]))
         states.append(x)
         covs.append(P)
+        advance(progress)
     return times, states, covs

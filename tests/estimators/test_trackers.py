@@ -330,3 +330,52 @@ def test_wall_held_initiation_does_not_throw_isam2_off() -> None:
     assert float(d @ np.linalg.solve(P, d)) < 1.0
     # the track is kept: the gate accepts nearly all later measurements
     assert np.mean(r.nis[:, 3]) >= 0.9
+
+
+def test_isam2_marginal_equals_its_full_estimate_and_covariance() -> None:
+    # The online estimate is read from the newest state's marginal factor; it must be the
+    # exact MAP and marginal covariance of the current linear system, as iSAM2's full
+    # back-substitution and its own marginalCovariance give them.
+    _, sim, model, init = _setup("b", 5e3)
+    tracker = ISAM2Tracker(model, ISAM2Settings(), model.prior())
+    m = sim.measurements
+    sc = m.scans()
+    start, _ = fd.estimators.window.window_start(model, m.between(0, init.t_end), init)
+    n_win = int(np.searchsorted(sc.times, init.t_end, side="right"))
+    rows = [sc.rows(k) for k in range(len(sc))]
+    tracker.add_window(sc.times[:n_win], [m.pair[r] for r in rows[:n_win]], [m.doppler[r] for r in rows[:n_win]],
+                       [m.sigma[r] for r in rows[:n_win]], start)
+    for k in range(n_win, n_win + 40):
+        x, P = tracker.add_scan(sc.times[k], m.pair[rows[k]], m.doppler[rows[k]], m.sigma[rows[k]])
+        assert P is not None
+        best = tracker.isam.calculateBestEstimate().atVector(X(k))
+        full_P = tracker.isam.marginalCovariance(X(k))
+        sd = np.sqrt(np.diag(full_P))
+        # Both by QR (the condition number of the information matrix reaches ~1e13 here, so a
+        # Cholesky path would lose about six digits; measured agreement is ~1e-10).
+        assert np.all(np.abs(x - best) <= 1e-7 * sd)
+        assert np.max(np.abs(P - full_P)) <= 1e-7 * np.abs(full_P).max()
+
+
+def test_smoother_state_without_measurements_changes_nothing_else() -> None:
+    # Constant velocity with white acceleration composes exactly over a step
+    # (F(a+b) = F(b)F(a), Q(a+b) = F(b)Q(a)F(b)' + Q(b)), so a state at a time without
+    # measurements leaves every other state's solution as it was and itself lies on the
+    # smoothed CV interpolation.
+    _, sim, model, init = _setup("a", 45e3)
+    m = sim.measurements
+    times = m.scans().times
+    x0 = fd.estimators.smoother.initial_trajectory(m, model, init, SmootherSettings())
+    plain = fd.estimators.smoother.solve_smoother(m, model, x0, prior=model.prior())
+    extra_t = 0.5 * (times[30] + times[31])
+    t_ext = np.insert(times, 31, extra_t)
+    x_ext = np.insert(x0, 31, model.motion.propagate(x0[30], extra_t - times[30]), axis=0)
+    ext = fd.estimators.smoother.solve_smoother(m, model, x_ext, prior=model.prior(), times=t_ext)
+    others = np.delete(ext.states, 31, axis=0)
+    assert _rel(others, plain.states) <= 1e-7
+    assert plain.covariances is not None and ext.covariances is not None
+    np.testing.assert_allclose(np.delete(ext.covariances, 31, axis=0), plain.covariances, rtol=1e-5,
+                               atol=1e-8 * np.abs(plain.covariances).max())
+    assert abs(ext.cost - plain.cost) <= 1e-8 * plain.cost
+    with pytest.raises(ValueError, match="every measurement time"):
+        fd.estimators.smoother.solve_smoother(m, model, x0[1:], times=times[1:])
