@@ -60,6 +60,7 @@ from fgdoppler.models import (
     cv_doppler_jacobian,
     cv_information,
 )
+from fgdoppler.progress import Progress, TqdmProgress
 from fgdoppler.simulation import (
     Scenario,
     Simulation,
@@ -96,11 +97,13 @@ __all__ = [
     "MeasurementError",
     "MeasurementModel",
     "Measurements",
+    "Progress",
     "Reason",
     "Scenario",
     "Simulation",
     "SmootherSettings",
     "StackedTimes",
+    "TqdmProgress",
     "TrackResult",
     "TrackerSettings",
     "TrackingModel",

@@ -66,6 +66,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from fgdoppler._text import first_line
+from fgdoppler.estimators.curvature import curvature_reason
 from fgdoppler.estimators.grid import (
     GridResult,
     GridSpec,
@@ -83,6 +84,7 @@ from fgdoppler.graphs import chain_graph, chain_values, cv_graph
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.doppler import StackedTimes, cv_doppler, cv_doppler_jacobian, cv_information
 from fgdoppler.models.motion import ConstantVelocity
+from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
 
 __all__ = ["METHODS", "Candidate", "Initiation", "InitiationSettings", "initiate", "lm_params",
@@ -384,6 +386,9 @@ class _Window:
         r = (self.z - cv_doppler(x0, self.geometry, self.times)) / self.sigma
         return float(r @ r)
 
+    def robust_cost(self, x0: FloatArray, huber_k: float | None) -> float:
+        return float(np.sum(huber_rho((self.z - cv_doppler(x0, self.geometry, self.times)) / self.sigma, huber_k)))
+
     def information(self, x0: FloatArray) -> FloatArray:
         return cv_information(x0, self.geometry, self.times, self.sigma)
 
@@ -501,6 +506,11 @@ def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: t
     if fit.P0 is None:
         reasons.append(Reason(code="covariance", status="doubtful",
                               message=f"initiation covariance indeterminate: {fit.cov_message}"))
+    if fit.P0 is not None:
+        found = curvature_reason(lambda x: w.robust_cost(x, settings.huber_k), np.asarray(fit.x0, dtype=float),
+                                 fit.P0, w.information(fit.x0), at_optimum=settings.method == "lm")
+        if found is not None:
+            reasons.append(found)
     if alternatives:
         far = max(float(np.linalg.norm(a.state[:2] - fit.x0[:2])) for a in alternatives)
         reasons.append(Reason(code="ambiguous", status="doubtful", message=(

@@ -163,9 +163,17 @@ class ISAM2Tracker:
         Only new linearisation points come from these, so the marginals are
         eliminated by GTSAM's default (Cholesky, half the cost of QR): its
         error, about 1e-6 standard deviations here, does not matter in a
-        linearisation point.
+        linearisation point.  Where Cholesky calls the system indeterminate,
+        QR is tried, and then iSAM2's own back-substitution.
         """
-        conds = [self.isam.marginalFactor(X(k)) for k in ks]
+        try:
+            conds = [self.isam.marginalFactor(X(k)) for k in ks]
+        except RuntimeError:
+            try:
+                conds = [self.isam.marginalFactor(X(k), gtsam.EliminateQR) for k in ks]
+            except RuntimeError:
+                est = self.isam.calculateEstimate([X(k) for k in ks])
+                return np.array([est.atVector(X(k)) for k in ks])
         R = np.array([c.R() for c in conds])
         d = np.array([c.d() for c in conds])
         theta = np.array([self.scans[k].theta for k in ks])

@@ -49,7 +49,9 @@ the status is the worst of them, :mod:`fgdoppler.estimators.verdict`).
     times in milliseconds or positions in kilometres.
 
 The initiation's findings are added by
-:func:`~fgdoppler.estimators.registry.run_estimator` (``initiation-…``), and
+:func:`~fgdoppler.estimators.registry.run_estimator` (``initiation-…``; its
+``nonlinear`` start covariance only informationally to the offline
+smoother, which does not use it), and
 competing hypotheses by :mod:`fgdoppler.estimators.ambiguity`
 (``competing``).
 """

@@ -167,10 +167,24 @@ def _solve(info: EstimatorInfo, measurements: Measurements, model: TrackingModel
     return resolve(info.run, info.resolution, measurements, model, hyps, settings, progress)
 
 
+#: Initiation findings about its covariance only, which an offline smoother does not use: informational there.
+START_COVARIANCE_FINDINGS = frozenset({"nonlinear"})
+
+
 def _with_initiation_reasons(result: TrackResult, init: Initiation) -> TrackResult:
-    """The track's reasons with those of the initiation it started from (an ambiguity resolved by the track is not one)."""
-    inherited = tuple(Reason(code=f"initiation-{r.code}", status=r.status, message=f"initiation: {r.message}")
-                      for r in init.reasons if r.code != "ambiguous")
+    """The track's reasons with those of the initiation it started from.
+
+    An ambiguity resolved by the track is not one; a finding about the
+    start covariance (:data:`START_COVARIANCE_FINDINGS`) stays doubtful for a
+    filter, which carries that covariance on, and is informational for the
+    offline smoother, which re-solves from all the data.
+    """
+    smoothed = result.primary.kind == "smoothed"
+    inherited = tuple(
+        Reason(code=f"initiation-{r.code}",
+               status="ok" if (smoothed and r.code in START_COVARIANCE_FINDINGS) else r.status,
+               message=f"initiation: {r.message}")
+        for r in init.reasons if r.code != "ambiguous")
     return replace(result, reasons=inherited + result.reasons) if inherited else result
 
 
@@ -182,12 +196,13 @@ def track(
     settings: TrackerSettings | None = None,
     initiation: InitiationSettings | None = None,
     init_per_pair: int = 10,
+    progress: Progress | None = None,
 ) -> TrackResult:
     """Initiate from the first ``init_per_pair`` measurements of each pair, then run ``estimator``.
 
     The one-call form of :func:`~fgdoppler.estimators.initiation.initiate`
-    followed by :func:`run_estimator`.
+    followed by :func:`run_estimator` (``progress``: :mod:`fgdoppler.progress`).
     """
     model = as_tracking_model(model)
     init = initiate(measurements.first_per_pair(init_per_pair), model, initiation)
-    return run_estimator(estimator, measurements, model, init, settings)
+    return run_estimator(estimator, measurements, model, init, settings, progress=progress)

@@ -379,3 +379,33 @@ def test_smoother_state_without_measurements_changes_nothing_else() -> None:
     assert abs(ext.cost - plain.cost) <= 1e-8 * plain.cost
     with pytest.raises(ValueError, match="every measurement time"):
         fd.estimators.smoother.solve_smoother(m, model, x0[1:], times=times[1:])
+
+
+def test_isam2_survives_a_marginal_that_cholesky_calls_indeterminate(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Case b 5 km with 5 % of the measurements replaced by +-100 m/s, no robust loss: the 13th run of
+    # seed 3 drives one of the relinearisation checks into a marginal that GTSAM's Cholesky calls
+    # indeterminate (it raised out of the tracker once).  The check falls back to QR.
+    sc = fd.paper_scenario("b", 5e3)
+    rng = np.random.default_rng(np.random.SeedSequence(3).spawn(20)[12])
+    sim = fd.simulate(sc, rng)
+    m = sim.measurements
+    z = m.doppler.copy()
+    idx = rng.choice(len(m), round(0.05 * len(m)), replace=False)
+    z[idx] += rng.choice([-100.0, 100.0], idx.size)
+    m = fd.Measurements(time=m.time, pair=m.pair, doppler=z, sigma=m.sigma)
+    model = fd.TrackingModel.of(sc.geometry)
+    init = initiate(m.first_per_pair(10), model)
+    failures = []
+    original = ISAM2Tracker._means
+
+    def counting(self: ISAM2Tracker, ks: list[int]) -> np.ndarray:
+        try:
+            [self.isam.marginalFactor(X(k)) for k in ks]
+        except RuntimeError:
+            failures.append(ks)
+        return original(self, ks)
+
+    monkeypatch.setattr(ISAM2Tracker, "_means", counting)
+    result = run_isam2(m, model, init)
+    assert failures, "the data no longer reach the Cholesky failure: this test needs a new case"
+    assert np.all(np.isfinite(result.primary.states))

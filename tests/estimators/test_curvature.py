@@ -1,0 +1,99 @@
+"""The curvature probe: silent on quadratic costs, loud on curved or flat ones, and where it matters."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+import fgdoppler as fd
+from fgdoppler.estimators.curvature import CURVATURE_LIMIT, curvature_reason, probe_rises
+
+RNG = np.random.default_rng(5)
+_B = RNG.normal(size=(4, 4))
+INFO = _B @ _B.T + 4 * np.eye(4)  # a generic, correlated information matrix
+MEAN = np.array([3e4, 2e3, 10.0, -100.0])
+
+
+def _quadratic(x: np.ndarray) -> float:
+    e = x - MEAN
+    return float(e @ INFO @ e)
+
+
+def test_a_quadratic_cost_rises_exactly_as_its_model_predicts() -> None:
+    P = np.linalg.inv(INFO)
+    lo, hi, quad, sd = probe_rises(_quadratic, MEAN, P, INFO)
+    assert quad == pytest.approx(9.0, rel=1e-12)  # delta' I delta = 1 for delta built from P = I^-1
+    assert lo == pytest.approx(9.0, rel=1e-9) and hi == pytest.approx(9.0, rel=1e-9)
+    assert sd == pytest.approx(np.sqrt(np.linalg.eigvalsh(P[:2, :2]).max()), rel=1e-12)
+    assert curvature_reason(_quadratic, MEAN, P, INFO) is None
+    # a reported covariance twice the true one: the probe goes sqrt(2) further and predicts 18
+    lo, hi, quad, _ = probe_rises(_quadratic, MEAN, 2 * P, INFO)
+    assert quad == pytest.approx(18.0, rel=1e-12) and lo == pytest.approx(18.0, rel=1e-9)
+    assert curvature_reason(_quadratic, MEAN, 2 * P, INFO) is None
+    # away from the optimum (a grid node) the linear term is taken out: the rises are curvature only
+    off = MEAN + np.array([300.0, -200.0, 1.0, 2.0])
+    lo, hi, quad, _ = probe_rises(_quadratic, off, P, INFO)
+    assert lo == pytest.approx(9.0, rel=1e-6) and hi == pytest.approx(9.0, rel=1e-6)
+
+
+def test_a_curved_valley_and_a_flat_bottom_are_reported() -> None:
+    # A banana: along the position's major axis the valley bends away (x1 = c x0^2).
+    c = 5.0
+
+    def banana(x: np.ndarray) -> float:
+        return float(1e4 * (x[1] - c * x[0] ** 2) ** 2 + x[0] ** 2 + x[2] ** 2 + x[3] ** 2)
+
+    x = np.zeros(4)
+    info = np.diag([1.0, 1e4, 1.0, 1.0])  # its Gauss-Newton model at the minimum
+    found = curvature_reason(banana, x, np.linalg.inv(info), info)
+    assert found is not None and found.status == "doubtful" and "curved" in found.message
+    # A quartic bottom: the covariance of a nearly flat quadratic model is too small.
+
+    def flat(x: np.ndarray) -> float:
+        return float(np.sum(x**2) * 1e-3 + np.sum(x**2) ** 2)
+
+    info = np.eye(4) * 100.0  # claims sigma 0.1; the cost at 3 sigma is 0.0082, not 9
+    found = curvature_reason(flat, np.zeros(4), np.linalg.inv(info), info)
+    assert found is not None and found.status == "doubtful" and "flatter" in found.message
+    assert CURVATURE_LIMIT > 1
+
+
+def _windows(case: str, x: float, n: int) -> list[tuple[fd.Initiation, float]]:
+    sc = fd.paper_scenario(case, x)
+    out = []
+    for seq in np.random.SeedSequence(99).spawn(n):
+        sim = fd.simulate(sc, np.random.default_rng(seq))
+        init = fd.initiate(sim.measurements.first_per_pair(10), sc.geometry)
+        assert init.P_start is not None
+        e = init.x_start - sim.truth.states[0]
+        out.append((init, float(e @ np.linalg.solve(init.P_start, e))))
+    return out
+
+
+@pytest.mark.parametrize(("case", "x"), [("a", 5e3), ("a", 45e3), ("b", 45e3)])
+def test_an_initiation_with_an_untrustworthy_covariance_is_not_ok(case: str, x: float) -> None:
+    # In the poorly observed scenarios the window's covariance is far too small (NEES in the
+    # hundreds); the probe must flag those windows, and among the windows left ok the NEES must be
+    # about as consistent as in a well-observed scenario.
+    thr = chi2.ppf(0.999, 4)
+    runs = _windows(case, x, 30)
+    ok = [nees for init, nees in runs if init.status == "ok"]
+    assert sum(n > thr for n in ok) <= 0.05 * max(len(ok), 1) + 1
+    flagged = [init for init, _ in runs if any(r.code == "nonlinear" for r in init.reasons)]
+    if x == 45e3 and case == "a":  # well observed: no false alarms
+        assert not flagged
+    else:  # the check has something to catch here, and catches all of it
+        assert sum(n > thr for _, n in runs) >= 0.3 * len(runs)
+        assert len(flagged) == len(runs)
+
+
+def test_the_offline_smoother_keeps_the_finding_informational() -> None:
+    sc = fd.paper_scenario("a", 5e3)
+    sim = fd.simulate(sc, np.random.default_rng(3))
+    init = fd.initiate(sim.measurements.first_per_pair(10), sc.geometry)
+    assert any(r.code == "nonlinear" and r.status == "doubtful" for r in init.reasons)
+    smoothed = fd.run_estimator("smoother", sim.measurements, sc.geometry, init)
+    filtered = fd.run_estimator("ekf", sim.measurements, sc.geometry, init, verify=False)
+    assert [r.status for r in smoothed.reasons if r.code == "initiation-nonlinear"] == ["ok"]
+    assert [r.status for r in filtered.reasons if r.code == "initiation-nonlinear"] == ["doubtful"]
