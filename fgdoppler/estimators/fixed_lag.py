@@ -36,7 +36,7 @@ from fgdoppler.estimators.gating import NISGate
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import FixedLagSettings
-from fgdoppler.estimators.verdict import Event, Reason
+from fgdoppler.estimators.verdict import NOT_CONVERGED, Event, Reason
 from fgdoppler.estimators.window import feed_from_window_start
 from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
 from fgdoppler.measurements import Measurements
@@ -301,16 +301,12 @@ def run_fixed_lag(
     idx = sorted(tr.lagged)
     lagged = Estimates.from_lists("lagged", [tr.times[j] for j in idx], [tr.lagged[j][0] for j in idx],
                                   [tr.lagged[j][1] for j in idx])
-    reasons = []
+    reasons = [r for r in (lagged.covariance_reason(),) if r is not None]
     if tr.rebuilds:
-        reasons.append(Reason(code="rebuilt", status="doubtful", message=(
+        reasons.insert(0, Reason(code="rebuilt", status="doubtful", message=(
             f"the smoother failed and was rebuilt from its last good estimate {tr.rebuilds} time(s)")))
-    if not np.all(lagged.cov_ok):
-        reasons.append(Reason(code="covariance", status="doubtful", message=(
-            f"{int(np.sum(~lagged.cov_ok))} of {len(lagged)} covariances are indeterminate")))
     if not tr.converged:
-        reasons.append(Reason(code="not-converged", status="doubtful",
-                              message="the final smoothing iterations did not converge"))
+        reasons.append(NOT_CONVERGED)
     return TrackResult(
         estimator="fixed-lag",
         settings=settings,

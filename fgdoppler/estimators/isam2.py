@@ -47,7 +47,7 @@ from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import ISAM2Settings, SmootherSettings
 from fgdoppler.estimators.smoother import solve_smoother
-from fgdoppler.estimators.verdict import Event, Reason
+from fgdoppler.estimators.verdict import NOT_CONVERGED, Event
 from fgdoppler.estimators.window import feed_from_window_start
 from fgdoppler.factors import X, absolute_linear_factor
 from fgdoppler.measurements import Measurements
@@ -410,13 +410,9 @@ def run_isam2(
     filtered = Estimates.from_lists("filtered", times, states, covs)
     smoothed_est = Estimates.from_lists("smoothed", list(tracker.times), list(smoothed),
                                         list(scov) if scov is not None else [None] * len(tracker.times))
-    reasons = []
-    if not np.all(filtered.cov_ok):
-        reasons.append(Reason(code="covariance", status="doubtful", message=(
-            f"{int(np.sum(~filtered.cov_ok))} of {len(filtered)} filtered covariances are indeterminate")))
+    reasons = [r for r in (filtered.covariance_reason(),) if r is not None]
     if not tracker.converged:
-        reasons.append(Reason(code="not-converged", status="doubtful",
-                              message="the final relinearisation did not converge"))
+        reasons.append(NOT_CONVERGED)
     return TrackResult(
         estimator="isam2",
         settings=settings,

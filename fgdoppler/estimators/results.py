@@ -117,6 +117,13 @@ class Estimates:
     def __len__(self) -> int:
         return int(np.size(self.times))
 
+    def covariance_reason(self) -> Reason | None:
+        """A ``"doubtful"`` ``covariance`` finding if some covariances are indeterminate, else ``None``."""
+        if bool(np.all(self.cov_ok)):
+            return None
+        return Reason(code="covariance", status="doubtful", message=(
+            f"{int(np.sum(~self.cov_ok))} of {len(self)} {self.kind} covariances are indeterminate"))
+
     def transformed(self, frame: Frame, *, to_world: bool) -> Estimates:
         """The estimates moved out of (``to_world``) or into ``frame``'s local coordinates."""
         if frame.is_identity or len(self) == 0:

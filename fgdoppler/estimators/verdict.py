@@ -30,7 +30,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Literal
 
-__all__ = ["STATUSES", "Event", "Judged", "Reason", "Status", "message_of", "status_of"]
+__all__ = ["NOT_CONVERGED", "STATUSES", "Event", "Judged", "Reason", "Status", "message_of", "status_of"]
 
 Status = Literal["ok", "doubtful", "failed"]
 #: The status vocabulary, from best to worst.
@@ -63,6 +63,11 @@ class Reason:
     def to_dict(self) -> dict[str, str]:
         """JSON-ready form."""
         return {"code": self.code, "status": self.status, "message": self.message}
+
+
+#: The finding of a tracker whose final smoothing hit its iteration cap (its events say more).
+NOT_CONVERGED = Reason(code="not-converged", status="doubtful",
+                       message="the final smoothing did not converge within its iteration cap")
 
 
 @dataclass(frozen=True, kw_only=True)
