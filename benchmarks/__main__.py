@@ -7,10 +7,17 @@ import os
 import platform
 from pathlib import Path
 
-from benchmarks import bench_ekf, bench_grid, bench_long, bench_montecarlo, bench_scaling
+from benchmarks import (
+    bench_accuracy,
+    bench_ekf,
+    bench_grid,
+    bench_long,
+    bench_montecarlo,
+    bench_scaling,
+)
 
 BENCHES = {"grid": bench_grid, "ekf": bench_ekf, "scaling": bench_scaling, "montecarlo": bench_montecarlo,
-           "long": bench_long}
+           "long": bench_long, "accuracy": bench_accuracy}
 
 
 def main() -> None:

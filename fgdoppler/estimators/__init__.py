@@ -1,4 +1,4 @@
-"""Estimators: initiation, EKF, iSAM2, fixed-lag and offline smoothers.
+"""Estimators: initiation, EKF, iSAM2, fixed-lag and offline smoothers, a particle filter.
 
 All trackers share one signature, ``run(measurements, model, init, settings)
 -> TrackResult``; :data:`ESTIMATORS` lists them and :func:`run_estimator`
@@ -18,7 +18,9 @@ from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import (
     EKFSettings,
     FixedLagSettings,
+    GaussianSumSettings,
     ISAM2Settings,
+    ParticleSettings,
     SmootherSettings,
     TrackerSettings,
 )
@@ -34,9 +36,11 @@ __all__ = [
     "EstimatorInfo",
     "Event",
     "FixedLagSettings",
+    "GaussianSumSettings",
     "ISAM2Settings",
     "Initiation",
     "InitiationSettings",
+    "ParticleSettings",
     "Reason",
     "SmootherSettings",
     "TrackResult",

@@ -25,6 +25,7 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import logsumexp
 from scipy.stats import chi2
 
 from fgdoppler.estimators.ekf import run_ekf
@@ -37,9 +38,9 @@ from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.progress import Progress, prefixed
 
-__all__ = ["Resolution", "hypotheses", "resolve"]
+__all__ = ["Resolution", "hypotheses", "posterior_hypotheses", "resolve"]
 
-Resolution = Literal["likelihood", "cost"]
+Resolution = Literal["likelihood", "cost", "native"]
 Runner = Callable[..., TrackResult]
 """``run(measurements, model, init, settings, *, progress=None) -> TrackResult``."""
 
@@ -48,18 +49,20 @@ def hypotheses(init: Initiation) -> list[Initiation]:
     """The initiation and one unambiguous copy per alternative (best first).
 
     Each copy starts from the alternative's state and covariance at the
-    window start, propagated to the window end.  Alternatives without a
-    determinate covariance are skipped.  A copy's ``objective`` is its data
-    cost (the regularisers are not evaluated for alternatives).
+    window start, propagated to the window end.  An alternative without a
+    determinate covariance keeps ``None`` (the EKF then starts from the
+    zone's broad prior and says so; the smoother does not need one): a
+    solution the window cannot pin down is still a place the target may be.
+    A copy's ``objective`` is its data cost (the regularisers are not
+    evaluated for alternatives).
     """
     kept = tuple(r for r in init.reasons if r.code != "ambiguous")
     out = [replace(init, alternatives=(), reasons=kept)]
     F = ConstantVelocity.F(init.t_end - init.t_start)
     for a in init.alternatives:
-        if a.covariance is None:
-            continue
+        P = a.covariance
         out.append(replace(
-            init, x_start=a.state, x_end=F @ a.state, P_start=a.covariance, P_end=F @ a.covariance @ F.T,
+            init, x_start=a.state, x_end=F @ a.state, P_start=P, P_end=None if P is None else F @ P @ F.T,
             cost=a.cost, objective=a.cost, passes_chi2=a.passes_chi2, alternatives=(),
             reasons=tuple(r for r in kept if r.code not in ("covariance", "boundary")),
             events=(*init.events, Event(time=init.t_start, message="hypothesis from an ambiguous initiation")),
@@ -67,11 +70,45 @@ def hypotheses(init: Initiation) -> list[Initiation]:
     return out
 
 
-def resolve(run: Runner, resolution: Resolution, measurements: Measurements, model: TrackingModel,
-            hyps: list[Initiation], settings: TrackerSettings, progress: Progress | None = None) -> TrackResult:
-    """Run ``run`` from every hypothesis and report one track (module docstring).
+def posterior_hypotheses(init: Initiation, measurements: Measurements, model: TrackingModel, k: int, *,
+                         huber_k: float | None = None, seed: int = 0
+                         ) -> tuple[list[Initiation], NDArray[np.float64]]:
+    """One hypothesis per term of a Gaussian sum of the window's posterior, and the terms' weights.
 
-    ``progress`` sees each run's tasks prefixed with ``"hypothesis i/n"``.
+    The posterior is sampled (:func:`~fgdoppler.estimators.particle.window_posterior`)
+    and split (:meth:`~fgdoppler.estimators.particle.WindowPosterior.components`);
+    each hypothesis starts a tracker at the window's end from its term
+    (``window_summarised``).
+
+    Raises
+    ------
+    ValueError
+        If no start inside the zone explains the window.
+    """
+    from fgdoppler.estimators.particle import window_posterior
+    from fgdoppler.estimators.settings import ParticleSettings
+
+    post = window_posterior(measurements, model, init, ParticleSettings(huber_k=huber_k, seed=seed))
+    terms = post.components(k, model, seed=seed)
+    Fi = np.linalg.inv(ConstantVelocity.F(init.t_end - init.t_start))
+    kept = tuple(r for r in init.reasons if r.code != "ambiguous")
+    hyps = [replace(init, x_start=Fi @ m, x_end=m, P_start=Fi @ P @ Fi.T, P_end=P, alternatives=(), reasons=kept,
+                    window_summarised=True,
+                    events=(*init.events, Event(time=init.t_end, message=(
+                        f"term {i + 1} of a {len(terms)}-term Gaussian sum of the window's posterior "
+                        f"(weight {w:.3f})"))))
+            for i, (w, m, P) in enumerate(terms)]
+    return hyps, np.array([w for w, _, _ in terms])
+
+
+def resolve(run: Runner, resolution: Resolution, measurements: Measurements, model: TrackingModel,
+            hyps: list[Initiation], settings: TrackerSettings, progress: Progress | None = None,
+            weights: NDArray[np.float64] | None = None) -> TrackResult:
+    r"""Run ``run`` from every hypothesis and report one track (module docstring).
+
+    ``weights`` are the hypotheses' prior weights (default: from their
+    window costs, :math:`\propto e^{-c/2}`).  ``progress`` sees each run's
+    tasks prefixed with ``"hypothesis i/n"``.
     """
     t_begin = time.perf_counter()
     n = len(hyps)
@@ -91,31 +128,102 @@ def resolve(run: Runner, resolution: Resolution, measurements: Measurements, mod
     ekfs = results if results[0].log_likelihood.size else [
         run_ekf(measurements, model, h, ekf_settings, progress=prefixed(progress, f"ranking {i + 1}/{n}"))
         for i, h in enumerate(hyps)]
-    L = np.array([e.log_likelihood for e in ekfs])
-    t_ekf = ekfs[0].primary.times
-
-    def leaders(times: NDArray[np.float64]) -> NDArray[np.intp]:
-        idx = np.clip(np.searchsorted(t_ekf, times, side="right") - 1, 0, t_ekf.size - 1)
-        return np.argmax(L[:, idx], axis=0)
-
-    final = int(np.argmax(L[:, -1]))
-    stitched = []
-    for est in results[0].estimates:
-        choice = leaders(est.times) if est.kind == "filtered" else np.full(len(est), final)
-        parts = [results[h].estimate(est.kind) for h in choice]
-        stitched.append(Estimates(
-            kind=est.kind, times=est.times,
-            states=np.array([p.states[i] for i, p in enumerate(parts)]),
-            covariances=np.array([p.covariances[i] for i, p in enumerate(parts)]),
-            cov_ok=np.array([p.cov_ok[i] for i, p in enumerate(parts)], dtype=bool),
-        ))
-    primary = stitched[0]
-    hyp = leaders(primary.times) if primary.kind == "filtered" else np.full(len(primary), final)
-    event = Event(time=float(t_ekf[-1]), message=f"{note}; hypothesis {final} leads at the end")
-    return replace(results[final], estimates=tuple(stitched), hypothesis=np.asarray(hyp, dtype=np.int64),
-                   events=(*results[final].events, event),
-                   reasons=(*results[final].reasons, *_competing(-2.0 * L[:, -1], results, final)),
+    logw0 = np.log(np.asarray(weights, dtype=float)) if weights is not None else -0.5 * np.array(
+        [h.cost for h in hyps])
+    mix = _Weights(logw0, np.array([e.log_likelihood for e in ekfs]), ekfs[0].primary.times)
+    mixed = tuple(_mixture(est.kind, [r.estimate(est.kind) for r in results],
+                           mix.at(est.times) if est.kind == "filtered" else mix.final(len(est)))
+                  for est in results[0].estimates)
+    W_end = mix.final(1)[:, 0]
+    best = int(np.argmax(W_end))
+    primary = mixed[0]
+    hyp = np.argmax(mix.at(primary.times), axis=0) if primary.kind == "filtered" else np.full(len(primary), best)
+    event = Event(time=float(mix.times[-1]), message=(
+        f"{note}; the estimates are their mixture, weighted by the data (hypothesis {best} carries "
+        f"{W_end[best]:.2f} at the end)"))
+    ends = [r.primary for r in results]
+    return replace(results[best], estimates=mixed, hypothesis=np.asarray(hyp, dtype=np.int64),
+                   events=(*results[best].events, event),
+                   reasons=(*results[best].reasons, _modes_reason(W_end, ends)),
                    wall_time=time.perf_counter() - t_begin)
+
+
+class _Weights:
+    """Posterior weights of the hypotheses over time: prior weight times the data's predictive likelihood."""
+
+    def __init__(self, logw0: NDArray[np.float64], loglik: NDArray[np.float64], times: NDArray[np.float64]) -> None:
+        self.logw0, self.loglik, self.times = logw0, loglik, times
+
+    def at(self, times: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Weights ``(H, n)`` at each of ``times`` (from the data up to then)."""
+        idx = np.clip(np.searchsorted(self.times, times, side="right") - 1, 0, self.times.size - 1)
+        lw = self.logw0[:, None] + self.loglik[:, idx]
+        return np.exp(lw - logsumexp(lw, axis=0, keepdims=True))
+
+    def final(self, n: int) -> NDArray[np.float64]:
+        """The weights after all the data, repeated for ``n`` times (smoothed and lagged estimates)."""
+        return np.repeat(self.at(self.times[-1:]), n, axis=1)
+
+
+def _mixture(kind: str, parts: list[Estimates], W: NDArray[np.float64]) -> Estimates:
+    r"""The Gaussian mixture of the hypotheses' estimates: :math:`\bar x = \sum w_h x_h`,
+    :math:`P = \sum w_h (P_h + (x_h - \bar x)(x_h - \bar x)')`.
+
+    Hypotheses whose estimates are on another time grid (a tracker that
+    stopped early) or indeterminate do not take part; their weight goes to
+    the others.
+    """
+    ref = parts[0]
+    same = np.array([p.times.shape == ref.times.shape and np.array_equal(p.times, ref.times) for p in parts])
+    X = np.array([p.states if ok else ref.states for p, ok in zip(parts, same, strict=True)])
+    P = np.array([p.covariances if ok else ref.covariances for p, ok in zip(parts, same, strict=True)])
+    ok = np.array([p.cov_ok if s else np.zeros(len(ref), dtype=bool) for p, s in zip(parts, same, strict=True)])
+    w = np.where(same[:, None], W, 0.0)
+    w = w / np.maximum(np.sum(w, axis=0, keepdims=True), 1e-300)
+    mean = np.einsum("hn,hni->ni", w, X)
+    d = X - mean[None]
+    cov = np.einsum("hn,hnij->nij", w, P + np.einsum("hni,hnj->hnij", d, d))
+    cov_ok = np.all(ok | (w < 1e-9), axis=0)
+    return Estimates(kind=kind, times=ref.times, states=mean, covariances=cov, cov_ok=cov_ok)  # type: ignore[arg-type]
+
+
+def _density(x: NDArray[np.float64], w: NDArray[np.float64], means: NDArray[np.float64],
+             covs: NDArray[np.float64]) -> float:
+    """Gaussian-mixture density of the positions at ``x`` (the position block of each term)."""
+    out = 0.0
+    for wi, m, P in zip(w, means, covs, strict=True):
+        d = x - m
+        S = P[:2, :2]
+        out += wi * float(np.exp(-0.5 * d @ np.linalg.solve(S, d)) / (2 * np.pi * np.sqrt(np.linalg.det(S))))
+    return out
+
+
+def _modes_reason(w: NDArray[np.float64], ends: list[Estimates]) -> Reason:
+    """A ``competing`` finding: ``"doubtful"`` when the final mixture has separate modes of real weight.
+
+    Two terms with weight ≥ 5 % are separate modes when the mixture's density
+    at the midpoint of their positions is below a tenth of the lower of the
+    two peaks: the data then leave two places for the target, and the
+    mixture's mean lies between them.
+    """
+    usable = [h for h in range(len(ends)) if ends[h].cov_ok[-1] and w[h] >= 0.05]
+    means = np.array([e.states[-1, :2] for e in ends])
+    covs = np.array([e.covariances[-1] for e in ends])
+    sel = np.array(usable, dtype=np.intp)
+    for i in usable:
+        for j in usable:
+            if j <= i:
+                continue
+            args = (w[sel], means[sel], covs[sel])
+            mid = _density(0.5 * (means[i] + means[j]), *args)
+            low = min(_density(means[i], *args), _density(means[j], *args))
+            if mid < 0.1 * low:
+                apart = float(np.linalg.norm(means[i] - means[j]))
+                return Reason(code="competing", status="doubtful", message=(
+                    f"the data leave separate solutions {apart / 1e3:.1f} km apart at the end (weights "
+                    f"{w[i]:.2f} and {w[j]:.2f}); the estimate is their mixture, its mean between them"))
+    return Reason(code="competing", status="ok", message=(
+        f"{len(ends)} hypotheses, carried as a mixture; no separate mode of weight >= 0.05 at the end"))
 
 
 #: Two hypotheses closer than this in cost (χ²₁ at 95 %) cannot be told apart by the data.

@@ -37,7 +37,7 @@ from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import FixedLagSettings
 from fgdoppler.estimators.verdict import NOT_CONVERGED, Event, Reason
-from fgdoppler.estimators.window import feed_from_window_start
+from fgdoppler.estimators.window import feed_from_window_start, start_prior
 from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import check_channels
@@ -294,7 +294,7 @@ def run_fixed_lag(
     settings = settings or FixedLagSettings()
     check_channels(model.observation, measurements)
     t_begin = time.perf_counter()
-    tr = FixedLagTracker(model, settings, model.prior())
+    tr = FixedLagTracker(model, settings, start_prior(model, init))
     times, states, covs = feed_from_window_start(tr, model, measurements, init, tr.events, huber_k=settings.huber_k,
                                                  progress=progress, name="fixed-lag")
     tr.finish()

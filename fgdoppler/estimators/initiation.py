@@ -247,6 +247,12 @@ class Initiation(Judged):
         The verdict's findings and the log (:mod:`fgdoppler.estimators.verdict`).
     wall_time
         Seconds for the whole initiation.
+    window_summarised
+        True for one term of a Gaussian sum made from the window's posterior
+        (:func:`~fgdoppler.estimators.ambiguity.posterior_hypotheses`):
+        ``x_end``/``P_end`` then summarise the window's measurements, and
+        trackers start at ``t_end`` from that Gaussian instead of solving the
+        window again.
     """
 
     method: str
@@ -270,6 +276,7 @@ class Initiation(Judged):
     wall_time: float = 0.0
     #: True if a half plane restricted the search (no mirror ambiguity).
     half_plane: bool = False
+    window_summarised: bool = False
     #: The same initiation in the frame it was computed in, with that frame (see :meth:`in_frame_of`).
     computed_in: tuple[Frame, Initiation] | None = field(default=None, repr=False, compare=False)
 

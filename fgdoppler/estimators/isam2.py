@@ -48,7 +48,7 @@ from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import ISAM2Settings, SmootherSettings
 from fgdoppler.estimators.smoother import solve_smoother
 from fgdoppler.estimators.verdict import NOT_CONVERGED, Event
-from fgdoppler.estimators.window import feed_from_window_start
+from fgdoppler.estimators.window import feed_from_window_start, start_prior
 from fgdoppler.factors import X, absolute_linear_factor
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import check_channels
@@ -371,8 +371,11 @@ class ISAM2Tracker:
         n = len(self.times)
         best = self.isam.calculateBestEstimate()
         start = np.array([best.atVector(X(j)) for j in range(n)])
+        if not any(sd.channels.size for sd in self.scans):  # a prior and motion only: linear, solved already
+            covs = np.array([self.isam.marginalCovariance(X(j)) for j in range(n)]) if covariances else None
+            return start, covs
         lm = SmootherSettings(huber_k=self.settings.huber_k, max_iterations=self.settings.final_passes,
-                              covariances=covariances, reinitiate=False)
+                              covariances=covariances, reinitiate=False, region_bound=False)
         sol = solve_smoother(self.kept_measurements(), self.tracking_model, start, lm, prior=self.prior,
                              times=np.asarray(self.times), progress=prefixed(progress, "isam2 final smoothing"))
         self.final_passes = sol.iterations
@@ -402,7 +405,7 @@ def run_isam2(
     settings = settings or ISAM2Settings()
     check_channels(model.observation, measurements)
     t_begin = time.perf_counter()
-    tracker = ISAM2Tracker(model, settings, model.prior())
+    tracker = ISAM2Tracker(model, settings, start_prior(model, init))
     times, states, covs = feed_from_window_start(tracker, model, measurements, init, tracker.events,
                                                  huber_k=settings.huber_k, progress=progress, name="isam2")
     n_online = len(tracker.relinearized)

@@ -89,8 +89,9 @@ LOST = 0.8
 SPEED_FACTOR = 2.0
 #: A track farther than this many sensor extents from every sensor is implausible.
 REMOTE_FACTOR = 100.0
-#: The smoother more uncertain than a filter by this factor (variance, in some direction) at the last time.
-COVARIANCE_RATIO = 9.0
+#: The smoother more uncertain than a filter by this factor (variance, in some direction) at the last time:
+#: the filter claims less than half the smoother's standard deviation from the same data.
+COVARIANCE_RATIO = 4.0
 #: Fewer measurements than the paper's initiation window make a track doubtful.
 MIN_MEASUREMENTS = 20
 #: How far (m, m/s) a smoothed track may start outside the zone before it contradicts it.

@@ -14,17 +14,22 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from types import MappingProxyType
 
-from fgdoppler.estimators.ambiguity import Resolution, hypotheses, resolve
+import numpy as np
+from numpy.typing import NDArray
+
+from fgdoppler.estimators.ambiguity import Resolution, hypotheses, posterior_hypotheses, resolve
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.fixed_lag import run_fixed_lag
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate
 from fgdoppler.estimators.isam2 import run_isam2
 from fgdoppler.estimators.judge import judge
+from fgdoppler.estimators.particle import run_particle
 from fgdoppler.estimators.results import TrackResult
 from fgdoppler.estimators.settings import (
     EKFSettings,
     FixedLagSettings,
     ISAM2Settings,
+    ParticleSettings,
     SmootherSettings,
     TrackerSettings,
 )
@@ -78,6 +83,9 @@ ESTIMATORS: Mapping[str, EstimatorInfo] = MappingProxyType({
                                summary="fixed-lag smoother: each state estimated lag seconds after its time"),
     "smoother": EstimatorInfo(name="smoother", run=run_smoother, settings=SmootherSettings, resolution="cost",
                               online=False, summary="offline smoother: the whole recording by Levenberg-Marquardt"),
+    "particle": EstimatorInfo(name="particle", run=run_particle, settings=ParticleSettings, resolution="native",
+                              online=True,
+                              summary="particle filter: the posterior by sequential Monte Carlo (resample-move)"),
 })
 
 #: Old names still accepted (the documentation used them), with a DeprecationWarning.
@@ -148,8 +156,8 @@ def run_estimator(
                               settings, resolve_ambiguity=resolve_ambiguity, verify=verify, reference=local_ref,
                               progress=progress)
         return local.transformed(frame, to_world=True)
-    hyps = hypotheses(init) if (resolve_ambiguity and init.ambiguous) else [init]
-    result = _solve(info, measurements, model, hyps, settings, progress)
+    hyps, weights = _hypotheses(info, measurements, model, init, settings) if resolve_ambiguity else ([init], None)
+    result = _solve(info, measurements, model, hyps, settings, progress, weights)
     if verify and reference is None and result.primary.kind != "smoothed":
         ref_settings = SmootherSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k)
         reference = run_estimator("smoother", measurements, model, init, ref_settings,
@@ -157,32 +165,54 @@ def run_estimator(
     if result.primary.kind == "smoothed" or not verify:
         reference = None
     half = init.half_plane
-    return _with_initiation_reasons(judge(result, measurements, model, settings, reference, half_plane=half), hyps[0])
+    judged = judge(result, measurements, model, settings, reference, half_plane=half)
+    return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
+
+
+def _nonlinear(init: Initiation) -> bool:
+    return any(r.code == "nonlinear" and r.status != "ok" for r in init.reasons)
+
+
+def _hypotheses(info: EstimatorInfo, measurements: Measurements, model: TrackingModel, init: Initiation,
+                settings: TrackerSettings) -> tuple[list[Initiation], NDArray[np.float64] | None]:
+    """Where to start from: the initiation, its distinct solutions, or the terms of its posterior's Gaussian sum."""
+    if info.resolution == "native":  # the estimator carries every solution itself
+        return [init], None
+    k = getattr(settings, "components", 1)
+    if info.resolution == "likelihood" and k > 1 and _nonlinear(init) and model.zone is not None:
+        try:
+            return posterior_hypotheses(init, measurements, model, k, huber_k=settings.huber_k)
+        except ValueError:  # nothing in the zone explains the window: keep the initiation's own answer
+            pass
+    return (hypotheses(init) if init.ambiguous else [init]), None
 
 
 def _solve(info: EstimatorInfo, measurements: Measurements, model: TrackingModel, hyps: list[Initiation],
-           settings: TrackerSettings, progress: Progress | None = None) -> TrackResult:
+           settings: TrackerSettings, progress: Progress | None = None,
+           weights: NDArray[np.float64] | None = None) -> TrackResult:
     if len(hyps) == 1:
         return info.run(measurements, model, hyps[0], settings, progress=progress)
-    return resolve(info.run, info.resolution, measurements, model, hyps, settings, progress)
+    return resolve(info.run, info.resolution, measurements, model, hyps, settings, progress, weights)
 
 
 #: Initiation findings about its covariance only, which an offline smoother does not use: informational there.
 START_COVARIANCE_FINDINGS = frozenset({"nonlinear"})
 
 
-def _with_initiation_reasons(result: TrackResult, init: Initiation) -> TrackResult:
+def _with_initiation_reasons(result: TrackResult, init: Initiation, *, native: bool = False) -> TrackResult:
     """The track's reasons with those of the initiation it started from.
 
     An ambiguity resolved by the track is not one; a finding about the
     start covariance (:data:`START_COVARIANCE_FINDINGS`) stays doubtful for a
-    filter, which carries that covariance on, and is informational for the
-    offline smoother, which re-solves from all the data.
+    filter that carries that covariance on, and is informational for the
+    offline smoother, which re-solves from all the data, and for a tracker
+    that started from the Gaussian sum of the window's posterior instead, or
+    carries the posterior itself (``native``: the particle estimator).
     """
-    smoothed = result.primary.kind == "smoothed"
+    informational = native or result.primary.kind == "smoothed" or init.window_summarised
     inherited = tuple(
         Reason(code=f"initiation-{r.code}",
-               status="ok" if (smoothed and r.code in START_COVARIANCE_FINDINGS) else r.status,
+               status="ok" if (informational and r.code in START_COVARIANCE_FINDINGS) else r.status,
                message=f"initiation: {r.message}")
         for r in init.reasons if r.code != "ambiguous")
     return replace(result, reasons=inherited + result.reasons) if inherited else result

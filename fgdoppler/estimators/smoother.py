@@ -50,6 +50,7 @@ from fgdoppler.models.observation import DopplerModel, check_channels
 from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.progress import Progress, advance, prefixed, start_task
+from fgdoppler.zone import Zone
 
 __all__ = ["SmootherSolution", "initial_trajectory", "rts_smooth", "run_smoother", "solve_smoother"]
 
@@ -106,8 +107,10 @@ def _scans_at(meas: Measurements, times: FloatArray) -> Scans:
 
 class _Problem:
     def __init__(self, model: TrackingModel, meas: Measurements, huber_k: float | None,
-                 prior: tuple[FloatArray, FloatArray] | None, times: FloatArray | None = None) -> None:
+                 prior: tuple[FloatArray, FloatArray] | None, times: FloatArray | None = None,
+                 wall: tuple[Zone, FloatArray] | None = None) -> None:
         self.model = model.observation
+        self.wall = wall  # (zone, whitening [position, position, speed]) on the first state
         self.meas = meas
         self.huber_k = huber_k
         self.scans = meas.scans() if times is None else _scans_at(meas, times)
@@ -132,6 +135,11 @@ class _Problem:
         self._damp = np.zeros((self.n, 4))
 
     def cost(self, states: FloatArray) -> float:
+        """The objective: data, motion, weak prior and zone wall."""
+        return self.data_cost(states) + self.wall_cost(states)
+
+    def data_cost(self, states: FloatArray) -> float:
+        """The objective without the zone wall."""
         h = self.model.predict(states[self.scan_of], self.meas.pair)
         rho = huber_rho((self.meas.doppler - h) / self.meas.sigma, self.huber_k)
         c = float(np.sum(rho)) + float(np.sum(self.motion.residuals(states, self.times) ** 2))
@@ -140,14 +148,30 @@ class _Problem:
             c += float(e @ e)
         return c
 
-    def system(self, states: FloatArray, lam: float) -> gtsam.GaussianFactorGraph:
+    def wall_rows(self, states: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Whitened wall error of the first state and its Jacobian (zero inside the zone)."""
+        if self.wall is None:
+            return np.zeros(3), np.zeros((3, 4))
+        zone, w = self.wall
+        e, J = zone.excess(states[0])
+        return e / w, J / w[:, None]
+
+    def wall_cost(self, states: FloatArray) -> float:
+        e, _ = self.wall_rows(states)
+        return float(e @ e)
+
+    def system(self, states: FloatArray, lam: float, *, wall: bool = True) -> gtsam.GaussianFactorGraph:
         """The damped linear system in delta coordinates, one JacobianFactor per scan.
 
         Every scan's block has rows ``[motion (4); measurements (padded to the
         largest scan with zero rows, which add nothing); damping (4)]``; all
         blocks are filled in one vectorised pass and only the factor
-        construction loops over scans.
+        construction loops over scans.  The zone wall's rows join the first
+        block where the wall is active (``wall``; the covariances leave them
+        out: the wall bounds the solution, it does not measure it).
         """
+        e_wall, J_wall = self.wall_rows(states) if wall else (np.zeros(3), np.zeros((3, 4)))
+        active = bool(np.any(e_wall != 0.0))
         n, m = self.n, self.m_max
         lin = linearize_rows(self.model, states[self.scan_of], self.meas.pair, self.meas.doppler,
                              self.meas.sigma, self.huber_k)
@@ -159,6 +183,8 @@ class _Problem:
             diag[:-1] += np.sum(self.Ap**2, axis=1)
         if self.prior is not None:
             diag[0] += np.sum(self.prior[0] ** 2, axis=0)
+        if active:
+            diag[0] += np.sum(J_wall**2, axis=0)
         damp = np.sqrt(lam * np.maximum(diag, 1e-12))
         self._damp = damp
         rows = 8 + m
@@ -180,6 +206,9 @@ class _Problem:
         if self.prior is not None:
             first_rows.append(self.prior[0])
             first_b.append(self.prior[1] - self.prior[0] @ states[0])
+        if active:
+            first_rows.append(J_wall)
+            first_b.append(-e_wall)
         A0 = np.vstack(first_rows)
         gfg.add(gtsam.JacobianFactor(keys[0], A0, np.concatenate(first_b), gtsam.noiseModel.Unit.Create(A0.shape[0])))
         for k in range(1, n):
@@ -241,13 +270,18 @@ def solve_smoother(
     check_channels(model.observation, measurements)
     pr = None if prior is None else (np.asarray(prior[0], float), np.asarray(prior[1], float))
     ts = None if times is None else np.asarray(times, dtype=float)
-    prob = _Problem(model, measurements, settings.huber_k, pr, ts)
+    wall = None
+    if settings.region_bound and model.zone is not None:
+        sp, sv = settings.wall_sigma
+        wall = (model.zone, np.array([sp, sp, sv]))
+    prob = _Problem(model, measurements, settings.huber_k, pr, ts, wall)
     x = np.array(initial, dtype=float).reshape(-1, 4)
     if x.shape[0] != prob.n:
         raise ValueError(f"{x.shape[0]} initial states for {prob.n} measurement times")
     start_task(progress, "Levenberg-Marquardt", None)
     x, cost, it, stop, notes = _levenberg_marquardt(prob, x, settings.max_iterations, progress)
     reasons = [] if stop is None else [Reason(code="not-converged", status="doubtful", message=stop)]
+    reasons += _boundary_reasons(prob, x, settings.max_iterations)
     covs = None
     if settings.covariances:
         covs, problem = _covariances(prob, x)
@@ -301,10 +335,40 @@ def _levenberg_marquardt(prob: _Problem, x: FloatArray, max_iterations: int, pro
     return x, cost, it, f"LM reached {max_iterations} iterations without converging", notes
 
 
-def _covariances(prob: _Problem, x: FloatArray) -> tuple[FloatArray | None, str]:
-    """Marginal covariances of the undamped system at ``x``, or ``None`` and why not."""
+def _boundary_reasons(prob: _Problem, x: FloatArray, max_iterations: int) -> list[Reason]:
+    """A ``boundary`` finding when the zone wall holds the first state: a likelihood-ratio test of the wall.
+
+    As in the initiation: the solution is re-solved without the wall from
+    where it stopped; ``"doubtful"`` when that lowers the objective by more
+    than the χ²₁ 95 % quantile (the data prefer a start outside the zone),
+    informational otherwise.
+    """
+    if prob.wall_cost(x) == 0.0:
+        return []
+    inside = prob.data_cost(x)
+    wall, prob.wall = prob.wall, None
     try:
-        _, covs = prob.solve(prob.system(x, 0.0), covariances=True)
+        free, free_cost, *_ = _levenberg_marquardt(prob, x, max_iterations)
+    finally:
+        prob.wall = wall
+    assert wall is not None
+    excess, _ = wall[0].excess(x[0])
+    gain = inside - free_cost
+    limit = float(chi2.ppf(0.95, 1))
+    held = ("the track's first state is held at the zone's boundary (excess along, across, speed: "
+            + ", ".join(f"{v:.3g}" for v in excess) + f"); without the bound the cost is {free_cost:.2f} "
+            f"instead of {inside:.2f}, {np.linalg.norm(free[0, :2] - x[0, :2]) / 1e3:.1f} km away")
+    if gain > limit:
+        return [Reason(code="boundary", status="doubtful", message=(
+            f"{held}: the data prefer a start outside the zone (lower by {gain:.1f} > {limit:.2f}); widen the "
+            "zone (--zone, --speed-max)"))]
+    return [Reason(code="boundary", status="ok", message=f"{held}: the data do not prefer a start outside it")]
+
+
+def _covariances(prob: _Problem, x: FloatArray) -> tuple[FloatArray | None, str]:
+    """Marginal covariances of the undamped system at ``x`` (without the zone wall), or ``None`` and why not."""
+    try:
+        _, covs = prob.solve(prob.system(x, 0.0, wall=False), covariances=True)
     except RuntimeError as exc:
         return None, first_line(exc)
     assert covs is not None

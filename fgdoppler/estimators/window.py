@@ -72,6 +72,15 @@ def window_start(model: TrackingModel, window: Measurements, init: Initiation, *
     return states, None
 
 
+def start_prior(model: TrackingModel, init: Initiation) -> tuple[FloatArray, FloatArray] | None:
+    """The prior of a streaming tracker's first state: the summarised window, or the model's weak prior."""
+    if init.window_summarised:
+        if init.P_end is None:
+            raise ValueError("a summarised window needs its covariance P_end")
+        return np.asarray(init.x_end, dtype=float), np.asarray(init.P_end, dtype=float)
+    return model.prior()
+
+
 class StreamingTracker(Protocol):
     """What :func:`feed_from_window_start` needs from a tracker (iSAM2 and fixed-lag implement it)."""
 
@@ -91,7 +100,10 @@ def feed_from_window_start(
 
     A failed LM start is recorded in ``events`` (the tracker's list).
     ``progress`` gets a task ``name`` with one step for the window and one
-    per later scan.
+    per later scan.  A term of a Gaussian sum (``init.window_summarised``)
+    starts with one state at ``t_end`` instead, with no measurements: the
+    tracker holds that term as the prior of its first state
+    (:func:`start_prior`).
     Returns the filtered ``(times, states, covariances)`` from the window's end on.
     """
     window, stream = split_window(measurements, init.t_end)
@@ -101,7 +113,14 @@ def feed_from_window_start(
     ws = window.scans()
     ss = stream.scans()
     start_task(progress, name, len(ss) + (1 if len(ws) else 0))
-    if len(ws):
+    if init.window_summarised:
+        x, P = tracker.add_window(np.array([init.t_end]), [np.empty(0, dtype=np.intp)], [np.empty(0)],
+                                  [np.empty(0)], np.asarray(init.x_end, dtype=float)[None])
+        times.append(float(init.t_end))
+        states.append(x)
+        covs.append(P)
+        advance(progress)
+    elif len(ws):
         start, note = window_start(model, window, init, huber_k=huber_k, max_iterations=max_iterations)
         if note:
             events.append(Event(time=init.t_start, message=note))

@@ -93,6 +93,27 @@ class DopplerModel:
         assert dp is not None and dv is not None
         return h, np.concatenate([dp, dv], axis=-1)
 
+    def predict_along(self, x0: ArrayLike, times: ArrayLike, channels: ArrayLike) -> FloatArray:
+        r"""Doppler ``(n, m)`` of constant-velocity tracks from states ``x0`` ``(n, 4)`` at ``times`` ``(m,)``.
+
+        Row ``i`` is track ``i`` (position :math:`\mathbf p_0 + t\mathbf v`)
+        seen by pair ``channels[j]`` at ``times[j]``; NaN where a track passes
+        through a sensor (no exception: a particle or grid node there is
+        simply impossible).
+        """
+        x = np.asarray(x0, dtype=float).reshape(-1, 4)
+        t = np.asarray(times, dtype=float).reshape(-1)
+        c = np.asarray(channels, dtype=np.intp).reshape(-1)
+        if c.size and (c.min() < 0 or c.max() >= self.geometry.n_pairs):
+            raise ValueError(f"pair index out of range for a geometry of {self.geometry.n_pairs} pair(s)")
+        vel = x[:, None, 2:]
+        pos = x[:, None, :2] + t[None, :, None] * vel
+        h, _, _, mask = _terms(pos, vel, self.geometry.tx[c][None], self.geometry.rx[c][None], jacobian=False,
+                               singular="mask")
+        if mask is not None:
+            h = np.where(mask, np.nan, h)
+        return h
+
     def scalar(self, state: list[float], channel: int) -> tuple[float, list[float]]:
         """Doppler of one pair at one state and its Jacobian row, in plain floats (no checks on ``channel``).
 

@@ -88,12 +88,16 @@ def test_an_initiation_with_an_untrustworthy_covariance_is_not_ok(case: str, x: 
         assert len(flagged) == len(runs)
 
 
-def test_the_offline_smoother_keeps_the_finding_informational() -> None:
+def test_the_finding_stays_doubtful_only_for_a_filter_that_carries_the_covariance_on() -> None:
     sc = fd.paper_scenario("a", 5e3)
     sim = fd.simulate(sc, np.random.default_rng(3))
     init = fd.initiate(sim.measurements.first_per_pair(10), sc.geometry)
     assert any(r.code == "nonlinear" and r.status == "doubtful" for r in init.reasons)
-    smoothed = fd.run_estimator("smoother", sim.measurements, sc.geometry, init)
-    filtered = fd.run_estimator("ekf", sim.measurements, sc.geometry, init, verify=False)
-    assert [r.status for r in smoothed.reasons if r.code == "initiation-nonlinear"] == ["ok"]
-    assert [r.status for r in filtered.reasons if r.code == "initiation-nonlinear"] == ["doubtful"]
+
+    def inherited(name: str, settings: fd.TrackerSettings | None = None) -> list[str]:
+        r = fd.run_estimator(name, sim.measurements, sc.geometry, init, settings, verify=False)
+        return [x.status for x in r.reasons if x.code == "initiation-nonlinear"]
+
+    assert inherited("smoother") == ["ok"]  # re-solves from all the data
+    assert inherited("ekf") == ["ok"]  # started from the Gaussian sum of the window's posterior
+    assert inherited("ekf", fd.EKFSettings(components=1)) == ["doubtful"]  # carries the covariance on

@@ -103,8 +103,10 @@ def test_consistent_well_observed_runs_are_ok(case: str, x: float) -> None:
         init = fd.initiate(sim.measurements.first_per_pair(10), scen.geometry)
         ref = fd.run_estimator("smoother", sim.measurements, scen.geometry, init)
         ok["smoother"] += ref.status == "ok"
-        for name in ("ekf", "isam2", "fixed-lag"):
-            ok[name] += fd.run_estimator(name, sim.measurements, scen.geometry, init, reference=ref).status == "ok"
+        for name in ok:
+            if name != "smoother":
+                ok[name] += fd.run_estimator(name, sim.measurements, scen.geometry, init,
+                                             reference=ref).status == "ok"
     assert all(n >= 0.95 * runs for n in ok.values()), ok
 
 

@@ -1,0 +1,284 @@
+"""Accuracy under marginal observability: every fgdoppler estimator against FilterPy's and Stone Soup's filters.
+
+The paper's six scenarios, ``--runs`` seeded recordings each.  Every run is
+initiated once by fgdoppler (LM, 10 measurements per pair); the peers
+(:mod:`benchmarks._peers`: FilterPy's EKF, UKF and URTS; Stone Soup's EKF
+and UKF smoothers when its extra is installed) start from that initiation's state and covariance
+at the end of its window, exactly where fgdoppler's EKF starts.  Per
+scenario and estimator:
+
+* position RMSE over runs at each truth time, averaged over t ≥ 5 s (m);
+* NEES averaged over runs at each time, then over t ≥ 10 s, with the 95 %
+  band for that many runs;
+* median run time (s): the estimator alone (for fgdoppler, its
+  ``wall_time``; the verdict's reference smoother is shared and not counted);
+* how many runs each verdict got (fgdoppler) or failed to run (peers);
+* the deterministic-CV CRLB of the position for filtering and smoothing,
+  averaged over the same times.
+
+Then the goals of the accuracy issue are checked on the table.
+
+Run: ``python -m benchmarks.bench_accuracy --runs 100 --seed 2026`` (a few
+minutes on 2 cores); results go to ``output/bench_accuracy/`` (JSON and a
+Markdown table).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+import fgdoppler as fd
+from benchmarks._common import Row
+from fgdoppler.analysis.bounds import crlb_deterministic
+from fgdoppler.analysis.metrics import errors, nees, nees_band, rmse
+
+FloatArray = NDArray[np.float64]
+
+OURS: tuple[str, ...] = tuple(fd.ESTIMATORS)
+ONLINE: tuple[str, ...] = tuple(n for n, info in fd.ESTIMATORS.items() if info.online)
+T_RMSE = 5.0
+T_NEES = 10.0
+
+
+def _on_grid(truth_t: FloatArray, t: FloatArray, x: FloatArray, P: FloatArray, truth: FloatArray,
+             ok: NDArray[np.bool_] | None = None) -> tuple[FloatArray, FloatArray]:
+    """Squared position error and NEES on the truth time grid (NaN where the estimator has no state)."""
+    se = np.full(truth_t.size, np.nan)
+    ne = np.full(truth_t.size, np.nan)
+    idx = np.searchsorted(truth_t, t)
+    hit = (idx < truth_t.size) & (np.abs(truth_t[np.clip(idx, 0, truth_t.size - 1)] - t) < 1e-9)
+    if ok is not None:
+        hit &= ok
+    if not np.any(hit):
+        return se, ne
+    finite = np.all(np.isfinite(x[hit]), axis=1)
+    i = idx[hit][finite]
+    xs, Ps = x[hit][finite], P[hit][finite]
+    se[i] = errors(xs, truth[i])[0]
+    with np.errstate(all="ignore"):
+        try:
+            ne[i] = nees(xs, Ps, truth[i])
+        except np.linalg.LinAlgError:
+            ne[i] = np.nan
+    return se, ne
+
+
+def one_run(args: tuple[int, int, int]) -> dict[str, Any]:
+    """Simulate, initiate and run every estimator and peer on run ``r`` of scenario ``s``."""
+    from benchmarks._peers import run_peers
+
+    s, r, seed = args
+    scen = fd.paper_scenarios()[s]
+    rng = np.random.default_rng(np.random.SeedSequence([seed, s, r]))
+    sim = fd.simulate(scen, rng)
+    model = fd.TrackingModel.of(scen.geometry)
+    m = sim.measurements
+    init = fd.initiate(m.first_per_pair(10), model)
+    tt, truth = sim.truth.times, sim.truth.states
+    out: dict[str, Any] = {}
+    reference = fd.run_estimator("smoother", m, model, init)
+    for name in OURS:
+        res = reference if name == "smoother" else fd.run_estimator(name, m, model, init, reference=reference)
+        e = res.primary
+        se, ne = _on_grid(tt, e.times, e.states, e.covariances, truth, e.cov_ok)
+        out[name] = {"se": se, "nees": ne, "seconds": res.wall_time, "status": str(res.status)}
+    if init.P_end is None:
+        return {"s": s, "r": r, "results": out, "peers_skipped": "initiation covariance indeterminate"}
+    try:
+        peers = run_peers(model, init, m)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        return {"s": s, "r": r, "results": out, "peers_skipped": str(exc).splitlines()[0]}
+    for name, (t, x, P, sec) in peers.items():
+        se, ne = _on_grid(tt, t, x, P, truth)
+        out[name] = {"se": se, "nees": ne, "seconds": sec, "status": "ran"}
+    return {"s": s, "r": r, "results": out}
+
+
+def _bounds(scen: fd.Scenario) -> tuple[FloatArray, FloatArray, FloatArray]:
+    sim = fd.simulate(scen, np.random.default_rng(0))
+    t = sim.truth.times
+    f = crlb_deterministic(scen.geometry, scen.x0, sim.measurements, t)
+    sm = crlb_deterministic(scen.geometry, scen.x0, sim.measurements, t, smoothing=True)
+    return t, np.sqrt(f[:, 0, 0] + f[:, 1, 1]), np.sqrt(sm[:, 0, 0] + sm[:, 1, 1])
+
+
+def _mean_after(x: FloatArray, t: FloatArray, t0: float) -> float:
+    sel = (t >= t0 - 1e-9) & np.isfinite(x)
+    return float(np.mean(x[sel])) if np.any(sel) else float("nan")
+
+
+def summarise(records: list[dict[str, Any]], runs: int) -> dict[str, Any]:
+    """Per scenario: RMSE, NEES, median time and verdict counts of every estimator, and the bounds."""
+    scens = fd.paper_scenarios()
+    table: dict[str, Any] = {}
+    for s, scen in enumerate(scens):
+        recs = [rec for rec in records if rec["s"] == s]
+        t, crlb_f, crlb_s = _bounds(scen)
+        row: dict[str, Any] = {"crlb_filter": _mean_after(crlb_f, t, T_RMSE),
+                               "crlb_smoother": _mean_after(crlb_s, t, T_RMSE), "estimators": {}}
+        names = list(dict.fromkeys(n for rec in recs for n in rec["results"]))
+        for name in names:
+            rs = [rec["results"][name] for rec in recs if name in rec["results"]]
+            se = np.array([x["se"] for x in rs])
+            ne = np.array([x["nees"] for x in rs])
+            statuses = [x["status"] for x in rs]
+            with np.errstate(all="ignore"):
+                nees_t = np.nanmean(ne, axis=0) if ne.size else np.full(t.size, np.nan)
+            row["estimators"][name] = {
+                "rmse": _mean_after(rmse(se), t, T_RMSE),
+                "median_error": _mean_after(np.nanmedian(np.sqrt(se), axis=0), t, T_RMSE),
+                "nees": _mean_after(nees_t, t, T_NEES),
+                "seconds": float(np.median([x["seconds"] for x in rs])),
+                "runs": len(rs),
+                "verdicts": {k: statuses.count(k) for k in sorted(set(statuses))},
+            }
+        row["skipped_peers"] = sum(1 for rec in recs if "peers_skipped" in rec)
+        table[scen.name] = row
+    return {"runs": runs, "nees_band": nees_band(runs), "scenarios": table}
+
+
+#: The resample-move particle filter of the accuracy issue (Stone Soup 1.9, 20,000 particles, uniform prior over
+#: the zone; 10 runs per scenario): time-averaged position RMSE (m) and its run time, 9-11 s per run.  Measured by
+#: the issue's authors; a Stone Soup particle filter rebuilt here (``_peers.run_stonesoup_pf``) collapses in a-45
+#: (RMSE 556-676 m), so goal 2 is checked against these published numbers rather than against a weaker rerun.
+ISSUE_PARTICLE_FILTER: dict[str, float] = {
+    "case a, start 5 km": 1111.0, "case a, start 25 km": 1895.0, "case a, start 45 km": 177.0,
+    "case b, start 5 km": 153.0, "case b, start 25 km": 1860.0, "case b, start 45 km": 1162.0}
+ISSUE_PARTICLE_FILTER_SECONDS = 9.0
+
+
+def goals(summary: dict[str, Any]) -> list[tuple[str, str, bool, str]]:
+    """The accuracy issue's goals 1-4 per scenario: (goal, scenario, met, numbers)."""
+    from benchmarks._peers import SMOOTHERS
+
+    out = []
+    hi = summary["nees_band"][1]
+    for name, row in summary["scenarios"].items():
+        est = row["estimators"]
+        r = {k: v["rmse"] for k, v in est.items()}
+        if "filterpy-ekf" in r:
+            best_peer = min(r["filterpy-ekf"], r["filterpy-ukf"])
+            out.append(("1: EKF <= plain EKF and UKF", name, r["ekf"] <= best_peer,
+                        f"ekf {r['ekf']:.0f} vs EKF {r['filterpy-ekf']:.0f} / UKF {r['filterpy-ukf']:.0f}"))
+            # the best of the online estimators that run in a tenth of the particle filter's time
+            fast = [n for n in ONLINE if est[n]["seconds"] <= ISSUE_PARTICLE_FILTER_SECONDS / 10] or list(ONLINE)
+            best_online = min(fast, key=lambda n: r[n])
+            pf = ISSUE_PARTICLE_FILTER.get(name, float("inf"))
+            best_filter = min(best_peer, pf)
+            in_time = est[best_online]["seconds"] <= ISSUE_PARTICLE_FILTER_SECONDS / 10
+            out.append(("2: best online <= best peer filter incl. PF, <= 1/10 PF time", name,
+                        r[best_online] <= best_filter and in_time,
+                        f"{best_online} {r[best_online]:.0f} in {est[best_online]['seconds']:.2f} s vs "
+                        f"{best_filter:.0f} (PF {pf:.0f} in {ISSUE_PARTICLE_FILTER_SECONDS:g} s)"))
+            smoothers = [n for n in SMOOTHERS if n in r]
+            best_sm = min(smoothers, key=lambda n: r[n])
+            out.append(("3: smoother <= best peer smoother", name, r["smoother"] <= r[best_sm],
+                        f"smoother {r['smoother']:.0f} vs {best_sm} {r[best_sm]:.0f}"))
+        if name in ("case a, start 45 km", "case b, start 5 km"):
+            ratio = r["smoother"] / row["crlb_smoother"]
+            out.append(("3: smoother <= 1.1 x smoothing CRLB", name, ratio <= 1.1, f"{ratio:.2f}"))
+        worst = max(OURS, key=lambda n: est[n]["nees"])
+        out.append(("4: NEES <= 2 x band's upper edge", name, est[worst]["nees"] <= 2 * hi,
+                    f"worst {worst} {est[worst]['nees']:.3g} (limit {2 * hi:.2f})"))
+    return out
+
+
+def markdown(summary: dict[str, Any], seed: int, wall: float) -> str:
+    """The table and the goals as Markdown."""
+    scen_names = list(summary["scenarios"])
+    short = [n.replace("case ", "").replace(", start ", "-").replace(" km", "") for n in scen_names]
+    names = list(dict.fromkeys(n for row in summary["scenarios"].values() for n in row["estimators"]))
+    lo, hi = summary["nees_band"]
+    lines = [f"{summary['runs']} runs per scenario, seed {seed}, {wall:.0f} s.  Position RMSE averaged over "
+             f"t >= {T_RMSE:g} s (m); NEES averaged over runs and t >= {T_NEES:g} s (95 % band {lo:.2f}-{hi:.2f}); "
+             "median run time (s).", "",
+             "| estimator | " + " | ".join(short) + " |", "|---|" + "---|" * len(short)]
+    for n in names:
+        cells = []
+        for sn in scen_names:
+            e = summary["scenarios"][sn]["estimators"].get(n)
+            cells.append("—" if e is None else f"{e['rmse']:,.0f}")
+        lines.append(f"| {n} | " + " | ".join(cells) + " |")
+    for key, label in (("crlb_filter", "filtering CRLB"), ("crlb_smoother", "smoothing CRLB")):
+        lines.append(f"| {label} | " + " | ".join(f"{summary['scenarios'][sn][key]:,.0f}" for sn in scen_names)
+                     + " |")
+    lines += ["", "| NEES | " + " | ".join(short) + " |", "|---|" + "---|" * len(short)]
+    for n in names:
+        lines.append(f"| {n} | " + " | ".join(
+            f"{summary['scenarios'][sn]['estimators'][n]['nees']:.3g}" for sn in scen_names) + " |")
+    lines += ["", "| median time (s) / verdicts | " + " | ".join(short) + " |", "|---|" + "---|" * len(short)]
+    for n in names:
+        cells = []
+        for sn in scen_names:
+            e = summary["scenarios"][sn]["estimators"][n]
+            v = e["verdicts"]
+            ver = " ".join(f"{k[0]}{c}" for k, c in v.items()) if set(v) != {"ran"} else ""
+            cells.append(f"{e['seconds']:.3f} {ver}".strip())
+        lines.append(f"| {n} | " + " | ".join(cells) + " |")
+    lines += ["", "| goal | scenario | met | numbers |", "|---|---|---|---|"]
+    for g, sn, met, detail in goals(summary):
+        lines.append(f"| {g} | {sn} | {'yes' if met else '**no**'} | {detail} |")
+    return "\n".join(lines) + "\n"
+
+
+def study(runs: int, seed: int, workers: int) -> tuple[dict[str, Any], float, list[dict[str, Any]]]:
+    """Run every (scenario, run); the summary, the wall time and the per-run records."""
+    tasks = [(s, r, seed) for s in range(len(fd.paper_scenarios())) for r in range(runs)]
+    t0 = time.perf_counter()
+    if workers > 1:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            records = list(pool.map(one_run, tasks, chunksize=4))
+    else:
+        records = [one_run(t) for t in tasks]
+    return summarise(records, runs), time.perf_counter() - t0, records
+
+
+def save_records(records: list[dict[str, Any]], path: Path) -> None:
+    """Per-run squared errors, NEES, times and verdicts as ``.npz`` (keys ``<field>_<s>_<name>``)."""
+    arrays: dict[str, np.ndarray] = {}
+    for s in sorted({rec["s"] for rec in records}):
+        recs = sorted((rec for rec in records if rec["s"] == s), key=lambda rec: rec["r"])
+        for name in dict.fromkeys(n for rec in recs for n in rec["results"]):
+            rs = [rec["results"].get(name) for rec in recs]
+            width = next(len(x["se"]) for x in rs if x is not None)
+            nan = np.full(width, np.nan)
+            arrays[f"se_{s}_{name}"] = np.array([nan if x is None else x["se"] for x in rs])
+            arrays[f"nees_{s}_{name}"] = np.array([nan if x is None else x["nees"] for x in rs])
+            arrays[f"seconds_{s}_{name}"] = np.array([np.nan if x is None else x["seconds"] for x in rs])
+            arrays[f"status_{s}_{name}"] = np.array(["" if x is None else x["status"] for x in rs])
+    np.savez_compressed(path, **arrays)
+
+
+def run() -> list[Row]:
+    """For ``python -m benchmarks``: 100 runs, seed 2026, one row per goal and scenario."""
+    summary, _wall, _ = study(100, 2026, 2)
+    return [Row(name=f"accuracy goal {g}, {sn}", value=detail, target="see issue", met=met)
+            for g, sn, met, detail in goals(summary)]
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(prog="python -m benchmarks.bench_accuracy")
+    p.add_argument("--runs", type=int, default=100)
+    p.add_argument("--seed", type=int, default=2026)
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--out", type=Path, default=Path("output/bench_accuracy"))
+    args = p.parse_args()
+    summary, wall, records = study(args.runs, args.seed, args.workers)
+    args.out.mkdir(parents=True, exist_ok=True)
+    save_records(records, args.out / f"accuracy_seed{args.seed}.npz")
+    text = markdown(summary, args.seed, wall)
+    (args.out / f"accuracy_seed{args.seed}.md").write_text(text)
+    (args.out / f"accuracy_seed{args.seed}.json").write_text(json.dumps(summary, indent=1))
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

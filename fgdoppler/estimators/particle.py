@@ -1,0 +1,519 @@
+r"""Particle estimator: the Bayesian posterior of a constant-velocity track by sequential Monte Carlo.
+
+Where the Doppler likelihood is a thin curved valley (far from the
+baseline, near it at the ends, a short window) no Gaussian describes the
+posterior, and every Gaussian estimator — EKF, UKF, iSAM2 — is
+overconfident there.  This estimator carries the posterior as weighted
+samples instead.
+
+The target moves at constant velocity (the model's process noise is tiny:
+:math:`q = 10^{-3}` m²/s³ moves a 30 s track by 3 m), so the posterior of
+the state at any time is the posterior of the state
+:math:`\mathbf x_a` at an *anchor* time mapped by :math:`\mathbf F(t - t_a)`.
+The particles are samples of :math:`\mathbf x_a`; the target density after
+the measurements :math:`z_{1:k}` since the anchor is
+
+.. math::
+
+    \pi_k(\mathbf x_a) \propto p(\mathbf x_a)\,
+        \exp\!\Big(-\tfrac12\sum_{j\le k}\rho\big((z_j - h_j(\mathbf F(t_j - t_a)\mathbf x_a))/\sigma_j\big)\Big),
+
+with :math:`\rho` the squared or Huber loss and :math:`p(\mathbf x_a)` the
+zone as support (the initiation's assumption) times the model's weak prior.
+This is iterated batch importance sampling (Chopin 2002):
+
+1. **Start** — the window's posterior :math:`\pi_0` by importance sampling
+   from a Gaussian mixture on the initiation's solutions (its estimate, its
+   alternatives, the grid's best candidates; covariances doubled in
+   standard deviation), resampled, then ``start_move_steps`` Metropolis
+   steps so the samples fill the curved valleys.
+2. **Each later scan** — every measurement is gated against the particles'
+   predictive distribution (mean and variance of :math:`h` over the
+   particles plus :math:`\sigma^2`, :class:`~fgdoppler.estimators.gating.NISGate`),
+   the accepted ones reweight the particles; when the effective sample
+   size falls below ``ess_threshold`` × N the particles are resampled
+   (systematic) and moved by ``move_steps`` random-walk Metropolis steps
+   targeting :math:`\pi_k`, each particle with the covariance of its own
+   cluster (the mixture component it descends from, so a mirror mode keeps
+   its own scale).
+3. **Estimates** — the weighted mean and covariance of
+   :math:`\mathbf F(t - t_a)\mathbf x_a`, plus the process noise
+   :math:`\mathbf Q(t - t_a)` accumulated since the anchor.
+
+A move needs the likelihood of every measurement since the anchor, so its
+cost grows with the span.  After ``max_span`` seconds the anchor moves to
+the current scan: the particles are propagated with process-noise samples
+and the older data are summarised by the moment-matched Gaussian of the
+propagated cloud (exact for a Gaussian posterior; by then the posterior of
+a recording this long is close to one).
+
+Random numbers come from ``numpy.random.default_rng(settings.seed)``: the
+same input and settings give the same track.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.special import logsumexp
+
+from fgdoppler.estimators.gating import NISGate
+from fgdoppler.estimators.initiation import Initiation
+from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.settings import ParticleSettings
+from fgdoppler.estimators.verdict import Event, Reason
+from fgdoppler.estimators.window import split_window
+from fgdoppler.geometry import Geometry
+from fgdoppler.measurements import Measurements
+from fgdoppler.models.observation import MeasurementModel, check_channels
+from fgdoppler.models.robust import huber_rho
+from fgdoppler.models.tracking import TrackingModel, as_tracking_model
+from fgdoppler.progress import Progress, advance, start_task
+
+__all__ = ["WindowPosterior", "run_particle", "window_posterior"]
+
+FloatArray = NDArray[np.float64]
+
+#: Rows of (particle, measurement) predictions evaluated at once (bounds the memory of a move).
+CHUNK_ROWS = 1 << 20
+#: Random-walk Metropolis scale for 4 dimensions (Roberts, Gelman & Gilks: 2.38²/d).
+RW_SCALE = 2.38**2 / 4
+
+
+def _predict_along(model: MeasurementModel, x: FloatArray, t: FloatArray, channels: NDArray[np.intp]) -> FloatArray:
+    """Predictions ``(n, m)`` along constant-velocity tracks; NaN where the model is undefined."""
+    along = getattr(model, "predict_along", None)
+    if along is not None:
+        return np.asarray(along(x, t, channels), dtype=float)
+    states = x[:, None, :] + np.concatenate([t[None, :, None] * x[:, None, 2:], np.zeros((1, t.size, 2))], -1)
+    return np.asarray(model.predict(states.reshape(-1, 4), np.tile(channels, x.shape[0])), dtype=float).reshape(
+        x.shape[0], t.size)
+
+
+@dataclass
+class _Data:
+    """The measurements since the anchor (times relative to it)."""
+
+    t: FloatArray
+    pair: NDArray[np.intp]
+    z: FloatArray
+    sigma: FloatArray
+
+    def add(self, t: FloatArray, pair: NDArray[np.intp], z: FloatArray, sigma: FloatArray) -> None:
+        self.t = np.concatenate([self.t, t])
+        self.pair = np.concatenate([self.pair, pair])
+        self.z = np.concatenate([self.z, z])
+        self.sigma = np.concatenate([self.sigma, sigma])
+
+
+class _Posterior:
+    """The particles of :math:`\\mathbf x_a`, their weights and log-posteriors, and the target they follow."""
+
+    def __init__(self, model: TrackingModel, settings: ParticleSettings, t_anchor: float, data: _Data) -> None:
+        self.model = model
+        self.settings = settings
+        self.t_anchor = t_anchor
+        self.data = data
+        self.gauss: tuple[FloatArray, FloatArray] | None = None  # moment-matched prior after re-anchoring
+        self.x = np.empty((0, 4))
+        self.logw = np.empty(0)
+        self.logpost = np.empty(0)
+        self.label = np.empty(0, dtype=np.intp)
+
+    # -- target -------------------------------------------------------------------------
+    def log_prior(self, x: FloatArray) -> FloatArray:
+        if self.gauss is not None:
+            m, Li = self.gauss
+            e = (x - m) @ Li.T
+            return -0.5 * np.einsum("ij,ij->i", e, e)
+        out = np.zeros(x.shape[0])
+        zone = self.model.zone
+        if zone is not None:
+            out[~zone.contains(x)] = -np.inf
+        prior = self.model.prior()
+        if prior is not None:
+            Li = np.linalg.inv(np.linalg.cholesky(prior[1]))
+            e = (x - prior[0]) @ Li.T
+            out -= 0.5 * np.einsum("ij,ij->i", e, e)
+        return out
+
+    def loglik(self, x: FloatArray, t: FloatArray, pair: NDArray[np.intp], z: FloatArray,
+               sigma: FloatArray) -> FloatArray:
+        """:math:`-\\tfrac12\\sum\\rho` of the given measurements for every row of ``x`` (``-inf`` if undefined)."""
+        out = np.empty(x.shape[0])
+        step = max(1, CHUNK_ROWS // max(t.size, 1))
+        for a in range(0, x.shape[0], step):
+            h = _predict_along(self.model.observation, x[a:a + step], t, pair)
+            r = (z - h) / sigma
+            with np.errstate(invalid="ignore"):
+                ll = -0.5 * huber_rho(r, self.settings.huber_k).sum(axis=1)
+            out[a:a + step] = np.where(np.isfinite(ll), ll, -np.inf)
+        return out
+
+    def log_target(self, x: FloatArray) -> FloatArray:
+        lp = self.log_prior(x)
+        ok = np.isfinite(lp)
+        out = np.full(x.shape[0], -np.inf)
+        if np.any(ok):
+            d = self.data
+            out[ok] = lp[ok] + self.loglik(x[ok], d.t, d.pair, d.z, d.sigma)
+        return out
+
+    # -- particle operations -------------------------------------------------------------
+    def weights(self) -> FloatArray:
+        return np.exp(self.logw - logsumexp(self.logw))
+
+    def ess(self) -> float:
+        w = self.weights()
+        return float(1.0 / np.sum(w * w))
+
+    def resample(self, rng: np.random.Generator) -> None:
+        """Systematic resampling to equal weights."""
+        n = self.x.shape[0]
+        c = np.cumsum(self.weights())
+        c[-1] = 1.0
+        idx = np.searchsorted(c, (rng.random() + np.arange(n)) / n)
+        self.x, self.logpost, self.label = self.x[idx], self.logpost[idx], self.label[idx]
+        self.logw = np.zeros(n)
+
+    def move(self, steps: int, rng: np.random.Generator) -> float:
+        """Random-walk Metropolis on the target, each cluster with its own covariance; mean acceptance."""
+        if steps == 0:
+            return float("nan")
+        chol = self._cluster_chol()
+        scale = RW_SCALE
+        accepted = []
+        for _ in range(steps):
+            eps = rng.standard_normal(self.x.shape)
+            prop = self.x + np.sqrt(scale) * np.einsum("nij,nj->ni", chol[self.label], eps)
+            lt = self.log_target(prop)
+            accept = np.log(rng.random(self.x.shape[0])) < lt - self.logpost
+            self.x[accept], self.logpost[accept] = prop[accept], lt[accept]
+            rate = float(np.mean(accept))
+            accepted.append(rate)
+            # keep the acceptance in the efficient range (a curved valley wants smaller steps)
+            scale *= 0.5 if rate < 0.15 else (1.5 if rate > 0.5 else 1.0)
+        return float(np.mean(accepted))
+
+    def _cluster_chol(self) -> FloatArray:
+        """Cholesky factor per cluster label ``(n_labels, 4, 4)`` of the particles' covariance in it."""
+        n_labels = int(self.label.max()) + 1
+        out = np.empty((n_labels, 4, 4))
+        w = self.weights()
+        everyone = _weighted_cov(self.x, w)
+        for k in range(n_labels):
+            sel = self.label == k
+            cov = _weighted_cov(self.x[sel], w[sel]) if np.count_nonzero(sel) >= 20 else everyone
+            out[k] = _safe_cholesky(cov, everyone)
+        return out
+
+    def moments(self, t: float) -> tuple[FloatArray, FloatArray]:
+        """Mean and covariance of the state at ``t``."""
+        m = self.model.motion
+        dt = t - self.t_anchor
+        xs = m.propagate(self.x, dt) if dt != 0 else self.x
+        w = self.weights()
+        mean = w @ xs
+        cov = _weighted_cov(xs, w)
+        if dt > 0:
+            cov = cov + m.Q(dt)
+        return mean, cov
+
+    def reanchor(self, t: float, rng: np.random.Generator) -> None:
+        """Move the anchor to ``t``: propagate with process noise, summarise the older data by a Gaussian."""
+        m = self.model.motion
+        dt = t - self.t_anchor
+        L = np.linalg.cholesky(m.Q(dt))
+        self.x = m.propagate(self.x, dt) + rng.standard_normal(self.x.shape) @ L.T
+        w = self.weights()
+        mean = w @ self.x
+        cov = _weighted_cov(self.x, w)
+        self.gauss = (mean, np.asarray(np.linalg.inv(_safe_cholesky(cov, cov)), dtype=float))
+        self.t_anchor = t
+        self.data = _Data(t=np.empty(0), pair=np.empty(0, dtype=np.intp), z=np.empty(0), sigma=np.empty(0))
+        self.logpost = self.log_prior(self.x)
+
+
+def _weighted_cov(x: FloatArray, w: FloatArray) -> FloatArray:
+    s = float(np.sum(w))
+    if x.shape[0] == 0 or s <= 0:
+        return np.eye(x.shape[1])
+    mean = w @ x / s
+    d = x - mean
+    return (d * (w / s)[:, None]).T @ d
+
+
+def _safe_cholesky(cov: FloatArray, fallback: FloatArray) -> FloatArray:
+    for c in (cov, fallback):
+        c = 0.5 * (c + c.T)
+        scale = max(float(np.max(np.abs(np.diag(c)))), 1e-12)
+        try:
+            return np.linalg.cholesky(c + 1e-10 * scale * np.eye(c.shape[0]))
+        except np.linalg.LinAlgError:
+            continue
+    return np.diag(np.sqrt(np.maximum(np.abs(np.diag(fallback)), 1e-6)))
+
+
+def _components(post: _Posterior, init: Initiation, window: _Data) -> list[tuple[FloatArray, FloatArray]]:
+    """Gaussian components of the start's proposal: the initiation's solutions and grid candidates."""
+    points = [init.x_start, *(a.state for a in init.alternatives), *(c.state for c in init.candidates)]
+    covs = [init.P_start, *(a.covariance for a in init.alternatives), *(None for _ in init.candidates)]
+    out: list[tuple[FloatArray, FloatArray]] = []
+    for x, P in zip(points, covs, strict=True):
+        x = np.asarray(x, dtype=float)
+        cov = np.asarray(P, dtype=float) if P is not None else _window_covariance(post, x, window)
+        if cov is not None and np.all(np.isfinite(cov)):
+            out.append((x, cov))
+    if not out:
+        zone_prior = post.model.prior()
+        if zone_prior is None:
+            raise ValueError("the particle estimator needs an initiation covariance or a zone to start from")
+        out.append((np.asarray(init.x_start, dtype=float), zone_prior[1]))
+    return out
+
+
+def _window_covariance(post: _Posterior, x: FloatArray, window: _Data) -> FloatArray | None:
+    """Inverse Fisher information of the window at ``x`` by central differences of the model."""
+    d = window
+    step = np.array([1.0, 1.0, 0.01, 0.01])
+    J = np.empty((d.t.size, 4))
+    for i in range(4):
+        e = np.zeros(4)
+        e[i] = step[i]
+        h = _predict_along(post.model.observation, np.stack([x + e, x - e]), d.t, d.pair)
+        if not np.all(np.isfinite(h)):
+            return None
+        J[:, i] = (h[0] - h[1]) / (2 * step[i])
+    Jw = J / d.sigma[:, None]
+    info = Jw.T @ Jw
+    s = np.linalg.svd(info, compute_uv=False)
+    if s[-1] <= s[0] * 1e-14:
+        return None
+    return np.linalg.inv(info)
+
+
+def _start(post: _Posterior, init: Initiation, rng: np.random.Generator) -> float:
+    """Sample the window's posterior (module docstring, step 1); returns the moves' acceptance rate."""
+    st = post.settings
+    comps = _components(post, init, post.data)
+    n, k = st.n_particles, len(comps)
+    inflate = 4.0  # doubled standard deviations: the proposal must cover the valley's curvature
+    chols = np.array([_safe_cholesky(inflate * P, inflate * P) for _, P in comps])
+    means = np.array([m for m, _ in comps])
+    label = rng.integers(0, k, n)
+    x = means[label] + np.einsum("nij,nj->ni", chols[label], rng.standard_normal((n, 4)))
+    # log of the mixture proposal density (equal component weights)
+    logq = np.empty((k, n))
+    for c in range(k):
+        sol = np.linalg.solve(chols[c], (x - means[c]).T).T
+        logq[c] = -0.5 * np.sum(sol * sol, axis=1) - np.sum(np.log(np.diag(chols[c])))
+    post.x, post.label = x, label
+    post.logpost = post.log_target(x)
+    post.logw = post.logpost - logsumexp(logq, axis=0)
+    if not np.any(np.isfinite(post.logw)):
+        raise ValueError("no start sample has a finite posterior: the window cannot be explained inside the zone")
+    post.resample(rng)
+    return post.move(st.start_move_steps, rng)
+
+
+def _window_posterior(measurements: Measurements, model: TrackingModel, init: Initiation,
+                      settings: ParticleSettings, rng: np.random.Generator) -> tuple[_Posterior, float]:
+    window, _ = split_window(measurements, init.t_end)
+    t0 = init.t_start
+    data = _Data(t=window.time - t0, pair=window.pair.astype(np.intp), z=window.doppler.copy(),
+                 sigma=window.sigma.copy())
+    post = _Posterior(model, settings, t0, data)
+    return post, _start(post, init, rng)
+
+
+@dataclass(frozen=True, kw_only=True)
+class WindowPosterior:
+    """Weighted samples of the initiation window's posterior (:func:`window_posterior`).
+
+    Attributes
+    ----------
+    t_start, t_end
+        The window's first and last measurement times.
+    states
+        Samples of the state at ``t_start`` ``(n, 4)``.
+    weights
+        Their normalised weights ``(n,)``.
+    acceptance
+        Mean Metropolis acceptance of the moves that spread them.
+    """
+
+    t_start: float
+    t_end: float
+    states: FloatArray
+    weights: FloatArray
+    acceptance: float
+
+    def at(self, t: float, model: TrackingModel) -> FloatArray:
+        """The samples propagated to time ``t`` (constant velocity, no process noise)."""
+        return model.motion.propagate(self.states, t - self.t_start)
+
+    def components(self, k: int, model: TrackingModel, seed: int = 0) -> list[tuple[float, FloatArray, FloatArray]]:
+        r"""A Gaussian sum of at most ``k`` terms at the window's end: ``(weight, mean, covariance)``, heaviest first.
+
+        The samples at :math:`t_\mathrm{end}` are clustered by k-means in
+        coordinates whitened by their overall covariance (so that metres and
+        metres per second weigh alike); each cluster gives a term with its
+        weight, weighted mean and covariance plus the process noise over the
+        window, :math:`\mathbf Q(t_\mathrm{end} - t_\mathrm{start})`.  A curved
+        valley becomes a chain of short, nearly straight pieces, each of which
+        a Kalman filter linearises well.  Clusters of fewer than 20 samples
+        are dropped (their weight goes to the others).
+        """
+        x = self.at(self.t_end, model)
+        w = self.weights
+        cov = _weighted_cov(x, w)
+        L = _safe_cholesky(cov, cov)
+        z = np.linalg.solve(L, (x - w @ x).T).T
+        labels = _kmeans(z, w, min(k, x.shape[0]), np.random.default_rng(seed))
+        Q = model.motion.Q(self.t_end - self.t_start)
+        out = []
+        for c in range(int(labels.max()) + 1):
+            sel = labels == c
+            if np.count_nonzero(sel) < 20:
+                continue
+            wc = float(np.sum(w[sel]))
+            if wc <= 0:
+                continue
+            out.append((wc, w[sel] @ x[sel] / wc, _weighted_cov(x[sel], w[sel]) + Q))
+        total = sum(c[0] for c in out)
+        return sorted(((wc / total, m, P) for wc, m, P in out), key=lambda c: -c[0])
+
+
+def _kmeans(z: FloatArray, w: FloatArray, k: int, rng: np.random.Generator, iterations: int = 25) -> NDArray[np.intp]:
+    """Weighted k-means (Lloyd) labels of the rows of ``z``, seeded by k-means++ on the weights."""
+    n = z.shape[0]
+    centres = [z[rng.choice(n, p=w / np.sum(w))]]
+    for _ in range(1, k):
+        d2 = np.min(np.sum((z[:, None, :] - np.array(centres)[None]) ** 2, axis=-1), axis=1) * w
+        if np.sum(d2) <= 0:
+            break
+        centres.append(z[rng.choice(n, p=d2 / np.sum(d2))])
+    C = np.array(centres)
+    labels = np.zeros(n, dtype=np.intp)
+    for it in range(iterations):
+        new = np.argmin(np.sum((z[:, None, :] - C[None]) ** 2, axis=-1), axis=1)
+        if it > 0 and np.array_equal(new, labels):
+            break
+        labels = new
+        for c in range(C.shape[0]):
+            sel = labels == c
+            if np.any(sel) and np.sum(w[sel]) > 0:
+                C[c] = w[sel] @ z[sel] / np.sum(w[sel])
+    return labels
+
+
+def window_posterior(measurements: Measurements, model: TrackingModel | Geometry, init: Initiation,
+                     settings: ParticleSettings | None = None) -> WindowPosterior:
+    """Sample the initiation window's posterior (the particle estimator's start, module docstring step 1).
+
+    Raises
+    ------
+    ValueError
+        If no start inside the zone explains the window.
+    """
+    model = as_tracking_model(model)
+    settings = settings or ParticleSettings()
+    post, rate = _window_posterior(measurements, model, init, settings, np.random.default_rng(settings.seed))
+    return WindowPosterior(t_start=init.t_start, t_end=init.t_end, states=post.x.copy(), weights=post.weights(),
+                           acceptance=rate)
+
+
+def run_particle(
+    measurements: Measurements,
+    model: TrackingModel,
+    init: Initiation,
+    settings: ParticleSettings | None = None,
+    *,
+    progress: Progress | None = None,
+) -> TrackResult:
+    """The particle estimator over a recording (module docstring); filtered estimates from the window's end on.
+
+    Raises
+    ------
+    ValueError
+        If the window cannot be explained by any start inside the zone.
+    """
+    settings = settings or ParticleSettings()
+    check_channels(model.observation, measurements)
+    t_begin = time.perf_counter()
+    rng = np.random.default_rng(settings.seed)
+    post, rate = _window_posterior(measurements, model, init, settings, rng)
+    _, stream = split_window(measurements, init.t_end)
+    events: list[Event] = []
+    gate = NISGate(settings.gate_probability, events)
+    rates = [rate]
+    scans = stream.scans()
+    start_task(progress, "particle", len(scans))
+    times, states, covs, loglik = [init.t_end], [], [], [0.0]
+    mean, cov = post.moments(init.t_end)
+    states.append(mean)
+    covs.append(cov)
+    total = 0.0
+    n_resample = 0
+    for k in range(len(scans)):
+        sl = scans.rows(k)
+        t = float(scans.times[k])
+        total += _update(post, gate, t, stream.pair[sl].astype(np.intp), stream.doppler[sl], stream.sigma[sl])
+        if post.ess() < settings.ess_threshold * settings.n_particles:
+            if t - post.t_anchor > settings.max_span:
+                post.reanchor(t, rng)
+            post.resample(rng)
+            rates.append(post.move(settings.move_steps, rng))
+            n_resample += 1
+        mean, cov = post.moments(t)
+        times.append(t)
+        states.append(mean)
+        covs.append(cov)
+        loglik.append(total)
+        advance(progress)
+    reasons: list[Reason] = []
+    finite = [r for r in rates if np.isfinite(r)]
+    events.append(Event(time=times[-1], message=(
+        f"{settings.n_particles} particles, {n_resample} resample-move steps, mean Metropolis acceptance "
+        f"{np.mean(finite) if finite else float('nan'):.2f}")))
+    return TrackResult(
+        estimator="particle",
+        settings=settings,
+        estimates=(Estimates.from_lists("filtered", times, states, covs),),
+        reasons=tuple(reasons),
+        events=tuple(events),
+        nis=gate.as_array(),
+        log_likelihood=np.array(loglik),
+        iterations=n_resample,
+        wall_time=time.perf_counter() - t_begin,
+    )
+
+
+def _update(post: _Posterior, gate: NISGate, t: float, pair: NDArray[np.intp], z: FloatArray,
+            sigma: FloatArray) -> float:
+    """Gate and apply one scan; returns the log predictive likelihood of the accepted measurements."""
+    tr = np.full(pair.size, t - post.t_anchor)
+    h = _predict_along(post.model.observation, post.x, tr, pair)
+    w = post.weights()
+    ok = np.all(np.isfinite(h), axis=1)
+    wk = np.where(ok, w, 0.0)
+    wk = wk / max(float(np.sum(wk)), 1e-300)
+    hm = wk @ np.where(ok[:, None], h, 0.0)
+    hv = wk @ (np.where(ok[:, None], h, hm) - hm) ** 2
+    nis = (z - hm) ** 2 / (hv + sigma**2)
+    keep = np.array([gate.accept(t, int(c), float(v)) for c, v in zip(pair, nis, strict=True)], dtype=bool)
+    if not np.any(keep):
+        return 0.0
+    r = (z[keep] - h[:, keep]) / sigma[keep]
+    with np.errstate(invalid="ignore"):
+        ll = -0.5 * huber_rho(r, post.settings.huber_k).sum(axis=1)
+    ll = np.where(np.isfinite(ll), ll, -np.inf)
+    before = logsumexp(post.logw)
+    post.logw = post.logw + ll
+    post.logpost = post.logpost + ll
+    post.data.add(tr[keep], pair[keep], z[keep], sigma[keep])
+    norm = float(np.sum(np.log(sigma[keep] * np.sqrt(2 * np.pi))))
+    return float(logsumexp(post.logw) - before) - norm
