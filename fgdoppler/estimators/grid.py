@@ -198,7 +198,7 @@ def grid_costs(
 ) -> FloatArray:
     """Weighted residual cost of each candidate state, evaluated ``chunk`` candidates at a time.
 
-    The cost is :math:`\\sum_j \rho(r_j)` with :func:`huber_rho` (the sum of
+    The cost is :math:`\\sum_j \\rho(r_j)` with :func:`huber_rho` (the sum of
     squares without ``huber_k``).  Candidates whose trajectory passes through
     a sensor get ``inf`` (they cannot explain finite Doppler).
     """

@@ -107,7 +107,7 @@ class EKFSettings(GaussianSumSettings):
 
 @dataclass(frozen=True, kw_only=True)
 class ISAM2Settings(GaussianSumSettings):
-    """iSAM2 tracker.
+    r"""iSAM2 tracker.
 
     Parameters
     ----------
@@ -119,8 +119,9 @@ class ISAM2Settings(GaussianSumSettings):
     relinearize_position : float, default 10.0
         A Doppler factor is relinearised when its state has moved more than
         this (m) from the linearisation point.  With the Doppler curvature of
-        these geometries (|∂²h/∂p²| ≲ v/r² ≈ 3e-5 s⁻¹ m⁻¹ at 2 km) a 10 m move
-        changes the linearisation by ~1e-3 m/s, far below σ.
+        these geometries (:math:`|\partial^2 h/\partial p^2| \lesssim v/r^2`,
+        about 3e-5 s⁻¹ m⁻¹ at 2 km) a 10 m move changes the linearisation by
+        ~1e-3 m/s, far below σ.
     relinearize_velocity : float, default 0.1
         The same for velocity (m/s).
     relinearize_window : int, default 10

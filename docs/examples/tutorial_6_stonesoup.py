@@ -1,28 +1,33 @@
-# fgdoppler and Stone Soup
+"""
+fgdoppler and Stone Soup
+========================
 
-[Stone Soup](https://stonesoup.readthedocs.io) has predictors, updaters,
+`Stone Soup <https://stonesoup.readthedocs.io>`_ has predictors, updaters,
 particle filters, smoothers, metrics and plotting, but no bistatic Doppler
-model.  `fgdoppler.interop.stonesoup` (extra `fgdoppler[stonesoup]`:
-`pip install 'fgdoppler[stonesoup]'`) supplies the model, turns fgdoppler's
+model.  ``fgdoppler.interop.stonesoup`` (extra ``fgdoppler[stonesoup]``:
+``pip install 'fgdoppler[stonesoup]'``) supplies the model, turns fgdoppler's
 measurements into Stone Soup detections, fgdoppler's initiation into a Stone
 Soup prior, and tracks in either direction.  Nothing of Stone Soup is
 imported unless this module is.
 
 Two conventions differ and the bridge handles both:
 
-* **state order** — Stone Soup's constant-velocity state is `[x, vx, y, vy]`,
-  fgdoppler's `[x, y, vx, vy]`; `TO_STONESOUP` is the permutation (its own
+* **state order** — Stone Soup's constant-velocity state is ``[x, vx, y, vy]``,
+  fgdoppler's ``[x, y, vx, vy]``; ``TO_STONESOUP`` is the permutation (its own
   inverse);
 * **time** — Stone Soup uses datetimes; fgdoppler seconds.  Every function
-  takes an `epoch` (the datetime of t = 0).  Datetimes resolve microseconds,
-  so `to_track` keeps the exact seconds in the track's metadata and
-  `from_track` restores them.
+  takes an ``epoch`` (the datetime of t = 0).  Datetimes resolve microseconds,
+  so ``to_track`` keeps the exact seconds in the track's metadata and
+  ``from_track`` restores them.
+"""
 
-## 1. Data, initiation and a Stone Soup prior
-
-```python
+# %%
+# Data, initiation and a Stone Soup prior
+# ----------------------------------------
 import datetime as dt
+
 import numpy as np
+
 import fgdoppler as fd
 from fgdoppler.interop.stonesoup import detections, prior
 
@@ -38,37 +43,33 @@ dets = [d for d in detections(sim.measurements, scen.geometry, epoch, per_scan=T
 start = prior(init, epoch)          # GaussianState at the end of the initiation window
 print(len(dets), "scans after the window; the prior at", start.timestamp.time())
 print("model of the first scan:", dets[0].measurement_model.ndim_meas, "pairs")
-```
 
-Output:
-
-```text
-51 scans after the window; the prior at 00:00:04.500000
-model of the first scan: 2 pairs
-```
-
-`detections(..., per_scan=False)` (the default) gives one scalar detection
-per measurement instead, each with its own pair's model: the form for
-asynchronous pairs and for Stone Soup's data association.  A filter that
-updates detection by detection, predicting over zero time between the
-pairs of a scan, is exactly fgdoppler's EKF with its gate off (tested to
-1e-9 in `tests/test_interop_stonesoup.py`).  Stone Soup's Kalman smoothers
-need one prediction per time step, hence one detection per scan here.
-
-## 2. Stone Soup's filters and smoothers with fgdoppler's model
-
-```python
-from stonesoup.models.transition.linear import CombinedLinearGaussianTransitionModel, ConstantVelocity
+# %%
+# ``detections(..., per_scan=False)`` (the default) gives one scalar detection
+# per measurement instead, each with its own pair's model: the form for
+# asynchronous pairs and for Stone Soup's data association.  A filter that
+# updates detection by detection, predicting over zero time between the
+# pairs of a scan, is exactly fgdoppler's EKF with its gate off (equal to
+# 1e-9 in fgdoppler's tests).  Stone Soup's Kalman smoothers
+# need one prediction per time step, hence one detection per scan here.
+#
+# Stone Soup's filters and smoothers with fgdoppler's model
+# ---------------------------------------------------------
+from stonesoup.models.transition.linear import (
+    CombinedLinearGaussianTransitionModel,
+    ConstantVelocity,
+)
 from stonesoup.predictor.kalman import ExtendedKalmanPredictor, UnscentedKalmanPredictor
 from stonesoup.predictor.particle import ParticlePredictor
 from stonesoup.resampler.particle import ESSResampler
 from stonesoup.smoother.kalman import ExtendedKalmanSmoother, UnscentedKalmanSmoother
-from stonesoup.types.hypothesis import SingleHypothesis
 from stonesoup.types.array import StateVectors
+from stonesoup.types.hypothesis import SingleHypothesis
 from stonesoup.types.state import ParticleState
 from stonesoup.types.track import Track
 from stonesoup.updater.kalman import ExtendedKalmanUpdater, UnscentedKalmanUpdater
 from stonesoup.updater.particle import ParticleUpdater
+
 from fgdoppler.interop.stonesoup import TO_STONESOUP
 
 # the same continuous white-noise acceleration model: Stone Soup's ConstantVelocity(q) is fgdoppler's Q
@@ -94,36 +95,30 @@ rng = np.random.default_rng(1)
 cloud = rng.multivariate_normal(np.asarray(start.state_vector, dtype=float).ravel(),
                                 np.asarray(start.covar, dtype=float), 5000)
 particles = ParticleState(StateVectors(cloud.T), weight=np.full(5000, 1 / 5000), timestamp=start.timestamp)
-np.random.seed(1)  # Stone Soup's resampler draws from numpy's global generator
+np.random.seed(1)  # noqa: NPY002 -- Stone Soup's resampler draws from numpy's global generator
 pf = run(ParticlePredictor(transition), ParticleUpdater(measurement_model=None, resampler=ESSResampler()),
          particles)
 print(len(ekf), len(ukf_urts), len(pf), "states per track")
-```
 
-Output:
-
-```text
-52 52 52 states per track
-```
-
-## 3. fgdoppler's smoothers, compared with Stone Soup's metrics
-
-fgdoppler's results become Stone Soup tracks (`to_track`), and the truth a
-`GroundTruthPath`; Stone Soup's metric manager then scores every track the
-same way.  With one target and one track, the OSPA distance (p = 1, cut-off
-c) is the position error, capped at c.
-
-```python
+# %%
+# fgdoppler's smoothers, compared with Stone Soup's metrics
+# ---------------------------------------------------------
+#
+# fgdoppler's results become Stone Soup tracks (``to_track``), and the truth a
+# ``GroundTruthPath``; Stone Soup's metric manager then scores every track the
+# same way.  With one target and one track, the OSPA distance (p = 1, cut-off
+# c) is the position error, capped at c.
 from stonesoup.measures import Euclidean
 from stonesoup.metricgenerator.manager import MultiManager
 from stonesoup.metricgenerator.ospametric import OSPAMetric
 from stonesoup.types.groundtruth import GroundTruthPath, GroundTruthState
+
 from fgdoppler.interop.stonesoup import to_track
 
 smoother = fd.run_estimator("smoother", sim.measurements, model, init)
 fixed_lag = fd.run_estimator("fixed-lag", sim.measurements, model, init)
 truth = GroundTruthPath([GroundTruthState(x[TO_STONESOUP], timestamp=epoch + dt.timedelta(seconds=float(t)))
-                         for t, x in zip(sim.truth.times, sim.truth.states)])
+                         for t, x in zip(sim.truth.times, sim.truth.states, strict=True)])
 
 def mean_ospa(track, t_from=5.0):
     manager = MultiManager([OSPAMetric(c=10e3, p=1, measure=Euclidean(mapping=(0, 2)))])
@@ -136,70 +131,39 @@ tracks = {"Stone Soup EKF": ekf, "Stone Soup UKF": ukf, "Stone Soup particle fil
           "fgdoppler fixed-lag": to_track(fixed_lag, epoch), "fgdoppler smoother": to_track(smoother, epoch)}
 for name, track in tracks.items():
     print(f"{name:28s} mean OSPA over t >= 5 s: {mean_ospa(track):5.0f} m")
-```
 
-Output:
-
-```text
-Stone Soup EKF               mean OSPA over t >= 5 s:   109 m
-Stone Soup UKF               mean OSPA over t >= 5 s:   102 m
-Stone Soup particle filter   mean OSPA over t >= 5 s:   126 m
-Stone Soup EKF + RTS         mean OSPA over t >= 5 s:    54 m
-Stone Soup UKF + URTS        mean OSPA over t >= 5 s:    44 m
-fgdoppler fixed-lag          mean OSPA over t >= 5 s:    58 m
-fgdoppler smoother           mean OSPA over t >= 5 s:    50 m
-```
-
-One recording says little (the [accuracy benchmark](../reproduction.md)
-compares them over hundreds); the point here is that every track, from
-either library, is scored by the same code.
-
-## 4. Stone Soup's tracks in fgdoppler's metrics and plots
-
-`from_track` turns any Stone Soup track of Gaussian or particle states into
-an fgdoppler `TrackResult`, so fgdoppler's NEES, verdict machinery and plots
-apply to Stone Soup's output.
-
-```python
-import matplotlib
-matplotlib.use("Agg")
+# %%
+# One recording says little (the :doc:`accuracy benchmark </reproduction>`
+# compares them over hundreds); the point here is that every track, from
+# either library, is scored by the same code.
+#
+# Stone Soup's tracks in fgdoppler's metrics and plots
+# ----------------------------------------------------
+#
+# ``from_track`` turns any Stone Soup track of Gaussian or particle states into
+# an fgdoppler ``TrackResult``, so fgdoppler's NEES, verdict machinery and plots
+# apply to Stone Soup's output.
 import matplotlib.pyplot as plt
+
 from fgdoppler.analysis.metrics import nees
 from fgdoppler.interop.stonesoup import from_track
 from fgdoppler.plotting import plot_track
 
 urts = from_track(ukf_urts, epoch, estimator="stonesoup-urts", kind="smoothed").primary
 truth_at = sim.truth.at(urts.times)
-print("Stone Soup URTS: mean NEES %.1f over %d states (4 expected)"
-      % (np.mean(nees(urts.states, urts.covariances, truth_at)), len(urts)))
+mean_nees = np.mean(nees(urts.states, urts.covariances, truth_at))
+print(f"Stone Soup URTS: mean NEES {mean_nees:.1f} over {len(urts)} states (4 expected)")
 
-fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+fig, axes = plt.subplots(1, 2, figsize=(11, 4), layout="constrained")
 plot_track(urts.times, urts.states, scen.geometry, axes[0], covariances=urts.covariances,
            truth=truth_at, label="Stone Soup UKF + URTS")
 ours = smoother.primary
 plot_track(ours.times, ours.states, scen.geometry, axes[1], covariances=ours.covariances,
            truth=sim.truth.at(ours.times), label="fgdoppler smoother")
-fig.savefig("stonesoup_vs_fgdoppler.png", dpi=100)
-```
 
-Output:
-
-```text
-Stone Soup URTS: mean NEES 2.5 over 52 states (4 expected)
-```
-
-![Stone Soup's UKF + URTS and fgdoppler's smoother on the same recording](../img/stonesoup_vs_fgdoppler.png)
-
-## Reference
-
-* `BistaticDoppler(tx=..., rx=..., noise_covar=...)` — the measurement
-  model, one pair (`tx`, `rx` as `(x, y)`) or several (`2 × n` arrays, one
-  column per pair); `function` is vectorised over particle states,
-  `jacobian` is fgdoppler's analytic Jacobian.
-* `models(geometry, sigma)` — one single-pair model per pair.
-* `detections(measurements, geometry, epoch, per_scan=False)` and
-  `measurements_from(detections)` — to detections and back, exactly.
-* `prior(init, epoch)`, `to_track(result, epoch)`,
-  `from_track(track, epoch)`.
-
-See the [API reference](../api/interop.md).
+# %%
+# Reference
+# ---------
+# :mod:`fgdoppler.interop.stonesoup`: ``BistaticDoppler`` (the measurement
+# model, one pair or several), ``models``, ``detections`` and
+# ``measurements_from``, ``prior``, ``to_track`` and ``from_track``.

@@ -1,0 +1,60 @@
+"""Sphinx configuration: numpydoc API reference, MyST Markdown pages, executed sphinx-gallery tutorials.
+
+Maths is rendered to MathML at build time (``_ext/mathml.py``), so the site
+needs no network and no JavaScript to show it.  Build:
+``python -m sphinx -W -b html docs output/site`` (``-W``: warnings are errors).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE / "_ext"))
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+import fgdoppler  # noqa: E402
+
+project = "fgdoppler"
+author = "the fgdoppler developers"
+copyright = "2026, the fgdoppler developers"
+release = fgdoppler.__version__
+
+extensions = [
+    "sphinx.ext.autodoc",
+    "numpydoc",
+    "myst_parser",
+    "sphinx_gallery.gen_gallery",
+    "mathml",
+]
+source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
+exclude_patterns = ["_build", "examples/README.txt", "tutorials/*.ipynb", "tutorials/*.py", "tutorials/*.md5",
+                    "tutorials/*.codeobj.json", "tutorials/*.zip"]
+html_math_renderer = "mathml"
+html_theme = "furo"
+html_title = "fgdoppler"
+html_static_path = ["_static"]
+html_css_files = ["fgdoppler.css"]
+
+myst_enable_extensions = ["dollarmath", "amsmath"]
+myst_heading_anchors = 3
+
+autodoc_member_order = "bysource"
+autodoc_typehints = "none"  # numpydoc's Parameters sections carry the types
+autodoc_default_options = {"members": True, "show-inheritance": True}
+numpydoc_show_class_members = False
+numpydoc_class_members_toctree = False
+numpydoc_xref_param_type = False
+
+sphinx_gallery_conf = {
+    "examples_dirs": ["examples"],
+    "gallery_dirs": ["tutorials"],
+    "filename_pattern": r"/tutorial_",
+    "download_all_examples": False,
+    "remove_config_comments": True,
+    "matplotlib_animations": False,
+    "image_scrapers": ("matplotlib",),
+    "within_subsection_order": "FileNameSortKey",
+}

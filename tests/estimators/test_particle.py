@@ -1,0 +1,121 @@
+"""The particle estimator, its window posterior, and the Gaussian sum the trackers build from it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+import fgdoppler as fd
+from fgdoppler.estimators.ambiguity import _mixture
+from fgdoppler.estimators.particle import run_particle, window_posterior
+
+
+def _case(case: str, x: float, seed: int) -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation]:
+    scen = fd.paper_scenario(case, x)  # type: ignore[arg-type]
+    sim = fd.simulate(scen, np.random.default_rng(seed))
+    model = fd.TrackingModel.of(scen.geometry)
+    return sim, model, fd.initiate(sim.measurements.first_per_pair(10), model)
+
+
+def test_same_seed_same_track_other_seed_same_posterior() -> None:
+    """Bit-identical with one seed; with another, the same posterior up to Monte Carlo error."""
+    sim, model, init = _case("a", 45e3, 1)
+    a = run_particle(sim.measurements, model, init, fd.ParticleSettings(seed=3)).primary
+    b = run_particle(sim.measurements, model, init, fd.ParticleSettings(seed=3)).primary
+    c = run_particle(sim.measurements, model, init, fd.ParticleSettings(seed=4)).primary
+    np.testing.assert_array_equal(a.states, b.states)
+    np.testing.assert_array_equal(a.covariances, b.covariances)
+    assert not np.array_equal(a.states, c.states)
+    # Monte Carlo error of a weighted mean is about σ/√ESS; 4,096 particles keep it far below σ/4
+    d = a.states[-1] - c.states[-1]
+    assert float(d @ np.linalg.solve(a.covariances[-1], d)) < 0.25 ** 2 * 4
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_agrees_with_the_offline_smoother_where_the_posterior_is_gaussian(seed: int) -> None:
+    """Well observed (a-45): at the last time both condition on all the data, so mean and covariance agree.
+
+    There the posterior is close to Gaussian, so its mean (particles) and its
+    mode (smoother, Laplace covariance) coincide to a fraction of σ and the
+    covariances agree within Monte Carlo error.
+    """
+    sim, model, init = _case("a", 45e3, seed)
+    pf = run_particle(sim.measurements, model, init).primary
+    sm = fd.run_estimator("smoother", sim.measurements, model, init, verify=False).primary
+    assert pf.times[-1] == pytest.approx(sm.times[-1])
+    P = sm.covariances[-1]
+    d = pf.states[-1] - sm.states[-1]
+    assert float(d @ np.linalg.solve(P, d)) < 0.5 ** 2 * 4  # within half a σ per dimension
+    ratio = np.linalg.eigvalsh(np.linalg.solve(np.linalg.cholesky(P), np.linalg.solve(
+        np.linalg.cholesky(P), pf.covariances[-1]).T))
+    assert np.all((ratio > 0.5) & (ratio < 2.0)), ratio
+
+
+def test_consistent_over_runs_in_a_poorly_observed_scenario() -> None:
+    """Case a, 5 km (the Gaussian trackers' worst): final NEES over 12 runs inside the χ²₄₈ 99 % interval."""
+    total, n = 0.0, 0
+    for seed in range(12):
+        sim, model, init = _case("a", 5e3, 100 + seed)
+        e = run_particle(sim.measurements, model, init).primary
+        d = e.states[-1] - sim.truth.states[-1]
+        total += float(d @ np.linalg.solve(e.covariances[-1], d))
+        n += 1
+    lo, hi = chi2.ppf([0.005, 0.995], 4 * n)
+    assert lo < total < hi, (total, lo, hi)
+
+
+def test_window_posterior_components_are_a_partition_of_the_samples() -> None:
+    """k-means terms: weights sum to one, the mixture's mean and covariance equal the samples' (plus Q)."""
+    sim, model, init = _case("b", 45e3, 5)
+    post = window_posterior(sim.measurements, model, init)
+    assert post.states.shape[1] == 4 and post.weights.sum() == pytest.approx(1.0)
+    terms = post.components(8, model)
+    assert 1 <= len(terms) <= 8
+    w = np.array([t[0] for t in terms])
+    assert w.sum() == pytest.approx(1.0) and np.all(np.diff(w) <= 0)
+    x = post.at(post.t_end, model)
+    mean = post.weights @ x
+    means = np.array([t[1] for t in terms])
+    mix_mean = w @ means
+    # clusters of fewer than 20 samples are dropped: compare where none was (their weight is tiny)
+    np.testing.assert_allclose(mix_mean, mean, rtol=0, atol=1e-3 * np.sqrt(np.diag(np.cov(x.T, aweights=post.weights))).max())
+    Q = model.motion.Q(post.t_end - post.t_start)
+    mix_cov = sum(wi * (P - Q + np.outer(m - mix_mean, m - mix_mean)) for wi, m, P in terms)
+    d = x - mean
+    cov = (post.weights[:, None] * d).T @ d
+    np.testing.assert_allclose(mix_cov, cov, rtol=1e-2, atol=1e-6 * np.abs(cov).max())
+
+
+def test_mixture_is_moment_matched() -> None:
+    """The reported mixture: mean Σ w x and covariance Σ w (P + (x - x̄)(x - x̄)ᵀ), by hand for two terms."""
+    t = np.array([0.0, 1.0])
+    x1 = np.array([[0.0, 0, 0, 0], [1, 0, 0, 0]])
+    x2 = np.array([[2.0, 0, 0, 0], [3, 2, 0, 0]])
+    P = np.broadcast_to(np.eye(4), (2, 4, 4)).copy()
+    e1 = fd.Estimates(kind="filtered", times=t, states=x1, covariances=P, cov_ok=np.ones(2, bool))
+    e2 = fd.Estimates(kind="filtered", times=t, states=x2, covariances=2 * P, cov_ok=np.ones(2, bool))
+    W = np.array([[0.75, 0.5], [0.25, 0.5]])
+    m = _mixture("filtered", [e1, e2], W)
+    np.testing.assert_allclose(m.states[0], [0.5, 0, 0, 0])
+    np.testing.assert_allclose(m.states[1], [2.0, 1.0, 0, 0])
+    # time 0: 0.75·I + 0.25·2I + spread 0.75·0.25·(2)² on x
+    expected0 = 1.25 * np.eye(4)
+    expected0[0, 0] += 0.75 * 0.25 * 4
+    np.testing.assert_allclose(m.covariances[0], expected0)
+    d = np.array([1.0, 1.0, 0, 0])
+    expected1 = 1.5 * np.eye(4) + np.outer(d, d)
+    np.testing.assert_allclose(m.covariances[1], expected1)
+
+
+def test_gaussian_sum_trackers_are_more_consistent_than_one_gaussian() -> None:
+    """Case b, 45 km: the EKF as a Gaussian sum (default) has a lower mean final NEES than with one term."""
+    one, many = [], []
+    for seed in range(8):
+        sim, model, init = _case("b", 45e3, 200 + seed)
+        for out, k in ((one, 1), (many, 8)):
+            e = fd.run_estimator("ekf", sim.measurements, model, init, fd.EKFSettings(components=k),
+                                 verify=False).primary
+            d = e.states[-1] - sim.truth.states[-1]
+            out.append(float(d @ np.linalg.solve(e.covariances[-1], d)))
+    assert np.mean(many) < np.mean(one), (np.mean(many), np.mean(one))
