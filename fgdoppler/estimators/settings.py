@@ -209,6 +209,11 @@ class SmootherSettings(TrackerSettings):
         from the truth (case a 5 km and case b 45 km: 2-5 runs in 100).
     wall_sigma : tuple of float, default (10.0, 0.1)
         Stiffness of the zone wall: (position m, speed m/s).
+    sampled_covariance : bool, default True
+        Where the likelihood is far from Gaussian about the estimate (the
+        curvature probe of :mod:`fgdoppler.estimators.curvature`), report the
+        posterior mean-square error from samples instead of the Laplace
+        covariance (:mod:`fgdoppler.estimators.spread`; 0.2-1 s).
     """
 
     max_iterations: int = 100
@@ -216,6 +221,7 @@ class SmootherSettings(TrackerSettings):
     reinitiate: bool = True
     region_bound: bool = True
     wall_sigma: tuple[float, float] = (10.0, 0.1)
+    sampled_covariance: bool = True
 
     def __post_init__(self) -> None:
         super().__post_init__()

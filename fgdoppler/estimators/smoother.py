@@ -42,6 +42,7 @@ from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
 from fgdoppler.estimators.marginals import chain_solve, check_covariances
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import SmootherSettings
+from fgdoppler.estimators.spread import posterior_spread
 from fgdoppler.estimators.verdict import Event, Judged, Reason
 from fgdoppler.factors import X
 from fgdoppler.measurements import Measurements, Scans
@@ -468,6 +469,12 @@ def run_smoother(
             notes += list(again.notes)
     reasons = list(sol.reasons)
     covs = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
+    if settings.sampled_covariance and sol.covariances is not None and np.all(np.isfinite(sol.covariances[0])):
+        sampled = posterior_spread(measurements, model, sol.times, sol.states, sol.covariances,
+                                   huber_k=settings.huber_k)
+        if sampled is not None:
+            covs = list(sampled[0])
+            reasons.append(sampled[1])
     t_last = float(sol.times[-1])
     return TrackResult(
         estimator="smoother",
