@@ -10,6 +10,7 @@ strict build then fails).
 from __future__ import annotations
 
 import html
+import re
 from typing import Any
 
 from docutils import nodes
@@ -20,9 +21,20 @@ from sphinx.util import logging
 logger = logging.getLogger(__name__)
 
 
+_BOLD = re.compile(r'<mi mathvariant="bold">([A-Za-z])</mi>')
+
+
+def _bold_letter(m: re.Match[str]) -> str:
+    # MathML Core (Chromium) renders only mathvariant="normal"; bold vectors become the Unicode
+    # mathematical bold letters (U+1D400 A, U+1D41A a), upright like \mathbf.
+    c = m.group(1)
+    code = 0x1D400 + (ord(c) - ord("A") if c.isupper() else 26 + ord(c) - ord("a"))
+    return f'<mi mathvariant="normal">&#x{code:X};</mi>'
+
+
 def _mathml(latex: str, node: nodes.Element, *, block: bool) -> str:
     try:
-        return convert(latex, display="block" if block else "inline")
+        return _BOLD.sub(_bold_letter, convert(latex, display="block" if block else "inline"))
     except Exception as exc:  # latex2mathml raises several exception types on unsupported input
         logger.warning("cannot render maths %r: %s", latex, exc, location=node)
         return f"<code>{html.escape(latex)}</code>"

@@ -1,19 +1,35 @@
-"""Ambiguous initiations: follow every hypothesis and let the later data decide.
+r"""Many hypotheses, one track: Gaussian sums over the initiation's solutions or its window posterior.
 
 Near-collinear sensors admit a mirror-image trajectory and other distant
-solutions of equal window cost.  :func:`hypotheses` turns an ambiguous
-:class:`~fgdoppler.estimators.initiation.Initiation` into one unambiguous
-initiation per solution; :func:`resolve` runs an estimator from each and
-reports one track:
+solutions of equal window cost, and a poorly observed window's likelihood
+is a curved valley that no single Gaussian describes.  The Gaussian
+trackers (EKF, iSAM2, fixed-lag) therefore start from several hypotheses
+(:func:`~fgdoppler.estimators.registry.run_estimator` chooses them):
 
-* EKF, iSAM2, fixed-lag ("likelihood"): an EKF per hypothesis accumulates
-  the predictive log-likelihood of every measurement; each *filtered*
-  estimate comes from the hypothesis leading at that time (causal), the
-  smoothed or lagged estimates from the hypothesis leading at the end;
-* smoother ("cost"): the hypothesis with the lowest final cost.
+* :func:`posterior_hypotheses` — when the initiation's covariance
+  misdescribes its likelihood (a ``nonlinear`` finding): the window's
+  posterior is sampled and split into at most
+  :attr:`~fgdoppler.estimators.settings.GaussianSumSettings.components`
+  Gaussian terms, each a short, nearly straight piece of the valley;
+* :func:`hypotheses` — when the initiation is ``ambiguous``: one
+  hypothesis per distinct solution.
+
+:func:`resolve` runs the estimator from each and reports one track:
+
+* EKF, iSAM2, fixed-lag ("likelihood"): each hypothesis's weight is its
+  prior weight (the term's weight, or :math:`e^{-c/2}` of its window cost)
+  times the predictive likelihood of every later measurement (from an EKF
+  per hypothesis); every estimate is the weighted *mixture*,
+  :math:`\bar{\mathbf x} = \sum_h w_h\mathbf x_h`,
+  :math:`\mathbf P = \sum_h w_h(\mathbf P_h + (\mathbf x_h - \bar{\mathbf x})(\mathbf x_h - \bar{\mathbf x})^\top)`,
+  with the weights of the data up to that time for filtered estimates and
+  of all the data for smoothed and lagged ones; a ``competing`` finding
+  is doubtful when the mixture holds separate modes;
+* smoother ("cost"): the hypothesis with the lowest final cost, with a
+  ``competing`` finding when another explains the data about as well.
 
 :attr:`TrackResult.hypothesis <fgdoppler.estimators.results.TrackResult>`
-records which hypothesis was reported when.
+records which hypothesis weighed most when.
 """
 
 from __future__ import annotations

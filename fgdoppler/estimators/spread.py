@@ -56,7 +56,7 @@ from fgdoppler.estimators.verdict import Reason
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["SAMPLES", "SAMPLING_LIMIT", "posterior_spread"]
+__all__ = ["MAX_SPAN", "SAMPLES", "SAMPLING_LIMIT", "posterior_spread"]
 
 FloatArray = NDArray[np.float64]
 
@@ -65,6 +65,10 @@ SAMPLES = 4096
 #: Ratio of the probe's cost rise to its quadratic model beyond which (or below whose inverse) the covariance
 #: is sampled.
 SAMPLING_LIMIT = 3.0
+#: Longest recording (s) sampled: beyond it the deterministic constant-velocity approximation fails (with
+#: q = 1e-3 m²/s³ the process noise moves a 300 s track by 95 m, a 2-hour one by 11 km) and the cost grows
+#: with every measurement; the Laplace covariance stands there.
+MAX_SPAN = 300.0
 #: Metropolis sweeps after resampling (enough for the samples to spread along a curved valley).
 MOVES = 20
 
@@ -92,10 +96,13 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     tuple or None
         ``(covariances, reason)`` with an informational ``nonlinear`` finding
         that says what was done, or ``None`` when the probe finds the
-        Laplace covariance fair (or the sampler cannot run: no finite
-        posterior around the estimate).
+        Laplace covariance fair, the recording is longer than
+        :data:`MAX_SPAN`, or the sampler cannot run (no finite posterior
+        around the estimate).
     """
     t0 = float(times[0])
+    if float(times[-1]) - t0 > MAX_SPAN:
+        return None
     data = _Data(t=measurements.time - t0, pair=measurements.pair, z=measurements.doppler, sigma=measurements.sigma)
     post = _Posterior(model, ParticleSettings(huber_k=huber_k, seed=seed, n_particles=SAMPLES), t0, data)
     x0, P0 = np.asarray(states[0], dtype=float), np.asarray(covariances[0], dtype=float)
