@@ -72,15 +72,13 @@ smoothing: all data).
 
 Run-averaged NEES over t >= 10 s, then per run.  In the well-observed
 scenarios (case a at 45 km, case b at 5 km) every estimator is consistent.
-Where the target starts near a sensor (case a at 5 km, case b at 45 km) the
-online estimators are overconfident in most runs, not in a few: they
-linearise an ill-conditioned problem and their covariance misses its
-curvature (the ill-conditioning the paper points to in Section 5).  In the
-25 km scenarios they are consistent in the median, with a minority of runs
-overconfident.  The offline smoother relinearises the whole trajectory,
-checks its chi-square and, when that fails, initiates again from the whole
-recording; it stays consistent in the median everywhere, its average raised
-by the few runs that settle in a wrong basin.
+Elsewhere every estimator is consistent in the median run; the filters'
+averages in the two poorest scenarios (case a at 5 km, case b at 45 km) are
+raised by a few runs (1-4 in 100 above 20) where the likelihood is a curved
+valley that even a Gaussian sum of the window's posterior misses.  The
+offline smoother, whose covariance is sampled from the posterior where the
+likelihood is not Gaussian about its estimate (`fgdoppler.estimators.spread`),
+and the particle estimator stay in or near the band everywhere.
 
 {section(rep, "## NEES", "![figures 10-11]").replace("## NEES ", "Run-averaged NEES ").strip()}
 
