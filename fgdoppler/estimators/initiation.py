@@ -390,10 +390,10 @@ class _Window:
         )
 
     def cost(self, x0: FloatArray) -> float:
-        r = (self.z - cv_doppler(x0, self.geometry, self.times)) / self.sigma
-        return float(r @ r)
+        return self.robust_cost(x0, None)
 
     def robust_cost(self, x0: FloatArray, huber_k: float | None) -> float:
+        """Σρ of the whitened residuals (the sum of squares without ``huber_k``)."""
         return float(np.sum(huber_rho((self.z - cv_doppler(x0, self.geometry, self.times)) / self.sigma, huber_k)))
 
     def information(self, x0: FloatArray) -> FloatArray:

@@ -164,6 +164,33 @@ class _Posterior:
         return out
 
     # -- particle operations -------------------------------------------------------------
+    def sample_from(self, comps: list[tuple[FloatArray, FloatArray]], n: int, moves: int,
+                    rng: np.random.Generator) -> float | None:
+        """Importance-sample ``n`` particles from an equal-weight Gaussian mixture, resample, move.
+
+        Each component's covariance is inflated 4× (doubled standard
+        deviations: the proposal must cover a valley's curvature).  Returns
+        the moves' acceptance rate, or ``None`` when no sample has a finite
+        posterior (the particles are then left unchanged).
+        """
+        inflate = 4.0
+        chols = np.array([_safe_cholesky(inflate * P, inflate * P) for _, P in comps])
+        means = np.array([m for m, _ in comps])
+        k = len(comps)
+        label = rng.integers(0, k, n)
+        x = means[label] + np.einsum("nij,nj->ni", chols[label], rng.standard_normal((n, 4)))
+        logq = np.empty((k, n))
+        for c in range(k):
+            sol = np.linalg.solve(chols[c], (x - means[c]).T).T
+            logq[c] = -0.5 * np.sum(sol * sol, axis=1) - np.sum(np.log(np.diag(chols[c])))
+        logpost = self.log_target(x)
+        logw = logpost - logsumexp(logq, axis=0)
+        if not np.any(np.isfinite(logw)):
+            return None
+        self.x, self.label, self.logpost, self.logw = x, label, logpost, logw
+        self.resample(rng)
+        return self.move(moves, rng)
+
     def weights(self) -> FloatArray:
         return np.exp(self.logw - logsumexp(self.logw))
 
@@ -277,47 +304,36 @@ def _components(post: _Posterior, init: Initiation, window: _Data) -> list[tuple
 
 
 def _window_covariance(post: _Posterior, x: FloatArray, window: _Data) -> FloatArray | None:
-    """Inverse Fisher information of the window at ``x`` by central differences of the model."""
+    r"""Inverse Fisher information of the window about the start state ``x`` (analytic Jacobian of the model).
+
+    Along a constant-velocity track :math:`\mathbf x(t) = \mathbf F(t)\mathbf x`, so the row of a
+    measurement at :math:`t` is :math:`\mathbf H(\mathbf x(t))\,\mathbf F(t)`.
+    """
     d = window
-    step = np.array([1.0, 1.0, 0.01, 0.01])
-    J = np.empty((d.t.size, 4))
-    for i in range(4):
-        e = np.zeros(4)
-        e[i] = step[i]
-        h = _predict_along(post.model.observation, np.stack([x + e, x - e]), d.t, d.pair)
-        if not np.all(np.isfinite(h)):
-            return None
-        J[:, i] = (h[0] - h[1]) / (2 * step[i])
+    if d.t.size == 0:
+        return None
+    states = post.model.motion.propagate(np.broadcast_to(x, (d.t.size, 4)), d.t)
+    try:
+        _, H = post.model.observation.predict_and_jacobian(states, d.pair)
+    except ValueError:  # the track passes through a sensor
+        return None
+    H = np.asarray(H, dtype=float).reshape(d.t.size, 4)
+    J = np.concatenate([H[:, :2], H[:, :2] * d.t[:, None] + H[:, 2:]], axis=1)
     Jw = J / d.sigma[:, None]
     info = Jw.T @ Jw
     s = np.linalg.svd(info, compute_uv=False)
-    if s[-1] <= s[0] * 1e-14:
+    if not np.all(np.isfinite(s)) or s[-1] <= s[0] * 1e-14:
         return None
-    return np.linalg.inv(info)
+    return np.asarray(np.linalg.inv(info), dtype=float)
 
 
 def _start(post: _Posterior, init: Initiation, rng: np.random.Generator) -> float:
     """Sample the window's posterior (module docstring, step 1); returns the moves' acceptance rate."""
     st = post.settings
-    comps = _components(post, init, post.data)
-    n, k = st.n_particles, len(comps)
-    inflate = 4.0  # doubled standard deviations: the proposal must cover the valley's curvature
-    chols = np.array([_safe_cholesky(inflate * P, inflate * P) for _, P in comps])
-    means = np.array([m for m, _ in comps])
-    label = rng.integers(0, k, n)
-    x = means[label] + np.einsum("nij,nj->ni", chols[label], rng.standard_normal((n, 4)))
-    # log of the mixture proposal density (equal component weights)
-    logq = np.empty((k, n))
-    for c in range(k):
-        sol = np.linalg.solve(chols[c], (x - means[c]).T).T
-        logq[c] = -0.5 * np.sum(sol * sol, axis=1) - np.sum(np.log(np.diag(chols[c])))
-    post.x, post.label = x, label
-    post.logpost = post.log_target(x)
-    post.logw = post.logpost - logsumexp(logq, axis=0)
-    if not np.any(np.isfinite(post.logw)):
+    rate = post.sample_from(_components(post, init, post.data), st.n_particles, st.start_move_steps, rng)
+    if rate is None:
         raise ValueError("no start sample has a finite posterior: the window cannot be explained inside the zone")
-    post.resample(rng)
-    return post.move(st.start_move_steps, rng)
+    return rate
 
 
 def _window_posterior(measurements: Measurements, model: TrackingModel, init: Initiation,

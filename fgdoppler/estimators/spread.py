@@ -108,7 +108,6 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     x0, P0 = np.asarray(states[0], dtype=float), np.asarray(covariances[0], dtype=float)
     try:
         info = np.linalg.inv(P0)
-        L = np.linalg.cholesky(4.0 * P0)
     except np.linalg.LinAlgError:
         return None
 
@@ -119,18 +118,9 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     ratio = min(lo, hi) / quad
     if 1.0 / SAMPLING_LIMIT <= ratio <= SAMPLING_LIMIT:
         return None
-    rng = np.random.default_rng(seed)
-    eps = rng.standard_normal((SAMPLES, 4))
-    x = x0 + eps @ L.T
-    logq = -0.5 * np.einsum("ij,ij->i", eps, eps)
-    lt = post.log_target(x)
-    if not np.any(np.isfinite(lt)):
+    rate = post.sample_from([(x0, P0)], SAMPLES, MOVES, np.random.default_rng(seed))
+    if rate is None:
         return None
-    post.x, post.logpost = x, lt
-    post.logw = np.where(np.isfinite(lt), lt - logq, -np.inf)
-    post.label = np.zeros(SAMPLES, dtype=np.intp)
-    post.resample(rng)
-    rate = post.move(MOVES, rng)
     d = post.x - x0
     sampled = d.T @ d / SAMPLES
     sigma0 = _enclosing(P0, sampled)
