@@ -24,10 +24,12 @@ release = fgdoppler.__version__
 
 extensions = [
     "sphinx.ext.autodoc",
+    "sphinx.ext.autosummary",
     "numpydoc",
     "myst_parser",
     "sphinx_gallery.gen_gallery",
     "mathml",
+    "run_blocks",
 ]
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 exclude_patterns = ["_build", "examples/README.txt", "tutorials/*.ipynb", "tutorials/*.py", "tutorials/*.md5",
@@ -41,6 +43,9 @@ html_css_files = ["fgdoppler.css"]
 myst_enable_extensions = ["dollarmath", "amsmath"]
 myst_heading_anchors = 3
 
+templates_path = ["_templates"]
+autosummary_generate = True
+autosummary_ignore_module_all = False  # one page per name in each module's __all__
 autodoc_member_order = "bysource"
 autodoc_typehints = "none"  # numpydoc's Parameters sections carry the types
 autodoc_default_options = {"members": True, "show-inheritance": True}

@@ -300,20 +300,28 @@ def plot_rmse(
     bounds: Mapping[str, ArrayLike] | None = None,
     ylabel: str = "position RMSE (m)",
     title: str | None = None,
+    legend: bool = True,
+    dotted: Sequence[str] = (),
 ) -> Axes:
-    """RMSE versus time per estimator (log scale), with bounds (e.g. CRLB) dashed."""
+    """RMSE versus time per estimator (log scale), with bounds (e.g. CRLB) dashed.
+
+    Curves named in ``dotted`` (e.g. extrapolated initiation estimates) are drawn thin and
+    dotted; ``legend=False`` leaves the legend to the caller (one per figure).
+    """
     ax = _axes(ax)
     t = np.asarray(times, dtype=float)
     for label, y in curves.items():
-        ax.semilogy(t, np.asarray(y, dtype=float), label=label, lw=1.3)
+        style = {"ls": ":", "lw": 1.0} if label in dotted else {"lw": 1.4}
+        ax.semilogy(t, np.asarray(y, dtype=float), label=label, **style)
     for label, y in (bounds or {}).items():
         ax.semilogy(t, np.asarray(y, dtype=float), "k--", lw=1, label=label)
     ax.set_xlabel("time (s)")
     ax.set_ylabel(ylabel)
     if title:
-        ax.set_title(title, fontsize="small")
+        ax.set_title(title, fontsize="medium")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize="x-small", ncol=2)
+    if legend:
+        ax.legend(fontsize="small", ncol=2)
     return ax
 
 

@@ -160,7 +160,7 @@ def observability_measure(
 
 
 def default_along(geometry: Geometry) -> FloatArray:
-    """The map's default along-baseline grid: :math:`D/50 .. D - D/50` every :math:`D/100` in the sensors' frame.
+    """The map's default along-baseline grid: from :math:`D/50` to :math:`D - D/50` every :math:`D/100` in the sensors' frame.
 
     :math:`D` is the sensors' extent along the first pair's baseline; for the
     paper's geometries this is :data:`DEFAULT_X` (1–49 km every 500 m).
