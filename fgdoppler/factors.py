@@ -174,7 +174,7 @@ def motion_factor(key1: int, key2: int, dt: float, model: ConstantVelocity) -> g
     ``Q(dt)`` is singular (``dt <= 0``, ``q = 0`` or the paper's rank-2 form).
     """
     R = model.sqrt_information(dt)
-    return absolute_linear_factor((key1, key2), (-R @ model.F(dt), R), np.zeros(4))
+    return absolute_linear_factor((key1, key2), (-R @ model.F(dt), R), np.zeros(model.n))
 
 
 def absolute_linear_factor(
@@ -238,7 +238,7 @@ def region_factor(key: int, zone: Zone, *, wall_sigma: tuple[float, float] = (10
     sp, sv = wall_sigma
     if not (sp > 0 and sv > 0):
         raise ValueError(f"wall_sigma must be positive, got {wall_sigma}")
-    return gtsam.CustomFactor(noise_model([sp, sp, sv]), [int(key)], partial(_region_error, zone))
+    return gtsam.CustomFactor(noise_model([sp] * zone.dim + [sv]), [int(key)], partial(_region_error, zone))
 
 
 def _cv_error(
@@ -256,7 +256,7 @@ def _cv_error(
     e, J = _robust(g - z, J, sigma, huber_k)
     if jacobians is not None:
         assert J is not None
-        jacobians[0] = _checked(J, z.size, 4, "cv_factor")
+        jacobians[0] = _checked(J, z.size, x0.size, "cv_factor")
     return e
 
 

@@ -187,16 +187,39 @@ def sensor_frame(tx: ArrayLike, rx: ArrayLike) -> Frame:
       distinct sensors lie on average (right-handed when they average on the
       line, e.g. all sensors collinear).
 
-    For the paper's geometries (first pair Rx at the origin, Tx on +x, the
-    other sensors at y >= 0) this is the identity.
+    In 3-D (positions with three coordinates) the third axis is "up":
+
+    * sensors all on the ground (every :math:`z = 0`): the 2-D frame of their
+      horizontal positions and :math:`\mathbf e_w = +\mathbf z`, so that the
+      zone's ``along``/``across`` mean the same as for the 2-D problem and its
+      altitude band is height above the ground;
+    * otherwise :math:`\mathbf e_v` is the sensors' mean offset across
+      :math:`\mathbf e_u` (normalised) and
+      :math:`\mathbf e_w = \mathbf e_u \times \mathbf e_v` (right-handed),
+      which depends on the sensors only, so any rotation and translation of
+      the whole problem moves the frame with it.  If the sensors are
+      collinear there is no such offset (the problem is symmetric about
+      their line); then :math:`\mathbf e_w` is world :math:`+\mathbf z` made
+      perpendicular to :math:`\mathbf e_u` and
+      :math:`\mathbf e_v = \mathbf e_w \times \mathbf e_u`.
+
+    Both 3-D rules agree for ground sensors on the left of the first baseline
+    (the paper's geometries, where the frame is the identity).
 
     Parameters
     ----------
     tx, rx
-        Transmitter and receiver positions, ``(n_pairs, 2)``.
+        Transmitter and receiver positions, ``(n_pairs, d)`` with ``d`` 2 or 3.
     """
     tx = np.asarray(tx, dtype=float)
     rx = np.asarray(rx, dtype=float)
+    if tx.shape[-1] == 3:
+        if not np.any(tx[:, 2]) and not np.any(rx[:, 2]):
+            flat = sensor_frame(tx[:, :2], rx[:, :2])
+            basis3 = np.eye(3)
+            basis3[:2, :2] = flat.B
+            return Frame(origin=(*flat.origin, 0.0), basis=tuple(tuple(b) for b in basis3))
+        return _sensor_frame_3d(tx, rx)
     o = rx[0]
     base = tx[0] - rx[0]
     e_u = base / np.linalg.norm(base)
@@ -208,3 +231,24 @@ def sensor_frame(tx: ArrayLike, rx: ArrayLike) -> Frame:
     if float(np.mean(v)) < -_SIDE_TOL * extent:
         basis[1] = -e_v
     return Frame(origin=tuple(o), basis=tuple(tuple(b) for b in basis))
+
+
+def _sensor_frame_3d(tx: FloatArray, rx: FloatArray) -> Frame:
+    """The 3-D rule of :func:`sensor_frame` for sensors not all on the ground."""
+    o = rx[0]
+    base = tx[0] - rx[0]
+    e_u = base / np.linalg.norm(base)
+    sensors = np.unique(np.vstack([tx, rx]), axis=0)
+    rel = sensors - o
+    across = rel - np.outer(rel @ e_u, e_u)
+    mean = across.mean(axis=0)
+    extent = float(np.max(np.linalg.norm(rel, axis=1))) or 1.0
+    if float(np.linalg.norm(mean)) > _SIDE_TOL * extent:
+        e_v = mean / np.linalg.norm(mean)
+        e_w = np.cross(e_u, e_v)
+    else:
+        up = np.array([0.0, 0.0, 1.0]) if abs(e_u[2]) < 1.0 - 1e-12 else np.array([1.0, 0.0, 0.0])
+        e_w = up - (up @ e_u) * e_u
+        e_w /= np.linalg.norm(e_w)
+        e_v = np.cross(e_w, e_u)
+    return Frame(origin=tuple(o), basis=(tuple(e_u), tuple(e_v), tuple(e_w)))

@@ -37,16 +37,20 @@ def _is_number(v: object) -> bool:
     return isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool | np.bool_)
 
 
-def _point(value: ArrayLike, name: str) -> tuple[float, float]:
+def _point(value: ArrayLike, name: str) -> tuple[float, ...]:
     items = value.tolist() if isinstance(value, np.ndarray) else value
     if not isinstance(items, list | tuple) or not all(_is_number(v) for v in items):
-        raise ValueError(f"{name} must be two numbers (x, y) in metres, got {value!r}")
+        raise ValueError(f"{name} must be two or three numbers (x, y[, z]) in metres, got {value!r}")
     arr = np.asarray(items, dtype=float)
-    if arr.shape != (2,):
-        raise ValueError(f"{name} must be a 2-vector (x, y) in metres, got shape {arr.shape}")
+    if arr.shape not in ((2,), (3,)):
+        raise ValueError(f"{name} must be a 2- or 3-vector (x, y[, z]) in metres, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must have finite coordinates, got {tuple(arr)}")
-    return (float(arr[0]), float(arr[1]))
+    return tuple(float(v) for v in arr)
+
+
+def _padded(point: tuple[float, ...], d: int) -> tuple[float, ...]:
+    return point + (0.0,) * (d - len(point))
 
 
 @dataclass(frozen=True)
@@ -56,17 +60,19 @@ class BistaticPair:
     Parameters
     ----------
     tx, rx
-        Transmitter and receiver positions ``(x, y)`` in metres.  They must be
-        finite and distinct.
+        Transmitter and receiver positions ``(x, y)`` or ``(x, y, z)`` in
+        metres (two coordinates mean ``z = 0``: a sensor on the ground).  They
+        must be finite and distinct.
     """
 
-    tx: tuple[float, float]
-    rx: tuple[float, float]
+    tx: tuple[float, ...]
+    rx: tuple[float, ...]
 
     def __init__(self, tx: ArrayLike, rx: ArrayLike) -> None:
         t = _point(tx, "tx")
         r = _point(rx, "rx")
-        if np.hypot(t[0] - r[0], t[1] - r[1]) <= SENSOR_EPS:
+        d = max(len(t), len(r))
+        if np.linalg.norm(np.subtract(_padded(t, d), _padded(r, d))) <= SENSOR_EPS:
             raise ValueError(f"tx and rx of a bistatic pair must differ, both are at {t}")
         object.__setattr__(self, "tx", t)
         object.__setattr__(self, "rx", r)
@@ -74,7 +80,8 @@ class BistaticPair:
     @property
     def baseline(self) -> float:
         """Tx–Rx distance ``L`` in metres."""
-        return float(np.hypot(self.tx[0] - self.rx[0], self.tx[1] - self.rx[1]))
+        d = max(len(self.tx), len(self.rx))
+        return float(np.linalg.norm(np.subtract(_padded(self.tx, d), _padded(self.rx, d))))
 
     def swapped(self) -> BistaticPair:
         """The same pair with the roles of Tx and Rx exchanged."""
@@ -94,7 +101,8 @@ class Geometry:
         Optional label (e.g. ``"a"`` for the paper's case (a)).
     zone_limits
         Overrides of the default detectable zone in the sensors' frame
-        (the ``[zone]`` table of the geometry file); see :attr:`zone`.
+        (the ``[zone]`` table of the geometry file); see :attr:`zone`.  An
+        altitude band makes the problem 3-D (:attr:`dim`).
     """
 
     pairs: tuple[BistaticPair, ...]
@@ -111,8 +119,10 @@ class Geometry:
             if not isinstance(p, BistaticPair):
                 raise TypeError(f"pair {i} is {type(p).__name__}, expected BistaticPair")
         object.__setattr__(self, "pairs", pairs)
-        tx = np.array([p.tx for p in pairs], dtype=float)
-        rx = np.array([p.rx for p in pairs], dtype=float)
+        d = 3 if self.zone_limits.altitude is not None or any(len(p.tx) == 3 or len(p.rx) == 3 for p in pairs) \
+            else 2
+        tx = np.array([_padded(p.tx, d) for p in pairs], dtype=float)
+        rx = np.array([_padded(p.rx, d) for p in pairs], dtype=float)
         tx.setflags(write=False)
         rx.setflags(write=False)
         object.__setattr__(self, "_tx", tx)
@@ -124,17 +134,65 @@ class Geometry:
         return len(self.pairs)
 
     @property
+    def dim(self) -> int:
+        """Spatial dimension of the problem: 3 if a sensor has three coordinates or the zone an
+        altitude band, else 2.  Estimators of this geometry use states of ``2 * dim`` numbers
+        (``[x, y, vx, vy]`` or ``[x, y, z, vx, vy, vz]``)."""
+        return int(self._tx.shape[1])
+
+    @property
+    def state_dim(self) -> int:
+        """Length of a state vector, ``2 * dim``."""
+        return 2 * self.dim
+
+    @property
     def tx(self) -> NDArray[np.float64]:
-        """Transmitter positions, shape ``(n_pairs, 2)`` (read-only)."""
+        """Transmitter positions, shape ``(n_pairs, dim)`` (read-only)."""
         return self._tx
 
     @property
     def rx(self) -> NDArray[np.float64]:
-        """Receiver positions, shape ``(n_pairs, 2)`` (read-only)."""
+        """Receiver positions, shape ``(n_pairs, dim)`` (read-only)."""
         return self._rx
 
+    def positions(self, d: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Transmitter and receiver positions with ``d`` coordinates, for states of ``2 d`` numbers.
+
+        A 2-D geometry serves 3-D states with its sensors at ``z = 0``; a 3-D
+        one serves 2-D states only if every sensor is on the ground.
+
+        Raises
+        ------
+        ValueError
+            If ``d`` is not 2 or 3, or 2-D states meet sensors above the ground.
+        """
+        if d == self.dim:
+            return self._tx, self._rx
+        if d == 3:
+            return self._pad3
+        if d == 2:
+            if np.any(self._tx[:, 2]) or np.any(self._rx[:, 2]):
+                raise ValueError("2-D states [x, y, vx, vy] cannot be used with sensors above the ground "
+                                 "(a sensor has z != 0): use 3-D states [x, y, z, vx, vy, vz]")
+            return self._flat
+        raise ValueError(f"states must have 4 or 6 numbers (2-D or 3-D), got {2 * d}")
+
+    @cached_property
+    def _pad3(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        tx, rx = (np.column_stack([a, np.zeros(len(a))]) for a in (self._tx, self._rx))
+        tx.setflags(write=False)
+        rx.setflags(write=False)
+        return tx, rx
+
+    @cached_property
+    def _flat(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        tx, rx = np.ascontiguousarray(self._tx[:, :2]), np.ascontiguousarray(self._rx[:, :2])
+        tx.setflags(write=False)
+        rx.setflags(write=False)
+        return tx, rx
+
     def sensors(self) -> NDArray[np.float64]:
-        """Distinct sensor positions (Tx and Rx), shape ``(n_sensors, 2)``."""
+        """Distinct sensor positions (Tx and Rx), shape ``(n_sensors, dim)``."""
         return np.unique(np.vstack([self._tx, self._rx]), axis=0)
 
     @cached_property
@@ -179,8 +237,11 @@ class Geometry:
         Levenberg–Marquardt stopping in a flat valley amplifies that to
         1e-5 of the answer).  ``None`` keeps the coordinates as computed.
         """
-        def local(point: tuple[float, float]) -> NDArray[np.float64]:
-            u = frame.points_to_local(point)
+        if frame.dim not in (self.dim, 3):
+            raise ValueError(f"a {self.dim}-D geometry cannot be moved into a {frame.dim}-D frame")
+
+        def local(point: tuple[float, ...]) -> NDArray[np.float64]:
+            u = frame.points_to_local(_padded(point, frame.dim))
             return u if snap is None else np.round(u / snap) * snap + 0.0
 
         return replace(self, pairs=tuple(BistaticPair(tx=local(p.tx), rx=local(p.rx)) for p in self.pairs))
@@ -196,7 +257,7 @@ class Geometry:
         return Geometry(
             pairs=tuple(
                 BistaticPair(
-                    tx=(2 * x_mirror - p.tx[0], p.tx[1]), rx=(2 * x_mirror - p.rx[0], p.rx[1])
+                    tx=(2 * x_mirror - p.tx[0], *p.tx[1:]), rx=(2 * x_mirror - p.rx[0], *p.rx[1:])
                 )
                 for p in self.pairs
             ),
@@ -273,15 +334,17 @@ def bistatic_range(points: ArrayLike, geometry: Geometry) -> NDArray[np.float64]
     Parameters
     ----------
     points
-        Positions, shape ``(..., 2)`` (extra trailing state entries are ignored
-        if the last axis has length 4).
+        Positions ``(..., d)`` or states ``(..., 2d)`` (then their positions), ``d`` 2 or 3.
 
     Returns
     -------
     ndarray, shape ``(..., n_pairs)``
     """
-    p = np.asarray(points, dtype=float)[..., None, :2]
-    return np.linalg.norm(p - geometry.tx, axis=-1) + np.linalg.norm(p - geometry.rx, axis=-1)
+    p = np.asarray(points, dtype=float)
+    d = p.shape[-1] // 2 if p.shape[-1] in (4, 6) else p.shape[-1]
+    tx, rx = geometry.positions(d)
+    p = p[..., None, :d]
+    return np.linalg.norm(p - tx, axis=-1) + np.linalg.norm(p - rx, axis=-1)
 
 
 def ellipse_tangent(points: ArrayLike, geometry: Geometry) -> NDArray[np.float64]:
@@ -293,6 +356,10 @@ def ellipse_tangent(points: ArrayLike, geometry: Geometry) -> NDArray[np.float64
     the gradient vanishes (the ellipse degenerates to the segment); there the
     tangent is taken along the baseline.
 
+    A plane notion: in 3-D the directions that leave a pair blind form the
+    plane perpendicular to the gradient, not one tangent; this function takes
+    horizontal positions ``(..., 2)`` of a geometry whose sensors are on the ground.
+
     Returns
     -------
     ndarray, shape ``(..., n_pairs, 2)``
@@ -300,18 +367,19 @@ def ellipse_tangent(points: ArrayLike, geometry: Geometry) -> NDArray[np.float64
     Raises
     ------
     ValueError
-        If a point coincides with a sensor.
+        If a point coincides with a sensor, or a sensor is above the ground.
     """
     p = np.asarray(points, dtype=float)[..., None, :2]
-    dt = p - geometry.tx
-    dr = p - geometry.rx
+    tx, rx = geometry.positions(2)
+    dt = p - tx
+    dr = p - rx
     nt = np.linalg.norm(dt, axis=-1, keepdims=True)
     nr = np.linalg.norm(dr, axis=-1, keepdims=True)
     if np.any(nt <= SENSOR_EPS) or np.any(nr <= SENSOR_EPS):
         raise ValueError("a point coincides with a sensor: the bistatic ellipse is undefined there")
     grad = dt / nt + dr / nr
     gnorm = np.linalg.norm(grad, axis=-1, keepdims=True)
-    baseline = geometry.rx - geometry.tx
+    baseline = rx - tx
     base_dir = np.broadcast_to(baseline / np.linalg.norm(baseline, axis=-1, keepdims=True), grad.shape)
     tangent = np.stack([-grad[..., 1], grad[..., 0]], axis=-1)
     degenerate = gnorm < 1e-12

@@ -15,7 +15,9 @@ along the first pair's baseline:
     u \in \big[\min u_i + D/25,\ \max u_i - D/25\big], \qquad
     v \in \big[\min(-D/10,\ \min v_i - D/25),\ \max(D/10,\ \max v_i + D/25)\big],
 
-speed at most 200 m/s.  In words: the stretch between the end sensors, less
+speed at most 200 m/s, and for a 3-D problem (see
+:attr:`fgdoppler.geometry.Geometry.dim`) heights :math:`w` above the
+sensors' plane in :math:`[0, D/5]` (0–10 km for a 50 km baseline).  In words: the stretch between the end sensors, less
 the 4 % next to them (where the paper's zone stops 2 km short of a 50 km
 baseline), and 10 % of the extent either side of the first baseline, widened
 to reach 4 % beyond every sensor off it.  For the paper's two geometries this
@@ -70,6 +72,10 @@ class Zone:
         ``(low, high)`` of the first and second local coordinate, metres.
     speed_max
         Largest target speed, m/s.
+    altitude
+        ``(low, high)`` of the third local coordinate (height above the
+        sensors' plane, metres) for a 3-D zone; ``None`` for a 2-D one.  The
+        frame's dimension must match (3 with an altitude band, 2 without).
 
     Raises
     ------
@@ -82,73 +88,100 @@ class Zone:
     along: tuple[float, float]
     across: tuple[float, float]
     speed_max: float = DEFAULT_SPEED_MAX
+    altitude: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "along", _interval(self.along, "along"))
         object.__setattr__(self, "across", _interval(self.across, "across"))
+        if self.altitude is not None:
+            object.__setattr__(self, "altitude", _interval(self.altitude, "altitude"))
         if isinstance(self.speed_max, bool) or not (math.isfinite(self.speed_max) and self.speed_max > 0):
             raise ValueError(f"zone speed_max must be a positive number of m/s, got {self.speed_max!r}")
         object.__setattr__(self, "speed_max", float(self.speed_max))
-        if self.frame.dim != 2:
-            raise ValueError(f"a zone needs a 2-D frame, got {self.frame.dim}-D")
+        if self.frame.dim != self.dim:
+            raise ValueError(f"a {self.dim}-D zone (altitude band {'set' if self.altitude else 'not set'}) "
+                             f"needs a {self.dim}-D frame, got {self.frame.dim}-D")
 
     @property
-    def extents(self) -> tuple[float, float]:
-        """Side lengths of the box (m)."""
-        return self.along[1] - self.along[0], self.across[1] - self.across[0]
+    def dim(self) -> int:
+        """Spatial dimension: 3 with an altitude band, else 2."""
+        return 2 if self.altitude is None else 3
+
+    @property
+    def intervals(self) -> tuple[tuple[float, float], ...]:
+        """``(low, high)`` per local axis: along, across and (3-D) altitude."""
+        return (self.along, self.across) if self.altitude is None else (self.along, self.across, self.altitude)
+
+    @property
+    def extents(self) -> tuple[float, ...]:
+        """Side lengths of the box (m), one per local axis."""
+        return tuple(hi - lo for lo, hi in self.intervals)
 
     @property
     def area(self) -> float:
-        """Area of the box (m²)."""
-        a, b = self.extents
-        return a * b
+        """Horizontal area of the box (m²), along × across."""
+        return (self.along[1] - self.along[0]) * (self.across[1] - self.across[0])
 
     def corners(self) -> FloatArray:
-        """The box's corners in world coordinates, ``(4, 2)``, in order around it."""
+        """The box's corners in world coordinates, ``(4, d)``, in order around it (3-D: on its floor)."""
         (a0, a1), (c0, c1) = self.along, self.across
-        return self.frame.points_to_world(np.array([[a0, c0], [a1, c0], [a1, c1], [a0, c1]]))
+        local = np.array([[a0, c0], [a1, c0], [a1, c1], [a0, c1]])
+        if self.altitude is not None:
+            local = np.column_stack([local, np.full(4, self.altitude[0])])
+        return self.frame.points_to_world(local)
+
+    def _check_states(self, states: ArrayLike) -> FloatArray:
+        x = np.asarray(states, dtype=float)
+        if x.ndim == 0 or x.shape[-1] != 2 * self.dim:
+            raise ValueError(f"a {self.dim}-D zone takes states (..., {2 * self.dim}), got shape {x.shape}")
+        return x
 
     def contains(self, states: ArrayLike, *, tol: float = 0.0) -> NDArray[np.bool_]:
-        """Whether each state ``(..., 4)`` starts in the zone (position in the box, speed below the bound)."""
-        x = np.asarray(states, dtype=float)
-        u = self.frame.points_to_local(x[..., :2])
-        speed = np.linalg.norm(x[..., 2:], axis=-1)
-        return ((u[..., 0] >= self.along[0] - tol) & (u[..., 0] <= self.along[1] + tol)
-                & (u[..., 1] >= self.across[0] - tol) & (u[..., 1] <= self.across[1] + tol)
-                & (speed <= self.speed_max + tol))
+        """Whether each state ``(..., 2d)`` starts in the zone (position in the box, speed below the bound)."""
+        x = self._check_states(states)
+        d = self.dim
+        u = self.frame.points_to_local(x[..., :d])
+        speed = np.linalg.norm(x[..., d:], axis=-1)
+        inside = speed <= self.speed_max + tol
+        for i, (lo, hi) in enumerate(self.intervals):
+            inside &= (u[..., i] >= lo - tol) & (u[..., i] <= hi + tol)
+        return inside
 
     def excess(self, state: ArrayLike) -> tuple[FloatArray, FloatArray]:
         r"""How far a state lies outside the zone, and the Jacobian of that.
 
-        With :math:`(u, v) = \mathbf B(\mathbf p - \mathbf o)` the local position,
+        With :math:`\mathbf u = \mathbf B(\mathbf p - \mathbf o)` the local position
+        (components :math:`u_i`, box :math:`[l_i, h_i]`),
 
         .. math::
 
-            \mathbf e(\mathbf x) = \begin{bmatrix}
-                \min(0, u - u_{lo}) + \max(0, u - u_{hi}) \\
-                \min(0, v - v_{lo}) + \max(0, v - v_{hi}) \\
-                \max(0, \lVert \mathbf v \rVert - s_{max})
-            \end{bmatrix},
+            e_i(\mathbf x) = \min(0, u_i - l_i) + \max(0, u_i - h_i)\quad (i < d),\qquad
+            e_d(\mathbf x) = \max(0, \lVert \mathbf v \rVert - s_{max}),
 
         zero inside, continuous and piecewise linear in position.  The
-        Jacobian rows of the position terms are the local axes.
+        Jacobian rows of the position terms are the local axes.  ``d + 1``
+        rows for a ``d``-dimensional zone.
         """
         # plain floats: this runs once per LM iteration as a Python callback, where numpy's
         # per-call overhead would be most of the cost
-        px, py, vx, vy = (float(v) for v in np.asarray(state, dtype=float).reshape(4))
-        (ox, oy), ((b00, b01), (b10, b11)) = self.frame.origin, self.frame.basis
-        local = (b00 * (px - ox) + b01 * (py - oy), b10 * (px - ox) + b11 * (py - oy))
-        e = [0.0, 0.0, 0.0]
-        J = [[0.0] * 4 for _ in range(3)]
-        for i, (v, (lo, hi), row) in enumerate(zip(local, (self.along, self.across), ((b00, b01), (b10, b11)),
-                                                   strict=True)):
+        d = self.dim
+        x = [float(v) for v in np.asarray(state, dtype=float).reshape(-1)]
+        if len(x) != 2 * d:
+            raise ValueError(f"a {d}-D zone takes a state of {2 * d} numbers, got {len(x)}")
+        origin, basis = self.frame.origin, self.frame.basis
+        rel = [x[i] - origin[i] for i in range(d)]
+        local = [sum(row[i] * rel[i] for i in range(d)) for row in basis]
+        e = [0.0] * (d + 1)
+        J = [[0.0] * (2 * d) for _ in range(d + 1)]
+        for i, (v, (lo, hi), row) in enumerate(zip(local, self.intervals, basis, strict=True)):
             if v < lo or v > hi:
                 e[i] = v - lo if v < lo else v - hi
-                J[i][0], J[i][1] = row
-        speed = math.hypot(vx, vy)
+                J[i][:d] = row
+        vel = x[d:]
+        speed = math.hypot(*vel)
         if speed > self.speed_max:
-            e[2] = speed - self.speed_max
-            J[2][2], J[2][3] = vx / speed, vy / speed
+            e[d] = speed - self.speed_max
+            J[d][d:] = [c / speed for c in vel]
         return np.array(e), np.array(J)
 
     def prior(self) -> tuple[FloatArray, FloatArray]:
@@ -158,16 +191,20 @@ class Zone:
         the box half-widths (at least 1 m) along the local axes and
         ``speed_max`` per velocity axis.
         """
-        centre = self.frame.points_to_world([(self.along[0] + self.along[1]) / 2,
-                                             (self.across[0] + self.across[1]) / 2])
-        half = np.array([(self.along[1] - self.along[0]) / 2, (self.across[1] - self.across[0]) / 2])
-        cov = np.diag(np.concatenate([np.maximum(half, 1.0) ** 2, np.full(2, max(self.speed_max, 1.0) ** 2)]))
-        return np.concatenate([centre, np.zeros(2)]), self.frame.covariances_to_world(cov)
+        d = self.dim
+        centre = self.frame.points_to_world([(lo + hi) / 2 for lo, hi in self.intervals])
+        half = np.array([(hi - lo) / 2 for lo, hi in self.intervals])
+        cov = np.diag(np.concatenate([np.maximum(half, 1.0) ** 2, np.full(d, max(self.speed_max, 1.0) ** 2)]))
+        return np.concatenate([centre, np.zeros(d)]), self.frame.covariances_to_world(cov)
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready form (the frame included)."""
-        return {"along": list(self.along), "across": list(self.across), "speed_max": self.speed_max,
-                "frame": self.frame.to_dict()}
+        out: dict[str, object] = {"along": list(self.along), "across": list(self.across),
+                                  "speed_max": self.speed_max}
+        if self.altitude is not None:
+            out["altitude"] = list(self.altitude)
+        out["frame"] = self.frame.to_dict()
+        return out
 
     def relative_to(self, frame: Frame) -> Zone:
         """The same zone with its frame expressed in ``frame``'s local coordinates."""
@@ -175,9 +212,9 @@ class Zone:
 
     def distance_to(self, points: ArrayLike) -> float:
         """Smallest distance (m) from the box to any of the world ``points`` (0 if one is inside)."""
-        u = self.frame.points_to_local(np.asarray(points, dtype=float).reshape(-1, 2))
-        lo = np.array([self.along[0], self.across[0]])
-        hi = np.array([self.along[1], self.across[1]])
+        u = self.frame.points_to_local(np.asarray(points, dtype=float).reshape(-1, self.dim))
+        lo = np.array([iv[0] for iv in self.intervals])
+        hi = np.array([iv[1] for iv in self.intervals])
         return float(np.min(np.linalg.norm(np.maximum(0.0, np.maximum(lo - u, u - hi)), axis=1)))
 
 
@@ -193,17 +230,23 @@ class ZoneLimits:
         ``(low, high)`` across it (m).
     speed_max : float or None, default None
         Largest target speed (m/s).
+    altitude : tuple of float or None, default None
+        ``(low, high)`` height above the sensors' plane (m).  Setting it makes
+        the problem 3-D (:attr:`fgdoppler.geometry.Geometry.dim`).
     """
 
     along: tuple[float, float] | None = None
     across: tuple[float, float] | None = None
     speed_max: float | None = None
+    altitude: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if self.along is not None:
             object.__setattr__(self, "along", _interval(self.along, "along"))
         if self.across is not None:
             object.__setattr__(self, "across", _interval(self.across, "across"))
+        if self.altitude is not None:
+            object.__setattr__(self, "altitude", _interval(self.altitude, "altitude"))
         sm = self.speed_max
         if sm is not None and (isinstance(sm, bool) or not isinstance(sm, int | float)
                                or not (math.isfinite(sm) and sm > 0)):
@@ -212,17 +255,21 @@ class ZoneLimits:
     @property
     def empty(self) -> bool:
         """True if nothing is overridden."""
-        return self.along is None and self.across is None and self.speed_max is None
+        return self.along is None and self.across is None and self.speed_max is None and self.altitude is None
 
     def apply(self, zone: Zone) -> Zone:
         """``zone`` with these overrides."""
+        if self.altitude is not None and zone.altitude is None:
+            raise ValueError("an altitude band needs a 3-D zone (build the zone from a geometry with these limits)")
         return replace(zone, along=self.along or zone.along, across=self.across or zone.across,
+                       altitude=self.altitude or zone.altitude,
                        speed_max=zone.speed_max if self.speed_max is None else float(self.speed_max))
 
     def merged(self, other: ZoneLimits) -> ZoneLimits:
         """These limits with ``other``'s set values on top (e.g. command-line options over a TOML table)."""
         return ZoneLimits(along=other.along or self.along, across=other.across or self.across,
-                          speed_max=self.speed_max if other.speed_max is None else other.speed_max)
+                          speed_max=self.speed_max if other.speed_max is None else other.speed_max,
+                          altitude=other.altitude or self.altitude)
 
     def to_dict(self) -> dict[str, object]:
         """The set values only (the TOML ``[zone]`` table)."""
@@ -233,6 +280,8 @@ class ZoneLimits:
             d["across"] = list(self.across)
         if self.speed_max is not None:
             d["speed_max"] = float(self.speed_max)
+        if self.altitude is not None:
+            d["altitude"] = list(self.altitude)
         return d
 
 
@@ -244,4 +293,5 @@ def default_zone(frame: Frame, tx: ArrayLike, rx: ArrayLike, *, speed_max: float
     v_min, v_max = float(local[:, 1].min()), float(local[:, 1].max())
     D = u_max - u_min
     return Zone(frame=frame, along=(u_min + D / 25, u_max - D / 25),
-                across=(min(-D / 10, v_min - D / 25), max(D / 10, v_max + D / 25)), speed_max=speed_max)
+                across=(min(-D / 10, v_min - D / 25), max(D / 10, v_max + D / 25)), speed_max=speed_max,
+                altitude=(0.0, D / 5) if frame.dim == 3 else None)

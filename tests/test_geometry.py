@@ -20,7 +20,7 @@ def test_paper_table1_positions() -> None:
 
 @pytest.mark.parametrize(
     ("tx", "rx", "msg"),
-    [((0, 0), (0, 0), "must differ"), ((np.nan, 0), (1, 0), "finite"), ((0, 0, 0), (1, 0), "2-vector")],
+    [((0, 0), (0, 0), "must differ"), ((np.nan, 0), (1, 0), "finite"), ((0, 0, 0, 0), (1, 0), "2- or 3-vector")],
 )
 def test_pair_validation(tx: tuple, rx: tuple, msg: str) -> None:
     with pytest.raises(ValueError, match=msg):
@@ -91,9 +91,9 @@ PAIR = "[[pair]]\ntx = [50000.0, 0.0]\nrx = [0.0, 0.0]\n"
         ("name = 'x'\n", "one or more", None),
         ("[[pair]]\ntx = [0.0, 0.0]\n", "needs both", None),
         ("[[pair]]\ntx = [0.0, 0.0]\nrx = [0.0, 0.0]\n", "must differ", 2),
-        ('[[pair]]\ntx = ["50000", 0.0]\nrx = [0.0, 0.0]\n', "two numbers", 2),
-        ("[[pair]]\ntx = [true, 0.0]\nrx = [0.0, 0.0]\n", "two numbers", 2),
-        ("[[pair]]\ntx = [1.0, 0.0, 0.0, 0.0]\nrx = [0.0, 0.0]\n", "2-vector", 2),
+        ('[[pair]]\ntx = ["50000", 0.0]\nrx = [0.0, 0.0]\n', "two or three numbers", 2),
+        ("[[pair]]\ntx = [true, 0.0]\nrx = [0.0, 0.0]\n", "two or three numbers", 2),
+        ("[[pair]]\ntx = [1.0, 0.0, 0.0, 0.0]\nrx = [0.0, 0.0]\n", "2- or 3-vector", 2),
         ("[[pair]]\ntx = [50000.0, nan]\nrx = [0.0, 0.0]\n", "finite", 2),
         ("nmae = 'x'\n" + PAIR, "unknown key 'nmae'", 1),
         (PAIR + "txx = 1.0\n", "unknown key 'txx'", 4),

@@ -60,7 +60,7 @@ def crlb_deterministic(
     smoothing: bool = False,
     prior_information: ArrayLike | None = None,
 ) -> FloatArray:
-    """CRLB ``(n, 4, 4)`` of the state at ``times`` for a constant-velocity target starting at ``x0``.
+    """CRLB ``(n, 2d, 2d)`` of the state at ``times`` for a constant-velocity target starting at ``x0``.
 
     Parameters
     ----------
@@ -86,14 +86,14 @@ def crlb_deterministic(
     outer = np.einsum("ji,jk->jik", J, J)
     cum = np.cumsum(outer, axis=0)
     if smoothing:
-        info = np.broadcast_to(cum[-1], (t.size, 4, 4)).copy()
+        info = np.broadcast_to(cum[-1], (t.size, *cum.shape[1:])).copy()
     else:
         idx = np.searchsorted(measurements.time, t, side="right") - 1
         info = np.where(idx[:, None, None] >= 0, cum[np.clip(idx, 0, None)], 0.0)
     if prior_information is not None:
         info = info + np.asarray(prior_information, dtype=float)
     P0 = _inv_or_nan(info)
-    F = ConstantVelocity.F(t - t0)
+    F = ConstantVelocity(dim=J.shape[-1] // 2).F(t - t0)
     return F @ P0 @ np.swapaxes(F, -1, -2)
 
 
@@ -107,14 +107,14 @@ def pcrlb_filter(
 ) -> tuple[FloatArray, FloatArray]:
     """Filtering posterior CRLB by Tichavský's recursion, from information ``J0`` at ``t0``.
 
-    Returns the scan times after ``t0`` and the bound ``(n, 4, 4)`` after
+    Returns the scan times after ``t0`` and the bound ``(n, 2d, 2d)`` after
     each scan (all measurements of a scan together).
     """
     m = measurements.subset(measurements.time > t0)
     times, scan = m.scans().times, m.scans().scan_of
     J = np.asarray(J0, dtype=float)
     t_prev = t0
-    out = np.empty((times.size, 4, 4))
+    out = np.empty((times.size, *J.shape))
     states = truth.at(times)
     _, H_all = model.predict_and_jacobian(states[scan], m.pair)
     Rinv = 1.0 / m.sigma**2

@@ -448,7 +448,7 @@ def observability_report(
     covs = res.covariances
     assert covs is not None
     if motion is None:
-        F = ConstantVelocity.F(times - t0)
+        F = ConstantVelocity(dim=states.shape[-1] // 2).F(times - t0)
         covs = F @ covs[0] @ np.swapaxes(F, -1, -2)
     pos = covs[:, :2, :2]
     w, V = np.linalg.eigh(pos)

@@ -74,7 +74,7 @@ def hypotheses(init: Initiation) -> list[Initiation]:
     """
     kept = tuple(r for r in init.reasons if r.code != "ambiguous")
     out = [replace(init, alternatives=(), reasons=kept)]
-    F = ConstantVelocity.F(init.t_end - init.t_start)
+    F = ConstantVelocity(dim=init.x_start.size // 2).F(init.t_end - init.t_start)
     for a in init.alternatives:
         P = a.covariance
         out.append(replace(
@@ -106,7 +106,7 @@ def posterior_hypotheses(init: Initiation, measurements: Measurements, model: Tr
 
     post = window_posterior(measurements, model, init, ParticleSettings(huber_k=huber_k, seed=seed))
     terms = post.components(k, model, seed=seed)
-    Fi = np.linalg.inv(ConstantVelocity.F(init.t_end - init.t_start))
+    Fi = np.linalg.inv(model.motion.F(init.t_end - init.t_start))
     kept = tuple(r for r in init.reasons if r.code != "ambiguous")
     hyps = [replace(init, x_start=Fi @ m, x_end=m, P_start=Fi @ P @ Fi.T, P_end=P, alternatives=(), reasons=kept,
                     window_summarised=True,

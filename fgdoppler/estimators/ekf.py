@@ -51,6 +51,14 @@ FloatArray = NDArray[np.float64]
 OUTLIER_CUT2 = OUTLIER_CUT**2
 
 
+def _dot(a: list[float], b: list[float]) -> float:
+    """``a . b`` summed left to right in plain floats (zero terms of a 3-D state at z = 0 add exactly 0)."""
+    total = a[0] * b[0]
+    for i in range(1, len(a)):
+        total += a[i] * b[i]
+    return total
+
+
 class ExtendedKalmanFilter:
     r"""Streaming EKF.
 
@@ -65,7 +73,7 @@ class ExtendedKalmanFilter:
 
     Notes
     -----
-    The 4-state arithmetic runs in plain Python floats: for 4x4 matrices
+    The state arithmetic (4 or 6 numbers) runs in plain Python floats: for matrices this small
     numpy's per-call overhead is several times the arithmetic.  The Joseph
     update for a scalar measurement is evaluated exactly in O(n^2) as
     :math:`\mathbf A = \mathbf P - \mathbf K(\mathbf P\mathbf H')'`,
@@ -80,8 +88,12 @@ class ExtendedKalmanFilter:
         self.model = model.observation
         self.motion = model.motion
         self.settings = settings or EKFSettings()
-        x = np.array(x0, dtype=float).reshape(4)
-        P = np.array(P0, dtype=float).reshape(4, 4)
+        self.n = n = model.n
+        x = np.array(x0, dtype=float).reshape(-1)
+        P = np.array(P0, dtype=float)
+        if x.shape != (n,) or P.shape != (n, n):
+            raise ValueError(f"a {n // 2}-D model needs a state of {n} numbers and an {n}x{n} covariance, "
+                             f"got {x.shape} and {P.shape}")
         if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
             raise ValueError("initial state and covariance must be finite")
         self._x = x.tolist()
@@ -100,12 +112,12 @@ class ExtendedKalmanFilter:
 
     @property
     def x(self) -> FloatArray:
-        """Current state estimate ``(4,)``."""
+        """Current state estimate ``(n,)``."""
         return np.array(self._x)
 
     @property
     def P(self) -> FloatArray:
-        """Current covariance ``(4, 4)``."""
+        """Current covariance ``(n, n)``."""
         return np.array(self._P)
 
     def predict(self, t: float) -> None:
@@ -125,17 +137,18 @@ class ExtendedKalmanFilter:
         if Q is None:  # few distinct step lengths: build Q once each
             Q = self._Q[dt] = self.motion.Q(dt).tolist()
         x = self._x
-        self._x = [x[0] + dt * x[2], x[1] + dt * x[3], x[2], x[3]]
+        d = self.n // 2
+        self._x = [x[i] + dt * x[i + d] for i in range(d)] + x[d:]
         P = self._P
         # F P F' for F = [[I, dt I], [0, I]], by blocks (P symmetric)
-        n = [[0.0] * 4 for _ in range(4)]
-        for i in range(2):
-            for j in range(2):
-                p11, p12, p21, p22 = P[i][j], P[i][j + 2], P[i + 2][j], P[i + 2][j + 2]
+        n = [[0.0] * self.n for _ in range(self.n)]
+        for i in range(d):
+            for j in range(d):
+                p11, p12, p21, p22 = P[i][j], P[i][j + d], P[i + d][j], P[i + d][j + d]
                 n[i][j] = p11 + dt * (p12 + p21) + dt * dt * p22 + Q[i][j]
-                n[i][j + 2] = p12 + dt * p22 + Q[i][j + 2]
-                n[i + 2][j] = p21 + dt * p22 + Q[i + 2][j]
-                n[i + 2][j + 2] = p22 + Q[i + 2][j + 2]
+                n[i][j + d] = p12 + dt * p22 + Q[i][j + d]
+                n[i + d][j] = p21 + dt * p22 + Q[i + d][j]
+                n[i + d][j + d] = p22 + Q[i + d][j + d]
         self._P = n
         self.t = float(t)
 
@@ -155,9 +168,10 @@ class ExtendedKalmanFilter:
             return float("nan")
         r = float(z) - hv
         P = self._P
-        PH = [P[i][0] * H[0] + P[i][1] * H[1] + P[i][2] * H[2] + P[i][3] * H[3] for i in range(4)]
+        n = self.n
+        PH = [_dot(row, H) for row in P]
         s2 = float(sigma) * float(sigma)
-        S = H[0] * PH[0] + H[1] * PH[1] + H[2] * PH[2] + H[3] * PH[3] + s2
+        S = _dot(H, PH) + s2
         if not (math.isfinite(S) and S > 0):
             self.events.append(Event(time=self.t, message=f"update skipped: innovation variance {S}"))
             return float("nan")
@@ -174,14 +188,14 @@ class ExtendedKalmanFilter:
             # Huber M-estimate: a measurement beyond k normalised units counts with weight
             # w = k / |r|, i.e. its variance is inflated so that S grows by 1 / w
             s2 += (S * (math.sqrt(nis) / k - 1.0))
-            S = H[0] * PH[0] + H[1] * PH[1] + H[2] * PH[2] + H[3] * PH[3] + s2
+            S = _dot(H, PH) + s2
         K = [v / S for v in PH]
         # Joseph form, exactly: A = (I - K H) P = P - K (P H')', then A (I - K H)' + s2 K K'
-        A = [[P[i][j] - K[i] * PH[j] for j in range(4)] for i in range(4)]
-        AH = [A[i][0] * H[0] + A[i][1] * H[1] + A[i][2] * H[2] + A[i][3] * H[3] for i in range(4)]
-        Pn = [[A[i][j] - AH[i] * K[j] + s2 * K[i] * K[j] for j in range(4)] for i in range(4)]
-        Pn = [[0.5 * (Pn[i][j] + Pn[j][i]) for j in range(4)] for i in range(4)]
-        x = [self._x[i] + K[i] * r for i in range(4)]
+        A = [[P[i][j] - K[i] * PH[j] for j in range(n)] for i in range(n)]
+        AH = [_dot(row, H) for row in A]
+        Pn = [[A[i][j] - AH[i] * K[j] + s2 * K[i] * K[j] for j in range(n)] for i in range(n)]
+        Pn = [[0.5 * (Pn[i][j] + Pn[j][i]) for j in range(n)] for i in range(n)]
+        x = [self._x[i] + K[i] * r for i in range(n)]
         if not math.isfinite(sum(x) + sum(sum(row) for row in Pn)):
             self.events.append(Event(time=self.t, message="update skipped: non-finite result"))
             return nis

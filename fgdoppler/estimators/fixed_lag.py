@@ -103,7 +103,7 @@ class FixedLagTracker:
         recorded before it is marginalised.
         """
         ts = np.asarray(times, dtype=float).reshape(-1)
-        g = np.asarray(guesses, dtype=float).reshape(-1, 4)
+        g = np.asarray(guesses, dtype=float).reshape(-1, self.motion.n)
         first = max(1, int(np.searchsorted(ts, ts[0] + 0.999 * self.settings.lag, side="right")))
         x, P = self.add_scans(ts[:first], channels[:first], z[:first], sigma[:first], g[:first], gate=False)
         for k in range(first, ts.size):
@@ -131,7 +131,7 @@ class FixedLagTracker:
             If a scan is not after the previous one (out of order).
         """
         ts = np.asarray(times, dtype=float).reshape(-1)
-        g = None if guesses is None else np.asarray(guesses, dtype=float).reshape(-1, 4)
+        g = None if guesses is None else np.asarray(guesses, dtype=float).reshape(-1, self.motion.n)
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         stamps: dict[Any, Any] = {}  # key -> time (gtsam's stub wants SupportsInt keys)

@@ -83,7 +83,6 @@ from fgdoppler.geometry import Geometry
 from fgdoppler.graphs import chain_graph, chain_values, cv_graph
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.doppler import StackedTimes, cv_doppler, cv_doppler_jacobian, cv_information
-from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
 
@@ -649,7 +648,7 @@ def _refine_lm(w: _Window, model: TrackingModel, settings: InitiationSettings, g
     reasons = [] if model.zone is None else _boundary_reasons(best, graph, n_data, model, settings)
     cv_window = settings.window == "cv"
     last = X(0) if cv_window else X(w.scan_times.size - 1)
-    F_end = ConstantVelocity.F(t_span)
+    F_end = model.motion.F(t_span)
     x1 = F_end @ best.x0 if cv_window else best.values.atVector(last)
     marg = marginal_covariances(_without_wall(graph, model, settings), best.values,
                                 [X(0)] if cv_window else [X(0), last])
@@ -728,7 +727,7 @@ def _refine_closed_form(w: _Window, model: TrackingModel, settings: InitiationSe
         info = w.information(x0)
     cost, n_out = (w.cost(x0), 0) if settings.huber_k is None else w.inlier_cost(
         model, model.motion.propagate(x0, w.scan_times))
-    F_end = ConstantVelocity.F(float(w.scan_times[-1]))
+    F_end = model.motion.F(float(w.scan_times[-1]))
     P0, message = _inverse(info)
     # other grid optima that pass the test are alternatives as well
     alternatives = [c for c in candidates[1:] if c.passes_chi2 and not _same(c.state, x0, settings)]

@@ -123,7 +123,7 @@ class ISAM2Tracker:
         if sd.channels.size == 0:
             return None
         try:
-            rows = linearize_rows(self.model, np.broadcast_to(x_lin, (sd.channels.size, 4)), sd.channels, sd.z,
+            rows = linearize_rows(self.model, np.broadcast_to(x_lin, (sd.channels.size, x_lin.size)), sd.channels, sd.z,
                                   sd.sigma, self.settings.huber_k)
         except ValueError as exc:  # the predicted state sits on a sensor: drop this scan's factor
             self.events.append(Event(time=self.times[k], message=f"measurements skipped: {exc}"))
@@ -152,7 +152,8 @@ class ISAM2Tracker:
             If the marginal is singular (indeterminate).
         """
         c = self.isam.marginalFactor(X(k), gtsam.EliminateQR)
-        Ri = solve_triangular(np.asarray(c.R()), np.eye(4))
+        R = np.asarray(c.R())
+        Ri = solve_triangular(R, np.eye(R.shape[0]))
         theta = self.scans[k].theta
         assert theta is not None
         return theta + Ri @ np.asarray(c.d()), Ri @ Ri.T
@@ -199,8 +200,9 @@ class ISAM2Tracker:
         lin = np.array([self.scans[j].lin for j in js])
         d = np.abs(xs - lin)
         st = self.settings
-        moved = np.any(d[:, :2] > st.relinearize_position * scale, axis=1) | np.any(
-            d[:, 2:] > st.relinearize_velocity * scale, axis=1)
+        half = self.motion_model.dim
+        moved = np.any(d[:, :half] > st.relinearize_position * scale, axis=1) | np.any(
+            d[:, half:] > st.relinearize_velocity * scale, axis=1)
         sel = [j for j, mv in zip(js, moved, strict=True) if mv]
         if not sel:
             return 0
@@ -232,7 +234,7 @@ class ISAM2Tracker:
         filtered ``(x, P)`` of the last state.
         """
         ts = np.asarray(times, dtype=float).reshape(-1)
-        g = np.asarray(guesses, dtype=float).reshape(-1, 4)
+        g = np.asarray(guesses, dtype=float).reshape(-1, self.motion_model.n)
         if ts.size == 0:
             raise ValueError("add_window needs at least one scan")
         self._pending = (gtsam.NonlinearFactorGraph(), gtsam.Values(), [], [])
@@ -336,7 +338,7 @@ class ISAM2Tracker:
             owners.append(-1)
         if k:
             Ap, An = self.motion(self.times[k] - self.times[k - 1])
-            graph.add(absolute_linear_factor([X(k - 1), X(k)], [Ap, An], np.zeros(4)))
+            graph.add(absolute_linear_factor([X(k - 1), X(k)], [Ap, An], np.zeros(An.shape[0])))
             owners.append(-1)
         f = self._meas_factor(k, x_pred)
         if f is not None:

@@ -33,7 +33,7 @@ FloatArray = NDArray[np.float64]
 class LinearRows:
     """Whitened measurement rows at a linearisation point."""
 
-    A: FloatArray  # (m, 4)
+    A: FloatArray  # (m, n)
     b: FloatArray  # (m,) whitened residual z - h at the point (Huber weighted)
 
 
@@ -70,8 +70,8 @@ class MotionBlocks:
         return blk
 
     def residuals(self, states: FloatArray, times: FloatArray) -> FloatArray:
-        """Whitened motion residuals ``(n-1, 4)`` of a trajectory."""
-        out = np.empty((max(states.shape[0] - 1, 0), 4))
+        """Whitened motion residuals ``(n-1, 2d)`` of a trajectory."""
+        out = np.empty((max(states.shape[0] - 1, 0), self.motion.n))
         dts = np.diff(times)
         # steps are few distinct lengths (one per sampling pattern): vectorise per length
         for dt in np.unique(np.round(dts, 12)):

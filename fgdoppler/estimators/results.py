@@ -42,20 +42,35 @@ Kind = Literal["filtered", "lagged", "smoothed"]
 #: The kinds of estimate.
 KINDS: tuple[Kind, ...] = ("filtered", "lagged", "smoothed")
 
-_IU = np.triu_indices(4)
-_COV_NAMES = [f"P{i}{j}" for i, j in zip(*_IU, strict=True)]
+#: State column names of the track CSV, per state length.
+STATE_NAMES = {4: ("x", "y", "vx", "vy"), 6: ("x", "y", "z", "vx", "vy", "vz")}
+
+
+def _upper(n: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    return np.triu_indices(n)
+
+
+def _cov_names(n: int) -> list[str]:
+    return [f"P{i}{j}" for i, j in zip(*_upper(n), strict=True)]
 
 
 def states_csv(times: FloatArray, states: FloatArray, covariances: FloatArray, cov_ok: NDArray[np.bool_],
                comments: Sequence[str] = ()) -> str:
-    """The track CSV: ``#`` comment lines, the header, a row per time with the covariance's upper triangle."""
+    """The track CSV: ``#`` comment lines, the header, a row per time with the covariance's upper triangle.
+
+    Columns ``time, x, y, vx, vy, P00, P01, ..., P33`` in 2-D and
+    ``time, x, y, z, vx, vy, vz, P00, ..., P55`` in 3-D (``Pij`` the
+    covariance of state entries ``i`` and ``j``, row-major upper triangle).
+    """
+    n = int(np.shape(states)[1]) if np.ndim(states) == 2 else 4
+    iu, names = _upper(n), _cov_names(n)
     buf = io.StringIO()
     for line in comments:
         buf.write(f"# {line}\n")
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["time", "x", "y", "vx", "vy", *_COV_NAMES])
+    w.writerow(["time", *STATE_NAMES[n], *names])
     for t, x, P, ok in zip(times, states, covariances, cov_ok, strict=True):
-        cov = [repr(float(v)) for v in P[_IU]] if ok else [""] * len(_COV_NAMES)
+        cov = [repr(float(v)) for v in P[iu]] if ok else [""] * len(names)
         w.writerow([repr(float(t)), *(repr(float(v)) for v in x), *cov])
     return buf.getvalue()
 
@@ -76,7 +91,7 @@ def json_dumps(obj: Any) -> str:
 
 @dataclass(frozen=True, kw_only=True)
 class Estimates:
-    """States ``(n, 4)`` and covariances ``(n, 4, 4)`` at times ``(n,)``, of one kind.
+    """States ``(n, 2d)`` and covariances ``(n, 2d, 2d)`` at times ``(n,)``, of one kind (``d`` = 2 or 3).
 
     ``cov_ok[k]`` is False where the covariance could not be computed
     (indeterminate system); the matrix there is filled with zeros and must
@@ -93,13 +108,20 @@ class Estimates:
         if self.kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}, got {self.kind!r}")
         n = np.asarray(self.times).size
-        if np.shape(self.states) != (n, 4) or np.shape(self.covariances) != (n, 4, 4) or np.size(self.cov_ok) != n:
+        m = np.shape(self.states)[-1] if np.ndim(self.states) == 2 else -1
+        if m not in (4, 6) or np.shape(self.states) != (n, m) or np.shape(self.covariances) != (n, m, m) \
+                or np.size(self.cov_ok) != n:
             raise ValueError("Estimates: inconsistent shapes")
 
+    @property
+    def dim(self) -> int:
+        """Spatial dimension of the states (2 or 3)."""
+        return int(np.shape(self.states)[1]) // 2
+
     @classmethod
-    def empty(cls, kind: Kind) -> Estimates:
-        """No estimates."""
-        return cls(kind=kind, times=np.zeros(0), states=np.zeros((0, 4)), covariances=np.zeros((0, 4, 4)),
+    def empty(cls, kind: Kind, n: int = 4) -> Estimates:
+        """No estimates (states of ``n`` numbers)."""
+        return cls(kind=kind, times=np.zeros(0), states=np.zeros((0, n)), covariances=np.zeros((0, n, n)),
                    cov_ok=np.zeros(0, dtype=bool))
 
     @classmethod
@@ -109,10 +131,12 @@ class Estimates:
         if not times:
             return cls.empty(kind)
         ok = np.array([c is not None for c in covs], dtype=bool)
-        P = np.array([np.zeros((4, 4)) if c is None else c for c in covs], dtype=float)
+        x = np.asarray(states, dtype=float)
+        n = x.shape[-1]
+        P = np.array([np.zeros((n, n)) if c is None else c for c in covs], dtype=float)
         P = 0.5 * (P + np.swapaxes(P, -1, -2))  # symmetric to the last bit (CSV keeps one triangle)
-        return cls(kind=kind, times=np.asarray(times, dtype=float),
-                   states=np.asarray(states, dtype=float).reshape(-1, 4), covariances=P, cov_ok=ok)
+        return cls(kind=kind, times=np.asarray(times, dtype=float), states=x.reshape(-1, n), covariances=P,
+                   cov_ok=ok)
 
     def __len__(self) -> int:
         return int(np.size(self.times))
@@ -261,7 +285,8 @@ class TrackResult(Judged):
                           [f"fgdoppler {self.estimator}: {e.kind} estimates, status {self.status}", *header])
 
     def to_csv(self, path: str | Path, *, header: Sequence[str] = ()) -> None:
-        """One row per time: ``time, x, y, vx, vy`` and the covariance upper triangle (empty if indeterminate).
+        """One row per time: ``time``, the state (``x, y, vx, vy`` or ``x, y, z, vx, vy, vz``) and the
+        covariance's upper triangle (empty if indeterminate); see :func:`states_csv`.
 
         The file starts with ``#`` comment lines: the estimator, the estimate's
         kind and the verdict, then each line of ``header`` (the command line
@@ -286,15 +311,18 @@ class TrackResult(Judged):
         from fgdoppler.csvfile import parse_number
 
         lines = [ln for ln in Path(path).read_text(encoding="utf-8").splitlines() if ln and not ln.startswith("#")]
-        body = list(csv.reader(lines))[1:]
+        rows = list(csv.reader(lines))
+        head, body = rows[0], rows[1:]
+        m = 6 if len(head) > 3 and head[3] == "z" else 4
+        iu = _upper(m)
         n = len(body)
-        t, x, P, ok = np.empty(n), np.empty((n, 4)), np.zeros((n, 4, 4)), np.zeros(n, dtype=bool)
+        t, x, P, ok = np.empty(n), np.empty((n, m)), np.zeros((n, m, m)), np.zeros(n, dtype=bool)
         for k, row in enumerate(body):
             where = f"{path}: row {k + 1}"
             t[k] = parse_number(row[0], where, "time")
-            x[k] = [parse_number(v, where, "state") for v in row[1:5]]
-            if row[5]:
-                P[k][_IU] = [parse_number(v, where, "covariance") for v in row[5:]]
+            x[k] = [parse_number(v, where, "state") for v in row[1:1 + m]]
+            if row[1 + m]:
+                P[k][iu] = [parse_number(v, where, "covariance") for v in row[1 + m:]]
                 P[k] = P[k] + np.triu(P[k], 1).T
                 ok[k] = True
         return Estimates(kind=kind, times=t, states=x, covariances=P, cov_ok=ok)

@@ -70,9 +70,9 @@ class SmootherSolution(Judged):
     times
         Scan times ``(n,)``.
     states
-        Smoothed states ``(n, 4)``.
+        Smoothed states ``(n, 2d)``.
     covariances
-        Marginal covariances ``(n, 4, 4)``, or ``None`` (not asked for, or
+        Marginal covariances ``(n, 2d, 2d)``, or ``None`` (not asked for, or
         indeterminate: a ``covariance`` reason says which).
     cost
         Final sum of squared whitened residuals (Huber-weighted where robust).
@@ -118,6 +118,7 @@ class _Problem:
         self.times = self.scans.times
         self.scan_of = self.scans.scan_of
         self.motion = MotionBlocks(model.motion)
+        self.nx = nx = model.n  # state length (4 or 6)
         self.n = len(self.scans)
         if prior is not None:
             Ri = np.linalg.inv(np.linalg.cholesky(prior[1]))
@@ -126,14 +127,14 @@ class _Problem:
             self.prior = None
         dts = np.diff(self.times)
         blocks = [self.motion(dt) for dt in dts]
-        self.Ap = np.array([blk[0] for blk in blocks]).reshape(-1, 4, 4)
-        self.An = np.array([blk[1] for blk in blocks]).reshape(-1, 4, 4)
+        self.Ap = np.array([blk[0] for blk in blocks]).reshape(-1, nx, nx)
+        self.An = np.array([blk[1] for blk in blocks]).reshape(-1, nx, nx)
         counts = np.diff(self.scans.bounds)
         self.m_max = int(counts.max()) if counts.size else 0
         self.row_in_scan = np.arange(len(meas)) - self.scans.bounds[self.scan_of]
         self.keys = [X(k) for k in range(self.n)]
-        self.unit = gtsam.noiseModel.Unit.Create(8 + self.m_max)
-        self._damp = np.zeros((self.n, 4))
+        self.unit = gtsam.noiseModel.Unit.Create(2 * nx + self.m_max)
+        self._damp = np.zeros((self.n, nx))
 
     def cost(self, states: FloatArray) -> float:
         """The objective: data, motion, weak prior and zone wall."""
@@ -152,7 +153,7 @@ class _Problem:
     def wall_rows(self, states: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Whitened wall error of the first state and its Jacobian (zero inside the zone)."""
         if self.wall is None:
-            return np.zeros(3), np.zeros((3, 4))
+            return np.zeros(self.nx // 2 + 1), np.zeros((self.nx // 2 + 1, self.nx))
         zone, w = self.wall
         e, J = zone.excess(states[0])
         return e / w, J / w[:, None]
@@ -164,20 +165,22 @@ class _Problem:
     def system(self, states: FloatArray, lam: float, *, wall: bool = True) -> gtsam.GaussianFactorGraph:
         """The damped linear system in delta coordinates, one JacobianFactor per scan.
 
-        Every scan's block has rows ``[motion (4); measurements (padded to the
-        largest scan with zero rows, which add nothing); damping (4)]``; all
+        Every scan's block has rows ``[motion (n); measurements (padded to the
+        largest scan with zero rows, which add nothing); damping (n)]`` for
+        states of ``n`` numbers; all
         blocks are filled in one vectorised pass and only the factor
         construction loops over scans.  The zone wall's rows join the first
         block where the wall is active (``wall``; the covariances leave them
         out: the wall bounds the solution, it does not measure it).
         """
-        e_wall, J_wall = self.wall_rows(states) if wall else (np.zeros(3), np.zeros((3, 4)))
+        nx = self.nx
+        e_wall, J_wall = self.wall_rows(states) if wall else (np.zeros(nx // 2 + 1), np.zeros((nx // 2 + 1, nx)))
         active = bool(np.any(e_wall != 0.0))
         n, m = self.n, self.m_max
         lin = linearize_rows(self.model, states[self.scan_of], self.meas.pair, self.meas.doppler,
                              self.meas.sigma, self.huber_k)
         # Marquardt scaling: the diagonal of J'J per state
-        diag = np.zeros((n, 4))
+        diag = np.zeros((n, nx))
         np.add.at(diag, self.scan_of, lin.A**2)
         if n > 1:
             diag[1:] += np.sum(self.An**2, axis=1)
@@ -188,22 +191,22 @@ class _Problem:
             diag[0] += np.sum(J_wall**2, axis=0)
         damp = np.sqrt(lam * np.maximum(diag, 1e-12))
         self._damp = damp
-        rows = 8 + m
-        A_next = np.zeros((n, rows, 4))
-        A_prev = np.zeros((n, rows, 4))
+        rows = 2 * nx + m
+        A_next = np.zeros((n, rows, nx))
+        A_prev = np.zeros((n, rows, nx))
         b = np.zeros((n, rows))
-        A_next[self.scan_of, 4 + self.row_in_scan] = lin.A
-        b[self.scan_of, 4 + self.row_in_scan] = lin.b
-        A_next[:, 4 + m:, :] = damp[:, :, None] * np.eye(4)
+        A_next[self.scan_of, nx + self.row_in_scan] = lin.A
+        b[self.scan_of, nx + self.row_in_scan] = lin.b
+        A_next[:, nx + m:, :] = damp[:, :, None] * np.eye(nx)
         if n > 1:
-            A_next[1:, :4] = self.An
-            A_prev[1:, :4] = self.Ap
-            b[1:, :4] = -self.motion.residuals(states, self.times)
+            A_next[1:, :nx] = self.An
+            A_prev[1:, :nx] = self.Ap
+            b[1:, :nx] = -self.motion.residuals(states, self.times)
         gfg = gtsam.GaussianFactorGraph()
         keys = self.keys
         unit = self.unit
-        first_rows = [A_next[0, 4:]]
-        first_b = [b[0, 4:]]
+        first_rows = [A_next[0, nx:]]
+        first_b = [b[0, nx:]]
         if self.prior is not None:
             first_rows.append(self.prior[0])
             first_b.append(self.prior[1] - self.prior[0] @ states[0])
@@ -247,7 +250,7 @@ def solve_smoother(
     model
         Observation and motion model.
     initial
-        Initial states, one per distinct measurement time, ``(n, 4)``.
+        Initial states, one per distinct measurement time, ``(n, 2d)``.
     settings
         Huber threshold, iteration cap, whether to compute covariances.
     prior
@@ -274,9 +277,9 @@ def solve_smoother(
     wall = None
     if settings.region_bound and model.zone is not None:
         sp, sv = settings.wall_sigma
-        wall = (model.zone, np.array([sp, sp, sv]))
+        wall = (model.zone, np.array([sp] * model.zone.dim + [sv]))
     prob = _Problem(model, measurements, settings.huber_k, pr, ts, wall)
-    x = np.array(initial, dtype=float).reshape(-1, 4)
+    x = np.array(initial, dtype=float).reshape(-1, model.n)
     if x.shape[0] != prob.n:
         raise ValueError(f"{x.shape[0]} initial states for {prob.n} measurement times")
     start_task(progress, "Levenberg-Marquardt", None)
@@ -356,9 +359,10 @@ def _boundary_reasons(prob: _Problem, x: FloatArray, max_iterations: int) -> lis
     excess, _ = wall[0].excess(x[0])
     gain = inside - free_cost
     limit = float(chi2.ppf(0.95, 1))
-    held = ("the track's first state is held at the zone's boundary (excess along, across, speed: "
+    axes = "along, across, altitude" if wall[0].dim == 3 else "along, across"
+    held = (f"the track's first state is held at the zone's boundary (excess {axes}, speed: "
             + ", ".join(f"{v:.3g}" for v in excess) + f"); without the bound the cost is {free_cost:.2f} "
-            f"instead of {inside:.2f}, {np.linalg.norm(free[0, :2] - x[0, :2]) / 1e3:.1f} km away")
+            f"instead of {inside:.2f}, {np.linalg.norm(free[0, :wall[0].dim] - x[0, :wall[0].dim]) / 1e3:.1f} km away")
     if gain > limit:
         return [Reason(code="boundary", status="doubtful", message=(
             f"{held}: the data prefer a start outside the zone (lower by {gain:.1f} > {limit:.2f}); widen the "
@@ -406,7 +410,7 @@ def initial_trajectory(measurements: Measurements, model: TrackingModel, init: I
     times = measurements.scans().times
     ekf = run_ekf(measurements, model, init, settings.start(), progress=prefixed(progress, "start")).primary
     smoothed = rts_smooth(ekf.times, ekf.states, ekf.covariances, model.motion) if np.all(ekf.cov_ok) else ekf.states
-    out = np.empty((times.size, 4))
+    out = np.empty((times.size, model.n))
     in_window = times <= init.t_end
     out[in_window] = model.motion.propagate(smoothed[0], times[in_window] - ekf.times[0])
     idx = np.searchsorted(ekf.times, times[~in_window])
@@ -457,7 +461,7 @@ def run_smoother(
     x_init = initial_trajectory(measurements, model, init, settings, progress)
     sol = solve_smoother(measurements, model, x_init, settings, prior=model.prior(), progress=progress)
     notes = list(sol.notes)
-    threshold = float(chi2.ppf(0.999, max(len(measurements) - 4, 1)))
+    threshold = float(chi2.ppf(0.999, max(len(measurements) - model.n, 1)))
     if sol.cost > threshold and settings.reinitiate and isinstance(model.observation, DopplerModel):
         # The solution cannot explain the data (a wrong basin inherited from the window):
         # offline, every measurement is available, so initiate again from all of them.

@@ -1,6 +1,8 @@
 r"""Bistatic Doppler (range-rate) model and its analytic Jacobians.
 
-For a target state :math:`\mathbf x = [x, y, \dot x, \dot y]'` and a pair with
+For a target state :math:`\mathbf x = [\mathbf p', \mathbf v']'` — 2-D
+:math:`[x, y, \dot x, \dot y]'` or 3-D :math:`[x, y, z, \dot x, \dot y, \dot z]'`,
+the same formulas in either dimension — and a pair with
 transmitter :math:`\mathbf t` and receiver :math:`\mathbf r`, the bistatic
 Doppler in m/s is the sum of the range rates to Tx and to Rx (paper Eq. 8–10):
 
@@ -56,8 +58,9 @@ FloatArray = NDArray[np.float64]
 
 def _as_states(states: ArrayLike) -> FloatArray:
     x = np.asarray(states, dtype=float)
-    if x.ndim == 0 or x.shape[-1] != 4:
-        raise ValueError(f"states must have shape (..., 4) = [x, y, vx, vy], got {x.shape}")
+    if x.ndim == 0 or x.shape[-1] not in (4, 6):
+        raise ValueError(f"states must have shape (..., 4) = [x, y, vx, vy] or (..., 6) = [x, y, z, vx, vy, vz], "
+                         f"got {x.shape}")
     return x
 
 
@@ -78,7 +81,7 @@ def _terms(
     jacobian: bool,
     singular: str = "raise",
 ) -> tuple[FloatArray, FloatArray | None, FloatArray | None, NDArray[np.bool_] | None]:
-    """Doppler and its partial derivatives for broadcastable pos/vel/tx/rx (..., 2).
+    """Doppler and its partial derivatives for broadcastable pos/vel/tx/rx (..., d), d = 2 or 3.
 
     Returns ``(h, dh_dp, dh_dv, singular_mask)``.  With ``singular="mask"``
     singular entries are evaluated at a harmless placeholder distance and
@@ -87,8 +90,15 @@ def _terms(
     """
     dT = pos - tx
     dR = pos - rx
-    rT = np.sqrt(dT[..., 0] ** 2 + dT[..., 1] ** 2)
-    rR = np.sqrt(dR[..., 0] ** 2 + dR[..., 1] ** 2)
+    d = pos.shape[-1]
+    # explicit component sums: the 3-D model at z = 0 is then the 2-D model to the bit
+    rT = dT[..., 0] ** 2 + dT[..., 1] ** 2
+    rR = dR[..., 0] ** 2 + dR[..., 1] ** 2
+    if d == 3:
+        rT = rT + dT[..., 2] ** 2
+        rR = rR + dR[..., 2] ** 2
+    rT = np.sqrt(rT)
+    rR = np.sqrt(rR)
     bad = (rT <= SENSOR_EPS) | (rR <= SENSOR_EPS)
     mask: NDArray[np.bool_] | None = None
     if np.any(bad):
@@ -99,8 +109,13 @@ def _terms(
         mask = bad
     vx = vel[..., 0]
     vy = vel[..., 1]
-    rdT = (dT[..., 0] * vx + dT[..., 1] * vy) / rT
-    rdR = (dR[..., 0] * vx + dR[..., 1] * vy) / rR
+    pT = dT[..., 0] * vx + dT[..., 1] * vy
+    pR = dR[..., 0] * vx + dR[..., 1] * vy
+    if d == 3:
+        pT = pT + dT[..., 2] * vel[..., 2]
+        pR = pR + dR[..., 2] * vel[..., 2]
+    rdT = pT / rT
+    rdR = pR / rR
     h = rdT + rdR
     if not jacobian:
         return h, None, None, mask
@@ -118,7 +133,7 @@ def bistatic_doppler(states: ArrayLike, geometry: Geometry) -> FloatArray:
     Parameters
     ----------
     states
-        Target states ``[x, y, vx, vy]``, shape ``(..., 4)``.
+        Target states ``[x, y, vx, vy]`` ``(..., 4)`` or ``[x, y, z, vx, vy, vz]`` ``(..., 6)``.
     geometry
         The sensor pairs.
 
@@ -132,22 +147,24 @@ def bistatic_doppler(states: ArrayLike, geometry: Geometry) -> FloatArray:
         If a state's position coincides with a sensor.
     """
     x = _as_states(states)[..., None, :]
-    h, _, _, _ = _terms(x[..., :2], x[..., 2:], geometry.tx, geometry.rx, jacobian=False)
+    d = x.shape[-1] // 2
+    h, _, _, _ = _terms(x[..., :d], x[..., d:], *geometry.positions(d), jacobian=False)
     return h
 
 
 def bistatic_doppler_and_jacobian(
     states: ArrayLike, geometry: Geometry
 ) -> tuple[FloatArray, FloatArray]:
-    """Doppler ``(..., n_pairs)`` and its Jacobian ``(..., n_pairs, 4)`` in one pass."""
+    """Doppler ``(..., n_pairs)`` and its Jacobian ``(..., n_pairs, 2d)`` in one pass."""
     x = _as_states(states)[..., None, :]
-    h, dp, dv, _ = _terms(x[..., :2], x[..., 2:], geometry.tx, geometry.rx, jacobian=True)
+    d = x.shape[-1] // 2
+    h, dp, dv, _ = _terms(x[..., :d], x[..., d:], *geometry.positions(d), jacobian=True)
     assert dp is not None and dv is not None
     return h, np.concatenate([dp, dv], axis=-1)
 
 
 def bistatic_doppler_jacobian(states: ArrayLike, geometry: Geometry) -> FloatArray:
-    r"""Analytic Jacobian :math:`\partial h_i/\partial\mathbf x`, shape ``(..., n_pairs, 4)``."""
+    r"""Analytic Jacobian :math:`\partial h_i/\partial\mathbf x`, shape ``(..., n_pairs, 2d)``."""
     return bistatic_doppler_and_jacobian(states, geometry)[1]
 
 
@@ -211,13 +228,13 @@ def _cv(
     singular: str = "raise",
 ) -> tuple[FloatArray, FloatArray | None, NDArray[np.bool_] | None]:
     x = _as_states(x0)
+    d = x.shape[-1] // 2
     bt = _stacked_times(times, geometry)
     t = bt.t[:, None]
-    vel = x[..., None, 2:]
-    pos = x[..., None, :2] + t * vel
-    h, dp, dv, mask = _terms(
-        pos, vel, geometry.tx[bt.pair], geometry.rx[bt.pair], jacobian=jacobian, singular=singular
-    )
+    vel = x[..., None, d:]
+    pos = x[..., None, :d] + t * vel
+    tx, rx = geometry.positions(d)
+    h, dp, dv, mask = _terms(pos, vel, tx[bt.pair], rx[bt.pair], jacobian=jacobian, singular=singular)
     if not jacobian:
         return h, None, mask
     assert dp is not None and dv is not None
@@ -232,7 +249,7 @@ def cv_doppler(
     Parameters
     ----------
     x0
-        Initial states, shape ``(..., 4)``; any leading shape is evaluated at once.
+        Initial states, shape ``(..., 4)`` or ``(..., 6)``; any leading shape is evaluated at once.
     geometry
         The sensor pairs.
     times
@@ -250,7 +267,7 @@ def cv_doppler(
 def cv_doppler_and_jacobian(
     x0: ArrayLike, geometry: Geometry, times: Sequence[ArrayLike] | StackedTimes
 ) -> tuple[FloatArray, FloatArray]:
-    r""":math:`\mathbf g(\mathbf x_0)` ``(..., n_Z)`` and :math:`\mathbf J(\mathbf x_0)` ``(..., n_Z, 4)``."""
+    r""":math:`\mathbf g(\mathbf x_0)` ``(..., n_Z)`` and :math:`\mathbf J(\mathbf x_0)` ``(..., n_Z, 2d)``."""
     g, jac, _ = _cv(x0, geometry, times, jacobian=True)
     assert jac is not None
     return g, jac
@@ -263,7 +280,7 @@ def cv_doppler_jacobian(
 
     Returns
     -------
-    ndarray, shape ``(..., n_Z, 4)``
+    ndarray, shape ``(..., n_Z, 2d)``
     """
     return cv_doppler_and_jacobian(x0, geometry, times)[1]
 
@@ -278,7 +295,7 @@ def cv_information(
 
     Returns
     -------
-    ndarray, shape ``(..., 4, 4)``
+    ndarray, shape ``(..., 2d, 2d)``
     """
     Jw = cv_doppler_jacobian(x0, geometry, times) / np.asarray(sigma, dtype=float)[:, None]
     return np.swapaxes(Jw, -1, -2) @ Jw

@@ -18,7 +18,7 @@ density ``q`` (m²/s³),
 
 .. math::
 
-    \mathbf Q(T) = q \begin{bmatrix} T^3/3 & T^2/2\\ T^2/2 & T\end{bmatrix}\otimes\mathbf I_2,
+    \mathbf Q(T) = q \begin{bmatrix} T^3/3 & T^2/2\\ T^2/2 & T\end{bmatrix}\otimes\mathbf I_d,
 
 which has full rank for :math:`T > 0`.  The factor graph, the EKF and the
 simulator all use this form by default, so every estimator shares one
@@ -40,7 +40,8 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True, kw_only=True)
 class ConstantVelocity:
-    """Nearly constant velocity model in 2-D with state ``[x, y, vx, vy]``.
+    """Nearly constant velocity model with state ``[p, v]``: ``[x, y, vx, vy]`` (``dim=2``) or
+    ``[x, y, z, vx, vy, vz]`` (``dim=3``), the same isotropic noise on every axis.
 
     Parameters
     ----------
@@ -52,47 +53,62 @@ class ConstantVelocity:
     form
         ``"continuous"`` (full rank, default) or ``"discrete"`` (the paper's
         rank-2 :math:`\\Gamma q \\Gamma'`).
+    dim
+        Spatial dimension, 2 or 3 (:class:`~fgdoppler.models.tracking.TrackingModel`
+        sets it from the geometry).
     """
 
     q: float = 1e-2
     form: Literal["continuous", "discrete"] = "continuous"
+    dim: int = 2
 
     def __post_init__(self) -> None:
+        if self.dim not in (2, 3) or isinstance(self.dim, bool):
+            raise ValueError(f"dim must be 2 or 3, got {self.dim!r}")
         if not np.isfinite(self.q) or self.q < 0:
             raise ValueError(f"process noise q must be finite and >= 0, got {self.q}")
         if self.form not in ("continuous", "discrete"):
             raise ValueError(f"form must be 'continuous' or 'discrete', got {self.form!r}")
 
-    @staticmethod
-    def F(dt: ArrayLike) -> FloatArray:
-        """State transition matrix, shape ``(..., 4, 4)`` for ``dt`` of shape ``(...)``."""
+    @property
+    def n(self) -> int:
+        """State length ``2 * dim``."""
+        return 2 * self.dim
+
+    def F(self, dt: ArrayLike) -> FloatArray:
+        """State transition matrix, shape ``(..., 2d, 2d)`` for ``dt`` of shape ``(...)``."""
+        d = self.dim
         dt = np.asarray(dt, dtype=float)
-        out = np.broadcast_to(np.eye(4), (*dt.shape, 4, 4)).copy()
-        out[..., 0, 2] = dt
-        out[..., 1, 3] = dt
+        out = np.broadcast_to(np.eye(2 * d), (*dt.shape, 2 * d, 2 * d)).copy()
+        for i in range(d):
+            out[..., i, i + d] = dt
         return out
 
     def Q(self, dt: ArrayLike) -> FloatArray:
-        """Process-noise covariance, shape ``(..., 4, 4)`` for ``dt`` of shape ``(...)``."""
+        """Process-noise covariance, shape ``(..., 2d, 2d)`` for ``dt`` of shape ``(...)``."""
         dt = np.asarray(dt, dtype=float)
         if self.form == "continuous":
             a, b, c = dt**3 / 3.0, dt**2 / 2.0, dt
         else:
             a, b, c = dt**4 / 4.0, dt**3 / 2.0, dt**2
-        out = np.zeros((*dt.shape, 4, 4))
-        for i in range(2):
+        d = self.dim
+        out = np.zeros((*dt.shape, 2 * d, 2 * d))
+        for i in range(d):
             out[..., i, i] = a
-            out[..., i, i + 2] = b
-            out[..., i + 2, i] = b
-            out[..., i + 2, i + 2] = c
+            out[..., i, i + d] = b
+            out[..., i + d, i] = b
+            out[..., i + d, i + d] = c
         return self.q * out
 
     def propagate(self, states: ArrayLike, dt: ArrayLike) -> FloatArray:
-        """Noise-free prediction ``F(dt) x``; ``states (..., 4)`` and ``dt`` broadcast."""
+        """Noise-free prediction ``F(dt) x``; ``states (..., 2d)`` and ``dt`` broadcast."""
         x = np.asarray(states, dtype=float)
+        d = self.dim
+        if x.shape[-1] != 2 * d:
+            raise ValueError(f"a {d}-D motion model takes states of {2 * d} numbers, got shape {x.shape}")
         dt = np.asarray(dt, dtype=float)[..., None]
-        pos = x[..., :2] + dt * x[..., 2:]
-        return np.concatenate([pos, np.broadcast_to(x[..., 2:], pos.shape)], axis=-1)
+        pos = x[..., :d] + dt * x[..., d:]
+        return np.concatenate([pos, np.broadcast_to(x[..., d:], pos.shape)], axis=-1)
 
     def predict_covariance(self, P: ArrayLike, dt: float) -> FloatArray:
         r"""Covariance of the prediction over ``dt``: :math:`\mathbf F\mathbf P\mathbf F' + \mathbf Q(dt)`."""
@@ -121,5 +137,5 @@ class ConstantVelocity:
         w, V = np.linalg.eigh(Q)
         A = V * np.sqrt(np.clip(w, 0.0, None))
         n = 1 if size is None else size
-        out = rng.standard_normal((n, 4)) @ A.T
+        out = rng.standard_normal((n, 2 * self.dim)) @ A.T
         return out[0] if size is None else out

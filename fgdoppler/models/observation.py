@@ -3,7 +3,8 @@ r"""Observation models: the scalar measurement models the estimators consume.
 Every estimator (EKF, iSAM2, fixed-lag, batch) consumes a
 :class:`MeasurementModel`: for states ``(n, 4)`` and one channel index per
 state (the bistatic pair for Doppler), it returns the predicted measurement
-``(n,)`` and, on request, its Jacobian ``(n, 4)``.  :class:`DopplerModel` is
+``(n,)`` and, on request, its Jacobian ``(n, 2d)`` (states of ``2d`` numbers,
+``d`` = 2 or 3).  :class:`DopplerModel` is
 the bistatic Doppler of :mod:`fgdoppler.models.doppler`; other models (e.g. a
 linear-Gaussian surrogate in tests) plug into the same machinery.
 """
@@ -31,7 +32,11 @@ FloatArray = NDArray[np.float64]
 
 @runtime_checkable
 class MeasurementModel(Protocol):
-    """A scalar measurement per (state, channel)."""
+    """A scalar measurement per (state, channel).
+
+    A model may also have a ``state_dim`` attribute (the length of its states,
+    6 for a 3-D one); without it the states are 2-D ``[x, y, vx, vy]``.
+    """
 
     @property
     def n_channels(self) -> int:
@@ -39,17 +44,20 @@ class MeasurementModel(Protocol):
         ...
 
     def predict(self, states: ArrayLike, channels: ArrayLike) -> FloatArray:
-        """Predicted measurements ``(n,)`` for states ``(n, 4)`` and channels ``(n,)``."""
+        """Predicted measurements ``(n,)`` for states ``(n, state_dim)`` and channels ``(n,)``."""
         ...
 
     def predict_and_jacobian(self, states: ArrayLike, channels: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """Predictions ``(n,)`` and Jacobians ``(n, 4)``."""
+        """Predictions ``(n,)`` and Jacobians ``(n, state_dim)``."""
         ...
 
 
 @dataclass(frozen=True, kw_only=True)
 class DopplerModel:
-    """Bistatic Doppler of pair ``channels[j]`` at ``states[j]`` (one pair per row, no waste)."""
+    """Bistatic Doppler of pair ``channels[j]`` at ``states[j]`` (one pair per row, no waste).
+
+    States have ``2 * geometry.dim`` numbers: ``[x, y, vx, vy]`` or ``[x, y, z, vx, vy, vz]``.
+    """
 
     geometry: Geometry
 
@@ -58,15 +66,24 @@ class DopplerModel:
         """Number of pairs."""
         return self.geometry.n_pairs
 
+    @property
+    def state_dim(self) -> int:
+        """``2 * geometry.dim``."""
+        return self.geometry.state_dim
+
     def _check(self, states: ArrayLike, channels: ArrayLike) -> tuple[FloatArray, NDArray[np.intp]]:
-        if isinstance(states, np.ndarray) and states.shape == (1, 4) and isinstance(channels, list) \
+        n = self.geometry.state_dim
+        if isinstance(states, np.ndarray) and states.shape == (1, n) and isinstance(channels, list) \
                 and len(channels) == 1:
             # the filters' one-state, one-channel call: validate cheaply
             k = channels[0]
             if not 0 <= k < self.geometry.n_pairs:
                 raise ValueError(f"pair index out of range for a geometry of {self.geometry.n_pairs} pair(s)")
             return states.astype(float, copy=False), np.array([k], dtype=np.intp)
-        x = _as_states(states).reshape(-1, 4)
+        x = _as_states(states)
+        if x.shape[-1] != n:
+            raise ValueError(f"a {self.geometry.dim}-D geometry takes states of {n} numbers, got {x.shape[-1]}")
+        x = x.reshape(-1, n)
         c = np.asarray(channels, dtype=np.intp).reshape(-1)
         if c.shape[0] != x.shape[0]:
             raise ValueError(f"{x.shape[0]} states but {c.shape[0]} channels")
@@ -79,35 +96,38 @@ class DopplerModel:
         x, c = self._check(states, channels)
         if c.size <= _SMALL:
             return self._small(x, c, jacobian=False)[0]
-        h, _, _, _ = _terms(x[:, :2], x[:, 2:], self.geometry.tx[c], self.geometry.rx[c], jacobian=False)
+        d = self.geometry.dim
+        h, _, _, _ = _terms(x[:, :d], x[:, d:], self.geometry.tx[c], self.geometry.rx[c], jacobian=False)
         return h
 
     def predict_and_jacobian(self, states: ArrayLike, channels: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """Doppler ``(n,)`` and Jacobian ``(n, 4)``."""
+        """Doppler ``(n,)`` and Jacobian ``(n, state_dim)``."""
         x, c = self._check(states, channels)
         if c.size <= _SMALL:
             h, H = self._small(x, c, jacobian=True)
             assert H is not None
             return h, H
-        h, dp, dv, _ = _terms(x[:, :2], x[:, 2:], self.geometry.tx[c], self.geometry.rx[c], jacobian=True)
+        d = self.geometry.dim
+        h, dp, dv, _ = _terms(x[:, :d], x[:, d:], self.geometry.tx[c], self.geometry.rx[c], jacobian=True)
         assert dp is not None and dv is not None
         return h, np.concatenate([dp, dv], axis=-1)
 
     def predict_along(self, x0: ArrayLike, times: ArrayLike, channels: ArrayLike) -> FloatArray:
-        r"""Doppler ``(n, m)`` of constant-velocity tracks from states ``x0`` ``(n, 4)`` at ``times`` ``(m,)``.
+        r"""Doppler ``(n, m)`` of constant-velocity tracks from states ``x0`` ``(n, state_dim)`` at ``times`` ``(m,)``.
 
         Row ``i`` is track ``i`` (position :math:`\mathbf p_0 + t\mathbf v`)
         seen by pair ``channels[j]`` at ``times[j]``; NaN where a track passes
         through a sensor (no exception: a particle or grid node there is
         simply impossible).
         """
-        x = np.asarray(x0, dtype=float).reshape(-1, 4)
+        d = self.geometry.dim
+        x = np.asarray(x0, dtype=float).reshape(-1, 2 * d)
         t = np.asarray(times, dtype=float).reshape(-1)
         c = np.asarray(channels, dtype=np.intp).reshape(-1)
         if c.size and (c.min() < 0 or c.max() >= self.geometry.n_pairs):
             raise ValueError(f"pair index out of range for a geometry of {self.geometry.n_pairs} pair(s)")
-        vel = x[:, None, 2:]
-        pos = x[:, None, :2] + t[None, :, None] * vel
+        vel = x[:, None, d:]
+        pos = x[:, None, :d] + t[None, :, None] * vel
         h, _, _, mask = _terms(pos, vel, self.geometry.tx[c][None], self.geometry.rx[c][None], jacobian=False,
                                singular="mask")
         if mask is not None:
@@ -121,6 +141,30 @@ class DopplerModel:
         the filters call this for their one-state, one-pair updates, where
         numpy's per-call overhead would cost several times the arithmetic.
         """
+        d = self.geometry.dim
+        if d == 2:
+            return self._scalar2(state, channel)
+        pos, vel = state[:3], state[3:]
+        hv = 0.0
+        dp = [0.0, 0.0, 0.0]
+        dv = [0.0, 0.0, 0.0]
+        for sensor in (self.geometry.tx[channel], self.geometry.rx[channel]):
+            delta = [pos[i] - float(sensor[i]) for i in range(3)]
+            r = math.sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2])
+            if r <= SENSOR_EPS:
+                raise ValueError(
+                    f"1 target position(s) coincide with a sensor (distance <= {SENSOR_EPS} m): "
+                    "the bistatic Doppler is undefined there"
+                )
+            u = [c / r for c in delta]
+            rd = u[0] * vel[0] + u[1] * vel[1] + u[2] * vel[2]
+            hv += rd
+            for i in range(3):
+                dp[i] += (vel[i] - rd * u[i]) / r
+                dv[i] += u[i]
+        return hv, dp + dv
+
+    def _scalar2(self, state: list[float], channel: int) -> tuple[float, list[float]]:
         px, py, vx, vy = state
         tx = self.geometry.tx[channel]
         rx = self.geometry.rx[channel]
@@ -148,7 +192,7 @@ class DopplerModel:
         # Few rows: plain floats beat numpy's per-call overhead (see :meth:`scalar`).
         n = c.size
         h = np.empty(n)
-        H = np.empty((n, 4)) if jacobian else None
+        H = np.empty((n, self.geometry.state_dim)) if jacobian else None
         for i, (row, k) in enumerate(zip(x.tolist(), c.tolist(), strict=True)):
             hv, Hrow = self.scalar(row, k)
             h[i] = hv

@@ -75,6 +75,9 @@ class TrackingModel:
         if not isinstance(self.motion, ConstantVelocity):
             raise TypeError(f"motion must be a ConstantVelocity model, got {type(self.motion).__name__}")
         geometry = self.observation.geometry if isinstance(self.observation, DopplerModel) else None
+        dim = getattr(self.observation, "state_dim", 4) // 2
+        if self.motion.dim != dim:  # one motion model for any dimension: follow the observation's states
+            object.__setattr__(self, "motion", replace(self.motion, dim=dim))
         if self.zone is None and geometry is not None:
             object.__setattr__(self, "zone", geometry.zone)
         if self.frame is None:
@@ -84,6 +87,16 @@ class TrackingModel:
     def of(cls, geometry: Geometry, **kwargs: Any) -> TrackingModel:
         """The bistatic Doppler model of ``geometry`` with the given motion, zone and prior."""
         return cls(observation=DopplerModel(geometry=geometry), **kwargs)
+
+    @property
+    def dim(self) -> int:
+        """Spatial dimension of the states (2 or 3)."""
+        return self.motion.dim
+
+    @property
+    def n(self) -> int:
+        """State length, ``2 * dim``."""
+        return self.motion.n
 
     @property
     def geometry(self) -> Geometry:

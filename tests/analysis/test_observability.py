@@ -119,7 +119,7 @@ def test_report_marginals_equal_inverse_fisher_deterministic() -> None:
     J = fd.cv_doppler_jacobian(np.asarray(scen.x0), scen.geometry, bt) / m.sigma[order][:, None]
     P0 = np.linalg.inv(J.T @ J)
     np.testing.assert_allclose(rep.covariances[0], P0, rtol=1e-6)
-    F = fd.ConstantVelocity.F(rep.times[-1])
+    F = fd.ConstantVelocity().F(rep.times[-1])
     np.testing.assert_allclose(rep.covariances[-1], F @ P0 @ F.T, rtol=1e-6)
 
 

@@ -8,9 +8,9 @@ import fgdoppler as fd
 
 def test_F_closed_form() -> None:
     T = 0.7
-    F = fd.ConstantVelocity.F(T)
+    F = fd.ConstantVelocity().F(T)
     np.testing.assert_array_equal(F, [[1, 0, T, 0], [0, 1, 0, T], [0, 0, 1, 0], [0, 0, 0, 1]])
-    assert fd.ConstantVelocity.F(np.array([0.5, 1.0])).shape == (2, 4, 4)
+    assert fd.ConstantVelocity().F(np.array([0.5, 1.0])).shape == (2, 4, 4)
 
 
 def test_discrete_Q_is_paper_gamma_q_gamma() -> None:
@@ -37,7 +37,7 @@ def test_continuous_Q_is_integral_of_F_L_L_F() -> None:
     s = (np.arange(n) + 0.5) * T / n
     L = np.zeros((4, 2))
     L[2, 0] = L[3, 1] = 1
-    FL = fd.ConstantVelocity.F(s) @ L
+    FL = fd.ConstantVelocity().F(s) @ L
     Qn = q * np.einsum("kij,klj->il", FL, FL) * T / n
     np.testing.assert_allclose(fd.ConstantVelocity(q=q).Q(T), Qn, rtol=1e-6)
 
