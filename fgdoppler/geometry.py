@@ -209,6 +209,16 @@ class Geometry:
         """The detectable zone: the default rule with :attr:`zone_limits` applied."""
         return self.zone_limits.apply(self.default_zone())
 
+    def in_3d(self, altitude: tuple[float, float] | None = None) -> Geometry:
+        """The same sensors as a 3-D problem (two-coordinate sensors at ``z = 0``).
+
+        ``altitude`` overrides the zone's altitude band (default: the rule of
+        :mod:`fgdoppler.zone`, heights 0 to a quarter of the sensors' extent).
+        """
+        pairs = tuple(BistaticPair(tx=_padded(p.tx, 3), rx=_padded(p.rx, 3)) for p in self.pairs)
+        limits = self.zone_limits if altitude is None else replace(self.zone_limits, altitude=altitude)
+        return replace(self, pairs=pairs, zone_limits=limits)
+
     def with_zone(self, limits: ZoneLimits) -> Geometry:
         """The same sensors with other zone overrides."""
         return replace(self, zone_limits=limits)

@@ -7,9 +7,14 @@ Format (metres, m/s)::
     along = [2000.0, 48000.0]   #   along the first pair's baseline, from its receiver
     across = [-5000.0, 5000.0]  #   across it
     speed_max = 200.0           #   largest target speed
+    altitude = [0.0, 12000.0]   #   optional: height band above the sensors' plane (3-D)
     [[pair]]                    # one table per bistatic pair, pair 0 first
-    tx = [50000.0, 0.0]
+    tx = [50000.0, 0.0]         # [x, y] (on the ground: z = 0) or [x, y, z]
     rx = [0.0, 0.0]
+
+The problem is 3-D (states ``[x, y, z, vx, vy, vz]``) when a sensor has three
+coordinates or the zone has an ``altitude`` band, 2-D otherwise: files with
+neither read exactly as before.
 
 Coordinates are TOML numbers (a string such as ``"50000"`` or a boolean is an
 error, not a number); unknown keys are errors (a misspelt ``speed_max`` must
@@ -36,7 +41,7 @@ __all__ = ["MAX_GEOMETRY_BYTES", "geometry_text", "read_geometry", "write_geomet
 MAX_GEOMETRY_BYTES = 1 << 20
 
 _TOP = ("name", "zone", "pair")
-_ZONE = ("along", "across", "speed_max")
+_ZONE = ("along", "across", "speed_max", "altitude")
 _PAIR = ("tx", "rx")
 
 

@@ -268,7 +268,7 @@ def plot_track(
     label: str = "estimate",
     n_ellipses: int = 12,
 ) -> Axes:
-    """Estimated track with 2σ position ellipses, the truth (if given) and the sensors (km)."""
+    """Estimated track with 2σ position ellipses, the truth (if given) and the sensors (km); 3-D tracks in plan view (x, y)."""
     ax = plot_geometry(geometry, ax)
     x = np.asarray(states, dtype=float)
     ax.plot(x[:, 0] * 1e-3, x[:, 1] * 1e-3, "-", color="tab:red", lw=1.5, label=label)

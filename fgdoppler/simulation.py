@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import csv
 import io
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +36,10 @@ __all__ = [
     "simulate",
 ]
 
+#: Truth CSV header per spatial dimension.
+TRUTH_HEADERS: dict[int, tuple[str, ...]] = {2: ("time", "x", "y", "vx", "vy"),
+                                             3: ("time", "x", "y", "z", "vx", "vy", "vz")}
+
 #: Start x-positions (m) of the paper's three trajectories per case.
 PAPER_START_X: tuple[float, float, float] = (5e3, 25e3, 45e3)
 #: Time offset (s) of pair 2 in case (b), our choice (the paper gives none).
@@ -44,14 +48,18 @@ PAPER_CASE_B_OFFSET = 0.25
 
 @dataclass(frozen=True, kw_only=True)
 class Trajectory:
-    """States ``(n, 4)`` at times ``(n,)``: the truth of a simulation or an estimate."""
+    """States ``(n, 4)`` (2-D) or ``(n, 6)`` (3-D) at times ``(n,)``: the truth of a simulation or an estimate."""
 
     times: NDArray[np.float64]
     states: NDArray[np.float64]
 
     def __post_init__(self) -> None:
         t = np.asarray(self.times, dtype=float).reshape(-1)
-        x = np.asarray(self.states, dtype=float).reshape(-1, 4) if np.size(self.states) else np.zeros((0, 4))
+        raw = np.asarray(self.states, dtype=float)
+        width = raw.shape[-1] if raw.ndim == 2 else 4
+        if width not in (4, 6):
+            raise ValueError(f"states must have 4 (2-D) or 6 (3-D) columns, got {width}")
+        x = raw.reshape(-1, width) if raw.size else np.zeros((0, width))
         if x.shape[0] != t.size:
             raise ValueError(f"{t.size} times but {x.shape[0]} states")
         object.__setattr__(self, "times", t)
@@ -66,11 +74,16 @@ class Trajectory:
             raise ValueError("requested times are not on the trajectory's time grid")
         return self.states[idx]
 
+    @property
+    def dim(self) -> int:
+        """Spatial dimension (2 or 3)."""
+        return int(self.states.shape[1]) // 2
+
     def csv_text(self) -> str:
-        """The ``time,x,y,vx,vy`` CSV as text; values round-trip exactly."""
+        """The ``time,x,y,vx,vy`` (3-D: ``time,x,y,z,vx,vy,vz``) CSV as text; values round-trip exactly."""
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
-        w.writerow(("time", "x", "y", "vx", "vy"))
+        w.writerow(TRUTH_HEADERS[self.dim])
         for t, s in zip(self.times, self.states, strict=True):
             w.writerow((repr(float(t)), *(repr(float(v)) for v in s)))
         return buf.getvalue()
@@ -81,7 +94,8 @@ class Trajectory:
 
     @classmethod
     def from_csv(cls, path: str | Path) -> Trajectory:
-        """Read a truth CSV ``time,x,y,vx,vy`` (strict: :mod:`fgdoppler.csvfile`); times strictly increasing.
+        """Read a truth CSV ``time,x,y,vx,vy`` or ``time,x,y,z,vx,vy,vz`` (strict: :mod:`fgdoppler.csvfile`);
+        times strictly increasing.
 
         Raises
         ------
@@ -91,9 +105,18 @@ class Trajectory:
         from fgdoppler.csvfile import CSVError, read_table
 
         try:
-            table = read_table(path, header=("time", "x", "y", "vx", "vy"), what="truth file")
+            table = read_table(path, header=TRUTH_HEADERS[2], what="truth file")
         except CSVError as exc:
-            raise MeasurementError(str(exc)) from None
+            if "bad header" not in str(exc):
+                raise MeasurementError(str(exc)) from None
+            try:
+                table = read_table(path, header=TRUTH_HEADERS[3], what="truth file")
+            except CSVError as exc3:
+                msg = str(exc3)
+                if "bad header" in msg:
+                    msg = msg.replace("expected time,x,y,z,vx,vy,vz", "expected time,x,y,vx,vy (2-D) or "
+                                      "time,x,y,z,vx,vy,vz (3-D)")
+                raise MeasurementError(msg) from None
         t = table.values[:, 0]
         back = np.flatnonzero(np.diff(t) <= 0)
         if back.size:
@@ -120,7 +143,8 @@ class Scenario:
     geometry
         Sensor pairs.
     x0
-        True state ``[x, y, vx, vy]`` at time 0.
+        True state at time 0: ``[x, y, vx, vy]``, or ``[x, y, z, vx, vy, vz]``
+        for a 3-D geometry (:attr:`~fgdoppler.geometry.Geometry.dim`).
     duration, dt
         Pair ``i`` measures at ``offset_i + k dt`` for all ``k >= 0`` up to ``duration``.
     sigma
@@ -135,7 +159,7 @@ class Scenario:
     """
 
     geometry: Geometry
-    x0: tuple[float, float, float, float]
+    x0: tuple[float, ...]
     duration: float = 30.0
     dt: float = 0.5
     sigma: float | tuple[float, ...] = 1.0
@@ -147,8 +171,13 @@ class Scenario:
 
     def __post_init__(self) -> None:
         x0 = tuple(float(v) for v in np.asarray(self.x0, dtype=float).reshape(-1))
-        if len(x0) != 4 or not np.all(np.isfinite(x0)):
-            raise ValueError(f"x0 must be 4 finite numbers [x, y, vx, vy], got {self.x0}")
+        want = self.geometry.state_dim
+        if len(x0) not in (4, 6) or not np.all(np.isfinite(x0)):
+            raise ValueError(f"x0 must be 4 finite numbers [x, y, vx, vy] or 6 [x, y, z, vx, vy, vz], got {self.x0}")
+        if len(x0) != want:
+            hint = ("give the geometry an altitude band (TOML [zone] altitude, --altitude) or sensors with z"
+                    if want == 4 else "give a 3-D start [x, y, z, vx, vy, vz] (--start-z, --velocity VX VY VZ)")
+            raise ValueError(f"x0 is {len(x0) // 2}-D but the geometry is {want // 2}-D: {hint}")
         object.__setattr__(self, "x0", x0)
         if not (self.dt > 0 and np.isfinite(self.dt)):
             raise ValueError(f"dt must be > 0, got {self.dt}")
@@ -212,16 +241,18 @@ def simulate(scenario: Scenario, rng: np.random.Generator) -> Simulation:
     """
     times = scenario.truth_times()
     x0 = np.asarray(scenario.x0)
+    d = x0.size // 2
     if scenario.process_noise is None or scenario.process_noise.q == 0:
-        states = np.concatenate([x0[:2] + times[:, None] * x0[2:], np.broadcast_to(x0[2:], (times.size, 2))], axis=1)
+        states = np.concatenate([x0[:d] + times[:, None] * x0[d:], np.broadcast_to(x0[d:], (times.size, d))], axis=1)
     else:
-        states = np.empty((times.size, 4))
+        noise = replace(scenario.process_noise, dim=d)
+        states = np.empty((times.size, 2 * d))
         x = x0.copy()
         t_prev = 0.0
         for k, t in enumerate(times):
             dt = t - t_prev
             if dt > 0:
-                x = scenario.process_noise.propagate(x, dt) + scenario.process_noise.sample_noise(dt, rng)
+                x = noise.propagate(x, dt) + noise.sample_noise(dt, rng)
             states[k] = x
             t_prev = t
     truth = Trajectory(times=times, states=states)
@@ -238,22 +269,31 @@ def simulate(scenario: Scenario, rng: np.random.Generator) -> Simulation:
     return Simulation(scenario=scenario, measurements=meas, truth=truth)
 
 
-def paper_scenario(case: str, start_x: float, *, sigma: float = 1.0) -> Scenario:
+def paper_scenario(case: str, start_x: float, *, sigma: float = 1.0, altitude: float | None = None) -> Scenario:
     """One of the paper's six test trajectories (Section 5, Fig. 9).
 
     Start ``(start_x, 2 km)``, velocity ``(10, -100)`` m/s, 30 s sampled every
     0.5 s, σ = 1 m/s.  Case (b) staggers pair 2 by :data:`PAPER_CASE_B_OFFSET`.
+    With ``altitude`` (m) the same track is flown level at that height over
+    the same ground sensors: a 3-D problem (:meth:`~fgdoppler.geometry.Geometry.in_3d`,
+    the default altitude band).
     """
     geom = paper_geometry(case)
     offsets = (0.0, PAPER_CASE_B_OFFSET) if geom.name == "b" else (0.0, 0.0)
+    x0: tuple[float, ...] = (float(start_x), 2e3, 10.0, -100.0)
+    name = f"case {geom.name}, start {start_x / 1e3:g} km"
+    if altitude is not None:
+        geom = geom.in_3d()
+        x0 = (float(start_x), 2e3, float(altitude), 10.0, -100.0, 0.0)
+        name += f", altitude {altitude / 1e3:g} km"
     return Scenario(
         geometry=geom,
-        x0=(float(start_x), 2e3, 10.0, -100.0),
+        x0=x0,
         duration=30.0,
         dt=0.5,
         sigma=sigma,
         time_offsets=offsets,
-        name=f"case {geom.name}, start {start_x / 1e3:g} km",
+        name=name,
     )
 
 

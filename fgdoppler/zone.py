@@ -17,7 +17,7 @@ along the first pair's baseline:
 
 speed at most 200 m/s, and for a 3-D problem (see
 :attr:`fgdoppler.geometry.Geometry.dim`) heights :math:`w` above the
-sensors' plane in :math:`[0, D/5]` (0–10 km for a 50 km baseline).  In words: the stretch between the end sensors, less
+sensors' plane in :math:`[0, D/4]` (0–12.5 km for a 50 km baseline).  In words: the stretch between the end sensors, less
 the 4 % next to them (where the paper's zone stops 2 km short of a 50 km
 baseline), and 10 % of the extent either side of the first baseline, widened
 to reach 4 % beyond every sensor off it.  For the paper's two geometries this
@@ -294,4 +294,4 @@ def default_zone(frame: Frame, tx: ArrayLike, rx: ArrayLike, *, speed_max: float
     D = u_max - u_min
     return Zone(frame=frame, along=(u_min + D / 25, u_max - D / 25),
                 across=(min(-D / 10, v_min - D / 25), max(D / 10, v_max + D / 25)), speed_max=speed_max,
-                altitude=(0.0, D / 5) if frame.dim == 3 else None)
+                altitude=(0.0, D / 4) if frame.dim == 3 else None)

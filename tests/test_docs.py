@@ -92,7 +92,7 @@ def test_built_pages_have_no_unrendered_markup_and_typeset_maths(site: Path) -> 
         if hits:
             bad[str(page.relative_to(site))] = sorted(set(hits))
     assert not bad, bad
-    particle = (site / "api" / "generated" / "fgdoppler.estimators.particle.ParticleFilter.html")
+    particle = (site / "api" / "generated" / "fgdoppler.estimators.particle.html")
     particle = particle.read_text(encoding="utf-8")
     assert "<math" in particle and "mathjax" not in particle.lower()
 

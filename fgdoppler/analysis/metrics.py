@@ -25,13 +25,18 @@ FloatArray = NDArray[np.float64]
 
 
 def errors(estimates: ArrayLike, truth: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """Squared position and velocity errors ``(..., )`` of states ``(..., 4)``."""
+    """Squared position and velocity errors ``(..., )`` of states ``(..., 2d)`` (``d`` = 2 or 3)."""
     e = np.asarray(estimates, dtype=float) - np.asarray(truth, dtype=float)
-    return e[..., 0] ** 2 + e[..., 1] ** 2, e[..., 2] ** 2 + e[..., 3] ** 2
+    d = e.shape[-1] // 2
+    pos, vel = e[..., 0] ** 2, e[..., d] ** 2
+    for i in range(1, d):
+        pos = pos + e[..., i] ** 2
+        vel = vel + e[..., d + i] ** 2
+    return pos, vel
 
 
 def nees(estimates: ArrayLike, covariances: ArrayLike, truth: ArrayLike) -> FloatArray:
-    """NEES of each state: ``e' P^-1 e`` for ``(..., 4)`` states and ``(..., 4, 4)`` covariances."""
+    """NEES of each state: ``e' P^-1 e`` for ``(..., n)`` states and ``(..., n, n)`` covariances."""
     e = np.asarray(estimates, dtype=float) - np.asarray(truth, dtype=float)
     P = np.asarray(covariances, dtype=float)
     return np.einsum("...i,...i->...", e, np.linalg.solve(P, e[..., None])[..., 0])

@@ -118,6 +118,8 @@ class MonteCarloSpec:
             raise ValueError(f"runs must be >= 1, got {self.runs}")
         if not self.scenarios:
             raise ValueError("need at least one scenario")
+        if len({sc.geometry.dim for sc in self.scenarios}) > 1:
+            raise ValueError("scenarios of one Monte Carlo study must all be 2-D or all 3-D")
         for e in self.estimators:
             if e not in METHODS and e not in ESTIMATORS and e not in ALIASES and _lag(e) is None:
                 raise ValueError(f"unknown estimator {e!r}: expected one of {', '.join(DEFAULT_ESTIMATORS)} "
@@ -194,8 +196,9 @@ def _run_one_unlimited(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.ran
 
     for name in spec.estimators:
         t_begin = time.perf_counter()
-        est = np.full((n_t, 4), np.nan)
-        cov = np.full((n_t, 4, 4), np.nan)
+        n_x = model.n
+        est = np.full((n_t, n_x), np.nan)
+        cov = np.full((n_t, n_x, n_x), np.nan)
         if name in METHODS:
             ini = init_of(cast(Method, name))
             F = model.motion.F(truth_t - ini.t_start)
@@ -247,6 +250,7 @@ class MonteCarloResult:
     wall_time: float
     workers: int
     timing: dict[str, float]
+    state_dim: int = 4
 
     def pos_rmse(self, s: int, name: str) -> FloatArray:
         """Position RMSE over runs at each time of scenario ``s``."""
@@ -272,8 +276,8 @@ class MonteCarloResult:
         return np.where(n > 0, np.where(ok, x, 0.0).sum(axis=1) / np.maximum(n, 1), np.nan)
 
     def nees_band(self) -> tuple[float, float]:
-        """95 % band of the run-averaged NEES."""
-        return nees_band(self.runs)
+        """95 % band of the run-averaged NEES (``state_dim`` degrees of freedom per run)."""
+        return nees_band(self.runs, self.state_dim)
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary: time-averaged RMSE per scenario and estimator, and settings."""
@@ -309,6 +313,7 @@ class MonteCarloResult:
         os.replace(tmp, npz)
         meta = {"scenario_names": list(self.scenario_names), "estimators": list(self.estimators), "runs": self.runs,
                 "seed": self.seed, "wall_time": self.wall_time, "workers": self.workers, "timing": self.timing,
+                "state_dim": self.state_dim,
                 "summary": self.summary()}
         js = path.with_suffix(".json")
         atomic_write_text(js, json.dumps(meta, indent=1, allow_nan=False, default=_json_default))
@@ -330,7 +335,7 @@ class MonteCarloResult:
             nees=tuple({e: data[f"nees_{s}_{e}"] for e in ests} for s in range(n)),
             verdicts=tuple({e: data[f"verdict_{s}_{e}"] for e in ests} for s in range(n)),
             ambiguous=data["ambiguous"], wall_time=float(meta["wall_time"]), workers=int(meta["workers"]),
-            timing=dict(meta["timing"]),
+            timing=dict(meta["timing"]), state_dim=int(meta.get("state_dim", 4)),
         )
 
 
@@ -413,6 +418,6 @@ def run_monte_carlo(
         seed=spec.seed, times=tuple(times), pos_se=tuple(pos), vel_se=tuple(vel), nees=tuple(nes), ambiguous=amb,
         verdicts=tuple(ver),
         wall_time=time.perf_counter() - t_begin, workers=workers if executor is None or own is not None else -1,
-        timing=timing,
+        timing=timing, state_dim=spec.scenarios[0].geometry.state_dim if spec.scenarios else 4,
     )
 

@@ -144,7 +144,8 @@ def observability_measure(
     Parameters
     ----------
     x0
-        Initial state(s) ``[x, y, vx, vy]``, shape ``(4,)`` or ``(..., 4)``.
+        Initial state(s) ``[x, y, vx, vy]`` ``(..., 4)``, or ``[x, y, z, vx, vy, vz]``
+        ``(..., 6)`` for a 3-D problem.
     geometry
         Sensor pairs.
     times
@@ -154,6 +155,8 @@ def observability_measure(
     -------
     float or ndarray of shape ``(...)``
         :math:`\log_{10}\det(\mathbf J'\mathbf J)` with unit noise, floored at −40.
+        A 3-D value is the determinant of a 6×6 information (units m⁻⁶ s⁻⁶ …
+        rather than m⁻⁴ s⁻⁴): compare 3-D values with 3-D values only.
     """
     O = log10_det_information(cv_doppler_jacobian(x0, geometry, times))
     return float(O) if O.ndim == 0 else O
@@ -339,13 +342,13 @@ class ObservabilityReport:
     message
         Why it is indeterminate (empty when ok).
     pos_std, vel_std
-        Standard deviations ``(n, 2)`` of x, y (m) and vx, vy (m/s).
+        Standard deviations ``(n, d)`` of the position (m) and velocity (m/s) components.
     weakest_direction
-        Unit vector ``(n, 2)`` of the dominant eigenvector of the position covariance.
+        Unit vector ``(n, d)`` of the dominant eigenvector of the position covariance.
     weakest_std
         Standard deviation (m) along it, ``(n,)``.
     covariances
-        Marginal covariances ``(n, 4, 4)``.
+        Marginal covariances ``(n, 2d, 2d)``.
     O_x0
         The paper's measure over all measurement times (unit σ).
     cond_JtJ
@@ -353,7 +356,8 @@ class ObservabilityReport:
     tangent_angle_deg
         Angle in [0°, 90°] between the heading and each pair's bistatic
         ellipse tangent, ``(n, n_pairs)``; near 0° the motion follows the
-        ellipse and that pair's Doppler carries little information.
+        ellipse and that pair's Doppler carries little information.  In 3-D
+        the angle between the velocity and each pair's ellipsoid tangent plane.
     """
 
     times: FloatArray
@@ -387,8 +391,18 @@ class ObservabilityReport:
 
 
 def _tangent_angles(states: FloatArray, geometry: Geometry) -> FloatArray:
+    d = states.shape[1] // 2
+    v = states[:, d:]
+    if d == 3:  # angle to the tangent plane: 90° minus the angle to the gradient u_T + u_R
+        tx, rx = geometry.positions(3)
+        p = states[:, None, :3]
+        grad = (p - tx) / np.linalg.norm(p - tx, axis=-1, keepdims=True) + \
+            (p - rx) / np.linalg.norm(p - rx, axis=-1, keepdims=True)
+        gn = np.linalg.norm(grad, axis=-1)
+        speed = np.linalg.norm(v, axis=1)
+        sin = np.abs(np.einsum("npk,nk->np", grad, v)) / np.maximum(gn * speed[:, None], 1e-300)
+        return np.rad2deg(np.arcsin(np.clip(sin, 0.0, 1.0)))
     tangents = ellipse_tangent(states[:, :2], geometry)  # (n, n_pairs, 2)
-    v = states[:, 2:]
     speed = np.linalg.norm(v, axis=1, keepdims=True)
     u = np.divide(v, speed, out=np.zeros_like(v), where=speed > 0)
     cosang = np.abs(np.einsum("npk,nk->np", tangents, u))
@@ -430,7 +444,8 @@ def observability_report(
     order = measurements.stacked_order()
     stacked = StackedTimes(pair=measurements.pair[order], t=measurements.time[order] - t0)
     J = cv_doppler_jacobian(states[0], geometry, stacked)
-    s = np.linalg.svd(J, compute_uv=False) if J.shape[0] >= 4 else np.zeros(4)
+    n = J.shape[1]
+    s = np.linalg.svd(J, compute_uv=False) if J.shape[0] >= n else np.zeros(n)
     O = float(log10_det_information(J))
     cond = float(s[0] ** 2 / s[-1] ** 2) if s[-1] > 0 else float("inf")
     angles = _tangent_angles(states, geometry)
@@ -450,14 +465,15 @@ def observability_report(
     if motion is None:
         F = ConstantVelocity(dim=states.shape[-1] // 2).F(times - t0)
         covs = F @ covs[0] @ np.swapaxes(F, -1, -2)
-    pos = covs[:, :2, :2]
+    d = states.shape[-1] // 2
+    pos = covs[:, :d, :d]
     w, V = np.linalg.eigh(pos)
     direction = V[:, :, -1] * np.sign(V[:, 0:1, -1] + (V[:, 0:1, -1] == 0))
     return ObservabilityReport(
         status="ok",
         message="",
         pos_std=np.sqrt(np.diagonal(pos, axis1=1, axis2=2)),
-        vel_std=np.sqrt(np.diagonal(covs[:, 2:, 2:], axis1=1, axis2=2)),
+        vel_std=np.sqrt(np.diagonal(covs[:, d:, d:], axis1=1, axis2=2)),
         weakest_direction=direction,
         weakest_std=np.sqrt(np.clip(w[:, -1], 0.0, None)),
         covariances=covs,

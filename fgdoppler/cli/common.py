@@ -53,6 +53,12 @@ def add_zone_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--grid-step", type=float, default=None, metavar="M",
                    help="position step of the initiation grid (default: the sensors' extent / 50, "
                    "coarsened to at most 2000 nodes)")
+    g.add_argument("--altitude", type=float, nargs=2, default=None, metavar=("LO", "HI"),
+                   help="height band above the sensors' plane in metres where a track may start; makes the "
+                   "problem 3-D (states x, y, z, vx, vy, vz; default: the [zone] table's, else 2-D, or 0 to a "
+                   "quarter of the sensors' extent for sensors given with z)")
+    g.add_argument("--altitude-levels", type=int, default=4, metavar="N",
+                   help="3-D only: heights the initiation grid tries, level flight at each (default 4)")
 
 
 def zone_limits(args: argparse.Namespace) -> Any:
@@ -61,9 +67,10 @@ def zone_limits(args: argparse.Namespace) -> Any:
 
     try:
         return ZoneLimits(along=None if args.zone is None else tuple(args.zone[:2]),
-                          across=None if args.zone is None else tuple(args.zone[2:]), speed_max=args.speed_max)
+                          across=None if args.zone is None else tuple(args.zone[2:]), speed_max=args.speed_max,
+                          altitude=None if getattr(args, "altitude", None) is None else tuple(args.altitude))
     except ValueError as exc:
-        raise CLIError(f"--zone/--speed-max: {exc}") from None
+        raise CLIError(f"--zone/--speed-max/--altitude: {exc}") from None
 
 
 def grid_spec(args: argparse.Namespace) -> Any:
@@ -71,9 +78,10 @@ def grid_spec(args: argparse.Namespace) -> Any:
     from fgdoppler.estimators.grid import GridSpec
 
     try:
-        return GridSpec(position_step=args.grid_step, speed_step=args.speed_step)
+        return GridSpec(position_step=args.grid_step, speed_step=args.speed_step,
+                        altitude_levels=getattr(args, "altitude_levels", 4))
     except ValueError as exc:
-        raise CLIError(f"--grid-step/--speed-step: {exc}") from None
+        raise CLIError(f"--grid-step/--speed-step/--altitude-levels: {exc}") from None
 
 
 def geometry_with_zone(spec: str, args: argparse.Namespace) -> Any:
@@ -98,8 +106,8 @@ def add_scenario_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
     The start position is each command's own (one start, or several for Monte Carlo).
     """
     g = p.add_argument_group("scenario (the simulated target)")
-    g.add_argument("--velocity", type=float, nargs=2, default=(10.0, -100.0), metavar=("VX", "VY"),
-                   help="velocity in m/s (default 10 -100)")
+    g.add_argument("--velocity", type=float, nargs="+", default=None, metavar="V",
+                   help="velocity VX VY (2-D) or VX VY VZ (3-D) in m/s (default 10 -100, and 0 for VZ)")
     g.add_argument("--duration", type=float, default=30.0, help="seconds (default 30)")
     g.add_argument("--dt", type=float, default=0.5, help="sampling interval of each pair in seconds (default 0.5)")
     g.add_argument("--offsets", type=float, nargs="+", default=None, metavar="S",
@@ -115,8 +123,12 @@ def add_scenario_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
 MAX_SAMPLES = 10_000_000
 
 
-def scenario(args: argparse.Namespace, geometry: Any, start: tuple[float, float], name: str) -> Any:
-    """A :class:`~fgdoppler.simulation.Scenario` from the scenario options (every value checked first)."""
+def scenario(args: argparse.Namespace, geometry: Any, start: tuple[float, ...], name: str) -> Any:
+    """A :class:`~fgdoppler.simulation.Scenario` from the scenario options (every value checked first).
+
+    ``start`` is ``(x, y)`` or ``(x, y, z)``; for a 3-D geometry a 2-D start and velocity are
+    refused with a message naming the missing option.
+    """
     from fgdoppler.models.motion import ConstantVelocity
     from fgdoppler.simulation import PAPER_CASE_B_OFFSET, Scenario
 
@@ -125,8 +137,19 @@ def scenario(args: argparse.Namespace, geometry: Any, start: tuple[float, float]
     if (args.duration / args.dt + 1) * geometry.n_pairs > MAX_SAMPLES:
         raise CLIError(f"--duration {args.duration:g} s at --dt {args.dt:g} s gives more than {MAX_SAMPLES:,} "
                        "samples: lengthen --dt or shorten --duration")
-    if not all(map(_finite, (*start, *args.velocity))):
-        raise CLIError(f"the start and --velocity must be finite, got {start} and {args.velocity}")
+    velocity = tuple(args.velocity) if args.velocity is not None else (10.0, -100.0)
+    if len(velocity) not in (2, 3):
+        raise CLIError(f"--velocity takes VX VY (2-D) or VX VY VZ (3-D), got {len(velocity)} numbers")
+    dim = geometry.dim
+    if dim == 3 and len(velocity) == 2 and args.velocity is None:
+        velocity = (*velocity, 0.0)
+    if len(start) != dim or len(velocity) != dim:
+        what = ("give --start-z and --velocity VX VY VZ" if dim == 3
+                else "drop --start-z and the third velocity, or make the problem 3-D with --altitude LO HI")
+        raise CLIError(f"the geometry is {dim}-D (an altitude band or sensors with z make it 3-D) but the start "
+                       f"has {len(start)} and --velocity {len(velocity)} coordinates: {what}")
+    if not all(map(_finite, (*start, *velocity))):
+        raise CLIError(f"the start and --velocity must be finite, got {start} and {velocity}")
     if not (args.process_noise >= 0 and _finite(args.process_noise)):
         raise CLIError(f"--process-noise must be a finite number >= 0, got {args.process_noise}")
     if args.offsets is not None:
@@ -135,7 +158,7 @@ def scenario(args: argparse.Namespace, geometry: Any, start: tuple[float, float]
         offsets = (0.0, PAPER_CASE_B_OFFSET) if geometry.name == "b" else (0.0,) * geometry.n_pairs
     sigma = args.sigma[0] if len(args.sigma) == 1 else tuple(args.sigma)
     try:
-        return Scenario(geometry=geometry, x0=(*start, *args.velocity), duration=args.duration, dt=args.dt,
+        return Scenario(geometry=geometry, x0=(*start, *velocity), duration=args.duration, dt=args.dt,
                         sigma=sigma, time_offsets=offsets, name=name,
                         process_noise=ConstantVelocity(q=args.process_noise) if args.process_noise > 0 else None)
     except ValueError as exc:

@@ -36,6 +36,8 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--start-x", type=float, nargs="+", default=None, metavar="M",
                    help="start x positions in m (default 5000 25000 45000)")
     p.add_argument("--start-y", type=float, default=2e3, help="start y in m (default 2000)")
+    p.add_argument("--start-z", type=float, default=None,
+                   help="start height in m: 3-D targets (the geometry must be 3-D: --altitude or sensors with z)")
     p.add_argument("--q", type=float, default=None, help="estimators' process noise PSD in m^2/s^3 (default 1e-3)")
     add_huber_option(p)
     p.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS),
@@ -67,7 +69,10 @@ def _run(args: argparse.Namespace) -> int:
         geom = geometry_with_zone(g, args)
         label = f"case {geom.name}" if geom.name in ("a", "b") and not args.geometry else str(g)
         y_note = "" if args.start_y == 2e3 else f", y {args.start_y / 1e3:g} km"
-        scen += [scenario(args, geom, (x, args.start_y), f"{label}, start {x / 1e3:g} km{y_note}") for x in starts]
+        z = () if args.start_z is None else (args.start_z,)
+        z_note = "" if args.start_z is None else f", altitude {args.start_z / 1e3:g} km"
+        scen += [scenario(args, geom, (x, args.start_y, *z), f"{label}, start {x / 1e3:g} km{y_note}{z_note}")
+                 for x in starts]
     from fgdoppler.estimators.registry import ESTIMATORS
 
     k = huber(args)

@@ -32,6 +32,9 @@ def add_simulate(sub: argparse._SubParsersAction) -> None:
                    help="geometry: the paper's a or b, or a geometry TOML file (default a; --case is the old name)")
     p.add_argument("--start-x", type=float, default=25e3, help="initial x in metres (default 25000)")
     p.add_argument("--start-y", type=float, default=2e3, help="initial y in metres (default 2000)")
+    p.add_argument("--start-z", type=float, default=None,
+                   help="initial height in metres: a 3-D target (the geometry must be 3-D: --altitude or "
+                   "sensors with z)")
     add_scenario_options(p)
     add_zone_options(p)
     p.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
@@ -44,7 +47,8 @@ def _run(args: argparse.Namespace) -> int:
     from fgdoppler.simulation import simulate
 
     geom = geometry_with_zone(args.geometry, args)
-    scen = scenario(args, geom, (args.start_x, args.start_y),
+    start = (args.start_x, args.start_y) if args.start_z is None else (args.start_x, args.start_y, args.start_z)
+    scen = scenario(args, geom, start,
                     f"{geom.name or 'custom geometry'}, start ({args.start_x / 1e3:g}, {args.start_y / 1e3:g}) km")
     sim = simulate(scen, np.random.default_rng(args.seed))
     out: Path = args.out

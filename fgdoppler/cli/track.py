@@ -129,6 +129,10 @@ def _run(args: argparse.Namespace) -> int:
     truth = None
     if args.truth:
         truth = Trajectory.from_csv(args.truth)
+        if truth.dim != geom.dim:
+            hint = ("give the geometry an altitude band (--altitude LO HI or [zone] altitude) or sensors with z"
+                    if truth.dim == 3 else "the geometry is 3-D (an altitude band or sensors with z)")
+            raise CLIError(f"{args.truth}: the truth is {truth.dim}-D but the problem is {geom.dim}-D: {hint}")
         truth.check_covers(meas.scans().times, str(args.truth))
     model = _model(args, geom)
     settings = _initiation_settings(args)
@@ -140,8 +144,9 @@ def _run(args: argparse.Namespace) -> int:
     where = _describe(geom, spec)
     if not args.json:
         z = geom.zone
+        height = "" if z.altitude is None else f", height {z.altitude[0]:g}..{z.altitude[1]:g} m (3-D)"
         print(f"geometry {spec} ({geom.n_pairs} pair(s)); zone along {z.along[0]:g}..{z.along[1]:g} m, across "
-              f"{z.across[0]:g}..{z.across[1]:g} m in the sensors' frame, speed up to {z.speed_max:g} m/s")
+              f"{z.across[0]:g}..{z.across[1]:g} m{height} in the sensors' frame, speed up to {z.speed_max:g} m/s")
     if args.estimator == "init":
         status = _report_initiation(args, init, window, geom, truth, where)
     else:
@@ -202,11 +207,9 @@ def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: A
         return str(init.status)
     print(f"initiation ({init.method}) from {init.n_measurements} measurements, "
           f"t = {init.t_start:g}..{init.t_end:g} s, {init.wall_time * 1e3:.0f} ms")
-    print(f"  state at t_end: x = {init.x_end[0]:.1f} m, y = {init.x_end[1]:.1f} m, "
-          f"vx = {init.x_end[2]:.2f} m/s, vy = {init.x_end[3]:.2f} m/s")
+    print(f"  state at t_end: {_state_text(init.x_end)}")
     if init.P_end is not None:
-        sd = np.sqrt(np.diag(init.P_end))
-        print(f"  std: {sd[0]:.1f} m, {sd[1]:.1f} m, {sd[2]:.2f} m/s, {sd[3]:.2f} m/s")
+        print(f"  std: {_state_text(np.sqrt(np.diag(init.P_end)), names=False)}")
     verdict = "passes" if init.passes_chi2 else "FAILS"
     print(f"  cost {init.cost:.2f} {verdict} the chi-square test ({init.chi2_threshold:.2f}, {init.dof} dof); "
           f"objective with prior and zone terms {init.objective:.2f}")
@@ -215,7 +218,8 @@ def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: A
     _print_events(init.events)
     if truth is not None:
         err = init.x_end - truth.at([init.t_end])[0]
-        print(f"  error at t_end: position {np.hypot(err[0], err[1]):.1f} m, velocity {np.hypot(err[2], err[3]):.2f} m/s")
+        d = err.size // 2
+        print(f"  error at t_end: position {np.linalg.norm(err[:d]):.1f} m, velocity {np.linalg.norm(err[d:]):.2f} m/s")
     if args.out is not None:
         print(f"  wrote {args.out} and {args.out.with_suffix('.json')}")
     return str(init.status)
@@ -226,6 +230,9 @@ def _plot_landscape(args: argparse.Namespace, init: Any, window: Any, geom: Any,
     from fgdoppler.analysis.observability import default_along
     from fgdoppler.estimators.initiation import residual_landscape
 
+    if geom.dim == 3:
+        raise CLIError("--plot with --estimator init draws the 2-D residual landscape (x0 x heading), which a 3-D "
+                       "problem does not have: plot a tracker's result instead (e.g. --estimator smoother)")
     xs = default_along(geom)
     hs = np.arange(0.0, 360.0, 2.0)
     start = geom.frame.states_to_local(init.x_start)
@@ -270,16 +277,26 @@ def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, tru
         return str(result.status)
     print(f"{name}: {len(e)} states ({e.kind}), t = {e.times[0]:g}..{e.times[-1]:g} s, "
           f"{result.wall_time * 1e3:.0f} ms")
-    print(f"  last state: x = {e.states[-1, 0]:.1f} m, y = {e.states[-1, 1]:.1f} m, "
-          f"vx = {e.states[-1, 2]:.2f} m/s, vy = {e.states[-1, 3]:.2f} m/s")
+    print(f"  last state: {_state_text(e.states[-1])}")
     _print_events(result.events)
     if truth is not None:
         err = e.states - truth.at(e.times)
-        rmse = float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1))))
-        print(f"  position RMSE vs truth: {rmse:.1f} m; final error {np.hypot(*err[-1, :2]):.1f} m")
+        d = e.dim
+        rmse = float(np.sqrt(np.mean(np.sum(err[:, :d] ** 2, axis=1))))
+        print(f"  position RMSE vs truth: {rmse:.1f} m; final error {np.linalg.norm(err[-1, :d]):.1f} m")
     if args.out is not None:
         print(f"  wrote {args.out} and {args.out.with_suffix('.json')}")
     return str(result.status)
+
+
+def _state_text(x: Any, *, names: bool = True) -> str:
+    """``x = 1.0 m, y = ..., vx = ... m/s`` for a 2-D or 3-D state (values only with ``names=False``)."""
+    from fgdoppler.estimators.results import STATE_NAMES
+
+    labels = STATE_NAMES[len(x)]
+    d = len(x) // 2
+    parts = [f"{v:.1f} m" if i < d else f"{v:.2f} m/s" for i, v in enumerate(x)]
+    return ", ".join(f"{n} = {p}" for n, p in zip(labels, parts, strict=True)) if names else ", ".join(parts)
 
 
 def _csv_header(where: dict[str, Any]) -> list[str]:
@@ -287,5 +304,7 @@ def _csv_header(where: dict[str, Any]) -> list[str]:
     g, z = where["geometry"], where["zone"]
     return [f"geometry: {g['source']} name={g['name'] or '-'} pairs="
             + ";".join(f"tx={p['tx']} rx={p['rx']}" for p in g["pairs"]),
-            f"zone: along={z['along']} across={z['across']} speed_max={z['speed_max']} "
+            f"zone: along={z['along']} across={z['across']} "
+            + (f"altitude={z['altitude']} " if "altitude" in z else "")
+            + f"speed_max={z['speed_max']} "
             f"frame_origin={z['frame']['origin']} frame_basis={z['frame']['basis']}"]

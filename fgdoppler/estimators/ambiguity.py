@@ -209,8 +209,10 @@ def _density(x: NDArray[np.float64], w: NDArray[np.float64], means: NDArray[np.f
     out = 0.0
     for wi, m, P in zip(w, means, covs, strict=True):
         d = x - m
-        S = P[:2, :2]
-        out += wi * float(np.exp(-0.5 * d @ np.linalg.solve(S, d)) / (2 * np.pi * np.sqrt(np.linalg.det(S))))
+        k = d.size
+        S = P[:k, :k]
+        norm = np.sqrt((2 * np.pi) ** k * np.linalg.det(S))
+        out += wi * float(np.exp(-0.5 * d @ np.linalg.solve(S, d)) / norm)
     return out
 
 
@@ -223,7 +225,7 @@ def _modes_reason(w: NDArray[np.float64], ends: list[Estimates]) -> Reason:
     mixture's mean lies between them.
     """
     usable = [h for h in range(len(ends)) if ends[h].cov_ok[-1] and w[h] >= 0.05]
-    means = np.array([e.states[-1, :2] for e in ends])
+    means = np.array([e.states[-1, :e.dim] for e in ends])
     covs = np.array([e.covariances[-1] for e in ends])
     sel = np.array(usable, dtype=np.intp)
     for i in usable:
@@ -248,8 +250,9 @@ COMPETING = float(chi2.ppf(0.95, 1))
 
 def _distinct(a: TrackResult, b: TrackResult) -> bool:
     """Two tracks end at different places: farther apart than 50 m and three of ``a``'s standard deviations."""
-    d = b.primary.states[-1, :2] - a.primary.states[-1, :2]
-    P = a.primary.covariances[-1, :2, :2]
+    k = a.primary.dim
+    d = b.primary.states[-1, :k] - a.primary.states[-1, :k]
+    P = a.primary.covariances[-1, :k, :k]
     sd = float(np.sqrt(np.max(np.linalg.eigvalsh(P)))) if a.primary.cov_ok[-1] else 0.0
     return bool(np.linalg.norm(d) > max(50.0, 3.0 * sd))
 
@@ -263,7 +266,8 @@ def _competing(costs: NDArray[np.float64], results: list[TrackResult], best: int
             f"{len(results)} hypotheses from an ambiguous initiation all converge to the track reported")),)
     second = min(others, key=lambda h: costs[h])
     margin = float(costs[second] - costs[best])
-    apart = float(np.linalg.norm(results[second].primary.states[-1, :2] - results[best].primary.states[-1, :2]))
+    k = results[best].primary.dim
+    apart = float(np.linalg.norm(results[second].primary.states[-1, :k] - results[best].primary.states[-1, :k]))
     if margin >= COMPETING:
         return (Reason(code="competing", status="ok", message=(
             f"{len(results)} hypotheses from an ambiguous initiation; the data prefer the one reported by "

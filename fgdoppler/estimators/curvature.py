@@ -71,11 +71,12 @@ def probe_rises(cost: Callable[[FloatArray], float], x: FloatArray, P: FloatArra
     difference), so that only curvature is compared; at an optimum that term
     is zero.
     """
-    Ppp = P[:2, :2]
+    k = P.shape[0] // 2  # position block (2-D or 3-D)
+    Ppp = P[:k, :k]
     _, V = np.linalg.eigh(Ppp)
     v = V[:, -1]
     sd = float(np.sqrt(v @ Ppp @ v))
-    d = P[:, :2] @ v / sd
+    d = P[:, :k] @ v / sd
 
     def at(step: float) -> float:
         try:

@@ -293,7 +293,8 @@ class Initiation(Judged):
         """The window's first and last states in the track CSV format (:func:`~fgdoppler.estimators.results.states_csv`)."""
         from fgdoppler.estimators.results import states_csv
 
-        P = [np.zeros((4, 4)) if c is None else c for c in (self.P_start, self.P_end)]
+        n = self.x_start.size
+        P = [np.zeros((n, n)) if c is None else c for c in (self.P_start, self.P_end)]
         return states_csv(np.array([self.t_start, self.t_end]), np.array([self.x_start, self.x_end]), np.array(P),
                           np.array([self.covariance_ok] * 2),
                           [f"fgdoppler initiation ({self.method}): window start and end, status {self.status}",
@@ -476,8 +477,10 @@ def initiate(
     t_begin = time.perf_counter()
     geometry = model.geometry
     measurements.check(geometry)
-    if len(measurements) < 5:
-        raise ValueError(f"initiation needs at least 5 measurements (4 unknowns + 1 dof), got {len(measurements)}")
+    n_state = geometry.state_dim
+    if len(measurements) < n_state + 1:
+        raise ValueError(f"initiation needs at least {n_state + 1} measurements ({n_state} unknowns + 1 dof), "
+                         f"got {len(measurements)}")
     w = _Window.build(measurements, geometry)
     threshold = _threshold(w, settings, 0)
     grid = grid_result if grid_result is not None else window_grid(measurements, model, settings)
@@ -495,7 +498,7 @@ def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: t
     # Each alternative gets the covariance of the deterministic window fit at its state, so a
     # tracker can follow it as a hypothesis (see fgdoppler.estimators.ambiguity).
     alternatives = tuple(replace(a, covariance=_inverse(w.information(a.state))[0]) for a in fit.alternatives)
-    dof = len(w.meas) - 4 - fit.n_outliers
+    dof = len(w.meas) - w.geometry.state_dim - fit.n_outliers
     threshold = _threshold(w, settings, fit.n_outliers)
     passes = bool(fit.cost <= threshold)
     reasons = list(fit.reasons)
@@ -518,7 +521,8 @@ def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: t
         if found is not None:
             reasons.append(found)
     if alternatives:
-        far = max(float(np.linalg.norm(a.state[:2] - fit.x0[:2])) for a in alternatives)
+        d = w.geometry.dim
+        far = max(float(np.linalg.norm(a.state[:d] - fit.x0[:d])) for a in alternatives)
         reasons.append(Reason(code="ambiguous", status="doubtful", message=(
             f"{len(alternatives)} other solution(s) fit the window as well (costs "
             + ", ".join(f"{a.cost:.1f}" for a in alternatives) + f" vs {fit.cost:.1f}; up to {far / 1e3:.1f} km "
@@ -669,7 +673,7 @@ def _refine_lm(w: _Window, model: TrackingModel, settings: InitiationSettings, g
 
 def _threshold(w: _Window, settings: InitiationSettings, n_outliers: int) -> float:
     """The χ² threshold of the window's test with ``n_outliers`` measurements left out."""
-    return float(chi2.ppf(settings.confidence, max(len(w.meas) - 4 - n_outliers, 1)))
+    return float(chi2.ppf(settings.confidence, max(len(w.meas) - w.geometry.state_dim - n_outliers, 1)))
 
 
 def _robust_solution(w: _Window, model: TrackingModel, sol: _Solution, settings: InitiationSettings) -> _Solution:
@@ -701,8 +705,10 @@ def _boundary_reasons(best: _Solution, graph: gtsam.NonlinearFactorGraph, n_data
     limit = float(chi2.ppf(settings.confidence, 1))
     outside = "" if isinstance(free, str) else (
         f"; without the bound LM reaches window cost {free.cost:.2f} "
-        f"{np.linalg.norm(free.x0[:2] - best.x0[:2]) / 1e3:.1f} km away (speed {np.hypot(*free.x0[2:]):.0f} m/s)")
-    held = ("the start state is held at the zone's boundary (excess along, across, speed: "
+        f"{np.linalg.norm(free.x0[:model.dim] - best.x0[:model.dim]) / 1e3:.1f} km away "
+        f"(speed {np.linalg.norm(free.x0[model.dim:]):.0f} m/s)")
+    axes = "along, across, altitude" if model.dim == 3 else "along, across"
+    held = (f"the start state is held at the zone's boundary (excess {axes}, speed: "
             + ", ".join(f"{v:.3g}" for v in excess) + f"; window cost {best.cost:.2f} inside the zone{outside})")
     if gain > limit:
         return [Reason(code="boundary", status="doubtful", message=(
@@ -773,9 +779,10 @@ def _ils(w: _Window, settings: InitiationSettings, x_grid: FloatArray, threshold
 
 
 def _same(a: FloatArray, b: FloatArray, settings: InitiationSettings) -> bool:
+    d = a.size // 2
     return bool(
-        np.linalg.norm(a[:2] - b[:2]) < settings.same_solution_m
-        and np.linalg.norm(a[2:] - b[2:]) < settings.same_solution_mps
+        np.linalg.norm(a[:d] - b[:d]) < settings.same_solution_m
+        and np.linalg.norm(a[d:] - b[d:]) < settings.same_solution_mps
     )
 
 

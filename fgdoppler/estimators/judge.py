@@ -175,12 +175,13 @@ def _reference_reasons(est: Estimates, reference: TrackResult) -> list[Reason]:
         out.append(Reason(code="reference", status="doubtful", message=(
             f"the offline smoother, with the same data, is {np.sqrt(ratio):.1f} times less certain in some "
             f"direction at the last time: the {est.kind} covariance understates the error (poor observability)")))
-    limit = float(chi2.ppf(LEVEL, 4))
+    n = d.size
+    limit = float(chi2.ppf(LEVEL, n))
     if m2 <= limit:
         return out
     return [*out, Reason(code="reference", status="doubtful", message=(
-        f"the final state lies {np.sqrt(m2):.1f} of its own sigma ({np.hypot(*d[:2]) / 1e3:.2f} km) from the "
-        f"offline smoother's, which uses the same data (chi-square {m2:.1f} > {limit:.1f}, 4 dof): the {est.kind} "
+        f"the final state lies {np.sqrt(m2):.1f} of its own sigma ({np.linalg.norm(d[:n // 2]) / 1e3:.2f} km) from the "
+        f"offline smoother's, which uses the same data (chi-square {m2:.1f} > {limit:.1f}, {n} dof): the {est.kind} "
         "estimates understate their error here (poor observability)"))]
 
 
@@ -206,7 +207,7 @@ def _residual(result: TrackResult, measurements: Measurements, model: TrackingMo
     inlier = np.abs(r) <= OUTLIER_CUT
     motion = MotionBlocks(model.motion).residuals(est.states, est.times)
     statistic = float(r[inlier] @ r[inlier] + np.sum(motion**2))
-    return int(inlier.sum()), statistic, max(int(inlier.sum()) - 4, 1), len(r), None
+    return int(inlier.sum()), statistic, max(int(inlier.sum()) - model.n, 1), len(r), None
 
 
 def _fit_reasons(statistic: float, dof: int, n: int, rejected: int, lost: int | None, robust: bool) -> list[Reason]:
@@ -240,7 +241,7 @@ def _unit_reasons(result: TrackResult, model: TrackingModel) -> list[Reason]:
     if not len(states):
         return out
     if model.zone is not None:
-        speed = float(np.max(np.linalg.norm(states[:, 2:], axis=1)))
+        speed = float(np.max(np.linalg.norm(states[:, model.dim:], axis=1)))
         if speed > SPEED_FACTOR * model.zone.speed_max:
             out.append(Reason(code="units", status="doubtful", message=(
                 f"the track reaches {speed:.0f} m/s, more than {SPEED_FACTOR:g} times the zone's bound "
@@ -248,7 +249,8 @@ def _unit_reasons(result: TrackResult, model: TrackingModel) -> list[Reason]:
     if isinstance(model.observation, DopplerModel):
         sensors = model.observation.geometry.sensors()
         extent = float(np.max(np.linalg.norm(sensors[:, None] - sensors[None], axis=-1)))
-        d = float(np.max(np.min(np.linalg.norm(states[:, None, :2] - sensors[None], axis=-1), axis=1)))
+        k = model.dim
+        d = float(np.max(np.min(np.linalg.norm(states[:, None, :k] - sensors[None, :, :k], axis=-1), axis=1)))
         if d > REMOTE_FACTOR * extent:
             out.append(Reason(code="units", status="doubtful", message=(
                 f"the track lies {d / 1e3:.0f} km from sensors that span {extent:.0f} m: are the sensor positions "

@@ -80,8 +80,8 @@ FloatArray = NDArray[np.float64]
 
 #: Rows of (particle, measurement) predictions evaluated at once (bounds the memory of a move).
 CHUNK_ROWS = 1 << 20
-#: Random-walk Metropolis scale for 4 dimensions (Roberts, Gelman & Gilks: 2.38²/d).
-RW_SCALE = 2.38**2 / 4
+#: Random-walk Metropolis scale per state dimension (Roberts, Gelman & Gilks: 2.38²/d for d unknowns).
+RW_SCALE_NUMERATOR = 2.38**2
 
 
 def _predict_along(model: MeasurementModel, x: FloatArray, t: FloatArray, channels: NDArray[np.intp]) -> FloatArray:
@@ -89,8 +89,9 @@ def _predict_along(model: MeasurementModel, x: FloatArray, t: FloatArray, channe
     along = getattr(model, "predict_along", None)
     if along is not None:
         return np.asarray(along(x, t, channels), dtype=float)
-    states = x[:, None, :] + np.concatenate([t[None, :, None] * x[:, None, 2:], np.zeros((1, t.size, 2))], -1)
-    return np.asarray(model.predict(states.reshape(-1, 4), np.tile(channels, x.shape[0])), dtype=float).reshape(
+    d = x.shape[1] // 2
+    states = x[:, None, :] + np.concatenate([t[None, :, None] * x[:, None, d:], np.zeros((1, t.size, d))], -1)
+    return np.asarray(model.predict(states.reshape(-1, 2 * d), np.tile(channels, x.shape[0])), dtype=float).reshape(
         x.shape[0], t.size)
 
 
@@ -119,7 +120,7 @@ class _Posterior:
         self.t_anchor = t_anchor
         self.data = data
         self.gauss: tuple[FloatArray, FloatArray] | None = None  # moment-matched prior after re-anchoring
-        self.x = np.empty((0, 4))
+        self.x = np.empty((0, model.n))
         self.logw = np.empty(0)
         self.logpost = np.empty(0)
         self.label = np.empty(0, dtype=np.intp)
@@ -178,7 +179,7 @@ class _Posterior:
         means = np.array([m for m, _ in comps])
         k = len(comps)
         label = rng.integers(0, k, n)
-        x = means[label] + np.einsum("nij,nj->ni", chols[label], rng.standard_normal((n, 4)))
+        x = means[label] + np.einsum("nij,nj->ni", chols[label], rng.standard_normal((n, means.shape[1])))
         logq = np.empty((k, n))
         for c in range(k):
             sol = np.linalg.solve(chols[c], (x - means[c]).T).T
@@ -212,7 +213,7 @@ class _Posterior:
         if steps == 0:
             return float("nan")
         chol = self._cluster_chol()
-        scale = RW_SCALE
+        scale = RW_SCALE_NUMERATOR / self.model.n
         accepted = []
         for _ in range(steps):
             eps = rng.standard_normal(self.x.shape)
@@ -227,9 +228,9 @@ class _Posterior:
         return float(np.mean(accepted))
 
     def _cluster_chol(self) -> FloatArray:
-        """Cholesky factor per cluster label ``(n_labels, 4, 4)`` of the particles' covariance in it."""
+        """Cholesky factor per cluster label ``(n_labels, n, n)`` of the particles' covariance in it."""
         n_labels = int(self.label.max()) + 1
-        out = np.empty((n_labels, 4, 4))
+        out = np.empty((n_labels, self.model.n, self.model.n))
         w = self.weights()
         everyone = _weighted_cov(self.x, w)
         for k in range(n_labels):
@@ -312,13 +313,14 @@ def _window_covariance(post: _Posterior, x: FloatArray, window: _Data) -> FloatA
     d = window
     if d.t.size == 0:
         return None
-    states = post.model.motion.propagate(np.broadcast_to(x, (d.t.size, 4)), d.t)
+    n = post.model.n
+    states = post.model.motion.propagate(np.broadcast_to(x, (d.t.size, n)), d.t)
     try:
         _, H = post.model.observation.predict_and_jacobian(states, d.pair)
     except ValueError:  # the track passes through a sensor
         return None
-    H = np.asarray(H, dtype=float).reshape(d.t.size, 4)
-    J = np.concatenate([H[:, :2], H[:, :2] * d.t[:, None] + H[:, 2:]], axis=1)
+    H = np.asarray(H, dtype=float).reshape(d.t.size, n)
+    J = np.concatenate([H[:, :n // 2], H[:, :n // 2] * d.t[:, None] + H[:, n // 2:]], axis=1)
     Jw = J / d.sigma[:, None]
     info = Jw.T @ Jw
     s = np.linalg.svd(info, compute_uv=False)
@@ -355,7 +357,7 @@ class WindowPosterior:
     t_start, t_end
         The window's first and last measurement times.
     states
-        Samples of the state at ``t_start`` ``(n, 4)``.
+        Samples of the state at ``t_start`` ``(n, 2d)``.
     weights
         Their normalised weights ``(n,)``.
     acceptance

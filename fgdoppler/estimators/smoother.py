@@ -439,6 +439,64 @@ def _reinitiate(measurements: Measurements, model: TrackingModel, settings: Smoo
         return None
 
 
+def _altitude_restarts(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
+                       sol: SmootherSolution, progress: Progress | None = None
+                       ) -> tuple[SmootherSolution, list[str], list[Reason]]:
+    """3-D only: smooth again from level flight at each candidate altitude, keep the lowest cost.
+
+    Ground sensors measure height only through :math:`z/r` and are blind to the
+    sign of :math:`z`: a track that sinks towards the sensors' plane can
+    explain the data about as well as the level one (cost differences of
+    about 1 were measured), and Levenberg–Marquardt keeps whichever basin its
+    start lies in.  The solution's horizontal track is therefore restarted at
+    the altitude levels of the initiation grid (:meth:`GridSpec.levels`),
+    level in the zone's frame; a distinct solution within χ²₁ (95 %) of the
+    best is reported as a ``competing`` finding, unless it sinks below the
+    altitude band's floor (by more than 50 m and three standard deviations)
+    somewhere along the track: the floor is the ground for ground sensors, and
+    a track through it is not a place the target can be.
+    """
+    from fgdoppler.estimators.ambiguity import COMPETING
+    from fgdoppler.estimators.grid import GridSpec
+
+    zone = model.zone
+    if model.dim != 3 or zone is None or zone.altitude is None:
+        return sol, [], []
+    local = zone.frame.states_to_local(sol.states)
+    found = [sol]
+    for level in GridSpec().levels(zone):
+        start = local.copy()
+        start[:, 2] = level
+        start[:, 5] = 0.0
+        try:
+            found.append(solve_smoother(measurements, model, zone.frame.states_to_world(start), settings,
+                                        prior=model.prior(), progress=prefixed(progress, f"altitude {level:.0f} m")))
+        except ValueError:
+            continue
+    best = min(found, key=lambda s: s.cost)
+    end = best.states[-1, :3]
+    sd = 0.0
+    if best.covariances is not None and np.all(np.isfinite(best.covariances[-1])):
+        sd = float(np.sqrt(max(np.max(np.linalg.eigvalsh(best.covariances[-1][:3, :3])), 0.0)))
+    moved = float(np.linalg.norm(sol.states[-1, :3] - end))
+    notes = [] if moved <= max(50.0, 3.0 * sd) else [
+        f"a restart at another altitude lowered the cost from {sol.cost:.2f} to {best.cost:.2f} "
+        f"(the track's end moved {moved / 1e3:.1f} km)"]
+    floor = zone.altitude[0] - max(50.0, 3.0 * sd)
+    rivals = [s for s in found if s.cost - best.cost < COMPETING
+              and np.linalg.norm(s.states[-1, :3] - end) > max(50.0, 3.0 * sd)
+              and float(np.min(zone.frame.states_to_local(s.states)[:, 2])) >= floor]
+    if not rivals:
+        return best, notes, []
+    rival = min(rivals, key=lambda s: s.cost)
+    apart = float(np.linalg.norm(rival.states[-1, :3] - end))
+    return best, notes, [Reason(code="competing", status="doubtful", message=(
+        f"a track at another altitude explains the data about as well (cost {rival.cost:.2f} vs {best.cost:.2f}, "
+        f"difference below {COMPETING:.2f}) and ends {apart / 1e3:.1f} km away (height "
+        f"{zone.frame.points_to_local(rival.states[-1, :3])[2]:.0f} m vs "
+        f"{zone.frame.points_to_local(end)[2]:.0f} m): the data do not fix the altitude")),]
+
+
 def run_smoother(
     measurements: Measurements,
     model: TrackingModel,
@@ -471,7 +529,9 @@ def run_smoother(
         if again is not None and again.cost < sol.cost:
             sol = again
             notes += list(again.notes)
-    reasons = list(sol.reasons)
+    sol, more_notes, altitude_reasons = _altitude_restarts(measurements, model, settings, sol, progress)
+    notes += more_notes
+    reasons = list(sol.reasons) + altitude_reasons
     covs = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
     if settings.sampled_covariance and sol.covariances is not None and np.all(np.isfinite(sol.covariances[0])):
         sampled = posterior_spread(measurements, model, sol.times, sol.states, sol.covariances,

@@ -126,20 +126,23 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     sigma0 = _enclosing(P0, sampled)
     spread = _weighted_cov(post.x, np.full(SAMPLES, 1.0 / SAMPLES))
     motion = model.motion
-    out = np.empty((len(times), 4, 4))
+    n = model.n
+    d_pos = model.dim
+    out = np.empty((len(times), n, n))
     for k, t in enumerate(times):
         F = motion.F(float(t) - t0)
         out[k] = F @ sigma0 @ F.T + (motion.Q(float(t) - t0) if t > t0 else 0.0)
-    sd_laplace = float(np.sqrt(np.max(np.linalg.eigvalsh(P0[:2, :2]))))
-    sd_sampled = float(np.sqrt(np.max(np.linalg.eigvalsh(sampled[:2, :2]))))
-    sd_reported = float(np.sqrt(np.max(np.linalg.eigvalsh(sigma0[:2, :2]))))
-    bias = float(np.hypot(*(post.x[:, :2].mean(axis=0) - x0[:2])))
+    pos = slice(0, d_pos)
+    sd_laplace = float(np.sqrt(np.max(np.linalg.eigvalsh(P0[pos, pos]))))
+    sd_sampled = float(np.sqrt(np.max(np.linalg.eigvalsh(sampled[pos, pos]))))
+    sd_reported = float(np.sqrt(np.max(np.linalg.eigvalsh(sigma0[pos, pos]))))
+    bias = float(np.linalg.norm(post.x[:, pos].mean(axis=0) - x0[pos]))
     reason = Reason(code="nonlinear", status="ok", message=(
         f"the likelihood is not Gaussian about the estimate (3 standard deviations along the major axis raise "
         f"the cost {ratio:.3g} times its quadratic model): covariances from {SAMPLES} posterior samples "
         f"(Metropolis acceptance {rate:.2f}); position sigma along the major axis {sd_reported:.0f} m (Laplace "
         f"{sd_laplace:.0f} m, samples {sd_sampled:.0f} m), posterior mean {bias:.0f} m from the estimate, spread "
-        f"{np.sqrt(max(np.max(np.linalg.eigvalsh(spread[:2, :2])), 0.0)):.0f} m"))
+        f"{np.sqrt(max(np.max(np.linalg.eigvalsh(spread[pos, pos])), 0.0)):.0f} m"))
     return out, reason
 
 
