@@ -151,7 +151,8 @@ class Frame:
         if self.is_identity:
             return P.copy()
         T = self._state_map(True)
-        return T @ P @ T.T
+        out = T @ P @ T.T
+        return 0.5 * (out + np.swapaxes(out, -1, -2))  # symmetric to the last bit, as it was
 
     def covariances_to_local(self, P: ArrayLike) -> FloatArray:
         """World state covariances ``(..., 2d, 2d)`` in local coordinates."""
@@ -159,7 +160,8 @@ class Frame:
         if self.is_identity:
             return P.copy()
         T = self._state_map(False)
-        return T @ P @ T.T
+        out = T @ P @ T.T
+        return 0.5 * (out + np.swapaxes(out, -1, -2))  # symmetric to the last bit, as it was
 
     def relative_to(self, other: Frame) -> Frame:
         r"""This frame expressed in ``other``'s local coordinates.

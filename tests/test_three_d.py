@@ -40,7 +40,7 @@ AIRCRAFT = fd.Scenario(geometry=GROUND, x0=(5e3, 8e3, 3e3, 100.0, 40.0, 0.0), du
 
 def _lift(x: np.ndarray) -> np.ndarray:
     """2-D states (..., 4) as 3-D states at z = 0, vz = 0."""
-    z = np.zeros(x.shape[:-1] + (1,))
+    z = np.zeros((*x.shape[:-1], 1))
     return np.concatenate([x[..., :2], z, x[..., 2:], z], axis=-1)
 
 

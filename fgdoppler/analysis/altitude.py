@@ -123,7 +123,7 @@ class AltitudeStudy:
 
         fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.2, 8.4), layout="constrained", sharex=True)
         km = np.asarray(self.altitudes) / 1e3
-        colours = plt.get_cmap("tab10").colors
+        colours = [plt.get_cmap("tab10")(k) for k in range(10)]
         for i, name in enumerate(self.scenarios):
             c = colours[i % len(colours)]
             top.semilogy(km, self.rmse_smoother[i], "o-", color=c, lw=1.5, label=f"{name}")

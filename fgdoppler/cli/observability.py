@@ -54,6 +54,8 @@ def add_observability(sub: argparse._SubParsersAction) -> None:
     mode.add_argument("--report", type=float, default=None, metavar="START_X",
                       help="marginal-covariance report of a target starting at (START_X, --offset) with the "
                       "scenario options; --process-noise Q also puts Q in the graph (default 0: deterministic CV)")
+    p.add_argument("--start-z", type=float, default=None, metavar="M",
+                   help="--report only: start height of a 3-D target (the geometry must be 3-D)")
     add_scenario_options(p)
     p.add_argument("--json", action="store_true", help="machine-readable output on stdout")
     p.add_argument("--plot", type=Path, default=None, metavar="PATH", help="write a figure")
@@ -80,6 +82,15 @@ def _run(args: argparse.Namespace) -> int:
     xs = _grid(args.x, None)
     hs = _grid(args.headings, ob.DEFAULT_HEADINGS_DEG)
     assert hs is not None
+    if args.report is None and args.geometry is not None:
+        from fgdoppler.geometry import resolve_geometry
+
+        if resolve_geometry(args.geometry).dim == 3:
+            raise CLIError("the maps, slices and speed table are 2-D (x x heading in the sensors' plane); for a 3-D "
+                           "geometry use --report START_X --start-z Z, or the altitude study "
+                           "(studies/altitude_study.py)")
+    if args.start_z is not None and args.report is None:
+        raise CLIError("--start-z goes with --report")
     if args.table:
         return _table(args, sampling, xs, hs)
     if args.slice is not None:
@@ -164,7 +175,7 @@ def _report(args: argparse.Namespace) -> int:
     from fgdoppler.simulation import simulate
 
     geom = resolve_geometry(args.geometry or "a")
-    start = (args.report, args.offset)
+    start = (args.report, args.offset) if args.start_z is None else (args.report, args.offset, args.start_z)
     scen = scenario(args, geom, start, f"{args.geometry or 'a'}, start ({start[0] / 1e3:g}, {start[1] / 1e3:g}) km")
     sim = simulate(scen, np.random.default_rng(0))
     motion = ConstantVelocity(q=args.process_noise) if args.process_noise > 0 else None
@@ -180,7 +191,8 @@ def _report(args: argparse.Namespace) -> int:
         if rep.pos_std is not None and rep.weakest_std is not None:
             print("  time   sigma_x  sigma_y  sigma_weakest (m)")
             for k in np.unique(np.linspace(0, rep.times.size - 1, 7).astype(int)):
-                print(f"{rep.times[k]:6.2f} {rep.pos_std[k, 0]:8.1f} {rep.pos_std[k, 1]:8.1f} {rep.weakest_std[k]:10.1f}")
+                print(f"{rep.times[k]:6.2f} {rep.pos_std[k, 0]:8.1f} {rep.pos_std[k, 1]:8.1f} {rep.weakest_std[k]:10.1f}"
+                      + (f"  sigma_z {rep.pos_std[k, 2]:.1f}" if rep.pos_std.shape[1] == 3 else ""))
     if args.plot:
         plotting.save(plotting.plot_report_std(rep), args.plot)
     return 0

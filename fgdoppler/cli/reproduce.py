@@ -21,6 +21,9 @@ def add_reproduce(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--quick", action="store_true", help="few runs (5 per scenario): under a minute")
     p.add_argument("--runs", type=int, default=None, help="runs per scenario (default 100; 5 with --quick)")
+    p.add_argument("--altitude-runs", type=int, default=None, metavar="N",
+                   help="runs per scenario and height of the 3-D altitude study (default: runs / 10, at least 1; "
+                   "0 skips the study)")
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
     p.add_argument("--seed", type=int, default=2026, help="root seed (default 2026)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS", help="Dask scheduler address (optional extra)")
@@ -38,9 +41,12 @@ def _run(args: argparse.Namespace) -> int:
     runs = args.runs if args.runs is not None else (5 if args.quick else 100)
     if runs < 1:
         raise CLIError("--runs must be >= 1")
+    if args.altitude_runs is not None and args.altitude_runs < 0:
+        raise CLIError("--altitude-runs must be >= 0")
     pool, client = executor(args)
     try:
-        report = reproduce(args.out, ReproduceSettings(runs=runs, workers=args.workers, seed=args.seed),
+        report = reproduce(args.out, ReproduceSettings(runs=runs, workers=args.workers, seed=args.seed,
+                                                         altitude_runs=args.altitude_runs),
                            executor=pool)
     finally:
         if client is not None:

@@ -199,6 +199,7 @@ def _mixture(kind: str, parts: list[Estimates], W: NDArray[np.float64]) -> Estim
     mean = np.einsum("hn,hni->ni", w, X)
     d = X - mean[None]
     cov = np.einsum("hn,hnij->nij", w, P + np.einsum("hni,hnj->hnij", d, d))
+    cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))  # symmetric to the last bit (files keep one triangle)
     cov_ok = np.all(ok | (w < 1e-9), axis=0)
     return Estimates(kind=kind, times=ref.times, states=mean, covariances=cov, cov_ok=cov_ok)  # type: ignore[arg-type]
 

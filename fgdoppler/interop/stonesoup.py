@@ -6,7 +6,10 @@ Stone Soup, nothing else in fgdoppler does.
 Stone Soup orders a 2-D constant-velocity state as :math:`[x, \dot x, y, \dot y]`,
 fgdoppler as :math:`[x, y, \dot x, \dot y]`; :data:`TO_STONESOUP` is the
 permutation between them (its own inverse), applied to every state vector
-and both sides of every covariance.
+and both sides of every covariance.  In 3-D Stone Soup's order is
+:math:`[x, \dot x, y, \dot y, z, \dot z]` and fgdoppler's
+:math:`[x, y, z, \dot x, \dot y, \dot z]` (:data:`TO_STONESOUP_3D`); every
+function here takes either, by the state's length.
 
 * :class:`BistaticDoppler` — a Stone Soup measurement model for one Tx–Rx
   pair: :math:`h` and its analytic Jacobian are fgdoppler's
@@ -48,14 +51,26 @@ from fgdoppler.geometry import BistaticPair, Geometry
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.doppler import bistatic_doppler_and_jacobian
 
-__all__ = ["TO_STONESOUP", "BistaticDoppler", "detections", "from_track", "measurements_from", "models", "prior",
-           "to_track"]
+__all__ = ["TO_STONESOUP", "TO_STONESOUP_3D", "BistaticDoppler", "detections", "from_track", "measurements_from",
+           "models", "prior", "to_track"]
 
 FloatArray = NDArray[np.float64]
 
 #: fgdoppler state index of each Stone Soup state component, and vice versa (a permutation that is its
 #: own inverse): Stone Soup ``[x, vx, y, vy]`` = fgdoppler ``[x, y, vx, vy]``\ ``[TO_STONESOUP]``.
 TO_STONESOUP = np.array([0, 2, 1, 3])
+#: The 3-D permutation: Stone Soup ``[x, vx, y, vy, z, vz]`` = fgdoppler ``[x, y, z, vx, vy, vz]``\ ``[TO_STONESOUP_3D]``;
+#: its inverse is ``np.argsort(TO_STONESOUP_3D)``.
+TO_STONESOUP_3D = np.array([0, 3, 1, 4, 2, 5])
+
+
+def _perm(n: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """(fgdoppler -> Stone Soup, Stone Soup -> fgdoppler) index arrays for states of ``n`` numbers."""
+    if n == 4:
+        return TO_STONESOUP, TO_STONESOUP
+    if n == 6:
+        return TO_STONESOUP_3D, np.argsort(TO_STONESOUP_3D)
+    raise ValueError(f"states must have 4 (2-D) or 6 (3-D) numbers, got {n}")
 
 
 class BistaticDoppler(NonLinearGaussianMeasurement):
@@ -66,24 +81,30 @@ class BistaticDoppler(NonLinearGaussianMeasurement):
     (fgdoppler's :func:`~fgdoppler.models.doppler.bistatic_doppler`), with
     Gaussian noise of covariance ``noise_covar`` (``n × n``, m²/s²).
     ``tx`` and ``rx`` hold one pair as ``(x, y)`` or ``n`` pairs as the
-    columns of a ``2 × n`` array; ``ndim_meas`` is ``n``.  One pair per
+    columns of a ``2 × n`` array (3-D: ``(x, y, z)`` or ``3 × n``, with
+    ``mapping=(0, 2, 4)``, ``velocity_mapping=(1, 3, 5)``, ``ndim_state=6``);
+    ``ndim_meas`` is ``n``.  One pair per
     detection is the natural model for asynchronous pairs; all pairs of a
     scan in one detection (:func:`detections` with ``per_scan=True``) gives
     Stone Soup's Kalman smoothers the one-prediction-per-scan track they
-    need.  ``mapping`` gives the state indices of :math:`x, y` and
-    ``velocity_mapping`` those of :math:`\dot x, \dot y` (Stone Soup's
-    constant-velocity order by default).
+    need.  ``mapping`` gives the state indices of the position
+    (:math:`x, y` or :math:`x, y, z`) and ``velocity_mapping`` those of the
+    velocity (Stone Soup's constant-velocity order by default).
     """
 
-    tx: np.ndarray = Property(doc="Transmitter position(s), m: (x, y) or 2 × n, one column per pair")
-    rx: np.ndarray = Property(doc="Receiver position(s), m: (x, y) or 2 × n, one column per pair")
-    mapping: Sequence[int] = Property(default=(0, 2), doc="State indices of x and y")
-    velocity_mapping: Sequence[int] = Property(default=(1, 3), doc="State indices of vx and vy")
+    tx: np.ndarray = Property(doc="Transmitter position(s), m: (x, y[, z]) or d × n, one column per pair")
+    rx: np.ndarray = Property(doc="Receiver position(s), m: (x, y[, z]) or d × n, one column per pair")
+    mapping: Sequence[int] = Property(default=(0, 2), doc="State indices of the position (x, y[, z])")
+    velocity_mapping: Sequence[int] = Property(default=(1, 3), doc="State indices of the velocity")
     ndim_state: int = Property(default=4, doc="Number of state dimensions")
 
     def _sensors(self) -> tuple[FloatArray, FloatArray]:
-        tx = np.asarray(self.tx, dtype=float).reshape(2, -1).T
-        rx = np.asarray(self.rx, dtype=float).reshape(2, -1).T
+        d = len(self.mapping)
+        if d not in (2, 3) or len(self.velocity_mapping) != d:
+            raise ValueError(f"mapping and velocity_mapping must both have 2 or 3 indices, got {self.mapping} "
+                             f"and {self.velocity_mapping}")
+        tx = np.asarray(self.tx, dtype=float).reshape(d, -1).T
+        rx = np.asarray(self.rx, dtype=float).reshape(d, -1).T
         if tx.shape != rx.shape:
             raise ValueError(f"tx and rx must hold as many pairs: {tx.shape[0]} and {rx.shape[0]}")
         return tx, rx
@@ -95,14 +116,13 @@ class BistaticDoppler(NonLinearGaussianMeasurement):
 
     def _geometry(self) -> Geometry:
         tx, rx = self._sensors()
-        return Geometry(pairs=tuple(BistaticPair(tx=(float(a[0]), float(a[1])), rx=(float(b[0]), float(b[1])))
+        return Geometry(pairs=tuple(BistaticPair(tx=tuple(map(float, a)), rx=tuple(map(float, b)))
                                     for a, b in zip(tx, rx, strict=True)))
 
     def _ours(self, state_vector: ArrayLike) -> FloatArray:
         sv = np.asarray(state_vector, dtype=float)
         sv = sv.reshape(sv.shape[0], -1)
-        return np.stack([sv[self.mapping[0]], sv[self.mapping[1]], sv[self.velocity_mapping[0]],
-                         sv[self.velocity_mapping[1]]], axis=-1)
+        return np.stack([sv[i] for i in (*self.mapping, *self.velocity_mapping)], axis=-1)
 
     def function(self, state, noise=False, **kwargs) -> StateVectors:
         """Doppler of every column of ``state.state_vector`` (``n × m``), plus noise if asked."""
@@ -115,10 +135,11 @@ class BistaticDoppler(NonLinearGaussianMeasurement):
     def jacobian(self, state, **kwargs) -> FloatArray:
         """Analytic Jacobian ``n × ndim_state`` at ``state`` (fgdoppler's, re-ordered)."""
         _, J = bistatic_doppler_and_jacobian(self._ours(state.state_vector)[:1], self._geometry())
-        J = np.asarray(J, dtype=float).reshape(-1, 4)
+        idx = (*self.mapping, *self.velocity_mapping)
+        J = np.asarray(J, dtype=float).reshape(-1, len(idx))
         out = np.zeros((J.shape[0], self.ndim_state))
-        out[:, self.mapping[0]], out[:, self.mapping[1]] = J[:, 0], J[:, 1]
-        out[:, self.velocity_mapping[0]], out[:, self.velocity_mapping[1]] = J[:, 2], J[:, 3]
+        for k, i in enumerate(idx):
+            out[:, i] = J[:, k]
         return out
 
 
@@ -126,7 +147,14 @@ def models(geometry: Geometry, sigma: float | Sequence[float]) -> list[BistaticD
     """One single-pair :class:`BistaticDoppler` per pair of ``geometry`` (σ in m/s, one or one per pair)."""
     s = np.broadcast_to(np.asarray(sigma, dtype=float), (geometry.n_pairs,))
     return [BistaticDoppler(tx=geometry.tx[i].copy(), rx=geometry.rx[i].copy(),
-                            noise_covar=CovarianceMatrix([[float(s[i]) ** 2]])) for i in range(geometry.n_pairs)]
+                            noise_covar=CovarianceMatrix([[float(s[i]) ** 2]]), **_layout(geometry.dim))
+            for i in range(geometry.n_pairs)]
+
+
+def _layout(d: int) -> dict[str, object]:
+    """Stone Soup's constant-velocity index layout for ``d`` spatial dimensions."""
+    return {"mapping": tuple(range(0, 2 * d, 2)), "velocity_mapping": tuple(range(1, 2 * d, 2)),
+            "ndim_state": 2 * d}
 
 
 def _timestamp(epoch: dt.datetime, t: float) -> dt.datetime:
@@ -160,7 +188,8 @@ def detections(measurements: Measurements, geometry: Geometry, epoch: dt.datetim
         if key not in cache:
             idx = list(pairs)
             cache[key] = BistaticDoppler(tx=geometry.tx[idx].T.copy(), rx=geometry.rx[idx].T.copy(),
-                                         noise_covar=CovarianceMatrix(np.diag(np.square(sigmas))))
+                                         noise_covar=CovarianceMatrix(np.diag(np.square(sigmas))),
+                                         **_layout(geometry.dim))
         return cache[key]
 
     out = []
@@ -198,8 +227,9 @@ def measurements_from(dets: Sequence[Detection]) -> Measurements:
 
 
 def _to_ss(x: FloatArray, P: FloatArray | None, t: dt.datetime) -> GaussianState:
-    cov = np.full((4, 4), np.nan) if P is None else P[np.ix_(TO_STONESOUP, TO_STONESOUP)]
-    return GaussianState(StateVector(x[TO_STONESOUP]), CovarianceMatrix(cov), timestamp=t)
+    fwd, _ = _perm(x.size)
+    cov = np.full((x.size, x.size), np.nan) if P is None else P[np.ix_(fwd, fwd)]
+    return GaussianState(StateVector(x[fwd]), CovarianceMatrix(cov), timestamp=t)
 
 
 def prior(init: Initiation, epoch: dt.datetime) -> GaussianState:
@@ -250,8 +280,9 @@ def from_track(track: Track, epoch: dt.datetime, *, estimator: str | None = None
         times.append((s.timestamp - epoch).total_seconds())
         x = np.asarray(s.mean if hasattr(s, "mean") else s.state_vector, dtype=float).reshape(-1)
         P = np.asarray(s.covar, dtype=float)
-        xs.append(x[TO_STONESOUP])
-        Ps.append(None if not np.all(np.isfinite(P)) else P[np.ix_(TO_STONESOUP, TO_STONESOUP)])
+        _, back = _perm(x.size)
+        xs.append(x[back])
+        Ps.append(None if not np.all(np.isfinite(P)) else P[np.ix_(back, back)])
     meta = track.metadatas[0] if track.metadatas else {}
     exact = meta.get("fgdoppler_times")
     if exact is not None and len(exact) == len(times) and np.allclose(exact, times, rtol=0.0, atol=1e-6):
