@@ -188,7 +188,7 @@ def _one_run(case: str, start_x: float, altitude: float, online: str, seed: Any)
 
 
 def altitude_study(*, altitudes: Sequence[float] = ALTITUDES, runs: int = 10, seed: int = 2026, workers: int = 1,
-                   online: str = "ekf") -> AltitudeStudy:
+                   online: str = "ekf", scenarios: Sequence[tuple[str, float]] | None = None) -> AltitudeStudy:
     """Run the study (module docstring): bounds at the truth, then ``runs`` seeded recordings per cell.
 
     Parameters
@@ -202,6 +202,8 @@ def altitude_study(*, altitudes: Sequence[float] = ALTITUDES, runs: int = 10, se
         Processes for the Monte Carlo part (1: in this process).
     online
         The online estimator compared with the smoother (a registry name).
+    scenarios
+        ``(case, start_x)`` pairs of paper scenarios (default: all six).
 
     Raises
     ------
@@ -221,7 +223,10 @@ def altitude_study(*, altitudes: Sequence[float] = ALTITUDES, runs: int = 10, se
     if online not in ESTIMATORS or online == "smoother":
         raise ValueError(f"online must be an online estimator of the registry, got {online!r}")
     t_begin = time.perf_counter()
-    cells = [(case, x) for case in ("a", "b") for x in PAPER_START_X]
+    cells = [(case, float(x)) for case, x in scenarios] if scenarios is not None else \
+        [(case, x) for case in ("a", "b") for x in PAPER_START_X]
+    if not cells:
+        raise ValueError("no scenarios")
     shape = (len(cells), len(alts))
     O, crlb, crlb_prior = np.empty(shape), np.empty(shape), np.empty(shape)
     for i, (case, x) in enumerate(cells):
