@@ -11,7 +11,8 @@ band 0–12.5 km) and for each scenario and height the study reports
   (deterministic constant velocity, all measurements) and with the zone's weak prior on the start
   (the information every fgdoppler estimator uses), as the RMS of the position bound;
 * Monte Carlo position RMSE (3-D, time-averaged after the window) of the offline smoother and of
-  the online estimator (EKF by default), and the horizontal RMSE of the 2-D model (the paper's,
+  the best online estimator (the lower RMSE of the EKF and the particle estimator by default),
+  and the horizontal RMSE of the 2-D model (the paper's,
   which assumes :math:`z = 0`) run on the same 3-D recordings;
 * the smoother's run-averaged NEES at the end of the track (6 degrees of freedom: about 6 when
   its covariance is honest) and the share of its runs with the verdict ``ok``.
@@ -64,13 +65,15 @@ class AltitudeStudy:
         The same bound with the zone's weak prior on the first state.
     rmse_smoother, rmse_online
         Time-averaged 3-D position RMSE after the window of the offline smoother and of the
-        online estimator ``online``.
+        best of the online estimators ``online`` (per cell; which one is ``best_online``).
     rmse_2d
         Time-averaged horizontal RMSE of the 2-D model's smoother on the same recordings.
     nees_smoother
         The smoother's NEES of the last state, averaged over runs.
     ok_smoother
         Fraction of the smoother's runs whose verdict is ``ok``.
+    best_online
+        Name of the online estimator with the lower RMSE, per cell.
     runs, seed, online, wall_time
         The protocol.
     """
@@ -82,18 +85,19 @@ class AltitudeStudy:
     crlb_prior: FloatArray
     rmse_smoother: FloatArray
     rmse_online: FloatArray
+    best_online: NDArray[np.str_]
     rmse_2d: FloatArray
     nees_smoother: FloatArray
     ok_smoother: FloatArray
     runs: int
     seed: int
-    online: str
+    online: tuple[str, ...]
     wall_time: float
 
     def table_markdown(self) -> str:
         """One row per scenario and altitude: O, both bounds and the three RMSEs."""
         rows = ["| scenario | altitude (km) | O (3-D window) | CRLB data only (m) | CRLB with zone prior (m) | "
-                f"smoother RMSE (m) | smoother NEES | smoother ok | {self.online} RMSE (m) | "
+                "smoother RMSE (m) | smoother NEES | smoother ok | best online RMSE (m) | "
                 "2-D model RMSE, horizontal (m) |",
                 "|---|---|---|---|---|---|---|---|---|---|"]
         for i, name in enumerate(self.scenarios):
@@ -101,7 +105,7 @@ class AltitudeStudy:
                 rows.append(f"| {name} | {alt / 1e3:g} | {self.observability[i, j]:.1f} | {_m(self.crlb[i, j])} | "
                             f"{_m(self.crlb_prior[i, j])} | {_m(self.rmse_smoother[i, j])} | "
                             f"{self.nees_smoother[i, j]:.3g} | {self.ok_smoother[i, j]:.0%} | "
-                            f"{_m(self.rmse_online[i, j])} | {_m(self.rmse_2d[i, j])} |")
+                            f"{_m(self.rmse_online[i, j])} ({self.best_online[i, j]}) | {_m(self.rmse_2d[i, j])} |")
         return "\n".join(rows)
 
     def to_dict(self) -> dict[str, Any]:
@@ -109,7 +113,8 @@ class AltitudeStudy:
         def clean(a: FloatArray) -> list[list[float | None]]:
             return [[float(v) if np.isfinite(v) else None for v in row] for row in a]
         return {"scenarios": list(self.scenarios), "altitudes": list(self.altitudes), "runs": self.runs,
-                "seed": self.seed, "online": self.online, "wall_time": self.wall_time,
+                "seed": self.seed, "online": list(self.online), "wall_time": self.wall_time,
+                "best_online": self.best_online.tolist(),
                 "observability": clean(self.observability), "crlb": clean(self.crlb),
                 "crlb_prior": clean(self.crlb_prior), "rmse_smoother": clean(self.rmse_smoother),
                 "rmse_online": clean(self.rmse_online), "rmse_2d": clean(self.rmse_2d),
@@ -131,7 +136,7 @@ class AltitudeStudy:
             top.semilogy(km, self.crlb_prior[i], ":", color=c, lw=1.2)
             bottom.plot(km, self.observability[i], "o-", color=c, lw=1.3)
         top.plot([], [], "ko-", label="smoother RMSE")
-        top.plot([], [], "ks--", ms=4, label=f"{self.online} RMSE")
+        top.plot([], [], "ks--", ms=4, label=f"best online ({' or '.join(self.online)}) RMSE")
         top.plot([], [], "k:", label="CRLB with zone prior")
         top.set_ylabel("3-D position error (m)")
         top.set_title(f"paper scenarios over ground sensors, {self.runs} runs each", fontsize="medium")
@@ -156,9 +161,9 @@ def _bound_rms(P: FloatArray) -> float:
     return float(np.sqrt(max(np.trace(P[:3, :3]), 0.0)))
 
 
-def _one_run(case: str, start_x: float, altitude: float, online: str, seed: Any) -> tuple[float, ...]:
-    """One recording at ``altitude``: time-averaged squared position errors of the smoother, the online
-    estimator and the 2-D model, the smoother's final NEES and 1.0 if its verdict is ``ok``."""
+def _one_run(case: str, start_x: float, altitude: float, online: tuple[str, ...], seed: Any) -> tuple[float, ...]:
+    """One recording at ``altitude``: time-averaged squared position errors of the smoother and the 2-D
+    model, the smoother's final NEES, 1.0 if its verdict is ``ok``, then the online estimators' errors."""
     import fgdoppler as fd
 
     scen = fd.paper_scenario(case, start_x, altitude=altitude)
@@ -168,7 +173,7 @@ def _one_run(case: str, start_x: float, altitude: float, online: str, seed: Any)
     out = []
     init = fd.initiate(window, scen.geometry)
     nees, ok = float("nan"), 0.0
-    for name in ("smoother", online):
+    for name in ("smoother", *online):
         result = fd.run_estimator(name, sim.measurements, scen.geometry, init, verify=False)
         track = result.primary
         keep = track.times > t_window
@@ -183,12 +188,12 @@ def _one_run(case: str, start_x: float, altitude: float, online: str, seed: Any)
     track = fd.run_estimator("smoother", sim.measurements, flat, fd.initiate(window, flat)).primary
     keep = track.times > t_window
     err = track.states[keep, :2] - sim.truth.at(track.times[keep])[:, :2]
-    out.append(float(np.mean(np.sum(err**2, axis=1))))
-    return out[0], out[1], out[2], nees, ok
+    return (out[0], float(np.mean(np.sum(err**2, axis=1))), nees, ok, *out[1:])
 
 
 def altitude_study(*, altitudes: Sequence[float] = ALTITUDES, runs: int = 10, seed: int = 2026, workers: int = 1,
-                   online: str = "ekf", scenarios: Sequence[tuple[str, float]] | None = None) -> AltitudeStudy:
+                   online: Sequence[str] = ("ekf", "particle"), scenarios: Sequence[tuple[str, float]] | None = None
+                   ) -> AltitudeStudy:
     """Run the study (module docstring): bounds at the truth, then ``runs`` seeded recordings per cell.
 
     Parameters
@@ -201,14 +206,14 @@ def altitude_study(*, altitudes: Sequence[float] = ALTITUDES, runs: int = 10, se
     workers
         Processes for the Monte Carlo part (1: in this process).
     online
-        The online estimator compared with the smoother (a registry name).
+        The online estimators compared with the smoother (registry names); the better per cell is reported.
     scenarios
         ``(case, start_x)`` pairs of paper scenarios (default: all six).
 
     Raises
     ------
     ValueError
-        If ``runs < 1``, an altitude is negative or not finite, or ``online`` is unknown.
+        If ``runs < 1``, an altitude is negative or not finite, or an ``online`` name is unknown.
     """
     import fgdoppler as fd
     from fgdoppler.analysis.bounds import crlb_deterministic
@@ -220,8 +225,9 @@ def altitude_study(*, altitudes: Sequence[float] = ALTITUDES, runs: int = 10, se
     alts = tuple(float(a) for a in altitudes)
     if not alts or not all(np.isfinite(a) and a >= 0 for a in alts):
         raise ValueError(f"altitudes must be finite and >= 0, got {altitudes}")
-    if online not in ESTIMATORS or online == "smoother":
-        raise ValueError(f"online must be an online estimator of the registry, got {online!r}")
+    online = tuple(online)
+    if not online or any(o not in ESTIMATORS or o == "smoother" for o in online):
+        raise ValueError(f"online must name online estimators of the registry, got {online!r}")
     t_begin = time.perf_counter()
     cells = [(case, float(x)) for case, x in scenarios] if scenarios is not None else \
         [(case, x) for case in ("a", "b") for x in PAPER_START_X]
@@ -249,10 +255,14 @@ def altitude_study(*, altitudes: Sequence[float] = ALTITUDES, runs: int = 10, se
             results = list(pool.map(_one_run, *zip(*jobs, strict=True)))
     else:
         results = [_one_run(*job) for job in jobs]
-    res = np.array(results).reshape(len(cells), len(alts), runs, 5)
-    rmse = np.sqrt(res[..., :3].mean(axis=2))
+    res = np.array(results).reshape(len(cells), len(alts), runs, 4 + len(online))
+    rmse = np.sqrt(res[..., [0, 1]].mean(axis=2))
+    rmse_on = np.sqrt(res[..., 4:].mean(axis=2))
+    best = np.argmin(rmse_on, axis=-1)
     return AltitudeStudy(scenarios=tuple(f"case {c}, start {x / 1e3:g} km" for c, x in cells), altitudes=alts,
                          observability=O, crlb=crlb, crlb_prior=crlb_prior, rmse_smoother=rmse[..., 0],
-                         rmse_online=rmse[..., 1], rmse_2d=rmse[..., 2], nees_smoother=np.nanmean(res[..., 3], axis=2),
-                         ok_smoother=res[..., 4].mean(axis=2), runs=runs, seed=seed, online=online,
+                         rmse_online=np.take_along_axis(rmse_on, best[..., None], axis=-1)[..., 0],
+                         best_online=np.array(online)[best], rmse_2d=rmse[..., 1],
+                         nees_smoother=np.nanmean(res[..., 2], axis=2), ok_smoother=res[..., 3].mean(axis=2),
+                         runs=runs, seed=seed, online=online,
                          wall_time=time.perf_counter() - t_begin)
