@@ -23,6 +23,15 @@ measurement's pull).
 A non-finite or non-positive :math:`S`, or a covariance that stops being
 positive definite, skips the update with a warning instead of propagating
 garbage.
+
+With ``EKFSettings(update="scan")`` the measurements of one scan (all pairs
+at one time) update together, linearised once at the prediction:
+:math:`\mathbf S = \mathbf H\mathbf P^-\mathbf H' + \mathbf R`,
+:math:`\mathbf K = \mathbf P^-\mathbf H'\mathbf S^{-1}`, Joseph form with
+:math:`\mathbf R = \mathrm{diag}(\sigma_j^2)` — the textbook vector update
+(and Stone Soup's with one Detection per scan).  Each measurement is gated
+by its own χ²₁ test against the prediction; a Huber weight inflates its
+:math:`\sigma_j^2` as above, from its own :math:`S_{jj}`.
 """
 
 from __future__ import annotations
@@ -152,6 +161,62 @@ class ExtendedKalmanFilter:
         self._P = n
         self.t = float(t)
 
+    def update_scan(self, t: float, channels: NDArray[np.intp], z: FloatArray, sigma: FloatArray) -> FloatArray:
+        """Predict to ``t`` and apply the scan's measurements in one vector update; returns each one's NIS.
+
+        The NIS of measurement ``j`` is :math:`(z_j - h_j)^2 / S_{jj}` against the prediction (``nan``
+        for all of them if the update is skipped).
+        """
+        self.predict(t)
+        ch = np.asarray(channels, dtype=np.intp).reshape(-1)
+        zv = np.asarray(z, dtype=float).reshape(-1)
+        s2 = np.asarray(sigma, dtype=float).reshape(-1) ** 2
+        x, P = np.array(self._x), np.array(self._P)
+        try:
+            h, H = self.model.predict_and_jacobian(np.broadcast_to(x, (ch.size, x.size)), ch)
+        except ValueError as exc:
+            self.events.append(Event(time=self.t, message=f"update skipped: {exc}"))
+            return np.full(ch.size, np.nan)
+        r = zv - h
+        PH = P @ H.T
+        S = H @ PH + np.diag(s2)
+        Sd = np.diag(S)
+        if not (np.all(np.isfinite(S)) and np.all(Sd > 0)):
+            self.events.append(Event(time=self.t, message="update skipped: innovation covariance not finite"))
+            return np.full(ch.size, np.nan)
+        nis = r * r / Sd
+        try:
+            L = np.linalg.cholesky(S)
+        except np.linalg.LinAlgError:
+            self.events.append(Event(time=self.t, message="update skipped: innovation covariance not positive"))
+            return np.full(ch.size, np.nan)
+        w = np.linalg.solve(L, r)
+        joint = float(w @ w)
+        if self._huber is not None:  # each term capped at the outlier cut, as in the scalar update
+            joint = min(joint, OUTLIER_CUT2 * ch.size)
+        self.log_likelihood -= 0.5 * (ch.size * math.log(2 * math.pi) + 2.0 * float(np.sum(np.log(np.diag(L))))
+                                      + joint)
+        keep = np.array([self.gate.accept(self.t, int(c), float(v)) for c, v in zip(ch, nis, strict=True)],
+                        dtype=bool)
+        if not np.any(keep):
+            return nis
+        k = self._huber
+        if k is not None:  # Huber: inflate the variance of a measurement beyond k normalised units
+            big = nis > k * k
+            s2 = np.where(big, s2 + Sd * (np.sqrt(nis) / k - 1.0), s2)
+        Hk, rk, Rk = H[keep], r[keep], np.diag(s2[keep])
+        Sk = Hk @ P @ Hk.T + Rk
+        K = np.linalg.solve(Sk, Hk @ P).T
+        A = np.eye(x.size) - K @ Hk
+        Pn = A @ P @ A.T + K @ Rk @ K.T
+        Pn = 0.5 * (Pn + Pn.T)
+        xn = x + K @ rk
+        if not (np.all(np.isfinite(xn)) and np.all(np.isfinite(Pn))):
+            self.events.append(Event(time=self.t, message="update skipped: non-finite result"))
+            return nis
+        self._x, self._P = xn.tolist(), Pn.tolist()
+        return nis
+
     def update(self, t: float, channel: int, z: float, sigma: float) -> float:
         """Predict to ``t`` and apply one scalar measurement; returns its NIS (``nan`` if skipped)."""
         self.predict(t)
@@ -238,22 +303,33 @@ def run_ekf(
     _, stream = split_window(measurements, init.t_end)
     start_task(progress, "ekf", len(stream.scans()))
     times, states, covs, loglik = [init.t_end], [ekf.x.copy()], [ekf.P.copy()], [0.0]
-    t_prev = None
-    for t, p, z, s in zip(stream.time, stream.pair, stream.doppler, stream.sigma, strict=True):
-        if t_prev is not None and t != t_prev:
+    if settings.update == "scan":
+        scans = stream.scans()
+        for k in range(len(scans)):
+            rows = scans.rows(k)
+            ekf.update_scan(float(scans.times[k]), stream.pair[rows], stream.doppler[rows], stream.sigma[rows])
+            times.append(float(scans.times[k]))
+            states.append(ekf.x.copy())
+            covs.append(ekf.P.copy())
+            loglik.append(ekf.log_likelihood)
+            advance(progress)
+    else:
+        t_prev = None
+        for t, p, z, s in zip(stream.time, stream.pair, stream.doppler, stream.sigma, strict=True):
+            if t_prev is not None and t != t_prev:
+                times.append(t_prev)
+                states.append(ekf.x.copy())
+                covs.append(ekf.P.copy())
+                loglik.append(ekf.log_likelihood)
+                advance(progress)
+            ekf.update(float(t), int(p), float(z), float(s))
+            t_prev = t
+        if t_prev is not None:
             times.append(t_prev)
             states.append(ekf.x.copy())
             covs.append(ekf.P.copy())
             loglik.append(ekf.log_likelihood)
             advance(progress)
-        ekf.update(float(t), int(p), float(z), float(s))
-        t_prev = t
-    if t_prev is not None:
-        times.append(t_prev)
-        states.append(ekf.x.copy())
-        covs.append(ekf.P.copy())
-        loglik.append(ekf.log_likelihood)
-        advance(progress)
     return TrackResult(
         estimator="ekf",
         settings=settings,

@@ -29,8 +29,10 @@ Resolution (:class:`GridSpec`)
     (default 4, the midpoints of equal slices of the band: 1.56, 4.69, 7.81
     and 10.9 km for the default 0–12.5 km) with level flight (:math:`\dot z = 0`); the
     initiation's Levenberg–Marquardt then refines all six components from
-    the best candidates.  The cost is ``altitude_levels`` times the 2-D grid's
-    (about 0.2 s for the paper's zone).  Levels at mid-slices rather than at
+    the best candidates.  The cost is ``altitude_levels`` times the 2-D grid's:
+    for the paper's zone and window 744,480 candidates in 0.12 s against
+    186,120 in 0.03 s in 2-D (measured on the 2-core machine, another job
+    running).  Levels at mid-slices rather than at
     the band's ends keep candidates off the sensors' plane, where the
     Doppler's derivative with respect to height vanishes (a target at
     :math:`z = 0` and its mirror at :math:`-z` give the same Doppler for

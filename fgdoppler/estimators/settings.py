@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 from scipy.stats import chi2
 
@@ -102,7 +102,22 @@ class EKFSettings(GaussianSumSettings):
         Huber threshold on the normalised innovation: a measurement beyond it
         updates with its variance inflated by ``|ν|/(k√S)`` (see
         :class:`TrackerSettings`).
+    components : int, default 8
+        Gaussian-sum terms (see :class:`GaussianSumSettings`).
+    update : {"sequential", "scan"}, default "sequential"
+        ``"sequential"``: one scalar update per measurement, relinearising
+        after each; ``"scan"``: one vector update per scan (all pairs measured
+        at one time, linearised once at the prediction), the textbook EKF of
+        other libraries (Stone Soup's with one Detection per scan).  The gate
+        is the same χ²₁ test per measurement against the prediction.
     """
+
+    update: Literal["sequential", "scan"] = "sequential"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.update not in ("sequential", "scan"):
+            raise ValueError(f"update must be 'sequential' or 'scan', got {self.update!r}")
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -160,6 +160,7 @@ def test_linear_gaussian_surrogate_ekf_isam2_fixed_lag_agree_with_kalman() -> No
         scans.append((t, ch, truth[ch] + rng.normal(0, 2.0, len(ch)), [2.0] * len(ch)))
     ref = _kalman(x0, P0, 0.0, scans, motion)
     ekf = ExtendedKalmanFilter(tm, x0, P0, 0.0, EKFSettings(gate_probability=None))
+    vec = ExtendedKalmanFilter(tm, x0, P0, 0.0, EKFSettings(gate_probability=None, update="scan"))
     isam = ISAM2Tracker(tm, ISAM2Settings(gate_probability=None), prior=None)
     fl = FixedLagTracker(tm, FixedLagSettings(gate_probability=None, lag=2.5), prior=None)
     # iSAM2/fixed-lag: a state at t = 0 with the prior and no measurement, then the scans
@@ -170,9 +171,10 @@ def test_linear_gaussian_surrogate_ekf_isam2_fixed_lag_agree_with_kalman() -> No
     for (t, ch, z, sig), (xr, Pr) in zip(scans, ref, strict=True):
         for c, zz, ss in zip(ch, z, sig, strict=True):
             ekf.update(t, c, zz, ss)
+        vec.update_scan(t, np.array(ch), np.array(z), np.array(sig))  # the vector update of a linear model too
         xi, Pi = isam.add_scan(t, ch, z, sig)
         xf, Pf = fl.add_scans([t], [ch], [z], [sig])
-        for x, P in ((ekf.x, ekf.P), (xi, Pi), (xf, Pf)):
+        for x, P in ((ekf.x, ekf.P), (vec.x, vec.P), (xi, Pi), (xf, Pf)):
             np.testing.assert_allclose(x, xr, rtol=1e-8, atol=1e-8 * np.abs(xr).max())
             np.testing.assert_allclose(P, Pr, rtol=1e-8, atol=1e-8 * np.abs(Pr).max())
 
