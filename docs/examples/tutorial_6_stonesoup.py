@@ -50,7 +50,9 @@ print("model of the first scan:", dets[0].measurement_model.ndim_meas, "pairs")
 # asynchronous pairs and for Stone Soup's data association.  A filter that
 # updates detection by detection, predicting over zero time between the
 # pairs of a scan, is exactly fgdoppler's EKF with its gate off (equal to
-# 1e-9 in fgdoppler's tests).  Stone Soup's Kalman smoothers
+# 1e-9 in fgdoppler's tests); with one detection per scan, as here, Stone
+# Soup's EKF is fgdoppler's EKF with ``EKFSettings(update="scan")`` (one
+# vector update per scan, also equal to 1e-9).  Stone Soup's Kalman smoothers
 # need one prediction per time step, hence one detection per scan here.
 #
 # Stone Soup's filters and smoothers with fgdoppler's model

@@ -12,7 +12,9 @@ linear-Gaussian surrogate in tests) plug into the same machinery.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -134,16 +136,19 @@ class DopplerModel:
             h = np.where(mask, np.nan, h)
         return h
 
-    def scalar(self, state: list[float], channel: int) -> tuple[float, list[float]]:
-        """Doppler of one pair at one state and its Jacobian row, in plain floats (no checks on ``channel``).
+    @cached_property
+    def scalar(self) -> Callable[[list[float], int], tuple[float, list[float]]]:
+        """``scalar(state, channel)``: Doppler of one pair at one state and its Jacobian row, in plain floats.
 
-        The same formulas as :func:`fgdoppler.models.doppler.bistatic_doppler_and_jacobian`;
-        the filters call this for their one-state, one-pair updates, where
-        numpy's per-call overhead would cost several times the arithmetic.
+        No checks on ``channel``.  The same formulas as
+        :func:`fgdoppler.models.doppler.bistatic_doppler_and_jacobian`; the
+        filters call this for their one-state, one-pair updates, where numpy's
+        per-call overhead would cost several times the arithmetic.  (The
+        function for the geometry's dimension, chosen once.)
         """
-        d = self.geometry.dim
-        if d == 2:
-            return self._scalar2(state, channel)
+        return self._scalar2 if self.geometry.dim == 2 else self._scalar3
+
+    def _scalar3(self, state: list[float], channel: int) -> tuple[float, list[float]]:
         pos, vel = state[:3], state[3:]
         hv = 0.0
         dp = [0.0, 0.0, 0.0]
