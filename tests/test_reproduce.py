@@ -13,7 +13,8 @@ from fgdoppler.cli import main
 @pytest.mark.reproduce
 def test_reproduce_quick_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "repro"
-    assert main(["reproduce", "--quick", "--runs", "2", "--out", str(out), "--json"]) == 0
+    # the altitude study (3-D) has its own test below: skipped here to keep the suite short
+    assert main(["reproduce", "--quick", "--runs", "2", "--altitude-runs", "0", "--out", str(out), "--json"]) == 0
     claims = json.loads(capsys.readouterr().out)["claims"]
     assert any(k.startswith("Table 2") for k in claims)
     report = (out / "report.md").read_text()
@@ -27,3 +28,17 @@ def test_reproduce_quick_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtur
         assert name in report, name
     for section in ("Table 2", "Figs. 10–11", "Lag sweep", "NEES", "Observability report"):
         assert section in report
+
+
+def test_altitude_section_of_the_report(tmp_path: Path) -> None:
+    """The 3-D altitude study's report section: its table, one row per scenario and height, and the figure."""
+    from fgdoppler.analysis.reproduce import ReproduceSettings, altitude_section
+
+    lines, fig = altitude_section(tmp_path, ReproduceSettings(runs=2, workers=1, altitude_runs=1,
+                                                              altitude_scenarios=(("b", 5e3),)))
+    assert fig is not None and fig.stat().st_size > 0
+    text = "\n".join(lines)
+    assert text.startswith("## Beyond the paper")
+    assert sum(row.startswith("| case b, start 5 km |") for row in text.splitlines()) == 4  # 0, 1, 3, 10 km
+    assert json.loads((tmp_path / "altitude.json").read_text())["runs"] == 1
+    assert altitude_section(tmp_path, ReproduceSettings(runs=2, altitude_runs=0)) == ([], None)

@@ -179,7 +179,9 @@ def test_batch_smoother_reaches_the_3d_bound_on_an_aircraft_over_ground_sensors(
     for r in range(runs):
         sim = fd.simulate(AIRCRAFT, np.random.default_rng(100 + r))
         init = fd.initiate(sim.measurements.first_per_pair(10), GROUND)
-        track = fd.run_estimator("smoother", sim.measurements, GROUND, init).primary
+        # the estimate only: the sampled covariance (1.3 of the 1.4 s per run here) does not change it
+        track = fd.run_estimator("smoother", sim.measurements, GROUND, init,
+                                 SmootherSettings(sampled_covariance=False)).primary
         d = track.states[-1, :3] - sim.truth.states[-1, :3]
         err2.append(float(d @ d))
     bound = crlb_deterministic(GROUND, AIRCRAFT.x0, sim.measurements, [sim.truth.times[-1]], smoothing=True)[0]

@@ -54,6 +54,8 @@ class ReproduceSettings:
     altitude_runs
         Runs per scenario and height of the altitude study
         (:mod:`fgdoppler.analysis.altitude`); ``None``: ``max(1, runs // 10)``; 0 skips it.
+    altitude_scenarios
+        ``(case, start_x)`` of the paper scenarios in the altitude study (``None``: all six).
     """
 
     runs: int = 100
@@ -62,6 +64,7 @@ class ReproduceSettings:
     lag_sweep_lags: tuple[float, ...] = (1.0, 2.0, 5.0, 10.0, 30.0)
     well_observed: tuple[str, ...] = field(default=("case a, start 45 km", "case b, start 5 km"))
     altitude_runs: int | None = None
+    altitude_scenarios: tuple[tuple[str, float], ...] | None = None
 
 
 def paper_monte_carlo(
@@ -99,7 +102,8 @@ def altitude_section(out: Path, settings: ReproduceSettings) -> tuple[list[str],
     runs = max(1, settings.runs // 10) if settings.altitude_runs is None else settings.altitude_runs
     if runs == 0:
         return [], None
-    study = altitude_study(runs=runs, seed=settings.seed + 2, workers=settings.workers)
+    study = altitude_study(runs=runs, seed=settings.seed + 2, workers=settings.workers,
+                           scenarios=settings.altitude_scenarios)
     atomic_write_text(out / "altitude.json", json.dumps(study.to_dict(), indent=1))
     fig = study.figure(out / "altitude.png")
     lines = ["## Beyond the paper: the scenarios at altitude (3-D)", "",
