@@ -121,12 +121,12 @@ class AltitudeStudy:
                 "nees_smoother": clean(self.nees_smoother), "ok_smoother": clean(self.ok_smoother)}
 
     def figure(self, path: str | Path) -> Path:
-        """Two panels, one column: position error and bounds versus altitude; O versus altitude."""
+        """Three panels, one column: the 3-D estimators' error and bound, the 2-D model's error, and O."""
         import matplotlib.pyplot as plt
 
         from fgdoppler import plotting
 
-        fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.2, 8.4), layout="constrained", sharex=True)
+        fig, (top, middle, bottom) = plt.subplots(3, 1, figsize=(7.2, 11.0), layout="constrained", sharex=True)
         km = np.asarray(self.altitudes) / 1e3
         colours = [plt.get_cmap("tab10")(k) for k in range(10)]
         for i, name in enumerate(self.scenarios):
@@ -134,16 +134,19 @@ class AltitudeStudy:
             top.semilogy(km, self.rmse_smoother[i], "o-", color=c, lw=1.5, label=f"{name}")
             top.semilogy(km, self.rmse_online[i], "s--", color=c, lw=1.0, ms=4)
             top.semilogy(km, self.crlb_prior[i], ":", color=c, lw=1.2)
+            middle.semilogy(km, self.rmse_2d[i], "o-", color=c, lw=1.3)
             bottom.plot(km, self.observability[i], "o-", color=c, lw=1.3)
         top.plot([], [], "ko-", label="smoother RMSE")
         top.plot([], [], "ks--", ms=4, label=f"best online ({' or '.join(self.online)}) RMSE")
         top.plot([], [], "k:", label="CRLB with zone prior")
         top.set_ylabel("3-D position error (m)")
-        top.set_title(f"paper scenarios over ground sensors, {self.runs} runs each", fontsize="medium")
-        top.grid(True, which="both", alpha=0.3)
+        top.set_title(f"3-D model: paper scenarios over ground sensors, {self.runs} run(s) each", fontsize="medium")
+        middle.set_ylabel("horizontal error (m)")
+        middle.set_title("the paper's 2-D model on the same recordings (smoother)", fontsize="medium")
         bottom.set_xlabel("altitude (km)")
-        bottom.set_ylabel("O of the window (3-D, -40 = unobservable)")
-        bottom.grid(True, alpha=0.3)
+        bottom.set_ylabel("O of the window (3-D; -40: unobservable)")
+        for ax in (top, middle, bottom):
+            ax.grid(True, which="both", alpha=0.3)
         handles, labels = top.get_legend_handles_labels()
         fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize="small", frameon=False)
         return plotting.save(top, path)
