@@ -222,6 +222,8 @@ def test_3d_files_round_trip(tmp_path: Path) -> None:
     (lambda: fd.Scenario(geometry=GROUND, x0=(1e3, 2e3, 10.0, -100.0)), "geometry is 3-D"),
     (lambda: fd.bistatic_doppler(np.zeros(4) + 1e3, HILL), "sensors above the ground"),
     (lambda: fd.BistaticPair(tx=(0, 0, 0, 0), rx=(1, 0)), "2- or 3-vector"),
+    (lambda: fd.TrackingModel.of(fd.paper_geometry("a").in_3d(), zone=fd.paper_geometry("a").zone),
+     "2-D zone for 3-D states"),
 ])
 def test_bad_3d_input_gets_a_clear_error(make: object, match: str) -> None:
     with pytest.raises(ValueError, match=match):

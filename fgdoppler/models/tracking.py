@@ -81,7 +81,10 @@ class TrackingModel:
         if self.zone is None and geometry is not None:
             object.__setattr__(self, "zone", geometry.zone)
         if self.frame is None:
-            object.__setattr__(self, "frame", Frame.identity() if geometry is None else geometry.frame)
+            object.__setattr__(self, "frame", Frame.identity(dim) if geometry is None else geometry.frame)
+        if self.zone is not None and self.zone.dim != dim:
+            raise ValueError(f"a {self.zone.dim}-D zone for {dim}-D states: give the zone an altitude band exactly "
+                             "when the problem is 3-D")
 
     @classmethod
     def of(cls, geometry: Geometry, **kwargs: Any) -> TrackingModel:
