@@ -471,12 +471,26 @@ def _restarts_3d(measurements: Measurements, model: TrackingModel, settings: Smo
     sensors the floor is the ground, and a best track that sinks below it that
     far is an ``altitude`` finding, ``doubtful``.
     """
-    from fgdoppler.estimators.ambiguity import COMPETING
-    from fgdoppler.estimators.grid import GridSpec
-
     zone = model.zone
     if model.dim != 3 or zone is None or zone.altitude is None:
         return sol, [], []
+    found = _restart_solutions(measurements, model, settings, sol, zone, progress)
+    best = min(found, key=lambda s: s.cost)
+    end = best.states[-1, :3]
+    moved = float(np.linalg.norm(sol.states[-1, :3] - end))
+    notes = []
+    if moved > 50.0 and moved > 3.0 * _sigma_along(best, (sol.states[-1, :3] - end) / moved):
+        notes.append(f"a restart lowered the cost from {sol.cost:.2f} to {best.cost:.2f} (the track's end moved "
+                     f"{moved / 1e3:.1f} km)")
+    reasons = [r for r in (_floor_reason(best, zone), _rival_reason(found, best, zone)) if r is not None]
+    return best, notes, reasons
+
+
+def _restart_solutions(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
+                       sol: SmootherSolution, zone: Zone, progress: Progress | None) -> list[SmootherSolution]:
+    """``sol`` and the smoother's solutions from level flight at each grid altitude and from a global multi-start."""
+    from fgdoppler.estimators.grid import GridSpec
+
     local = zone.frame.states_to_local(sol.states)
     found = [sol]
     for level in GridSpec().levels(zone):
@@ -494,25 +508,42 @@ def _restarts_3d(measurements: Measurements, model: TrackingModel, settings: Smo
         again = _reinitiate(measurements, model, settings, progress, per_pair=REINITIATE_PER_PAIR // 4)
         if again is not None:
             found.append(again)
-    best = min(found, key=lambda s: s.cost)
+    return found
+
+
+def _sigma_along(sol: SmootherSolution, u: FloatArray) -> float:
+    """Standard deviation of the solution's end position along the unit vector ``u`` (0 without a covariance)."""
+    if sol.covariances is None or not np.all(np.isfinite(sol.covariances[-1])):
+        return 0.0
+    return float(np.sqrt(max(u @ sol.covariances[-1][:3, :3] @ u, 0.0)))
+
+
+def _floor_reason(best: SmootherSolution, zone: Zone) -> Reason | None:
+    """An ``altitude`` finding when the track sinks below the band's floor by more than 50 m and 3σ."""
+    assert zone.altitude is not None
+    heights = zone.frame.states_to_local(best.states)[:, 2]
+    k = int(np.argmin(heights))
+    sd_z = 0.0 if best.covariances is None else float(np.sqrt(max(best.covariances[k][2, 2], 0.0)))
+    if float(heights[k]) >= zone.altitude[0] - max(50.0, 3.0 * sd_z):
+        return None
+    return Reason(code="altitude", status="doubtful", message=(
+        f"the track sinks to {heights[k]:.0f} m, below the altitude band's floor ({zone.altitude[0]:g} m) by "
+        f"more than 3 sigma (sigma {sd_z:.0f} m): for sensors on the ground that is underground — the data "
+        "do not fix the height"))
+
+
+def _rival_reason(found: list[SmootherSolution], best: SmootherSolution, zone: Zone) -> Reason | None:
+    """A ``competing`` finding for the rival with the largest share of the mean-square error (rule: :func:`_restarts_3d`)."""
+    from fgdoppler.estimators.ambiguity import COMPETING
+
+    assert zone.altitude is not None
     end = best.states[-1, :3]
-    P_end = None
-    if best.covariances is not None and np.all(np.isfinite(best.covariances[-1])):
-        P_end = best.covariances[-1][:3, :3]
-
-    def sigma_along(u: FloatArray) -> float:
-        return 0.0 if P_end is None else float(np.sqrt(max(u @ P_end @ u, 0.0)))
-
-    moved = float(np.linalg.norm(sol.states[-1, :3] - end))
-    notes = []
-    if moved > 50.0 and moved > 3.0 * sigma_along((sol.states[-1, :3] - end) / moved):
-        notes.append(f"a restart lowered the cost from {sol.cost:.2f} to {best.cost:.2f} (the track's end moved "
-                     f"{moved / 1e3:.1f} km)")
+    has_cov = _sigma_along(best, np.array([1.0, 0.0, 0.0])) > 0.0
     rivals = []
     for s in found:
         d_vec = s.states[-1, :3] - end
         d = float(np.linalg.norm(d_vec))
-        sd = sigma_along(d_vec / d) if d > 0 else 0.0
+        sd = _sigma_along(best, d_vec / d) if d > 0 else 0.0
         if d <= max(50.0, 3.0 * sd):
             continue
         if float(np.min(zone.frame.states_to_local(s.states)[:, 2])) < zone.altitude[0] - max(50.0, 3.0 * sd):
@@ -520,25 +551,16 @@ def _restarts_3d(measurements: Measurements, model: TrackingModel, settings: Smo
         delta = s.cost - best.cost
         w = float(np.exp(-0.5 * delta))
         share = w / (1.0 + w) * d * d
-        if delta < COMPETING or (P_end is not None and share > 9.0 * sd * sd):
+        if delta < COMPETING or (has_cov and share > 9.0 * sd * sd):
             rivals.append((share, s, d, sd, delta))
-    reasons = []
-    heights = zone.frame.states_to_local(best.states)[:, 2]
-    sd_z = 0.0 if best.covariances is None else float(np.sqrt(max(best.covariances[int(np.argmin(heights))][2, 2],
-                                                                   0.0)))
-    if float(heights.min()) < zone.altitude[0] - max(50.0, 3.0 * sd_z):
-        reasons.append(Reason(code="altitude", status="doubtful", message=(
-            f"the track sinks to {heights.min():.0f} m, below the altitude band's floor ({zone.altitude[0]:g} m) by "
-            f"more than 3 sigma (sigma {sd_z:.0f} m): for sensors on the ground that is underground — the data "
-            "do not fix the height")))
     if not rivals:
-        return best, notes, reasons
+        return None
     _, rival, apart, sd, delta = max(rivals, key=lambda r: r[0])
-    return best, notes, [*reasons, Reason(code="competing", status="doubtful", message=(
+    return Reason(code="competing", status="doubtful", message=(
         f"another track explains the data nearly as well (cost {rival.cost:.2f} vs {best.cost:.2f}, posterior "
         f"weight {np.exp(-0.5 * delta):.2g} of the reported one's) and ends {apart / 1e3:.1f} km away (height "
         f"{zone.frame.points_to_local(rival.states[-1, :3])[2]:.0f} m vs {zone.frame.points_to_local(end)[2]:.0f} m; "
-        f"reported sigma in that direction {sd:.0f} m): the data do not fix the track in 3-D"))]
+        f"reported sigma in that direction {sd:.0f} m): the data do not fix the track in 3-D"))
 
 
 def run_smoother(
