@@ -294,3 +294,15 @@ def test_a_lower_cost_track_far_from_the_truth_is_not_ok() -> None:
     assert err > 20e3  # the data prefer a track far from the truth
     assert result.status != "ok"
     assert any(r.code == "competing" and r.status == "doubtful" for r in result.reasons)
+
+
+def test_the_speed_lower_bound_never_excludes_a_3d_truth() -> None:
+    """|h| <= 2 |v| holds in 3-D too: the initiation's speed floor from noise-free Doppler never exceeds the speed."""
+    from fgdoppler.estimators.grid import speed_lower_bound
+
+    rng = np.random.default_rng(9)
+    x = np.column_stack([rng.uniform(-5e3, 25e3, (2000, 2)), rng.uniform(0, 12e3, 2000), rng.uniform(-300, 300, (2000, 3))])
+    h = fd.bistatic_doppler(x, HILL)
+    bound = np.array([speed_lower_bound(row, 1.0, n_sigma=0.0) for row in h])
+    assert np.all(bound <= np.linalg.norm(x[:, 3:], axis=1) + 1e-9)
+    assert np.max(bound / np.linalg.norm(x[:, 3:], axis=1)) > 0.5  # and it is not vacuous
