@@ -7,7 +7,14 @@ import pytest
 
 import fgdoppler as fd
 from fgdoppler.analysis.bounds import crlb_deterministic, pcrlb_filter
-from fgdoppler.analysis.metrics import errors, nees, nees_band, rmse
+from fgdoppler.analysis.metrics import (
+    compare_rmse,
+    errors,
+    nees,
+    nees_band,
+    rmse,
+    time_averaged_rmse,
+)
 from fgdoppler.analysis.observability import observability_report
 from tests.estimators.test_trackers import PositionModel, _kalman
 
@@ -26,6 +33,54 @@ def test_rmse_and_nees_by_hand() -> None:
     P = np.diag([4.0, 1.0, 1.0, 0.25])
     # e = (3, 4, 1, 0): 9/4 + 16/1 + 1/1 + 0 = 19.25
     assert nees(est[0, 0], P, truth[0, 0]) == pytest.approx(19.25)
+
+
+def test_time_averaged_rmse_by_hand_and_with_counts() -> None:
+    se = np.array([[4.0, 9.0, np.nan], [16.0, np.nan, 1.0]])
+    t = np.array([0.0, 1.0, 2.0])
+    # t >= 1: time 1 has run 0 only (3), time 2 run 1 only (1) -> (3 + 1) / 2
+    assert time_averaged_rmse(se, t, t0=1.0) == pytest.approx(2.0)
+    # all times: sqrt(10), 3, 1
+    assert time_averaged_rmse(se, t) == pytest.approx((np.sqrt(10.0) + 3.0 + 1.0) / 3)
+    # counts are run multiplicities: run 1 twice equals stacking it twice
+    stacked = np.vstack([se, se[1:]])
+    np.testing.assert_allclose(time_averaged_rmse(se, t, counts=[[1, 2], [1, 1]]),
+                               [time_averaged_rmse(stacked, t), time_averaged_rmse(se, t)])
+    with pytest.raises(ValueError, match="counts"):
+        time_averaged_rmse(se, t, counts=[[1, 1, 1]])
+    with pytest.raises(ValueError, match="times"):
+        time_averaged_rmse(se, t[:2])
+
+
+def test_paired_bootstrap_resolves_a_small_common_shift_and_not_noise() -> None:
+    rng = np.random.default_rng(5)
+    t = np.linspace(0.0, 10.0, 21)
+    # heavy run-to-run spread (some runs 100x worse) shared by both estimators
+    scale = np.exp(rng.normal(0.0, 1.5, 40))[:, None]
+    base = scale * rng.chisquare(2, (40, t.size))
+    same = compare_rmse(base, base, t)
+    assert same.difference == 0.0 and same.low == 0.0 and same.high == 0.0 and not same.resolved
+    # B errs 1 % more in every run and time: RMSE_A - RMSE_B = -0.01 RMSE_A exactly
+    worse = compare_rmse(base, 1.01**2 * base, t)
+    assert worse.difference == pytest.approx(-0.01 * time_averaged_rmse(base, t))
+    assert worse.resolved and worse.high < 0
+    # while the spread of either RMSE alone is far larger than that difference
+    counts = rng.multinomial(40, np.full(40, 1 / 40), size=500)
+    assert np.std(time_averaged_rmse(base, t, counts=counts)) > 10 * abs(worse.difference)
+    with pytest.raises(ValueError, match="same runs"):
+        compare_rmse(base, base[:-1], t)
+
+
+def test_paired_bootstrap_interval_covers_zero_when_estimators_are_exchangeable() -> None:
+    # A and B are independent draws of the same error law: the 95 % interval should hold 0 in about 95 %
+    # of repetitions; 200 repetitions, binomial 99.9 % lower limit 0.95 - 3.1 sqrt(0.95 * 0.05 / 200) = 0.90
+    rng = np.random.default_rng(11)
+    t = np.arange(5.0)
+    covered = 0
+    for k in range(200):
+        a, b = rng.chisquare(2, (2, 30, t.size))
+        covered += not compare_rmse(a, b, t, resamples=400, seed=k).resolved
+    assert covered / 200 >= 0.90
 
 
 def test_nees_band_has_its_coverage() -> None:
