@@ -24,6 +24,7 @@ from fgdoppler.estimators.initiation import Initiation, InitiationSettings, init
 from fgdoppler.estimators.isam2 import run_isam2
 from fgdoppler.estimators.judge import judge
 from fgdoppler.estimators.particle import run_particle
+from fgdoppler.estimators.restart import with_restarts
 from fgdoppler.estimators.results import TrackResult
 from fgdoppler.estimators.settings import (
     EKFSettings,
@@ -158,6 +159,12 @@ def run_estimator(
         return local.transformed(frame, to_world=True)
     hyps, weights = _hypotheses(info, measurements, model, init, settings) if resolve_ambiguity else ([init], None)
     result = _solve(info, measurements, model, hyps, settings, progress, weights)
+    if resolve_ambiguity and info.resolution == "likelihood" and getattr(settings, "restarts", False) \
+            and model.zone is not None:
+        def again(new: Initiation) -> TrackResult:
+            h, w = _hypotheses(info, measurements, model, new, settings)
+            return _solve(info, measurements, model, h, settings, prefixed(progress, "restart"), w)
+        result = with_restarts(measurements, model, init, settings, result, again)
     if verify and reference is None and result.primary.kind != "smoothed":
         ref_settings = SmootherSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k)
         reference = run_estimator("smoother", measurements, model, init, ref_settings,

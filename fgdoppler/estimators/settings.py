@@ -81,13 +81,21 @@ class GaussianSumSettings(TrackerSettings):
         predicts the data (:mod:`fgdoppler.estimators.ambiguity`).  ``1``
         keeps one Gaussian (the initiation's, and the hypotheses of an
         ambiguous one).
+    restarts : bool, default True
+        Test the online estimate at checkpoints against a fresh initiation
+        over all data so far and restart the tracker there when they
+        disagree and the fresh solution fits the data better
+        (:mod:`fgdoppler.estimators.restart`).
     """
 
     components: int = 8
+    restarts: bool = True
 
     def __post_init__(self) -> None:
         super().__post_init__()
         _count(self.components, "components")
+        if not isinstance(self.restarts, bool):
+            raise ValueError(f"restarts must be True or False, got {self.restarts!r}")
 
 
 @dataclass(frozen=True, kw_only=True)
