@@ -71,7 +71,11 @@ def _wrong(est: fd.Estimates, truth: np.ndarray) -> bool:
     return bool(np.hypot(*(est.states[-1, :2] - truth[:2])) > 3.0 * sd)
 
 
-@pytest.mark.parametrize("case", list(CASES))
+#: The degenerate cases that take 30-40 s each (every estimator over several seeds): run with -m slow.
+LONG_CASES = frozenset({"outside the zone", "times in milliseconds"})
+
+
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c in LONG_CASES else c for c in CASES])
 def test_degenerate_cases_are_never_wrong_and_ok(case: str) -> None:
     failures = []
     for seed in SEEDS:
@@ -91,6 +95,8 @@ def test_degenerate_cases_are_never_wrong_and_ok(case: str) -> None:
     assert not failures, failures
 
 
+# 30 runs of every estimator per scenario (40 s each): long studies, run with -m slow
+@pytest.mark.slow
 @pytest.mark.parametrize(("case", "x"), [("a", 45e3), ("b", 5e3)])
 def test_consistent_well_observed_runs_are_ok(case: str, x: float) -> None:
     # It must not cry wolf: in the well-observed scenarios every estimator is "ok" in >= 95 % of

@@ -1,0 +1,91 @@
+"""Online re-initiation of the Gaussian trackers: when it fires, what it changes, and that it stays online."""
+
+from __future__ import annotations
+
+from itertools import pairwise
+
+import numpy as np
+import pytest
+
+import fgdoppler as fd
+from fgdoppler.analysis.metrics import errors
+from fgdoppler.estimators.restart import GROWTH, checkpoints
+
+
+def _benchmark_run(s: int, r: int, seed: int = 2026) -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation]:
+    """Run ``r`` of scenario ``s`` exactly as the accuracy benchmark draws it."""
+    scen = fd.paper_scenarios()[s]
+    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([seed, s, r])))
+    model = fd.TrackingModel.of(scen.geometry)
+    return sim, model, fd.initiate(sim.measurements.first_per_pair(10), model)
+
+
+def _end_error(sim: fd.Simulation, res: fd.TrackResult) -> float:
+    e = res.primary
+    i = int(np.searchsorted(sim.truth.times, e.times[-1]))
+    return float(np.sqrt(errors(e.states[-1], sim.truth.states[i])[0]))
+
+
+def test_checkpoints_grow_geometrically_from_the_window() -> None:
+    sim, _, init = _benchmark_run(0, 0)
+    m = sim.measurements
+    t = np.sort(m.time)
+    n0 = int(np.count_nonzero(t <= init.t_end))
+    cps = checkpoints(m, init)
+    assert cps and init.t_end < cps[0] and all(a < b for a, b in pairwise(cps))
+    assert cps[-1] < m.scans().times[-1]
+    # each checkpoint is the time of the measurement that brings the count to n0 * GROWTH^k
+    counts = [int(np.count_nonzero(t <= c)) for c in cps]
+    expected = [int(np.ceil(n0 * GROWTH**k)) for k in range(1, 40) if np.ceil(n0 * GROWTH**k) <= t.size]
+    assert all(c >= e for c, e in zip(counts, expected, strict=False))
+    assert len(cps) <= len(expected)
+
+
+def test_a_lagging_gaussian_sum_restarts_and_recovers() -> None:
+    # Run 32 of case a 5 km (benchmark seed 2026): all eight terms of the EKF's Gaussian sum lag kilometres
+    # behind the maximum of their own posterior; the best fit of the first 7 s is 19 sigma away by the EKF's
+    # covariance and the tracker restarts there.
+    sim, model, init = _benchmark_run(0, 32)
+    m = sim.measurements
+    plain = fd.run_estimator("ekf", m, model, init, fd.EKFSettings(restarts=False), verify=False)
+    res = fd.run_estimator("ekf", m, model, init, verify=False)
+    restarts = [e for e in res.events if "online re-initiation" in e.message]
+    assert restarts, "the EKF did not restart"
+    assert _end_error(sim, res) < 0.5 * _end_error(sim, plain)
+    # the estimates before the first restart are the plain run's, to the bit: nothing in the past is rewritten
+    t0 = restarts[0].time
+    before = plain.primary.times < t0
+    np.testing.assert_array_equal(res.primary.times[: np.count_nonzero(before)], plain.primary.times[before])
+    np.testing.assert_array_equal(res.primary.states[: np.count_nonzero(before)], plain.primary.states[before])
+
+
+def test_restarts_stay_online() -> None:
+    # The estimate at t must not depend on data after t: cutting the recording at 20 s changes nothing before it.
+    sim, model, init = _benchmark_run(0, 32)
+    m = sim.measurements
+    cut = 20.0
+    full = fd.run_estimator("ekf", m, model, init, verify=False)
+    part = fd.run_estimator("ekf", m.subset(m.time <= cut), model, init, verify=False)
+    sel = full.primary.times <= cut
+    np.testing.assert_array_equal(part.primary.times, full.primary.times[sel])
+    np.testing.assert_allclose(part.primary.states, full.primary.states[sel], rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(part.primary.covariances, full.primary.covariances[sel], rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("estimator", ["ekf", "fixed-lag"])
+def test_a_well_observed_track_never_restarts(estimator: str) -> None:
+    # case a 45 km: the trackers sit on the best fit of the data; the restart test changes nothing at all
+    sim, model, init = _benchmark_run(2, 0)
+    m = sim.measurements
+    settings = fd.ESTIMATORS[estimator].settings
+    plain = fd.run_estimator(estimator, m, model, init, settings(restarts=False), verify=False)
+    res = fd.run_estimator(estimator, m, model, init, verify=False)
+    assert not [e for e in res.events if "online re-initiation" in e.message]
+    for a, b in zip(res.estimates, plain.estimates, strict=True):
+        np.testing.assert_array_equal(a.states, b.states)
+        np.testing.assert_array_equal(a.covariances, b.covariances)
+
+
+def test_restarts_setting_is_checked() -> None:
+    with pytest.raises(ValueError, match="restarts"):
+        fd.EKFSettings(restarts=1)  # type: ignore[arg-type]
