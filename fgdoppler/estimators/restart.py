@@ -51,6 +51,7 @@ from scipy.stats import chi2
 
 from fgdoppler.estimators.grid import GridResult
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate, window_grid
+from fgdoppler.estimators.particle import _predict_along
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import TrackerSettings
 from fgdoppler.estimators.verdict import Event
@@ -98,7 +99,7 @@ def checkpoints(measurements: Measurements, init: Initiation) -> list[float]:
 def _cost(model: TrackingModel, x_start: FloatArray, t_start: float, data: Measurements,
           huber_k: float | None) -> float:
     """Data cost :math:`\\sum\\rho(r)` of the constant-velocity track from ``x_start`` at ``t_start``."""
-    h = model.observation.predict_along(x_start[None], data.time - t_start, data.pair)[0]
+    h = _predict_along(model.observation, x_start[None], data.time - t_start, data.pair.astype(np.intp))[0]
     r = (data.doppler - h) / data.sigma
     return float(np.sum(huber_rho(r, huber_k))) if np.all(np.isfinite(r)) else float("inf")
 
