@@ -66,7 +66,7 @@ FloatArray = NDArray[np.float64]
 GROWTH = 1.5
 #: Measurements per pair the checkpoint's grid scores (LM then uses all of them).
 PER_PAIR = 16
-#: χ² probability above which the running estimate and the fresh initiation disagree.
+#: χ² probability (state-dimension dof) beyond which the best fit of all data so far lies outside the tracker's region.
 DISAGREEMENT = 0.999
 
 #: Runs a tracker from an initiation over the measurements after its window (the registry's solve step).
