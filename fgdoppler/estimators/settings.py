@@ -82,9 +82,10 @@ class GaussianSumSettings(TrackerSettings):
         keeps one Gaussian (the initiation's, and the hypotheses of an
         ambiguous one).
     restarts : bool, default True
-        Test the online estimate at checkpoints against a fresh initiation
-        over all data so far and restart the tracker there when they
-        disagree and the fresh solution fits the data better
+        At checkpoints, find the best fit of all data so far (a fresh
+        multi-start initiation, and Levenberg–Marquardt from the tracker's
+        own estimate; the lower cost wins) and restart the tracker from it
+        when it lies outside the tracker's 99.9 % region
         (:mod:`fgdoppler.estimators.restart`).
     """
 
