@@ -82,10 +82,10 @@ class GaussianSumSettings(TrackerSettings):
         keeps one Gaussian (the initiation's, and the hypotheses of an
         ambiguous one).
     restarts : bool, default True
-        At checkpoints, find the best fit of all data so far (a fresh
-        multi-start initiation, and Levenberg–Marquardt from the tracker's
-        own estimate; the lower cost wins) and restart the tracker from it
-        when it lies outside the tracker's 99.9 % region
+        At checkpoints, find the best fit of all data so far (Levenberg–Marquardt
+        from the tracker's own estimate, unless a fresh multi-start
+        initiation finds a mode 1,000 times more likely) and restart the
+        tracker from it when each lies outside the other's 99.9 % region
         (:mod:`fgdoppler.estimators.restart`).
     """
 
