@@ -34,8 +34,9 @@ initiation over *all* data up to :math:`t_c`:
    tracker's confidence region and the tracker outside the fit's.  A fit less
    certain than the tracker cannot overrule it.  On run 32 above the EKF's
    basin *is* the fresh solution's: the filter had not got stuck in another
-   mode, it lagged 4 km behind the maximum of its own posterior, 19–180 σ by
-   its own covariance and 8–17 σ by the fit's.
+   mode, it lagged 4 km behind the maximum of its own posterior, 4–13 σ by
+   its own covariance (squared distances 19–181 at the four checkpoints)
+   and 8–17 σ by the fit's.
 
 Both guards were measured on a two-hour recording of a slow target seen by
 three pairs (:mod:`benchmarks.bench_long`): with the fit's estimate tested

@@ -43,7 +43,7 @@ def test_checkpoints_grow_geometrically_from_the_window() -> None:
 
 def test_a_lagging_gaussian_sum_restarts_and_recovers() -> None:
     # Run 32 of case a 5 km (benchmark seed 2026): all eight terms of the EKF's Gaussian sum lag kilometres
-    # behind the maximum of their own posterior; the best fit of the first 7 s is 19 sigma away by the EKF's
+    # behind the maximum of their own posterior; the best fit of the first 7 s is 4.3 sigma away by the EKF's
     # covariance and the tracker restarts there.
     sim, model, init = _benchmark_run(0, 32)
     m = sim.measurements
