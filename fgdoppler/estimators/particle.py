@@ -69,7 +69,7 @@ from fgdoppler.estimators.verdict import Event, Reason
 from fgdoppler.estimators.window import split_window
 from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
-from fgdoppler.models.observation import MeasurementModel, check_channels
+from fgdoppler.models.observation import check_channels, predict_along
 from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
 from fgdoppler.progress import Progress, advance, start_task
@@ -82,17 +82,6 @@ FloatArray = NDArray[np.float64]
 CHUNK_ROWS = 1 << 20
 #: Random-walk Metropolis scale per state dimension (Roberts, Gelman & Gilks: 2.38²/d for d unknowns).
 RW_SCALE_NUMERATOR = 2.38**2
-
-
-def _predict_along(model: MeasurementModel, x: FloatArray, t: FloatArray, channels: NDArray[np.intp]) -> FloatArray:
-    """Predictions ``(n, m)`` along constant-velocity tracks; NaN where the model is undefined."""
-    along = getattr(model, "predict_along", None)
-    if along is not None:
-        return np.asarray(along(x, t, channels), dtype=float)
-    d = x.shape[1] // 2
-    states = x[:, None, :] + np.concatenate([t[None, :, None] * x[:, None, d:], np.zeros((1, t.size, d))], -1)
-    return np.asarray(model.predict(states.reshape(-1, 2 * d), np.tile(channels, x.shape[0])), dtype=float).reshape(
-        x.shape[0], t.size)
 
 
 @dataclass
@@ -148,7 +137,7 @@ class _Posterior:
         out = np.empty(x.shape[0])
         step = max(1, CHUNK_ROWS // max(t.size, 1))
         for a in range(0, x.shape[0], step):
-            h = _predict_along(self.model.observation, x[a:a + step], t, pair)
+            h = predict_along(self.model.observation, x[a:a + step], t, pair)
             r = (z - h) / sigma
             with np.errstate(invalid="ignore"):
                 ll = -0.5 * huber_rho(r, self.settings.huber_k).sum(axis=1)
@@ -518,7 +507,7 @@ def _update(post: _Posterior, gate: NISGate, t: float, pair: NDArray[np.intp], z
             sigma: FloatArray) -> float:
     """Gate and apply one scan; returns the log predictive likelihood of the accepted measurements."""
     tr = np.full(pair.size, t - post.t_anchor)
-    h = _predict_along(post.model.observation, post.x, tr, pair)
+    h = predict_along(post.model.observation, post.x, tr, pair)
     w = post.weights()
     ok = np.all(np.isfinite(h), axis=1)
     wk = np.where(ok, w, 0.0)

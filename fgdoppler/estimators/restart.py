@@ -66,11 +66,11 @@ from scipy.stats import chi2
 
 from fgdoppler.estimators.grid import GridResult
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate, window_grid
-from fgdoppler.estimators.particle import _predict_along
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import TrackerSettings
 from fgdoppler.estimators.verdict import Event
 from fgdoppler.measurements import Measurements
+from fgdoppler.models.observation import predict_along
 from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel
 
@@ -117,7 +117,7 @@ def checkpoints(measurements: Measurements, init: Initiation) -> list[float]:
 def _cost(model: TrackingModel, x_start: FloatArray, t_start: float, data: Measurements,
           huber_k: float | None) -> float:
     """Data cost :math:`\\sum\\rho(r)` of the constant-velocity track from ``x_start`` at ``t_start``."""
-    h = _predict_along(model.observation, x_start[None], data.time - t_start, data.pair.astype(np.intp))[0]
+    h = predict_along(model.observation, x_start[None], data.time - t_start, data.pair.astype(np.intp))[0]
     r = (data.doppler - h) / data.sigma
     return float(np.sum(huber_rho(r, huber_k))) if np.all(np.isfinite(r)) else float("inf")
 
@@ -152,12 +152,12 @@ def _fresh(measurements: Measurements, model: TrackingModel, settings: TrackerSe
                      n_candidates=1, speed_min=grid.speed_min)
     basin = initiate(data, model, isets, grid_result=own)
     best = new if basin.P_end is None or new.cost < basin.cost - MODE_MARGIN else basin
-    if best.P_end is None:
-        return None
+    P_best = best.P_end
+    assert P_best is not None  # new's was checked above, basin is chosen only with one
     d = best.x_end - x_old
     try:
         # each must lie outside the other's region: a fit less certain than the tracker cannot overrule it
-        m2 = min(float(d @ np.linalg.solve(P_old, d)), float(d @ np.linalg.solve(best.P_end, d)))
+        m2 = min(float(d @ np.linalg.solve(P_old, d)), float(d @ np.linalg.solve(P_best, d)))
     except np.linalg.LinAlgError:
         return None
     if not m2 > chi2.ppf(DISAGREEMENT, model.n):

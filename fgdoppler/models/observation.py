@@ -27,7 +27,7 @@ from fgdoppler.models.doppler import _as_states, _terms
 #: Up to this many rows the model is evaluated in plain floats (less overhead than numpy).
 _SMALL = 4
 
-__all__ = ["DopplerModel", "MeasurementModel", "check_channels"]
+__all__ = ["DopplerModel", "MeasurementModel", "check_channels", "predict_along"]
 
 FloatArray = NDArray[np.float64]
 
@@ -210,3 +210,23 @@ def check_channels(model: MeasurementModel, measurements: Measurements) -> None:
     """Raise :class:`ValueError` if a measurement's channel (pair) is outside ``model``."""
     if len(measurements) and int(measurements.pair.max()) >= model.n_channels:
         raise ValueError(f"pair index {int(measurements.pair.max())} outside a model of {model.n_channels} channel(s)")
+
+
+def predict_along(model: MeasurementModel, x0: FloatArray, times: FloatArray,
+                  channels: NDArray[np.intp]) -> FloatArray:
+    r"""Predictions ``(n, m)`` of any measurement model along constant-velocity tracks.
+
+    Row ``i`` is the track :math:`\mathbf p_0 + t\mathbf v` from state
+    ``x0[i]``, seen on ``channels[j]`` at ``times[j]``.  A model with its own
+    vectorised ``predict_along`` (:meth:`DopplerModel.predict_along`: NaN
+    where a track passes through a sensor) is called directly; any other
+    :class:`MeasurementModel` is evaluated at the propagated states.
+    """
+    along = getattr(model, "predict_along", None)
+    if along is not None:
+        return np.asarray(along(x0, times, channels), dtype=float)
+    d = x0.shape[1] // 2
+    states = x0[:, None, :] + np.concatenate([times[None, :, None] * x0[:, None, d:],
+                                              np.zeros((1, times.size, d))], -1)
+    return np.asarray(model.predict(states.reshape(-1, 2 * d), np.tile(channels, x0.shape[0])),
+                      dtype=float).reshape(x0.shape[0], times.size)

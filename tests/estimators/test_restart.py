@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import fgdoppler as fd
+from benchmarks.bench_long import THREE_PAIRS
 from fgdoppler.analysis.metrics import errors
 from fgdoppler.estimators.restart import DISAGREEMENT, GROWTH, MODE_MARGIN, checkpoints
 
@@ -86,16 +87,9 @@ def test_a_well_observed_track_never_restarts(estimator: str) -> None:
         np.testing.assert_array_equal(a.covariances, b.covariances)
 
 
-#: A slow target (7 m/s) seen by three pairs, the poorly observed recording of the long-run benchmark.
-_THREE_PAIRS = fd.Geometry(pairs=(
-    fd.BistaticPair(tx=(40e3, 0.0), rx=(0.0, 0.0)),
-    fd.BistaticPair(tx=(40e3, 0.0), rx=(15e3, 25e3)),
-    fd.BistaticPair(tx=(5e3, 30e3), rx=(0.0, 0.0)),
-))
-
-
 def _slow_run(seed: int) -> tuple[fd.Simulation, fd.TrackResult, fd.TrackResult]:
-    scen = fd.Scenario(geometry=_THREE_PAIRS, x0=(15e3, 8e3, 5.0, 5.0), duration=120.0, dt=0.5, name="slow")
+    # the slow 7 m/s target of the long-run benchmark, on its three pairs, for 120 s
+    scen = fd.Scenario(geometry=THREE_PAIRS, x0=(15e3, 8e3, 5.0, 5.0), duration=120.0, dt=0.5, name="slow")
     sim = fd.simulate(scen, np.random.default_rng(seed))
     m = sim.measurements
     model = fd.TrackingModel.of(scen.geometry)
