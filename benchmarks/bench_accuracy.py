@@ -75,7 +75,18 @@ def _on_grid(truth_t: FloatArray, t: FloatArray, x: FloatArray, P: FloatArray, t
 
 
 def one_run(args: tuple[int, int, int]) -> dict[str, Any]:
-    """Simulate, initiate and run every estimator and peer on run ``r`` of scenario ``s``."""
+    """Simulate, initiate and run every estimator and peer on run ``r`` of scenario ``s``.
+
+    With one BLAS thread, as Monte Carlo's workers (:mod:`fgdoppler.analysis.montecarlo`):
+    OpenBLAS's own threads make two workers on two cores contend.
+    """
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1):
+        return _one_run(args)
+
+
+def _one_run(args: tuple[int, int, int]) -> dict[str, Any]:
     from benchmarks._peers import run_peers
 
     s, r, seed = args
