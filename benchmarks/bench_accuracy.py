@@ -40,6 +40,7 @@ import fgdoppler as fd
 from benchmarks._common import Row
 from fgdoppler.analysis.bounds import crlb_deterministic
 from fgdoppler.analysis.metrics import compare_rmse, errors, nees, nees_band, time_averaged_rmse
+from fgdoppler.analysis.workers import one_blas_thread
 
 FloatArray = NDArray[np.float64]
 
@@ -74,19 +75,9 @@ def _on_grid(truth_t: FloatArray, t: FloatArray, x: FloatArray, P: FloatArray, t
     return se, ne
 
 
+@one_blas_thread
 def one_run(args: tuple[int, int, int]) -> dict[str, Any]:
-    """Simulate, initiate and run every estimator and peer on run ``r`` of scenario ``s``.
-
-    With one BLAS thread, as Monte Carlo's workers (:mod:`fgdoppler.analysis.montecarlo`):
-    OpenBLAS's own threads make two workers on two cores contend.
-    """
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1):
-        return _one_run(args)
-
-
-def _one_run(args: tuple[int, int, int]) -> dict[str, Any]:
+    """Simulate, initiate and run every estimator and peer on run ``r`` of scenario ``s`` (one BLAS thread)."""
     from benchmarks._peers import run_peers
 
     s, r, seed = args

@@ -34,6 +34,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fgdoppler.analysis.workers import one_blas_thread
+
 __all__ = ["ALTITUDES", "AltitudeStudy", "altitude_study"]
 
 FloatArray = NDArray[np.float64]
@@ -164,20 +166,11 @@ def _bound_rms(P: FloatArray) -> float:
     return float(np.sqrt(max(np.trace(P[:3, :3]), 0.0)))
 
 
+@one_blas_thread
 def _one_run(case: str, start_x: float, altitude: float, online: tuple[str, ...], seed: Any) -> tuple[float, ...]:
     """One recording at ``altitude``: time-averaged squared position errors of the smoother and the 2-D
-    model, the smoother's final NEES, 1.0 if its verdict is ``ok``, then the online estimators' errors.
-
-    With one BLAS thread, as Monte Carlo's workers (:mod:`fgdoppler.analysis.montecarlo`).
-    """
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1):
-        return _one_run_unlimited(case, start_x, altitude, online, seed)
-
-
-def _one_run_unlimited(case: str, start_x: float, altitude: float, online: tuple[str, ...],
-                       seed: Any) -> tuple[float, ...]:
+    model, the smoother's final NEES, 1.0 if its verdict is ``ok``, then the online estimators' errors
+    (in a worker, one BLAS thread)."""
     import fgdoppler as fd
 
     scen = fd.paper_scenario(case, start_x, altitude=altitude)

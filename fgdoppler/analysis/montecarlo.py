@@ -40,6 +40,7 @@ from numpy.typing import NDArray
 
 from fgdoppler._io import atomic_write_text
 from fgdoppler.analysis.metrics import errors, nees, nees_band, rmse
+from fgdoppler.analysis.workers import one_blas_thread
 from fgdoppler.estimators.initiation import METHODS, InitiationSettings, Method
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
 from fgdoppler.estimators.settings import FixedLagSettings, SmootherSettings, TrackerSettings
@@ -144,22 +145,9 @@ class MonteCarloSpec:
         return name, self.settings.get(name, ESTIMATORS[name].settings())
 
 
+@one_blas_thread
 def _run_one(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.random.SeedSequence) -> dict[str, Any]:
-    """One simulated run of one scenario through every estimator (executed in a worker).
-
-    Runs with one BLAS thread: numpy's OpenBLAS starts a thread per core in
-    every process, and with one worker per core the pools contend — two
-    workers ran *slower* than one (19.6 s vs 14.0 s for 36 scenario-runs).
-    The matrices here are tiny, so BLAS threads never help.  The limit is set
-    per task so that any executor (process pool, Dask) gets it.
-    """
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1):
-        return _run_one_unlimited(spec, s_idx, r_idx, seq)
-
-
-def _run_one_unlimited(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.random.SeedSequence) -> dict[str, Any]:
+    """One simulated run of one scenario through every estimator (executed in a worker, one BLAS thread)."""
     from fgdoppler.estimators.initiation import initiate, window_grid
     from fgdoppler.estimators.registry import run_estimator
 
