@@ -18,10 +18,15 @@ Python for every ``CustomFactor`` callback, so an iSAM2 update would cost
 O(N) in the track length.  Here the measurement factors are linearised in
 numpy (:mod:`fgdoppler.estimators.linearized`) and enter as native linear
 factors; the tracker relinearises them itself, iSAM2-style: at every update
-the factors of the ``relinearize_window`` most recent states are checked and
-those whose state moved more than ``relinearize_position`` /
-``relinearize_velocity`` from their linearisation point are replaced
-(removed and re-added in the same update).  iSAM2's own relinearisation is
+the factors of the ``relinearize_window`` most recent states (and every
+``relinearize_every`` updates also of the ``relinearize_history`` states
+before them, which on a poorly observed track go on moving long after their
+scan) are checked and those whose state moved more than
+``relinearize_position`` / ``relinearize_velocity`` from their linearisation
+point are replaced (removed and re-added in the same update).  The states'
+values for the check come from their marginals (:meth:`ISAM2Tracker._means`),
+exact where iSAM2's own estimate stops back-substituting at the wildfire
+threshold.  iSAM2's own relinearisation is
 switched off (all factors are linear), and the factorisation is QR, which
 survives the ill-conditioning of Doppler-only graphs.
 
@@ -284,7 +289,10 @@ class ISAM2Tracker:
             self._pending = (graph, values, owners, remove)
             return x_pred, None
         self._pending = None
-        start = max(0, k - self.settings.relinearize_window)
+        st = self.settings
+        start = max(0, k - st.relinearize_window)
+        if st.relinearize_history and self._n_updates % st.relinearize_every == 0:
+            start = max(0, start - st.relinearize_history)
         n_relin = self._relinearize(range(start, k), 1.0, graph, owners, remove) if self._n_updates else 0
         self._n_updates += 1
         try:

@@ -150,8 +150,19 @@ class ISAM2Settings(GaussianSumSettings):
         The same for velocity (m/s).
     relinearize_window : int, default 10
         How many of the most recent scans are checked for relinearisation at
-        every update (older states barely move); the whole graph is solved to
-        convergence at the end.
+        every update; the whole graph is solved to convergence at the end.
+    relinearize_history : int, default 120
+        Every ``relinearize_every`` updates, this many states before the
+        ``relinearize_window`` most recent ones are checked as well; 0 switches
+        the check off.  On a poorly observed track old states go on moving by
+        kilometres long after their scan, and their Doppler factors would stay
+        linearised where the states were (on the slow three-pair two-hour
+        recording of the long benchmark: iSAM2's filtered RMSE 1,489 m without
+        the check, 538 m with it, the EKF's 454 m; 19 % more time).  A bound, not the whole
+        history, keeps the cost of a check constant on long tracks: checking
+        every state made a 1,200 s track 2.6 times slower.
+    relinearize_every : int, default 10
+        Updates between two checks of the ``relinearize_history`` older states.
     wildfire_threshold : float, default 0.01
         Back-substitution threshold (m and m/s): changes smaller than this are
         not propagated to older states until the end (GTSAM's default 0.001
@@ -166,6 +177,8 @@ class ISAM2Settings(GaussianSumSettings):
     relinearize_position: float = 10.0
     relinearize_velocity: float = 0.1
     relinearize_window: int = 10
+    relinearize_history: int = 120
+    relinearize_every: int = 10
     wildfire_threshold: float = 0.01
     final_passes: int = 100
     smoothed_covariances: bool = True
@@ -176,6 +189,9 @@ class ISAM2Settings(GaussianSumSettings):
         _positive(self.relinearize_velocity, "relinearize_velocity")
         _positive(self.wildfire_threshold, "wildfire_threshold")
         _count(self.relinearize_window, "relinearize_window")
+        if self.relinearize_history != 0:
+            _count(self.relinearize_history, "relinearize_history")
+        _count(self.relinearize_every, "relinearize_every")
         _count(self.final_passes, "final_passes")
 
 

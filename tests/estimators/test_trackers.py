@@ -180,6 +180,16 @@ def test_linear_gaussian_surrogate_ekf_isam2_fixed_lag_agree_with_kalman() -> No
 
 
 # -- bad conditions ------------------------------------------------------------------------
+@pytest.mark.parametrize("bad", [{"relinearize_history": -1}, {"relinearize_history": 2.5},
+                                 {"relinearize_every": 0}, {"relinearize_window": 0},
+                                 {"relinearize_position": 0.0}, {"wildfire_threshold": float("nan")}])
+def test_isam2_settings_reject_bad_values(bad: dict) -> None:
+    name = next(iter(bad))
+    with pytest.raises(ValueError, match=name):
+        ISAM2Settings(**bad)
+    ISAM2Settings(relinearize_history=0)  # 0 switches the history check off
+
+
 def test_outlier_is_gated_by_nis_and_downweighted_by_huber() -> None:
     _, sim, model, init = _setup("a", 45e3)
     m = sim.measurements
@@ -357,6 +367,61 @@ def test_isam2_marginal_equals_its_full_estimate_and_covariance() -> None:
         # Cholesky path would lose about six digits; measured agreement is ~1e-10).
         assert np.all(np.abs(x - best) <= 1e-7 * sd)
         assert np.max(np.abs(P - full_P)) <= 1e-7 * np.abs(full_P).max()
+
+
+def _isam2_feed(model, m, init, settings: ISAM2Settings, check=None) -> ISAM2Tracker:
+    """Initiation window in one update, then every later scan; ``check(tracker, k)`` before each scan."""
+    tracker = ISAM2Tracker(model, settings, model.prior())
+    sc = m.scans()
+    start, _ = fd.estimators.window.window_start(model, m.between(0, init.t_end), init)
+    n_win = int(np.searchsorted(sc.times, init.t_end, side="right"))
+    rows = [sc.rows(k) for k in range(len(sc))]
+    tracker.add_window(sc.times[:n_win], [m.pair[r] for r in rows[:n_win]], [m.doppler[r] for r in rows[:n_win]],
+                       [m.sigma[r] for r in rows[:n_win]], start)
+    for k in range(n_win, len(sc)):
+        after = check(tracker, k) if check is not None else None
+        tracker.add_scan(sc.times[k], m.pair[rows[k]], m.doppler[rows[k]], m.sigma[rows[k]])
+        if after is not None:
+            after()
+    return tracker
+
+
+def _stale(tracker: ISAM2Tracker, ks: list[int], xs: np.ndarray) -> np.ndarray:
+    """Which of states ``ks`` have a factor linearised beyond the thresholds from their value ``xs``."""
+    st = tracker.settings
+    lin = np.array([tracker.scans[j].lin for j in ks])
+    d = np.abs(xs - lin)
+    return np.any(d[:, :2] > st.relinearize_position, axis=1) | np.any(d[:, 2:] > st.relinearize_velocity, axis=1)
+
+
+def test_isam2_history_check_leaves_no_stale_factor() -> None:
+    # Every relinearize_every updates the states before the recent window are checked too:
+    # right after such an update, every checked state's factor is linearised within the
+    # thresholds of the value the state had when it was checked (its marginal mean, the MAP
+    # of the linear system before the update).  Case b 25 km is poorly observed: old states
+    # keep moving, and without the check (the control) many factors are left far from them.
+    _, sim, model, init = _setup("b", 25e3, seed=3)
+    m = sim.measurements
+    every = 5
+
+    def run(history: int) -> list[int]:
+        st = ISAM2Settings(relinearize_history=history, relinearize_every=every)
+        stale: list[int] = []
+
+        def check(tracker: ISAM2Tracker, k: int):
+            if tracker._n_updates % every:
+                return None
+            ks = [j for j in range(k) if tracker.scans[j].lin is not None]
+            xs = tracker._means(ks)
+            return lambda: stale.append(int(np.sum(_stale(tracker, ks, xs))))
+
+        _isam2_feed(model, m, init, st, check)
+        return stale
+
+    with_check, without = run(10_000), run(0)
+    assert len(with_check) == len(without) >= 10
+    assert sum(with_check) == 0
+    assert sum(without) >= 10 * len(without)
 
 
 def test_smoother_state_without_measurements_changes_nothing_else() -> None:
