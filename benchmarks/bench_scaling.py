@@ -17,22 +17,33 @@ SIZES = (60, 600, 7200)
 REPEATS = 3
 
 
-def _stream(tracker: object, sim: fd.Simulation, n_window: int) -> np.ndarray:
+def _stream(tracker: object, sim: fd.Simulation, n_window: int) -> tuple[np.ndarray, float, float, float]:
+    """Per-scan latencies, the share of gated measurements accepted, and the end error and its sd (m).
+
+    A tracker that lost the track rejects nearly everything and costs almost
+    nothing per scan: its latency says nothing, so the row reports the
+    acceptance and the end position error beside it.
+    """
     m = sim.measurements
     sc = m.scans()
     lat = []
     x0 = sim.truth.states[0]
+    x, P = x0, None
     for k in range(len(sc)):
         sl = sc.rows(k)
         t = time.perf_counter()
         if isinstance(tracker, ISAM2Tracker):
-            tracker.add_scan(sc.times[k], m.pair[sl], m.doppler[sl], m.sigma[sl], x0 if k == 0 else None,
-                             gate=k >= n_window)
+            x, P = tracker.add_scan(sc.times[k], m.pair[sl], m.doppler[sl], m.sigma[sl], x0 if k == 0 else None,
+                                    gate=k >= n_window)
         else:
-            tracker.add_scans([sc.times[k]], [m.pair[sl]], [m.doppler[sl]], [m.sigma[sl]],
-                              [x0] if k == 0 else None, gate=k >= n_window)
+            x, P = tracker.add_scans([sc.times[k]], [m.pair[sl]], [m.doppler[sl]],  # type: ignore[attr-defined]
+                                     [m.sigma[sl]], [x0] if k == 0 else None, gate=k >= n_window)
         lat.append(time.perf_counter() - t)
-    return np.array(lat)
+    nis = tracker.gate.as_array()  # type: ignore[attr-defined]
+    accepted = float(np.mean(nis[:, 3])) if nis.size else 1.0
+    error = float(np.hypot(*(np.asarray(x) - sim.truth.states[-1])[:2]))
+    sd = float(np.sqrt(P[0, 0] + P[1, 1])) if P is not None else float("nan")
+    return np.array(lat), accepted, error, sd
 
 
 def _native_isam2(n: int) -> float:
@@ -68,16 +79,22 @@ def run() -> list[Row]:
     settings = {"isam2": fd.ISAM2Settings(), "fixed-lag": fd.FixedLagSettings(lag=1.0)}
     results: dict[str, dict[int, float]] = {"isam2": {}, "fixed-lag": {}, "smoother": {}}
     detail: dict[str, dict[int, str]] = {"isam2": {}, "fixed-lag": {}, "smoother": {}}
+    tracking: dict[str, float] = {}  # the lowest share of measurements accepted over the sizes
     for n in SIZES:
         sim = fd.simulate(long_scenario(n), np.random.default_rng(0))
         model = fd.TrackingModel.of(sim.scenario.geometry)
         prior = model.prior()
         for name, make in (("isam2", ISAM2Tracker), ("fixed-lag", FixedLagTracker)):
             # sub-millisecond medians are noisy on a shared machine: pool three repeats
-            steady = np.concatenate([_stream(make(model, settings[name], prior), sim, 20)[30:]  # type: ignore[operator]
-                                     for _ in range(REPEATS)])
+            runs = [_stream(make(model, settings[name], prior), sim, 20)  # type: ignore[operator]
+                    for _ in range(REPEATS)]
+            steady = np.concatenate([r[0][30:] for r in runs])
             results[name][n] = float(np.median(steady))
-            detail[name][n] = f"median {np.median(steady) * 1e3:.2f} ms, p99 {np.percentile(steady, 99) * 1e3:.2f} ms"
+            _, accepted, error, sd = runs[-1]
+            tracking[name] = min(tracking.get(name, 1.0), accepted)
+            detail[name][n] = (f"median {np.median(steady) * 1e3:.2f} ms, p99 {np.percentile(steady, 99) * 1e3:.2f} ms, "
+                               f"mean {np.mean(steady) * 1e3:.2f} ms (accepted {accepted:.1%}, "
+                               f"end error {error:.0f} m, sd {sd:.0f} m)")
         init = initiate(sim.measurements.first_per_pair(min(100, n // 2)), model)
         smoother = fd.SmootherSettings()
         x_init = initial_trajectory(sim.measurements, model, init, smoother)
@@ -97,5 +114,8 @@ def run() -> list[Row]:
                         ("smoother", "offline smoother cost per scan and LM iteration")):
         ratio = results[name][SIZES[-1]] / results[name][SIZES[0]]
         value = "; ".join(f"{n}: {detail[name][n]}" for n in SIZES)
-        rows.append(Row(name=label, value=value, ratio=ratio, target="7200 vs 60 scans <= 1.5x", met=ratio <= 1.5))
+        # a tracker that lost the track (rejecting nearly all measurements) is fast for nothing
+        target = "7200 vs 60 scans <= 1.5x" + (", >= 90 % of measurements accepted" if name in tracking else "")
+        holds = tracking.get(name, 1.0) >= 0.9
+        rows.append(Row(name=label, value=value, ratio=ratio, target=target, met=ratio <= 1.5 and holds))
     return rows
