@@ -94,6 +94,8 @@ def test_truth_is_checked_before_anything_runs(recording: Path, capsys: pytest.C
         (["--plot", "x.xyz"], "unknown figure format 'xyz'"),
         (["--out", "t.json"], "give a .csv path"),
         (["--init-per-pair", "2"], "--init-per-pair"),
+        (["--init-seconds", "-1"], "--init-seconds"),
+        (["--init-seconds", "nan"], "--init-seconds"),
     ],
 )
 def test_bad_track_options(recording: Path, capsys: pytest.CaptureFixture[str], options: list[str],

@@ -156,6 +156,29 @@ def test_scans_and_windows() -> None:
     np.testing.assert_array_equal(m.pair[m.stacked_order()], [0, 0, 1, 1, 1])
 
 
+def test_initiation_window_is_the_papers_at_2_hz_and_a_span_of_time_when_faster() -> None:
+    # At the paper's rate (both pairs every 0.5 s) 10 per pair and 4.5 s are the same window.
+    paper = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(0)).measurements
+    w = paper.initiation_window(10, 4.5)
+    ref = paper.first_per_pair(10)
+    for field in ("time", "pair", "doppler", "sigma"):
+        np.testing.assert_array_equal(getattr(w, field), getattr(ref, field))
+    # At 20 Hz (0.1-s steps that do not sum exactly) the span decides: every scan up to 4.5 s.
+    t = np.round(np.arange(0, 10, 0.05), 10)
+    fast = fd.Measurements.from_arrays(np.repeat(t, 2), np.tile([0, 1], t.size), np.zeros(2 * t.size), 1.0)
+    w = fast.initiation_window(10, 4.5)
+    np.testing.assert_array_equal(np.unique(w.time), t[t <= 4.5 + 1e-9])
+    assert np.count_nonzero(w.pair == 0) == np.count_nonzero(w.pair == 1) == 91
+    # Slow or sparse data: the count decides (a pair seen once in the first 4.5 s still gets 10).
+    slow = fd.Measurements.from_arrays(np.arange(40.0), np.arange(40) % 2, np.zeros(40), 1.0)
+    w = slow.initiation_window(10, 4.5)
+    assert np.count_nonzero(w.pair == 0) == np.count_nonzero(w.pair == 1) == 10
+    np.testing.assert_array_equal(slow.initiation_window(10, 0.0).time, slow.first_per_pair(10).time)
+    for bad in ({"per_pair": 0}, {"seconds": -1.0}, {"seconds": float("inf")}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            slow.initiation_window(**bad)
+
+
 def test_spread_keeps_every_pair_evenly_with_ends() -> None:
     # A staggered schedule (pairs alternate): taking every 4th scan would keep pair 0 only.
     t = np.arange(400) * 0.25

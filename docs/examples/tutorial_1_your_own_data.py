@@ -61,11 +61,13 @@ print("zone:", geometry.zone)
 # %%
 # Initiation, then three estimators
 # ---------------------------------
-# The initiation fits the first 10 measurements of each pair (a grid search,
-# then Levenberg–Marquardt from the best candidates).  The EKF and the
+# The initiation fits the first 10 measurements of each pair and every
+# measurement of the first 4.5 s (``initiation_window``: with fast data the
+# span in time, not the count, fixes the start) by a grid search, then
+# Levenberg–Marquardt from the best candidates.  The EKF and the
 # fixed-lag smoother start from it; the offline smoother solves the whole
 # recording.  Every result carries a verdict (``status``) and its reasons.
-init = fd.initiate(meas.first_per_pair(10), geometry)
+init = fd.initiate(meas.initiation_window(10, 4.5), geometry)
 print("initiation:", init.status, "-", init.message)
 results = {name: fd.run_estimator(name, meas, geometry, init) for name in ("ekf", "fixed-lag", "smoother")}
 truth = recording.truth

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -30,7 +31,7 @@ def add_track(sub: argparse._SubParsersAction) -> None:
         "track",
         help="initiate and track/smooth a recorded measurement CSV",
         description="Read FILE (CSV time,pair,doppler,sigma), initiate from the first --init-per-pair "
-        "measurements of each pair (multi-start grid + refinement), then run the chosen estimator.  The "
+        "measurements of each pair and the first --init-seconds (multi-start grid + refinement), then run the chosen estimator.  The "
         "geometry is never assumed: give --geometry, or keep a geometry.toml beside FILE (as simulate writes).",
     )
     p.add_argument("file", type=Path, metavar="FILE", help="measurement CSV")
@@ -42,8 +43,11 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    + "; batch is the old name of smoother (default init)")
     p.add_argument("--sigma", type=float, default=None, help="default Doppler sigma when FILE has no sigma column")
     p.add_argument("--init-method", choices=METHODS, default="lm", help="initiation refinement (default lm)")
-    p.add_argument("--init-per-pair", type=int, default=10, help="initiation window: measurements per pair (default 10, 4.5 s at 2 scans/s; with faster "
-                   "data choose N so that the window spans a few seconds)")
+    p.add_argument("--init-per-pair", type=int, default=10,
+                   help="initiation window: at least this many measurements per pair (default 10)")
+    p.add_argument("--init-seconds", type=float, default=4.5,
+                   help="initiation window: and every measurement of the first S seconds (default 4.5, the same "
+                        "window as 10 per pair at 2 scans/s; faster data need the time, not the count)")
     p.add_argument("--k-best", type=int, default=5, help="grid candidates to refine (default 5)")
     p.add_argument("--no-weak-prior", action="store_true", help="no weak zone prior on the first state")
     p.add_argument("--no-region-bound", action="store_true",
@@ -124,6 +128,8 @@ def _run(args: argparse.Namespace) -> int:
     _check_outputs(args)
     if args.init_per_pair < 3:
         raise CLIError("--init-per-pair must be >= 3")
+    if not (math.isfinite(args.init_seconds) and args.init_seconds >= 0):
+        raise CLIError(f"--init-seconds must be a finite number >= 0, got {args.init_seconds:g}")
     spec = _geometry_spec(args)
     geom = geometry_with_zone(spec, args)
     meas = Measurements.from_csv(args.file, geometry=geom, default_sigma=args.sigma)
@@ -137,7 +143,7 @@ def _run(args: argparse.Namespace) -> int:
         truth.check_covers(meas.scans().times, str(args.truth))
     model = _model(args, geom)
     settings = _initiation_settings(args)
-    window = meas.first_per_pair(args.init_per_pair)
+    window = meas.initiation_window(args.init_per_pair, args.init_seconds)
     try:
         init = initiate(window, model, settings)
     except ValueError as exc:  # e.g. the data need a speed above the zone's bound

@@ -233,13 +233,15 @@ def track(
     settings: TrackerSettings | None = None,
     initiation: InitiationSettings | None = None,
     init_per_pair: int = 10,
+    init_seconds: float = 4.5,
     progress: Progress | None = None,
 ) -> TrackResult:
-    """Initiate from the first ``init_per_pair`` measurements of each pair, then run ``estimator``.
+    """Initiate from the first ``init_per_pair`` measurements of each pair and the first ``init_seconds``, then run ``estimator``.
 
     The one-call form of :func:`~fgdoppler.estimators.initiation.initiate`
-    followed by :func:`run_estimator` (``progress``: :mod:`fgdoppler.progress`).
+    followed by :func:`run_estimator` (``progress``: :mod:`fgdoppler.progress`);
+    the window is :meth:`~fgdoppler.measurements.Measurements.initiation_window`.
     """
     model = as_tracking_model(model)
-    init = initiate(measurements.first_per_pair(init_per_pair), model, initiation)
+    init = initiate(measurements.initiation_window(init_per_pair, init_seconds), model, initiation)
     return run_estimator(estimator, measurements, model, init, settings, progress=progress)
