@@ -207,7 +207,7 @@ def test_isam2_holds_a_well_observed_track_at_20_hz() -> None:
 
 def test_ekf_from_a_window_in_time_is_consistent_at_20_hz() -> None:
     # fd.track's window spans 4.5 s (initiation_window): at 20 Hz, 91 scans rather than the
-    # 10 (0.5 s) that 10 per pair would give.  Measured on this recording, NEES averaged over
+    # 10 (0.45 s) that 10 per pair would give.  Measured on this recording, NEES averaged over
     # 5-20 s: 119 from the short window (init_seconds=0), 10.7 from the 4.5 s one; the bound
     # is the single-time 0.9999 quantile, 23.5.
     sc = fd.Scenario(geometry=fd.paper_geometry("a"), x0=(45e3, 4.5e3, -100.0, -20.0), duration=19.95, dt=0.05)
