@@ -181,12 +181,16 @@ class Measurements:
 
     def first_per_pair(self, n: int) -> Measurements:
         """The first ``n`` measurements of every pair (the paper's initiation batch)."""
+        return self.subset(self._first_mask(n, "n"))
+
+    def _first_mask(self, n: int, name: str) -> NDArray[np.bool_]:
+        """Which rows are among the first ``n`` of their pair."""
         if n < 1:
-            raise ValueError(f"n must be >= 1, got {n}")
+            raise ValueError(f"{name} must be >= 1, got {n}")
         keep = np.zeros(len(self), dtype=bool)
         for k in np.unique(self.pair):
             keep[np.flatnonzero(self.pair == k)[:n]] = True
-        return self.subset(keep)
+        return keep
 
     def initiation_window(self, per_pair: int = 10, seconds: float = 4.5) -> Measurements:
         r"""The first ``per_pair`` measurements of every pair and every measurement of the first ``seconds``.
@@ -208,13 +212,9 @@ class Measurements:
             Every measurement with :math:`t - t_0 \le` ``seconds`` is kept
             too (:math:`t_0`: the first time); 0 keeps only ``per_pair``.
         """
-        if per_pair < 1:
-            raise ValueError(f"per_pair must be >= 1, got {per_pair}")
         if not (math.isfinite(seconds) and seconds >= 0):
             raise ValueError(f"seconds must be a finite number >= 0, got {seconds!r}")
-        keep = np.zeros(len(self), dtype=bool)
-        for k in np.unique(self.pair):
-            keep[np.flatnonzero(self.pair == k)[:per_pair]] = True
+        keep = self._first_mask(per_pair, "per_pair")
         if len(self) and seconds > 0:
             # a relative tolerance so that 0.1-s steps summing to 4.5 s still include the scan at 4.5 s
             keep |= self.time - self.time.min() <= seconds * (1.0 + 1e-9)

@@ -192,22 +192,19 @@ class ISAM2Tracker:
             if k >= 0:
                 self.scans[k].factor = int(idx)
 
-    def _relinearize(self, candidates: range, scale: float, graph: gtsam.NonlinearFactorGraph,
-                     owners: list[int], remove: list[int], estimates: gtsam.Values | None = None) -> int:
+    def _relinearize(self, candidates: range, graph: gtsam.NonlinearFactorGraph, owners: list[int],
+                     remove: list[int]) -> int:
         """Replace the factors of the states in ``candidates`` that moved; vectorised over all of them."""
         js = [j for j in candidates if self.scans[j].lin is not None and self.scans[j].channels.size]
         if not js:
             return 0
-        if estimates is None:
-            xs = self._means(js)
-        else:
-            xs = np.array([estimates.atVector(X(j)) for j in js])
+        xs = self._means(js)
         lin = np.array([self.scans[j].lin for j in js])
         d = np.abs(xs - lin)
         st = self.settings
         half = self.motion_model.dim
-        moved = np.any(d[:, :half] > st.relinearize_position * scale, axis=1) | np.any(
-            d[:, half:] > st.relinearize_velocity * scale, axis=1)
+        moved = np.any(d[:, :half] > st.relinearize_position, axis=1) | np.any(
+            d[:, half:] > st.relinearize_velocity, axis=1)
         sel = [j for j, mv in zip(js, moved, strict=True) if mv]
         if not sel:
             return 0
@@ -293,7 +290,7 @@ class ISAM2Tracker:
         start = max(0, k - st.relinearize_window)
         if st.relinearize_history and self._n_updates % st.relinearize_every == 0:
             start = max(0, start - st.relinearize_history)
-        n_relin = self._relinearize(range(start, k), 1.0, graph, owners, remove) if self._n_updates else 0
+        n_relin = self._relinearize(range(start, k), graph, owners, remove) if self._n_updates else 0
         self._n_updates += 1
         try:
             self._update(graph, values, remove, owners)

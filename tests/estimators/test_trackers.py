@@ -181,6 +181,12 @@ def test_linear_gaussian_surrogate_ekf_isam2_fixed_lag_agree_with_kalman() -> No
 
 
 # -- bad conditions ------------------------------------------------------------------------
+def _paper_at_20_hz(duration: float):
+    """Paper geometry (a), a well-observed track (the scaling benchmark's), 20 scans/s, seed 0."""
+    sc = fd.Scenario(geometry=fd.paper_geometry("a"), x0=(45e3, 4.5e3, -100.0, -20.0), duration=duration, dt=0.05)
+    return sc, fd.simulate(sc, np.random.default_rng(0))
+
+
 def test_isam2_holds_a_well_observed_track_at_20_hz() -> None:
     # At 20 scans/s the 10 most recent states are half a second: a tracker that checked only
     # those left the factors of states it had long moved away from linearised where the
@@ -188,8 +194,7 @@ def test_isam2_holds_a_well_observed_track_at_20_hz() -> None:
     # the history check, 1,200 scans: 0.6 % of the measurements accepted, end error 11.7 km
     # at a stated sd of 55 m).  With it the track holds: nearly every measurement passes the
     # 0.9999 gate and the end state is consistent with its covariance.
-    sc = fd.Scenario(geometry=fd.paper_geometry("a"), x0=(45e3, 4.5e3, -100.0, -20.0), duration=59.95, dt=0.05)
-    sim = fd.simulate(sc, np.random.default_rng(0))
+    sc, sim = _paper_at_20_hz(59.95)
     model = fd.TrackingModel.of(sc.geometry)
     tracker = ISAM2Tracker(model, ISAM2Settings(), model.prior())
     m = sim.measurements
@@ -210,8 +215,7 @@ def test_ekf_from_a_window_in_time_is_consistent_at_20_hz() -> None:
     # 10 (0.45 s) that 10 per pair would give.  Measured on this recording, NEES averaged over
     # 5-20 s: 119 from the short window (init_seconds=0), 10.7 from the 4.5 s one; the bound
     # is the single-time 0.9999 quantile, 23.5.
-    sc = fd.Scenario(geometry=fd.paper_geometry("a"), x0=(45e3, 4.5e3, -100.0, -20.0), duration=19.95, dt=0.05)
-    sim = fd.simulate(sc, np.random.default_rng(0))
+    sc, sim = _paper_at_20_hz(19.95)
     r = fd.track(sim.measurements, sc.geometry, "ekf")
     e = r.primary
     d = e.states - sim.truth.at(e.times)
@@ -385,33 +389,12 @@ def test_wall_held_initiation_does_not_throw_isam2_off() -> None:
     assert np.mean(r.nis[:, 3]) >= 0.9
 
 
-def test_isam2_marginal_equals_its_full_estimate_and_covariance() -> None:
-    # The online estimate is read from the newest state's marginal factor; it must be the
-    # exact MAP and marginal covariance of the current linear system, as iSAM2's full
-    # back-substitution and its own marginalCovariance give them.
-    _, sim, model, init = _setup("b", 5e3)
-    tracker = ISAM2Tracker(model, ISAM2Settings(), model.prior())
-    m = sim.measurements
-    sc = m.scans()
-    start, _ = fd.estimators.window.window_start(model, m.between(0, init.t_end), init)
-    n_win = int(np.searchsorted(sc.times, init.t_end, side="right"))
-    rows = [sc.rows(k) for k in range(len(sc))]
-    tracker.add_window(sc.times[:n_win], [m.pair[r] for r in rows[:n_win]], [m.doppler[r] for r in rows[:n_win]],
-                       [m.sigma[r] for r in rows[:n_win]], start)
-    for k in range(n_win, n_win + 40):
-        x, P = tracker.add_scan(sc.times[k], m.pair[rows[k]], m.doppler[rows[k]], m.sigma[rows[k]])
-        assert P is not None
-        best = tracker.isam.calculateBestEstimate().atVector(X(k))
-        full_P = tracker.isam.marginalCovariance(X(k))
-        sd = np.sqrt(np.diag(full_P))
-        # Both by QR (the condition number of the information matrix reaches ~1e13 here, so a
-        # Cholesky path would lose about six digits; measured agreement is ~1e-10).
-        assert np.all(np.abs(x - best) <= 1e-7 * sd)
-        assert np.max(np.abs(P - full_P)) <= 1e-7 * np.abs(full_P).max()
+def _isam2_feed(model, m, init, settings: ISAM2Settings, check=None, n_scans: int | None = None) -> ISAM2Tracker:
+    """Initiation window in one update, then the later scans (all, or ``n_scans``).
 
-
-def _isam2_feed(model, m, init, settings: ISAM2Settings, check=None) -> ISAM2Tracker:
-    """Initiation window in one update, then every later scan; ``check(tracker, k)`` before each scan."""
+    ``check(tracker, k)`` is called before scan ``k``; what it returns (if not
+    ``None``) is called after it with the filtered ``(x, P)`` that the scan returned.
+    """
     tracker = ISAM2Tracker(model, settings, model.prior())
     sc = m.scans()
     start, _ = fd.estimators.window.window_start(model, m.between(0, init.t_end), init)
@@ -419,12 +402,36 @@ def _isam2_feed(model, m, init, settings: ISAM2Settings, check=None) -> ISAM2Tra
     rows = [sc.rows(k) for k in range(len(sc))]
     tracker.add_window(sc.times[:n_win], [m.pair[r] for r in rows[:n_win]], [m.doppler[r] for r in rows[:n_win]],
                        [m.sigma[r] for r in rows[:n_win]], start)
-    for k in range(n_win, len(sc)):
+    for k in range(n_win, len(sc) if n_scans is None else n_win + n_scans):
         after = check(tracker, k) if check is not None else None
-        tracker.add_scan(sc.times[k], m.pair[rows[k]], m.doppler[rows[k]], m.sigma[rows[k]])
+        x, P = tracker.add_scan(sc.times[k], m.pair[rows[k]], m.doppler[rows[k]], m.sigma[rows[k]])
         if after is not None:
-            after()
+            after(x, P)
     return tracker
+
+
+def test_isam2_marginal_equals_its_full_estimate_and_covariance() -> None:
+    # The online estimate is read from the newest state's marginal factor; it must be the
+    # exact MAP and marginal covariance of the current linear system, as iSAM2's full
+    # back-substitution and its own marginalCovariance give them.
+    _, sim, model, init = _setup("b", 5e3)
+
+    def compare(tracker: ISAM2Tracker, k: int):
+        def after(x: np.ndarray, P: np.ndarray | None) -> None:
+            assert P is not None
+            best = tracker.isam.calculateBestEstimate().atVector(X(k))
+            full_P = tracker.isam.marginalCovariance(X(k))
+            sd = np.sqrt(np.diag(full_P))
+            # Both by QR (the condition number of the information matrix reaches ~1e13 here, so a
+            # Cholesky path would lose about six digits; measured agreement is ~1e-10).
+            assert np.all(np.abs(x - best) <= 1e-7 * sd)
+            assert np.max(np.abs(P - full_P)) <= 1e-7 * np.abs(full_P).max()
+            checked.append(k)
+        return after
+
+    checked: list[int] = []
+    _isam2_feed(model, sim.measurements, init, ISAM2Settings(), compare, n_scans=40)
+    assert len(checked) == 40
 
 
 def _stale(tracker: ISAM2Tracker, ks: list[int], xs: np.ndarray) -> np.ndarray:
@@ -454,7 +461,7 @@ def test_isam2_history_check_leaves_no_stale_factor() -> None:
                 return None
             ks = [j for j in range(k) if tracker.scans[j].lin is not None]
             xs = tracker._means(ks)
-            return lambda: stale.append(int(np.sum(_stale(tracker, ks, xs))))
+            return lambda _x, _P: stale.append(int(np.sum(_stale(tracker, ks, xs))))
 
         _isam2_feed(model, m, init, st, check)
         return stale
