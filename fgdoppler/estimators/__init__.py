@@ -22,6 +22,7 @@ from fgdoppler.estimators.settings import (
     ISAM2Settings,
     ParticleSettings,
     SmootherSettings,
+    StreamingSettings,
     TrackerSettings,
 )
 from fgdoppler.estimators.verdict import STATUSES, Event, Reason
@@ -43,6 +44,7 @@ __all__ = [
     "ParticleSettings",
     "Reason",
     "SmootherSettings",
+    "StreamingSettings",
     "TrackResult",
     "TrackerSettings",
     "estimator_info",

@@ -37,6 +37,7 @@ from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import FixedLagSettings
 from fgdoppler.estimators.verdict import NOT_CONVERGED, Event, Reason
+from fgdoppler.estimators.warmup import WarmUp, start_warmed_up
 from fgdoppler.estimators.window import feed_from_window_start, start_prior
 from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
 from fgdoppler.measurements import Measurements
@@ -79,6 +80,7 @@ class FixedLagTracker:
 
     def __init__(self, model: TrackingModel, settings: FixedLagSettings | None = None,
                  prior: tuple[ArrayLike, ArrayLike] | None = None) -> None:
+        self.tracking_model = model
         self.model = model.observation
         self.motion = model.motion
         self.settings = settings or FixedLagSettings()
@@ -93,6 +95,13 @@ class FixedLagTracker:
         self.converged = True
         self._first_live = 0
         self._last: tuple[FloatArray, FloatArray | None] | None = None
+        self._warmup = (WarmUp(seconds=self.settings.warmup_seconds, per_pair=self.settings.warmup_per_pair,
+                               n_channels=self.model.n_channels) if self.settings.warms_up else None)
+
+    @property
+    def warming_up(self) -> bool:
+        """Whether the tracker still holds its first scans back (:mod:`fgdoppler.estimators.warmup`)."""
+        return self._warmup is not None
 
     def add_window(self, times: ArrayLike, channels: list[ArrayLike], z: list[ArrayLike], sigma: list[ArrayLike],
                    guesses: ArrayLike) -> tuple[FloatArray, FloatArray | None]:
@@ -104,6 +113,10 @@ class FixedLagTracker:
         """
         ts = np.asarray(times, dtype=float).reshape(-1)
         g = np.asarray(guesses, dtype=float).reshape(-1, self.motion.n)
+        if self._warmup is not None and self._warmup.times:
+            raise ValueError("scans are held in the warm-up: add the window before any scan, or switch the "
+                             "warm-up off (warmup_seconds=0, warmup_per_pair=0)")
+        self._warmup = None  # a window is the start the warm-up would build
         first = max(1, int(np.searchsorted(ts, ts[0] + 0.999 * self.settings.lag, side="right")))
         x, P = self.add_scans(ts[:first], channels[:first], z[:first], sigma[:first], g[:first], gate=False)
         for k in range(first, ts.size):
@@ -125,6 +138,13 @@ class FixedLagTracker:
                   guesses: ArrayLike | None = None, *, gate: bool = True) -> tuple[FloatArray, FloatArray | None]:
         """Add one or more scans in one smoother update; returns the newest ``(x, P)``.
 
+        A tracker whose first update is this one warms up
+        (:mod:`fgdoppler.estimators.warmup`): it holds the scans back,
+        ungated, returns a state of NaN and no covariance, and at the scan
+        that completes the warm-up adds them all as one window (from
+        ``guesses[0]``, or without guesses from a multi-start initiation of
+        them); scans after that one in the same call follow as one update.
+
         Raises
         ------
         ValueError
@@ -132,6 +152,8 @@ class FixedLagTracker:
         """
         ts = np.asarray(times, dtype=float).reshape(-1)
         g = None if guesses is None else np.asarray(guesses, dtype=float).reshape(-1, self.motion.n)
+        if self._warmup is not None:
+            return self._hold(ts, channels, z, sigma, g, gate)
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         stamps: dict[Any, Any] = {}  # key -> time (gtsam's stub wants SupportsInt keys)
@@ -149,7 +171,8 @@ class FixedLagTracker:
             elif self._last is not None:
                 x_pred = m.propagate(self._last[0], t - self.times[-1])
             else:
-                raise ValueError("the first scan needs an initial guess")
+                raise ValueError("the first scan needs an initial guess "
+                                 "(or the warm-up on, warmup_seconds > 0, to start without one)")
             if gate and self._last is not None and self._last[1] is not None and cc.size:
                 P_pred = m.predict_covariance(self._last[1], t - self.times[-1])
                 keep = self.gate.scan(self.model, x_pred, P_pred, t, cc, zz, ss)
@@ -162,6 +185,25 @@ class FixedLagTracker:
             stamps[X(k)] = t
             self._last = (np.asarray(x_pred, dtype=float), None if self._last is None else self._last[1])
         return self._update(graph, values, stamps)
+
+    def _hold(self, ts: FloatArray, channels: list[ArrayLike], z: list[ArrayLike], sigma: list[ArrayLike],
+              g: FloatArray | None, gate: bool) -> tuple[FloatArray, FloatArray | None]:
+        """The warm-up part of :meth:`add_scans`."""
+        w = self._warmup
+        assert w is not None
+        for j, t in enumerate(ts):
+            if w.hold(self.model, float(t), channels[j], z[j], sigma[j], None if g is None else g[j]):
+                x, P = self._start_warmed_up()
+                if j + 1 < ts.size:
+                    x, P = self.add_scans(ts[j + 1:], channels[j + 1:], z[j + 1:], sigma[j + 1:],
+                                          None if g is None else g[j + 1:], gate=gate)
+                return x, P
+        return np.full(self.motion.n, np.nan), None
+
+    def _start_warmed_up(self) -> tuple[FloatArray, FloatArray | None]:
+        w, self._warmup = self._warmup, None
+        assert w is not None
+        return start_warmed_up(self, w)
 
     def _update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                 stamps: dict[Any, Any]) -> tuple[FloatArray, FloatArray | None]:
@@ -193,8 +235,11 @@ class FixedLagTracker:
 
         iSAM2 takes one Gauss–Newton step per update, so the last window is
         not at its optimum after the last scan; this brings it there (with a
-        lag longer than the track, to the batch solution).
+        lag longer than the track, to the batch solution).  A tracker still
+        warming up starts from the scans it holds first.
         """
+        if self._warmup is not None and self._warmup.times:
+            self._start_warmed_up()
         if not self.times:
             return
         prev = self._live_estimates()

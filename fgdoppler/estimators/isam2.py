@@ -53,6 +53,7 @@ from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import ISAM2Settings, SmootherSettings
 from fgdoppler.estimators.smoother import solve_smoother
 from fgdoppler.estimators.verdict import NOT_CONVERGED, Event
+from fgdoppler.estimators.warmup import WarmUp, start_warmed_up
 from fgdoppler.estimators.window import feed_from_window_start, start_prior
 from fgdoppler.factors import X, absolute_linear_factor
 from fgdoppler.measurements import Measurements
@@ -77,6 +78,11 @@ class _ScanData:
 
 class ISAM2Tracker:
     """Incremental smoother over a growing constant-velocity trajectory.
+
+    Start it with a window (:meth:`add_window`, as :func:`run_isam2` does
+    with the initiation window), or feed it scans from the first: it then
+    warms up (:mod:`fgdoppler.estimators.warmup`, ``ISAM2Settings.warmup_seconds``),
+    holding them back until they can be solved together.
 
     Parameters
     ----------
@@ -121,6 +127,8 @@ class ISAM2Tracker:
         self._last: tuple[FloatArray, FloatArray | None] | None = None  # newest (x, P) after an update
         self._pending: tuple[gtsam.NonlinearFactorGraph, gtsam.Values, list[int], list[int]] | None = None
         self._n_updates = 0
+        self._warmup = (WarmUp(seconds=self.settings.warmup_seconds, per_pair=self.settings.warmup_per_pair,
+                               n_channels=self.model.n_channels) if self.settings.warms_up else None)
 
     # -- helpers ----------------------------------------------------------------
     def _meas_factor(self, k: int, x_lin: FloatArray) -> gtsam.LinearContainerFactor | None:
@@ -239,6 +247,10 @@ class ISAM2Tracker:
         g = np.asarray(guesses, dtype=float).reshape(-1, self.motion_model.n)
         if ts.size == 0:
             raise ValueError("add_window needs at least one scan")
+        if self._warmup is not None and self._warmup.times:
+            raise ValueError("scans are held in the warm-up: add the window before any scan, or switch the "
+                             "warm-up off (warmup_seconds=0, warmup_per_pair=0)")
+        self._warmup = None  # a window is the start the warm-up would build
         self._pending = (gtsam.NonlinearFactorGraph(), gtsam.Values(), [], [])
         for k in range(ts.size - 1):
             self.add_scan(ts[k], channels[k], z[k], sigma[k], g[k], gate=False, _defer=True)
@@ -257,16 +269,30 @@ class ISAM2Tracker:
             The measurements of this time.
         x_guess
             Initial value of the new state (default: prediction from the
-            previous estimate; required for the very first scan).
+            previous estimate).  At the very first scan: the start of the
+            warm-up's solution (without one, a multi-start initiation of the
+            warm-up's scans finds it), or, with the warm-up off, required.
         gate
             Apply the NIS gate against the prediction (needs a previous
-            covariance).
+            covariance; the warm-up's scans are not gated).
+
+        Returns
+        -------
+        x, P
+            The new state's filtered estimate and covariance (``None`` when
+            indeterminate).  During the warm-up (a tracker whose first update
+            is a scan, :attr:`warming_up`): a state of NaN and ``None``, and
+            at the scan that completes it, the estimate from all its scans.
 
         Raises
         ------
         ValueError
             If ``t`` is not after the previous scan (out of order).
         """
+        if self._warmup is not None and not _defer:
+            if not self._warmup.hold(self.model, t, channels, z, sigma, x_guess):
+                return np.full(self.motion_model.n, np.nan), None
+            return self._start_warmed_up()
         t = float(t)
         if self.times and not t > self.times[-1]:
             raise ValueError(f"scan at t = {t} is not after the previous scan at t = {self.times[-1]}: out of order")
@@ -300,24 +326,37 @@ class ISAM2Tracker:
                 "(an underdetermined start: add the initiation window in one update, or use a prior)"
             ) from exc
         self.relinearized.append(n_relin)
-        P: FloatArray | None
+        self._last = self._filtered(k, t)
+        return self._last
+
+    def _filtered(self, k: int, t: float) -> tuple[FloatArray, FloatArray | None]:
+        """The newest state's estimate and covariance (``None`` and an event when indeterminate)."""
         try:
             x, P = self._marginal(k)
             if not (np.all(np.isfinite(P)) and np.all(np.isfinite(x))):
                 raise RuntimeError("non-finite marginal")
         except (RuntimeError, np.linalg.LinAlgError) as exc:
             self.events.append(Event(time=t, message=f"marginal covariance indeterminate: {first_line(exc)}"))
-            x = np.asarray(self.isam.calculateEstimate([X(k)]).atVector(X(k)), dtype=float)
-            P = None
-        self._last = (x, P)
+            return np.asarray(self.isam.calculateEstimate([X(k)]).atVector(X(k)), dtype=float), None
         return x, P
+
+    @property
+    def warming_up(self) -> bool:
+        """Whether the tracker still holds its first scans back (:mod:`fgdoppler.estimators.warmup`)."""
+        return self._warmup is not None
+
+    def _start_warmed_up(self) -> tuple[FloatArray, FloatArray | None]:
+        w, self._warmup = self._warmup, None
+        assert w is not None
+        return start_warmed_up(self, w)
 
     def _predict(self, t: float, x_guess: ArrayLike | None) -> tuple[FloatArray, FloatArray | None]:
         """Initial value of the state at ``t`` and its predicted covariance (``None`` when unknown)."""
         k = len(self.times)
         if k == 0:
             if x_guess is None:
-                raise ValueError("the first scan needs an initial guess x_guess")
+                raise ValueError("the first scan needs an initial guess x_guess "
+                                 "(or the warm-up on, warmup_seconds > 0, to start without one)")
             return np.asarray(x_guess, dtype=float), None
         dt = t - self.times[-1]
         m = self.motion_model
@@ -373,8 +412,11 @@ class ISAM2Tracker:
         3,600 factors of a slow target, 13 s); LM with Marquardt scaling
         converges there and costs O(N) per iteration.  ``final_passes`` caps
         its iterations; ``converged`` is cleared and an event added when it
-        does not converge.
+        does not converge.  A tracker still warming up starts from the
+        scans it holds first.
         """
+        if self._warmup is not None and self._warmup.times:
+            self._start_warmed_up()
         n = len(self.times)
         best = self.isam.calculateBestEstimate()
         start = np.array([best.atVector(X(j)) for j in range(n)])

@@ -36,7 +36,7 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.progress import Progress, advance, start_task
 
-__all__ = ["StreamingTracker", "feed_from_window_start", "split_window", "window_start"]
+__all__ = ["StreamingTracker", "feed_from_window_start", "solve_window", "split_window", "window_start"]
 
 FloatArray = NDArray[np.float64]
 
@@ -61,14 +61,26 @@ def window_start(model: TrackingModel, window: Measurements, init: Initiation, *
         constant-velocity track of ``init.x_start`` is returned then).
     """
     guesses = model.motion.propagate(init.x_start, window.scans().times - init.t_start)
-    graph, _ = chain_graph(window, model.observation, model.motion, prior=model.prior(), huber_k=huber_k)
+    return solve_window(model, window, guesses, prior=model.prior(), huber_k=huber_k, max_iterations=max_iterations)
+
+
+def solve_window(model: TrackingModel, window: Measurements, guesses: ArrayLike, *,
+                 prior: tuple[ArrayLike, ArrayLike] | None, huber_k: float | None = None,
+                 max_iterations: int = 100) -> tuple[FloatArray, str | None]:
+    """Levenberg–Marquardt (QR) on the window's chain graph with ``prior`` on its first state.
+
+    ``guesses`` holds one state per scan of ``window``.  Returns the states
+    and ``None``, or the guesses and the reason LM failed.
+    """
+    g = np.asarray(guesses, dtype=float).reshape(-1, model.n)
+    graph, _ = chain_graph(window, model.observation, model.motion, prior=prior, huber_k=huber_k)
     try:
-        result = gtsam.LevenbergMarquardtOptimizer(graph, chain_values(guesses), lm_params(max_iterations)).optimize()
+        result = gtsam.LevenbergMarquardtOptimizer(graph, chain_values(g), lm_params(max_iterations)).optimize()
     except (RuntimeError, ValueError) as exc:  # ValueError: a state on a sensor
-        return guesses, f"window start: LM failed ({first_line(exc)}); starting on the CV track"
-    states = np.array([result.atVector(X(k)) for k in range(len(guesses))])
+        return g, f"window start: LM failed ({first_line(exc)}); starting on the CV track"
+    states = np.array([result.atVector(X(k)) for k in range(len(g))])
     if not np.all(np.isfinite(states)):
-        return guesses, "window start: LM gave non-finite states; starting on the CV track"
+        return g, "window start: LM gave non-finite states; starting on the CV track"
     return states, None
 
 

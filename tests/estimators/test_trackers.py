@@ -162,8 +162,10 @@ def test_linear_gaussian_surrogate_ekf_isam2_fixed_lag_agree_with_kalman() -> No
     ref = _kalman(x0, P0, 0.0, scans, motion)
     ekf = ExtendedKalmanFilter(tm, x0, P0, 0.0, EKFSettings(gate_probability=None))
     vec = ExtendedKalmanFilter(tm, x0, P0, 0.0, EKFSettings(gate_probability=None, update="scan"))
-    isam = ISAM2Tracker(tm, ISAM2Settings(gate_probability=None), prior=None)
-    fl = FixedLagTracker(tm, FixedLagSettings(gate_probability=None, lag=2.5), prior=None)
+    # an exact prior: every scan is one update from the first (no warm-up)
+    cold = {"warmup_seconds": 0.0, "warmup_per_pair": 0}
+    isam = ISAM2Tracker(tm, ISAM2Settings(gate_probability=None, **cold), prior=None)
+    fl = FixedLagTracker(tm, FixedLagSettings(gate_probability=None, lag=2.5, **cold), prior=None)
     # iSAM2/fixed-lag: a state at t = 0 with the prior and no measurement, then the scans
     isam.prior = (x0, P0)
     isam.add_scan(0.0, [], [], [], x0)
@@ -193,10 +195,11 @@ def test_isam2_holds_a_well_observed_track_at_20_hz() -> None:
     # states were while it converged from the prior, and lost the target (measured without
     # the history check, 1,200 scans: 0.6 % of the measurements accepted, end error 11.7 km
     # at a stated sd of 55 m).  With it the track holds: nearly every measurement passes the
-    # 0.9999 gate and the end state is consistent with its covariance.
+    # 0.9999 gate and the end state is consistent with its covariance.  Streamed from the
+    # first scan (the warm-up off), as the check has to hold the track from there.
     sc, sim = _paper_at_20_hz(59.95)
     model = fd.TrackingModel.of(sc.geometry)
-    tracker = ISAM2Tracker(model, ISAM2Settings(), model.prior())
+    tracker = ISAM2Tracker(model, ISAM2Settings(warmup_seconds=0.0, warmup_per_pair=0), model.prior())
     m = sim.measurements
     scans = m.scans()
     x0 = sim.truth.states[0]
@@ -281,11 +284,12 @@ def test_out_of_order_is_rejected_in_streaming_and_batch_input() -> None:
     ekf = ExtendedKalmanFilter(model, x0, np.eye(4), 1.0)
     with pytest.raises(ValueError, match="out of order"):
         ekf.update(0.5, 0, 1.0, 1.0)
-    tr = ISAM2Tracker(model, prior=(x0, np.eye(4)))
+    cold = {"warmup_seconds": 0.0, "warmup_per_pair": 0}  # the warm-up's own check: test_warmup.py
+    tr = ISAM2Tracker(model, ISAM2Settings(**cold), prior=(x0, np.eye(4)))
     tr.add_scan(1.0, [0, 1], [0.0, 0.0], [1.0, 1.0], x0)
     with pytest.raises(ValueError, match="out of order"):
         tr.add_scan(1.0, [0], [0.0], [1.0])
-    fl = FixedLagTracker(model, prior=(x0, np.eye(4)))
+    fl = FixedLagTracker(model, FixedLagSettings(**cold), prior=(x0, np.eye(4)))
     fl.add_scans([1.0], [[0]], [[0.0]], [[1.0]], [x0])
     with pytest.raises(ValueError, match="out of order"):
         fl.add_scans([0.5], [[0]], [[0.0]], [[1.0]])
