@@ -2,10 +2,25 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
+from threadpoolctl import threadpool_limits
 
 import fgdoppler as fd
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """One BLAS thread in each pytest-xdist worker (and the commands the tests start from it).
+
+    numpy's OpenBLAS starts a thread per core in every process, and with two
+    workers on two cores those threads only spin against each other
+    (docs/concepts.md, "Running many tracks at once").
+    """
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        os.environ["OPENBLAS_NUM_THREADS"] = "1"
+        threadpool_limits(1)
 
 
 def random_geometry(rng: np.random.Generator, n_pairs: int | None = None) -> fd.Geometry:
