@@ -103,6 +103,14 @@ def test_warm_up_edges() -> None:
             _stream(tracker, m.subset(m.time == 1.0))
         with pytest.raises(ValueError, match="outside a model"):
             _stream(tracker, fd.Measurements.from_arrays([3.5], [5], [1.0], 1.0))
+        held = len(tracker._warmup.times)
+        for z, sigma, what in ((np.nan, 1.0, "not finite"), (1.0, 0.0, "sigma")):
+            with pytest.raises(fd.MeasurementError, match=what):
+                if isinstance(tracker, ISAM2Tracker):
+                    tracker.add_scan(3.6, [0], [z], [sigma])
+                else:
+                    tracker.add_scans([3.6], [[0]], [[z]], [[sigma]])
+        assert len(tracker._warmup.times) == held  # a refused scan is not held
         with pytest.raises(ValueError, match="held in the warm-up"):
             tracker.add_window([4.0], [[0]], [[0.0]], [[1.0]], sim.truth.states[:1])
         tracker.finish()  # a track shorter than the warm-up: finish starts from the held scans
