@@ -17,7 +17,7 @@ SIZES = (60, 600, 7200)
 REPEATS = 3
 
 
-def _stream(tracker: object, sim: fd.Simulation, n_window: int) -> tuple[np.ndarray, float, float, float]:
+def _stream(tracker: ISAM2Tracker | FixedLagTracker, sim: fd.Simulation, n_window: int) -> tuple[np.ndarray, float, float, float]:
     """Per-scan latencies, the share of gated measurements accepted, and the end error and its sd (m).
 
     A tracker that lost the track rejects nearly everything and costs almost
@@ -32,14 +32,10 @@ def _stream(tracker: object, sim: fd.Simulation, n_window: int) -> tuple[np.ndar
     for k in range(len(sc)):
         sl = sc.rows(k)
         t = time.perf_counter()
-        if isinstance(tracker, ISAM2Tracker):
-            x, P = tracker.add_scan(sc.times[k], m.pair[sl], m.doppler[sl], m.sigma[sl], x0 if k == 0 else None,
-                                    gate=k >= n_window)
-        else:
-            x, P = tracker.add_scans([sc.times[k]], [m.pair[sl]], [m.doppler[sl]],  # type: ignore[attr-defined]
-                                     [m.sigma[sl]], [x0] if k == 0 else None, gate=k >= n_window)
+        x, P = tracker.add_scan(sc.times[k], m.pair[sl], m.doppler[sl], m.sigma[sl], x0 if k == 0 else None,
+                                gate=k >= n_window)
         lat.append(time.perf_counter() - t)
-    nis = tracker.gate.as_array()  # type: ignore[attr-defined]
+    nis = tracker.gate.as_array()
     accepted = float(np.mean(nis[:, 3])) if nis.size else 1.0
     error = float(np.hypot(*(np.asarray(x) - sim.truth.states[-1])[:2]))
     sd = float(np.sqrt(P[0, 0] + P[1, 1])) if P is not None else float("nan")

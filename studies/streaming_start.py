@@ -50,11 +50,7 @@ def one_run(name: str, dt: float, duration: float, seed: int, warmup: dict[str, 
     for k in range(len(s)):
         r = s.rows(k)
         g = x0 if (k == 0 and guess) else None
-        if isinstance(tracker, ISAM2Tracker):
-            x, P = tracker.add_scan(s.times[k], m.pair[r], m.doppler[r], m.sigma[r], g, gate=k >= 20)
-        else:
-            x, P = tracker.add_scans([s.times[k]], [m.pair[r]], [m.doppler[r]], [m.sigma[r]],
-                                     None if g is None else [g], gate=k >= 20)
+        x, P = tracker.add_scan(s.times[k], m.pair[r], m.doppler[r], m.sigma[r], g, gate=k >= 20)
         if P is not None and s.times[k] >= 10.0:
             d = x - sim.truth.states[k]
             nees.append(float(d @ np.linalg.solve(P, d)))

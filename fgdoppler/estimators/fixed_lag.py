@@ -123,9 +123,17 @@ class FixedLagTracker:
             x, P = self.add_scans(ts[k:k + 1], channels[k:k + 1], z[k:k + 1], sigma[k:k + 1], g[k:k + 1], gate=False)
         return x, P
 
-    def add_scan(self, t: float, channels: ArrayLike, z: ArrayLike, sigma: ArrayLike) -> tuple[FloatArray, FloatArray | None]:
-        """Add one scan (gated); returns the newest ``(x, P)``."""
-        return self.add_scans([t], [channels], [z], [sigma])
+    def add_scan(self, t: float, channels: ArrayLike, z: ArrayLike, sigma: ArrayLike,
+                 x_guess: ArrayLike | None = None, *, gate: bool = True) -> tuple[FloatArray, FloatArray | None]:
+        """Add one scan; returns the newest ``(x, P)`` (as :meth:`add_scans` with one scan).
+
+        ``x_guess`` is the new state's initial value (default: the previous
+        estimate moved by the motion model; needed for the first scan unless
+        the warm-up is on), ``gate`` whether the NIS gate applies, as in
+        :meth:`ISAM2Tracker.add_scan <fgdoppler.estimators.isam2.ISAM2Tracker.add_scan>`.
+        """
+        guesses = None if x_guess is None else np.asarray(x_guess, dtype=float)[None]
+        return self.add_scans([t], [channels], [z], [sigma], guesses, gate=gate)
 
     def _factors(self, k: int, t: float, c: NDArray[np.intp], z: FloatArray, s: FloatArray,
                  graph: gtsam.NonlinearFactorGraph) -> None:

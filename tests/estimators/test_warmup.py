@@ -30,11 +30,7 @@ def _stream(tracker, m: fd.Measurements, guess: np.ndarray | None = None, until:
             break
         r = sc.rows(k)
         g = guess if k == 0 else None
-        if isinstance(tracker, ISAM2Tracker):
-            x, P = tracker.add_scan(sc.times[k], m.pair[r], m.doppler[r], m.sigma[r], g)
-        else:
-            x, P = tracker.add_scans([sc.times[k]], [m.pair[r]], [m.doppler[r]], [m.sigma[r]],
-                                     None if g is None else [g])
+        x, P = tracker.add_scan(sc.times[k], m.pair[r], m.doppler[r], m.sigma[r], g)
         out.append((float(sc.times[k]), x, P, tracker.warming_up))
     return out
 
@@ -106,16 +102,22 @@ def test_warm_up_edges() -> None:
         held = len(tracker._warmup.times)
         for z, sigma, what in ((np.nan, 1.0, "not finite"), (1.0, 0.0, "sigma")):
             with pytest.raises(fd.MeasurementError, match=what):
-                if isinstance(tracker, ISAM2Tracker):
-                    tracker.add_scan(3.6, [0], [z], [sigma])
-                else:
-                    tracker.add_scans([3.6], [[0]], [[z]], [[sigma]])
+                tracker.add_scan(3.6, [0], [z], [sigma])
         assert len(tracker._warmup.times) == held  # a refused scan is not held
         with pytest.raises(ValueError, match="held in the warm-up"):
             tracker.add_window([4.0], [[0]], [[0.0]], [[1.0]], sim.truth.states[:1])
         tracker.finish()  # a track shorter than the warm-up: finish starts from the held scans
         assert not tracker.warming_up
         assert len(tracker.times) == len(short.scans())
+    # the warm-up off: one update per scan from the first, which needs a guess (both trackers alike)
+    for cold in (ISAM2Tracker(model, ISAM2Settings(**COLD), model.prior()),
+                 FixedLagTracker(model, FixedLagSettings(), model.prior())):
+        assert not cold.warming_up
+        r = m.scans().rows(0)
+        with pytest.raises(ValueError, match="initial guess"):
+            cold.add_scan(0.0, m.pair[r], m.doppler[r], m.sigma[r])
+        x, _ = cold.add_scan(0.0, m.pair[r], m.doppler[r], m.sigma[r], sim.truth.states[0])
+        assert np.all(np.isfinite(x))
     # a window first: no warm-up at all
     tr = ISAM2Tracker(model, ISAM2Settings(), model.prior())
     first = m.scans()
