@@ -34,10 +34,11 @@ from numpy.typing import ArrayLike, NDArray
 from fgdoppler._text import first_line
 from fgdoppler.estimators.gating import NISGate
 from fgdoppler.estimators.initiation import Initiation
+from fgdoppler.estimators.local import LocalFrame
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import FixedLagSettings
 from fgdoppler.estimators.verdict import NOT_CONVERGED, Event, Reason
-from fgdoppler.estimators.warmup import WarmUp, start_warmed_up
+from fgdoppler.estimators.warmup import WarmUp
 from fgdoppler.estimators.window import feed_from_window_start, start_prior
 from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
 from fgdoppler.measurements import Measurements
@@ -68,6 +69,10 @@ def _params() -> gtsam.ISAM2Params:
 class FixedLagTracker:
     """Streaming fixed-lag smoother.
 
+    Guesses, the prior and every estimate (the returned ones and
+    :attr:`lagged`) are in the model's coordinates; the smoother computes in
+    its computation frame (:mod:`fgdoppler.estimators.local`).
+
     Parameters
     ----------
     model
@@ -80,12 +85,13 @@ class FixedLagTracker:
 
     def __init__(self, model: TrackingModel, settings: FixedLagSettings | None = None,
                  prior: tuple[ArrayLike, ArrayLike] | None = None) -> None:
-        self.tracking_model = model
-        self.model = model.observation
-        self.motion = model.motion
+        # computed in the model's computation frame; states cross at the public methods
+        self.local, self.tracking_model = LocalFrame.of(model)
+        self.model = self.tracking_model.observation
+        self.motion = self.tracking_model.motion
         self.settings = settings or FixedLagSettings()
         self.smoother = gtsam.IncrementalFixedLagSmoother(self.settings.lag, _params())
-        self.prior = prior
+        self.prior = self.local.prior_in(prior)  # in the computation frame
         self.times: list[float] = []
         self.events: list[Event] = []
         self.gate = NISGate(self.settings.gate_probability, self.events)
@@ -111,16 +117,22 @@ class FixedLagTracker:
         determined); later window scans one by one, so every state is
         recorded before it is marginalised.
         """
+        g = self.local.state_in(np.asarray(guesses, dtype=float).reshape(-1, self.motion.n))
+        return self.local.out(*self._add_window(times, channels, z, sigma, g))
+
+    def _add_window(self, times: ArrayLike, channels: list[ArrayLike], z: list[ArrayLike], sigma: list[ArrayLike],
+                    g: FloatArray) -> tuple[FloatArray, FloatArray | None]:
+        """:meth:`add_window` in the computation frame."""
         ts = np.asarray(times, dtype=float).reshape(-1)
-        g = np.asarray(guesses, dtype=float).reshape(-1, self.motion.n)
         if self._warmup is not None and self._warmup.times:
             raise ValueError("scans are held in the warm-up: add the window before any scan, or switch the "
                              "warm-up off (warmup_seconds=0, warmup_per_pair=0)")
         self._warmup = None  # a window is the start the warm-up would build
         first = max(1, int(np.searchsorted(ts, ts[0] + 0.999 * self.settings.lag, side="right")))
-        x, P = self.add_scans(ts[:first], channels[:first], z[:first], sigma[:first], g[:first], gate=False)
+        x, P = self._add_scans(ts[:first], channels[:first], z[:first], sigma[:first], g[:first], gate=False)
         for k in range(first, ts.size):
-            x, P = self.add_scans(ts[k:k + 1], channels[k:k + 1], z[k:k + 1], sigma[k:k + 1], g[k:k + 1], gate=False)
+            x, P = self._add_scans(ts[k:k + 1], channels[k:k + 1], z[k:k + 1], sigma[k:k + 1], g[k:k + 1],
+                                   gate=False)
         return x, P
 
     def add_scan(self, t: float, channels: ArrayLike, z: ArrayLike, sigma: ArrayLike,
@@ -159,9 +171,15 @@ class FixedLagTracker:
             If a scan is not after the previous one (out of order).
         """
         ts = np.asarray(times, dtype=float).reshape(-1)
-        g = None if guesses is None else np.asarray(guesses, dtype=float).reshape(-1, self.motion.n)
+        g = None if guesses is None else self.local.state_in(np.asarray(guesses, dtype=float).reshape(-1, self.motion.n))
         if self._warmup is not None:
-            return self._hold(ts, channels, z, sigma, g, gate)
+            return self.local.out(*self._hold(ts, channels, z, sigma, g, gate))
+        return self.local.out(*self._add_scans(ts, channels, z, sigma, g, gate=gate))
+
+    def _add_scans(self, times: ArrayLike, channels: list[ArrayLike], z: list[ArrayLike], sigma: list[ArrayLike],
+                   g: FloatArray | None, *, gate: bool) -> tuple[FloatArray, FloatArray | None]:
+        """:meth:`add_scans` in the computation frame, after the warm-up."""
+        ts = np.asarray(times, dtype=float).reshape(-1)
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         stamps: dict[Any, Any] = {}  # key -> time (gtsam's stub wants SupportsInt keys)
@@ -203,15 +221,16 @@ class FixedLagTracker:
             if w.hold(self.model, float(t), channels[j], z[j], sigma[j], None if g is None else g[j]):
                 x, P = self._start_warmed_up()
                 if j + 1 < ts.size:
-                    x, P = self.add_scans(ts[j + 1:], channels[j + 1:], z[j + 1:], sigma[j + 1:],
-                                          None if g is None else g[j + 1:], gate=gate)
+                    x, P = self._add_scans(ts[j + 1:], channels[j + 1:], z[j + 1:], sigma[j + 1:],
+                                           None if g is None else g[j + 1:], gate=gate)
                 return x, P
         return np.full(self.motion.n, np.nan), None
 
     def _start_warmed_up(self) -> tuple[FloatArray, FloatArray | None]:
         w, self._warmup = self._warmup, None
         assert w is not None
-        return start_warmed_up(self, w)
+        states = w.start(self.tracking_model, self.prior, huber_k=self.settings.huber_k, events=self.events)
+        return self._add_window(w.times, list(w.channels), list(w.z), list(w.sigma), states)
 
     def _update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                 stamps: dict[Any, Any]) -> tuple[FloatArray, FloatArray | None]:
@@ -290,7 +309,7 @@ class FixedLagTracker:
                 P = np.asarray(self.smoother.marginalCovariance(X(j)), dtype=float)
             except RuntimeError:
                 P = None
-            self.lagged[j] = (np.asarray(est.atVector(X(j)), dtype=float), P)
+            self.lagged[j] = self.local.out(np.asarray(est.atVector(X(j)), dtype=float), P)
         if which is not None and live:
             self._first_live = max(live) + 1
         elif live:

@@ -49,11 +49,12 @@ from fgdoppler._text import first_line
 from fgdoppler.estimators.gating import NISGate
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
+from fgdoppler.estimators.local import LocalFrame
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import ISAM2Settings, SmootherSettings
 from fgdoppler.estimators.smoother import solve_smoother
 from fgdoppler.estimators.verdict import NOT_CONVERGED, Event
-from fgdoppler.estimators.warmup import WarmUp, start_warmed_up
+from fgdoppler.estimators.warmup import WarmUp
 from fgdoppler.estimators.window import feed_from_window_start, start_prior
 from fgdoppler.factors import X, absolute_linear_factor
 from fgdoppler.measurements import Measurements
@@ -82,7 +83,10 @@ class ISAM2Tracker:
     Start it with a window (:meth:`add_window`, as :func:`run_isam2` does
     with the initiation window), or feed it scans from the first: it then
     warms up (:mod:`fgdoppler.estimators.warmup`, ``ISAM2Settings.warmup_seconds``),
-    holding them back until they can be solved together.
+    holding them back until they can be solved together.  Guesses, the prior
+    and every estimate are in the model's coordinates; the tracker computes
+    in its computation frame (:mod:`fgdoppler.estimators.local`), so its
+    answers move with a rigidly moved problem.
 
     Parameters
     ----------
@@ -96,9 +100,10 @@ class ISAM2Tracker:
 
     def __init__(self, model: TrackingModel, settings: ISAM2Settings | None = None,
                  prior: tuple[ArrayLike, ArrayLike] | None = None) -> None:
-        self.tracking_model = model
-        self.model = model.observation
-        self.motion_model = model.motion
+        # computed in the model's computation frame; states cross at the public methods
+        self.local, self.tracking_model = LocalFrame.of(model)
+        self.model = self.tracking_model.observation
+        self.motion_model = self.tracking_model.motion
         self.settings = settings or ISAM2Settings()
         params = gtsam.ISAM2Params()
         params.setFactorization("QR")
@@ -116,7 +121,7 @@ class ISAM2Tracker:
         params.setOptimizationParams(gn)
         self.isam = gtsam.ISAM2(params)
         self.motion = MotionBlocks(self.motion_model)
-        self.prior = None if prior is None else (np.asarray(prior[0], float), np.asarray(prior[1], float))
+        self.prior = self.local.prior_in(prior)  # in the computation frame
         self.times: list[float] = []
         self.scans: list[_ScanData] = []
         self.relinearized: list[int] = []
@@ -243,8 +248,13 @@ class ISAM2Tracker:
         a single scan is not (two Doppler values, four unknowns).  Returns the
         filtered ``(x, P)`` of the last state.
         """
+        g = self.local.state_in(np.asarray(guesses, dtype=float).reshape(-1, self.motion_model.n))
+        return self.local.out(*self._add_window(times, channels, z, sigma, g))
+
+    def _add_window(self, times: ArrayLike, channels: list[ArrayLike], z: list[ArrayLike], sigma: list[ArrayLike],
+                    g: FloatArray) -> tuple[FloatArray, FloatArray | None]:
+        """:meth:`add_window` in the computation frame."""
         ts = np.asarray(times, dtype=float).reshape(-1)
-        g = np.asarray(guesses, dtype=float).reshape(-1, self.motion_model.n)
         if ts.size == 0:
             raise ValueError("add_window needs at least one scan")
         if self._warmup is not None and self._warmup.times:
@@ -253,12 +263,11 @@ class ISAM2Tracker:
         self._warmup = None  # a window is the start the warm-up would build
         self._pending = (gtsam.NonlinearFactorGraph(), gtsam.Values(), [], [])
         for k in range(ts.size - 1):
-            self.add_scan(ts[k], channels[k], z[k], sigma[k], g[k], gate=False, _defer=True)
-        return self.add_scan(ts[-1], channels[-1], z[-1], sigma[-1], g[-1], gate=False)
+            self._add_scan(ts[k], channels[k], z[k], sigma[k], g[k], gate=False, defer=True)
+        return self._add_scan(ts[-1], channels[-1], z[-1], sigma[-1], g[-1], gate=False)
 
     def add_scan(self, t: float, channels: ArrayLike, z: ArrayLike, sigma: ArrayLike,
-                 x_guess: ArrayLike | None = None, *, gate: bool = True,
-                 _defer: bool = False) -> tuple[FloatArray, FloatArray | None]:
+                 x_guess: ArrayLike | None = None, *, gate: bool = True) -> tuple[FloatArray, FloatArray | None]:
         """Add the measurements of one time; returns the filtered ``(x, P)`` of the new state.
 
         Parameters
@@ -289,10 +298,16 @@ class ISAM2Tracker:
         ValueError
             If ``t`` is not after the previous scan (out of order).
         """
-        if self._warmup is not None and not _defer:
-            if not self._warmup.hold(self.model, t, channels, z, sigma, x_guess):
+        guess = None if x_guess is None else self.local.state_in(x_guess)
+        if self._warmup is not None:
+            if not self._warmup.hold(self.model, t, channels, z, sigma, guess):
                 return np.full(self.motion_model.n, np.nan), None
-            return self._start_warmed_up()
+            return self.local.out(*self._start_warmed_up())
+        return self.local.out(*self._add_scan(t, channels, z, sigma, guess, gate=gate))
+
+    def _add_scan(self, t: float, channels: ArrayLike, z: ArrayLike, sigma: ArrayLike,
+                  x_guess: FloatArray | None, *, gate: bool, defer: bool = False) -> tuple[FloatArray, FloatArray | None]:
+        """:meth:`add_scan` in the computation frame, after the warm-up; ``defer`` keeps the update for later."""
         t = float(t)
         if self.times and not t > self.times[-1]:
             raise ValueError(f"scan at t = {t} is not after the previous scan at t = {self.times[-1]}: out of order")
@@ -308,7 +323,7 @@ class ISAM2Tracker:
         self.scans.append(_ScanData(channels=c[keep], z=zz[keep], sigma=ss[keep]))
         graph, values, owners, remove = self._pending or (gtsam.NonlinearFactorGraph(), gtsam.Values(), [], [])
         self._add_factors(k, x_pred, graph, values, owners)
-        if _defer:
+        if defer:
             self._pending = (graph, values, owners, remove)
             return x_pred, None
         self._pending = None
@@ -348,7 +363,8 @@ class ISAM2Tracker:
     def _start_warmed_up(self) -> tuple[FloatArray, FloatArray | None]:
         w, self._warmup = self._warmup, None
         assert w is not None
-        return start_warmed_up(self, w)
+        states = w.start(self.tracking_model, self.prior, huber_k=self.settings.huber_k, events=self.events)
+        return self._add_window(w.times, list(w.channels), list(w.z), list(w.sigma), states)
 
     def _predict(self, t: float, x_guess: ArrayLike | None) -> tuple[FloatArray, FloatArray | None]:
         """Initial value of the state at ``t`` and its predicted covariance (``None`` when unknown)."""
@@ -422,7 +438,7 @@ class ISAM2Tracker:
         start = np.array([best.atVector(X(j)) for j in range(n)])
         if not any(sd.channels.size for sd in self.scans):  # a prior and motion only: linear, solved already
             covs = np.array([self.isam.marginalCovariance(X(j)) for j in range(n)]) if covariances else None
-            return start, covs
+            return self.local.out(start, covs)
         lm = SmootherSettings(huber_k=self.settings.huber_k, max_iterations=self.settings.final_passes,
                               covariances=covariances, reinitiate=False, region_bound=False)
         sol = solve_smoother(self.kept_measurements(), self.tracking_model, start, lm, prior=self.prior,
@@ -432,7 +448,7 @@ class ISAM2Tracker:
             if r.code == "not-converged":
                 self.converged = False
             self.events.append(Event(time=self.times[-1], message=f"final smoothing: {r.message}"))
-        return sol.states, sol.covariances
+        return self.local.out(sol.states, sol.covariances)
 
 
 def run_isam2(

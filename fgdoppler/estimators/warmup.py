@@ -36,20 +36,18 @@ covariance.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.estimators.initiation import initiate
-from fgdoppler.estimators.settings import StreamingSettings
 from fgdoppler.estimators.verdict import Event
-from fgdoppler.estimators.window import StreamingTracker, solve_window
+from fgdoppler.estimators.window import solve_window
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import MeasurementModel, check_channels
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["WarmUp", "start_warmed_up"]
+__all__ = ["WarmUp"]
 
 FloatArray = NDArray[np.float64]
 
@@ -159,25 +157,3 @@ class WarmUp:
         idx = np.clip(np.searchsorted(scan_times, ts, side="right") - 1, 0, None)
         return model.motion.propagate(states[idx], ts - scan_times[idx])
 
-
-class _Warming(StreamingTracker, Protocol):
-    """What :func:`start_warmed_up` needs from a tracker."""
-
-    @property
-    def tracking_model(self) -> TrackingModel: ...
-
-    @property
-    def prior(self) -> tuple[ArrayLike, ArrayLike] | None: ...
-
-    @property
-    def settings(self) -> StreamingSettings: ...
-
-    @property
-    def events(self) -> list[Event]: ...
-
-
-def start_warmed_up(tracker: _Warming, warmup: WarmUp) -> tuple[FloatArray, FloatArray | None]:
-    """Add ``warmup``'s scans to ``tracker`` as one window from their joint solution; its newest ``(x, P)``."""
-    states = warmup.start(tracker.tracking_model, tracker.prior, huber_k=tracker.settings.huber_k,
-                          events=tracker.events)
-    return tracker.add_window(warmup.times, list(warmup.channels), list(warmup.z), list(warmup.sigma), states)
