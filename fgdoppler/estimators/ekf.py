@@ -44,6 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.estimators.gating import NISGate
 from fgdoppler.estimators.initiation import OUTLIER_CUT, Initiation
+from fgdoppler.estimators.local import in_computation_frame
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import EKFSettings
 from fgdoppler.estimators.verdict import Event, Reason
@@ -275,6 +276,7 @@ class ExtendedKalmanFilter:
         return nis
 
 
+@in_computation_frame
 def run_ekf(
     measurements: Measurements,
     model: TrackingModel,

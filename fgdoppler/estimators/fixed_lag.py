@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 from fgdoppler._text import first_line
 from fgdoppler.estimators.gating import NISGate
 from fgdoppler.estimators.initiation import Initiation
-from fgdoppler.estimators.local import LocalFrame
+from fgdoppler.estimators.local import LocalFrame, in_computation_frame
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import FixedLagSettings
 from fgdoppler.estimators.verdict import NOT_CONVERGED, Event, Reason
@@ -346,6 +346,7 @@ class FixedLagTracker:
         return x, P
 
 
+@in_computation_frame
 def run_fixed_lag(
     measurements: Measurements,
     model: TrackingModel,

@@ -49,7 +49,7 @@ from fgdoppler._text import first_line
 from fgdoppler.estimators.gating import NISGate
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
-from fgdoppler.estimators.local import LocalFrame
+from fgdoppler.estimators.local import LocalFrame, in_computation_frame
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import ISAM2Settings, SmootherSettings
 from fgdoppler.estimators.smoother import solve_smoother
@@ -451,6 +451,7 @@ class ISAM2Tracker:
         return self.local.out(sol.states, sol.covariances)
 
 
+@in_computation_frame
 def run_isam2(
     measurements: Measurements,
     model: TrackingModel,

@@ -24,11 +24,23 @@ the user's coordinates arrives rounded (6e-13 m in the weak prior's mean),
 and a poorly observed stream is sensitive enough to carry that to tens of
 metres (case b 25 km: 42–55 m, well inside its kilometre standard
 deviation).
+
+Every runner (``run_ekf``, ``run_isam2``, ``run_fixed_lag``,
+``run_smoother``, ``run_particle``) called directly, not through the
+registry, moves its problem the same way (:func:`in_computation_frame`):
+the initiation it is given keeps the copy computed in that frame, so the
+answer moves with the problem to rounding.  Called in the user's
+coordinates instead, case b 25 km in a rotated frame 830 km from the origin
+gave iSAM2 states 46 m and particle states 152 m from the moved answer
+(the EKF, the fixed-lag smoother and the smoother within 5 mm).
 """
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -36,9 +48,15 @@ from numpy.typing import ArrayLike, NDArray
 from fgdoppler.frames import Frame
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["LocalFrame"]
+if TYPE_CHECKING:
+    from fgdoppler.estimators.initiation import Initiation
+    from fgdoppler.estimators.results import TrackResult
+    from fgdoppler.measurements import Measurements
+
+__all__ = ["LocalFrame", "in_computation_frame"]
 
 FloatArray = NDArray[np.float64]
+Run = TypeVar("Run", bound=Callable[..., "TrackResult"])
 
 
 @dataclass(frozen=True)
@@ -82,3 +100,25 @@ class LocalFrame:
         if self.frame is None:
             return x, P
         return self.frame.states_to_world(x), None if P is None else self.frame.covariances_to_world(P)
+
+
+def in_computation_frame(run: Run) -> Run:
+    """Make ``run(measurements, model, init, settings, **options)`` solve in ``model``'s computation frame.
+
+    A canonical model runs as it is.  Otherwise the model and the
+    initiation move into the frame, the run's result moves back
+    (:meth:`~fgdoppler.estimators.results.TrackResult.transformed`); a
+    ``fallback_covariance`` option (the EKF's) moves in with them.
+    """
+    @functools.wraps(run)
+    def framed(measurements: Measurements, model: TrackingModel, init: Initiation, *args: Any,
+               **options: Any) -> TrackResult:
+        if model.canonical:
+            return run(measurements, model, init, *args, **options)
+        frame = model.computation_frame
+        if options.get("fallback_covariance") is not None:
+            options["fallback_covariance"] = frame.covariances_to_local(options["fallback_covariance"])
+        local = run(measurements, model.in_frame(frame), init.in_frame_of(frame), *args, **options)
+        return local.transformed(frame, to_world=True)
+
+    return cast(Run, framed)

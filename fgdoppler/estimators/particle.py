@@ -63,6 +63,7 @@ from scipy.special import logsumexp
 
 from fgdoppler.estimators.gating import NISGate
 from fgdoppler.estimators.initiation import Initiation
+from fgdoppler.estimators.local import in_computation_frame
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import ParticleSettings
 from fgdoppler.estimators.verdict import Event, Reason
@@ -434,6 +435,7 @@ def window_posterior(measurements: Measurements, model: TrackingModel | Geometry
                            acceptance=rate)
 
 
+@in_computation_frame
 def run_particle(
     measurements: Measurements,
     model: TrackingModel,

@@ -39,6 +39,7 @@ from fgdoppler._text import first_line
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
+from fgdoppler.estimators.local import in_computation_frame
 from fgdoppler.estimators.marginals import chain_solve, check_covariances
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import SmootherSettings
@@ -563,6 +564,7 @@ def _rival_reason(found: list[SmootherSolution], best: SmootherSolution, zone: Z
         f"reported sigma in that direction {sd:.0f} m): the data do not fix the track in 3-D"))
 
 
+@in_computation_frame
 def run_smoother(
     measurements: Measurements,
     model: TrackingModel,
