@@ -101,8 +101,7 @@ class FixedLagTracker:
         self.converged = True
         self._first_live = 0
         self._last: tuple[FloatArray, FloatArray | None] | None = None
-        self._warmup = (WarmUp(seconds=self.settings.warmup_seconds, per_pair=self.settings.warmup_per_pair,
-                               n_channels=self.model.n_channels) if self.settings.warms_up else None)
+        self._warmup = WarmUp.of(self.settings, self.model.n_channels)
 
     @property
     def warming_up(self) -> bool:
@@ -124,9 +123,8 @@ class FixedLagTracker:
                     g: FloatArray) -> tuple[FloatArray, FloatArray | None]:
         """:meth:`add_window` in the computation frame."""
         ts = np.asarray(times, dtype=float).reshape(-1)
-        if self._warmup is not None and self._warmup.times:
-            raise ValueError("scans are held in the warm-up: add the window before any scan, or switch the "
-                             "warm-up off (warmup_seconds=0, warmup_per_pair=0)")
+        if self._warmup is not None:
+            self._warmup.refuse_window()
         self._warmup = None  # a window is the start the warm-up would build
         first = max(1, int(np.searchsorted(ts, ts[0] + 0.999 * self.settings.lag, side="right")))
         x, P = self._add_scans(ts[:first], channels[:first], z[:first], sigma[:first], g[:first], gate=False)

@@ -132,8 +132,7 @@ class ISAM2Tracker:
         self._last: tuple[FloatArray, FloatArray | None] | None = None  # newest (x, P) after an update
         self._pending: tuple[gtsam.NonlinearFactorGraph, gtsam.Values, list[int], list[int]] | None = None
         self._n_updates = 0
-        self._warmup = (WarmUp(seconds=self.settings.warmup_seconds, per_pair=self.settings.warmup_per_pair,
-                               n_channels=self.model.n_channels) if self.settings.warms_up else None)
+        self._warmup = WarmUp.of(self.settings, self.model.n_channels)
 
     # -- helpers ----------------------------------------------------------------
     def _meas_factor(self, k: int, x_lin: FloatArray) -> gtsam.LinearContainerFactor | None:
@@ -257,9 +256,8 @@ class ISAM2Tracker:
         ts = np.asarray(times, dtype=float).reshape(-1)
         if ts.size == 0:
             raise ValueError("add_window needs at least one scan")
-        if self._warmup is not None and self._warmup.times:
-            raise ValueError("scans are held in the warm-up: add the window before any scan, or switch the "
-                             "warm-up off (warmup_seconds=0, warmup_per_pair=0)")
+        if self._warmup is not None:
+            self._warmup.refuse_window()
         self._warmup = None  # a window is the start the warm-up would build
         self._pending = (gtsam.NonlinearFactorGraph(), gtsam.Values(), [], [])
         for k in range(ts.size - 1):

@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.estimators.initiation import initiate
+from fgdoppler.estimators.settings import StreamingSettings
 from fgdoppler.estimators.verdict import Event
 from fgdoppler.estimators.window import solve_window
 from fgdoppler.measurements import Measurements
@@ -76,6 +77,25 @@ class WarmUp:
     z: list[FloatArray] = field(default_factory=list)
     sigma: list[FloatArray] = field(default_factory=list)
     guess: FloatArray | None = None
+
+    @classmethod
+    def of(cls, settings: StreamingSettings, n_channels: int) -> WarmUp | None:
+        """The warm-up ``settings`` ask for, or ``None`` when they switch it off."""
+        if not settings.warms_up:
+            return None
+        return cls(seconds=settings.warmup_seconds, per_pair=settings.warmup_per_pair, n_channels=n_channels)
+
+    def refuse_window(self) -> None:
+        """Raise if scans are held: a window must come before any scan.
+
+        Raises
+        ------
+        ValueError
+            If a scan is held.
+        """
+        if self.times:
+            raise ValueError("scans are held in the warm-up: add the window before any scan, or switch the "
+                             "warm-up off (warmup_seconds=0, warmup_per_pair=0)")
 
     def hold(self, model: MeasurementModel, t: float, channels: ArrayLike, z: ArrayLike, sigma: ArrayLike,
              guess: ArrayLike | None) -> bool:
