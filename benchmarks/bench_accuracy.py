@@ -12,7 +12,10 @@ scenario and estimator:
   band for that many runs;
 * median run time (s): the estimator alone (for fgdoppler, its
   ``wall_time``; the verdict's reference smoother is shared and not counted);
-* how many runs each verdict got (fgdoppler) or failed to run (peers);
+* how many runs each verdict got (fgdoppler) or failed to run (peers), and
+  of the runs whose own NEES, averaged over t ≥ 10 s, lies beyond the χ²₄
+  99.9 % quantile (the truth outside the stated 99.9 % ellipsoid on
+  average), how many the verdict does not flag (goal 4's second clause);
 * the deterministic-CV CRLB of the position for filtering and smoothing,
   averaged over the same times.
 
@@ -35,6 +38,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import chi2
 
 import fgdoppler as fd
 from benchmarks._common import Row
@@ -50,6 +54,10 @@ VARIANTS: dict[str, tuple[str, Any]] = {"ekf-scan": ("ekf", fd.EKFSettings(updat
 ONLINE: tuple[str, ...] = tuple(n for n, info in fd.ESTIMATORS.items() if info.online)
 T_RMSE = 5.0
 T_NEES = 10.0
+#: A run is called inconsistent when its NEES averaged over t >= T_NEES exceeds this quantile of chi-square(4):
+#: a consistent run's time average, of identically distributed chi-square(4) terms, exceeds it with a probability
+#: of at most about 0.1 % (exactly that when the terms are fully correlated, less when they are not).
+RUN_NEES_LEVEL = 0.999
 
 
 def _on_grid(truth_t: FloatArray, t: FloatArray, x: FloatArray, P: FloatArray, truth: FloatArray,
@@ -125,6 +133,23 @@ def _mean_after(x: FloatArray, t: FloatArray, t0: float) -> float:
     return float(np.mean(x[sel])) if np.any(sel) else float("nan")
 
 
+def inconsistent_runs(nees_runs: FloatArray, t: FloatArray, statuses: list[str]) -> tuple[int, int]:
+    r"""(inconsistent runs, those of them judged ``ok``) of one estimator in one scenario.
+
+    A run is inconsistent when its NEES averaged over :math:`t \ge` ``T_NEES``
+    exceeds the :data:`RUN_NEES_LEVEL` quantile of :math:`\chi^2_4`.  Runs
+    with no NEES after ``T_NEES`` count as neither.
+    """
+    if not nees_runs.size:
+        return 0, 0
+    late = nees_runs[:, t >= T_NEES]
+    has = np.any(np.isfinite(late), axis=1)
+    run_nees = np.full(late.shape[0], np.nan)
+    run_nees[has] = np.nanmean(late[has], axis=1)
+    bad = np.nan_to_num(run_nees, nan=0.0) > chi2.ppf(RUN_NEES_LEVEL, 4)
+    return int(bad.sum()), int(sum(1 for b, st in zip(bad, statuses, strict=True) if b and st == "ok"))
+
+
 def summarise(records: list[dict[str, Any]], runs: int) -> dict[str, Any]:
     """Per scenario: RMSE, NEES, median time and verdict counts of every estimator, and the bounds."""
     with warnings.catch_warnings():
@@ -149,6 +174,7 @@ def _summarise(records: list[dict[str, Any]], runs: int) -> dict[str, Any]:
             statuses = [x["status"] for x in rs]
             with np.errstate(all="ignore"):
                 nees_t = np.nanmean(ne, axis=0) if ne.size else np.full(t.size, np.nan)
+            inconsistent, unflagged = inconsistent_runs(ne, t, statuses)
             row["estimators"][name] = {
                 "rmse": float(time_averaged_rmse(se, t, t0=T_RMSE)),
                 "median_error": _mean_after(np.nanmedian(np.sqrt(se), axis=0), t, T_RMSE),
@@ -156,6 +182,8 @@ def _summarise(records: list[dict[str, Any]], runs: int) -> dict[str, Any]:
                 "seconds": float(np.median([x["seconds"] for x in rs])),
                 "runs": len(rs),
                 "verdicts": {k: statuses.count(k) for k in sorted(set(statuses))},
+                "inconsistent": inconsistent,
+                "unflagged": unflagged,
             }
         row["skipped_peers"] = sum(1 for rec in recs if "peers_skipped" in rec)
         # per-run errors for the goals' paired comparisons (not written to the JSON summary)
@@ -254,6 +282,11 @@ def goals(summary: dict[str, Any]) -> list[tuple[str, str, bool, str, str]]:
         worst = max(OURS, key=lambda n: est[n]["nees"])
         out.append(("4: NEES <= 2 x band's upper edge", name, est[worst]["nees"] <= 2 * hi,
                     f"worst {worst} {est[worst]['nees']:.3g} (limit {2 * hi:.2f})", ""))
+        bad = sum(est[n]["inconsistent"] for n in OURS)
+        missed = {n: est[n]["unflagged"] for n in OURS if est[n]["unflagged"]}
+        out.append(("4: inconsistent runs' verdicts not ok", name, not missed,
+                    f"{bad - sum(missed.values())} of {bad} flagged",
+                    ("judged ok: " + ", ".join(f"{n} {c}" for n, c in missed.items())) if missed else ""))
     return out
 
 

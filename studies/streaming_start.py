@@ -4,42 +4,58 @@ The scaling benchmark's track (paper geometry (a), from 45 km, 4.5 km at
 -100, -20 m/s), seeded recordings at several scan rates, streamed into an
 ``ISAM2Tracker`` (and the fixed-lag smoother, lag 5 s) with the model's weak
 prior, the gate from the 20th scan: from the first scan with the true state
-as the guess (warm-up off), with the warm-up from the true state, and with
-the warm-up and no guess.  Per variant: median end position error, the
+as the guess (warm-up off), with the warm-up from the true state, with
+the warm-up and no guess, and as a Gaussian sum
+(:class:`~fgdoppler.estimators.gaussian_sum.GaussianSumTracker`: the
+registry's hypotheses from the first 4.5 s, no guess, no prior).  Per variant: median end position error, the
 smallest share of measurements a run accepted, and how many runs have a
-filtered NEES averaged over t >= 10 s below 20.
+filtered NEES averaged over t >= 10 s below 20.  Then the paper's six
+scenarios at 2 scans/s (``PAPER_RUNS`` runs each), streamed with no guess
+into one warmed-up iSAM2 and into the Gaussian sum.
 
-Run: python studies/streaming_start.py [--out DIR]   (about 2-3 minutes)
+Run: python studies/streaming_start.py [--out DIR]   (about 9 minutes)
 """
 
 from __future__ import annotations
 
 import json
+import time
 
 import numpy as np
 from _common import out_dir
+from scipy.stats import chi2
 from threadpoolctl import threadpool_limits
 
 import fgdoppler as fd
 from fgdoppler.estimators.fixed_lag import FixedLagTracker
+from fgdoppler.estimators.gaussian_sum import GaussianSumTracker
 from fgdoppler.estimators.isam2 import ISAM2Tracker
 
+#: A run is inconsistent when its NEES averaged over t >= 10 s exceeds the chi-square(4) 99.9 % quantile.
+RUN_LIMIT = float(chi2.ppf(0.999, 4))
 COLD = {"warmup_seconds": 0.0, "warmup_per_pair": 0}
 WARM = {"warmup_seconds": 4.5, "warmup_per_pair": 10}
 CASES = (("isam2", 0.5, 60.0, 10), ("isam2", 0.05, 30.0, 10), ("isam2", 0.02, 30.0, 10),
          ("fixed-lag", 0.5, 60.0, 10), ("fixed-lag", 0.05, 30.0, 6))
-VARIANTS = {"from the first scan": (COLD, True), "warm-up, true guess": (WARM, True),
-            "warm-up, no guess": (WARM, False)}
+VARIANTS = {"from the first scan": (COLD, True, False), "warm-up, true guess": (WARM, True, False),
+            "warm-up, no guess": (WARM, False, False), "Gaussian sum, no guess": (WARM, False, True)}
 
 
-def one_run(name: str, dt: float, duration: float, seed: int, warmup: dict[str, float], guess: bool
-            ) -> tuple[float, float, float]:
-    """End position error (m), share of gated measurements accepted, filtered NEES averaged over t >= 10 s."""
+def one_run(name: str, dt: float, duration: float, seed: int, warmup: dict[str, float], guess: bool,
+            gaussian_sum: bool = False) -> tuple[float, float, float]:
+    """End position error (m), share of gated measurements accepted, filtered NEES averaged over t >= 10 s.
+
+    With ``gaussian_sum``, a :class:`~fgdoppler.estimators.gaussian_sum.GaussianSumTracker` of ``name``
+    (its own 4.5 s warm-up, no guess, no prior); the share accepted is its heaviest hypothesis's.
+    """
     sc = fd.Scenario(geometry=fd.paper_geometry("a"), x0=(45e3, 4.5e3, -100.0, -20.0), duration=duration - dt, dt=dt)
     sim = fd.simulate(sc, np.random.default_rng(seed))
     model = fd.TrackingModel.of(sc.geometry)
-    tracker: ISAM2Tracker | FixedLagTracker
-    if name == "isam2":
+    tracker: ISAM2Tracker | FixedLagTracker | GaussianSumTracker
+    if gaussian_sum:
+        tracker = GaussianSumTracker(model, "isam2" if name == "isam2" else "fixed-lag",
+                                     fd.ISAM2Settings() if name == "isam2" else fd.FixedLagSettings(lag=5.0))
+    elif name == "isam2":
         tracker = ISAM2Tracker(model, fd.ISAM2Settings(**warmup), model.prior())
     else:
         tracker = FixedLagTracker(model, fd.FixedLagSettings(lag=5.0, **warmup), model.prior())
@@ -50,13 +66,62 @@ def one_run(name: str, dt: float, duration: float, seed: int, warmup: dict[str, 
     for k in range(len(s)):
         r = s.rows(k)
         g = x0 if (k == 0 and guess) else None
-        x, P = tracker.add_scan(s.times[k], m.pair[r], m.doppler[r], m.sigma[r], g, gate=k >= 20)
+        if isinstance(tracker, GaussianSumTracker):
+            x, P = tracker.add_scan(s.times[k], m.pair[r], m.doppler[r], m.sigma[r])
+        else:
+            x, P = tracker.add_scan(s.times[k], m.pair[r], m.doppler[r], m.sigma[r], g, gate=k >= 20)
         if P is not None and s.times[k] >= 10.0:
             d = x - sim.truth.states[k]
             nees.append(float(d @ np.linalg.solve(P, d)))
-    nis = tracker.gate.as_array()
+    nis = tracker.nis if isinstance(tracker, GaussianSumTracker) else tracker.gate.as_array()
     accepted = float(nis[:, 3].mean()) if nis.size else 1.0
     return float(np.hypot(*(x - sim.truth.states[-1])[:2])), accepted, float(np.mean(nees)) if nees else np.nan
+
+
+#: The paper's six scenarios streamed at their 2 scans/s: runs per scenario and the seed (the accuracy benchmark's
+#: recordings, ``SeedSequence([seed, scenario, run])``).
+PAPER_RUNS, PAPER_SEED = 30, 2026
+
+
+def paper_run(s: int, r: int, gaussian_sum: bool) -> tuple[float, float, float]:
+    """Run ``r`` of paper scenario ``s`` streamed with no guess into a warmed-up ``ISAM2Tracker`` (weak prior)
+    or a ``GaussianSumTracker``: mean squared position error and mean NEES over t >= 10 s, seconds."""
+    scen = fd.paper_scenarios()[s]
+    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([PAPER_SEED, s, r])))
+    model = fd.TrackingModel.of(scen.geometry)
+    tracker = GaussianSumTracker(model, "isam2") if gaussian_sum else ISAM2Tracker(model, fd.ISAM2Settings(),
+                                                                                   model.prior())
+    m, sc = sim.measurements, sim.measurements.scans()
+    se, ne = [], []
+    t0 = time.perf_counter()
+    for k in range(len(sc)):
+        rows = sc.rows(k)
+        x, P = tracker.add_scan(sc.times[k], m.pair[rows], m.doppler[rows], m.sigma[rows])
+        if sc.times[k] >= 10.0 and P is not None:
+            d = x - sim.truth.at(sc.times[k:k + 1])[0]
+            se.append(float(d[0] ** 2 + d[1] ** 2))
+            ne.append(float(d @ np.linalg.solve(P, d)))
+    return float(np.mean(se)), float(np.mean(ne)), time.perf_counter() - t0
+
+
+def paper_table() -> list[dict[str, object]]:
+    """One warmed-up Gaussian against the Gaussian sum on the paper's scenarios (printed as a Markdown table)."""
+    rows: list[dict[str, object]] = []
+    print(f"\n{PAPER_RUNS} runs per scenario, seed {PAPER_SEED}, iSAM2 fed scan by scan with no guess; position RMSE and "
+          f"NEES averaged over runs and t >= 10 s; runs whose own NEES average exceeds {RUN_LIMIT:.1f}; seconds per run\n")
+    print("| scenario | one Gaussian (warm-up) | Gaussian sum |\n|---|---|---|")
+    for s, scen in enumerate(fd.paper_scenarios()):
+        cells = []
+        for gaussian_sum in (False, True):
+            res = np.array([paper_run(s, r, gaussian_sum) for r in range(PAPER_RUNS)])
+            row = {"scenario": scen.name, "gaussian_sum": gaussian_sum, "rmse_m": float(np.sqrt(res[:, 0].mean())),
+                   "nees": float(res[:, 1].mean()), "inconsistent_runs": int(np.sum(res[:, 1] > RUN_LIMIT)),
+                   "seconds": float(res[:, 2].mean())}
+            rows.append(row)
+            cells.append(f"{row['rmse_m']:,.0f} m, NEES {row['nees']:.3g}, {row['inconsistent_runs']} runs, "
+                         f"{row['seconds']:.2f} s")
+        print(f"| {scen.name} | " + " | ".join(cells) + " |", flush=True)
+    return rows
 
 
 def main() -> None:
@@ -64,10 +129,11 @@ def main() -> None:
     rows = []
     with threadpool_limits(1):
         for name, dt, duration, runs in CASES:
-            for label, (warmup, guess) in VARIANTS.items():
+            for label, (warmup, guess, gaussian_sum) in VARIANTS.items():
                 if name == "fixed-lag" and label == "warm-up, no guess":
                     continue
-                res = np.array([one_run(name, dt, duration, seed, warmup, guess) for seed in range(runs)])
+                res = np.array([one_run(name, dt, duration, seed, warmup, guess, gaussian_sum)
+                                for seed in range(runs)])
                 row = {"tracker": name, "scans_per_s": round(1 / dt), "seconds": duration, "variant": label,
                        "runs": runs, "median_end_error_m": float(np.nanmedian(res[:, 0])),
                        "min_accepted": float(np.nanmin(res[:, 1])), "nees_below_20": int(np.sum(res[:, 2] < 20))}
@@ -75,8 +141,9 @@ def main() -> None:
                 print(f"| {name} | {row['scans_per_s']}/s, {duration:g} s | {label} | "
                       f"{row['median_end_error_m']:,.0f} m | {row['min_accepted']:.1%} | "
                       f"{row['nees_below_20']}/{runs} |", flush=True)
+        paper = paper_table()
     out.mkdir(parents=True, exist_ok=True)
-    (out / "streaming_start.json").write_text(json.dumps(rows, indent=1))
+    (out / "streaming_start.json").write_text(json.dumps({"scaling_track": rows, "paper": paper}, indent=1))
 
 
 if __name__ == "__main__":

@@ -5,8 +5,16 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import chi2
 
-from benchmarks.bench_accuracy import json_summary, load_records, save_records
+from benchmarks.bench_accuracy import (
+    RUN_NEES_LEVEL,
+    T_NEES,
+    inconsistent_runs,
+    json_summary,
+    load_records,
+    save_records,
+)
 
 
 def _records() -> list[dict[str, object]]:
@@ -39,3 +47,19 @@ def test_records_round_trip(tmp_path: Path) -> None:
 def test_json_summary_leaves_out_the_per_run_arrays() -> None:
     text = json_summary({"runs": 3, "scenarios": {"a": {"_se": {"ekf": np.zeros(2)}, "crlb_filter": 1.0}}})
     assert "_se" not in text and "crlb_filter" in text
+
+
+def test_inconsistent_runs_counts_the_runs_beyond_the_quantile_and_the_verdicts_that_miss_them() -> None:
+    t = np.array([0.0, 5.0, T_NEES, T_NEES + 5.0])
+    q = chi2.ppf(RUN_NEES_LEVEL, 4)
+    nees = np.array([
+        [1e9, 1e9, 4.0, 4.0],            # large only before T_NEES: consistent
+        [np.nan, np.nan, q - 1, q + 3],  # average q + 1: inconsistent, judged ok
+        [4.0, 4.0, q + 1, np.nan],       # inconsistent where it has a value, judged doubtful
+        [4.0, 4.0, np.nan, np.nan],      # no NEES after T_NEES: neither
+        [4.0, 4.0, q - 0.5, q - 0.5],    # below the quantile
+    ])
+    statuses = ["ok", "ok", "doubtful", "ok", "ok"]
+    assert inconsistent_runs(nees, t, statuses) == (2, 1)
+    assert inconsistent_runs(nees, t, ["doubtful"] * 5) == (2, 0)
+    assert inconsistent_runs(np.zeros((0, 4)), t, []) == (0, 0)

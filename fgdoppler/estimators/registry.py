@@ -41,7 +41,7 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
 from fgdoppler.progress import Progress, prefixed
 
-__all__ = ["ALIASES", "ESTIMATORS", "EstimatorInfo", "estimator_info", "run_estimator", "track"]
+__all__ = ["ALIASES", "ESTIMATORS", "EstimatorInfo", "estimator_info", "hypotheses_of", "run_estimator", "track"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -174,6 +174,18 @@ def run_estimator(
     half = init.half_plane
     judged = judge(result, measurements, model, settings, reference, half_plane=half)
     return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
+
+
+def hypotheses_of(name: str, measurements: Measurements, model: TrackingModel, init: Initiation,
+                  settings: TrackerSettings) -> tuple[list[Initiation], NDArray[np.float64] | None]:
+    """The hypotheses ``run_estimator(name, ...)`` starts from, and their prior weights (``None``: from the costs).
+
+    The terms of the window posterior's Gaussian sum where the initiation is
+    ``nonlinear`` (at most ``settings.components``), its distinct solutions
+    where it is ``ambiguous``, else the initiation alone; ``measurements``
+    need only hold the initiation window.
+    """
+    return _hypotheses(estimator_info(name), measurements, model, init, settings)
 
 
 def _nonlinear(init: Initiation) -> bool:

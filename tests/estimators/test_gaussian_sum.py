@@ -1,0 +1,160 @@
+"""The Gaussian-sum tracker fed scan by scan (fgdoppler.estimators.gaussian_sum) is the registry's, online."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import fgdoppler as fd
+from fgdoppler.estimators.ekf import run_ekf
+from fgdoppler.estimators.gaussian_sum import GaussianSumTracker
+from fgdoppler.estimators.registry import hypotheses_of
+
+SETTINGS = {"ekf": fd.EKFSettings, "isam2": fd.ISAM2Settings, "fixed-lag": fd.FixedLagSettings}
+
+
+def _recording(case: str, start: float, run: int) -> tuple[fd.Simulation, fd.TrackingModel]:
+    # the accuracy benchmark's recordings (seed 2026)
+    scens = fd.paper_scenarios()
+    s = next(i for i, sc in enumerate(scens) if sc.name == f"case {case}, start {start / 1e3:g} km")
+    sim = fd.simulate(scens[s], np.random.default_rng(np.random.SeedSequence([2026, s, run])))
+    return sim, fd.TrackingModel.of(scens[s].geometry)
+
+
+def _stream(tracker: GaussianSumTracker, m: fd.Measurements) -> list[tuple[float, np.ndarray, np.ndarray | None, bool]]:
+    sc = m.scans()
+    out = []
+    for k in range(len(sc)):
+        r = sc.rows(k)
+        x, P = tracker.add_scan(sc.times[k], m.pair[r], m.doppler[r], m.sigma[r])
+        out.append((float(sc.times[k]), x, P, tracker.warming_up))
+    return out
+
+
+def _assert_same(times: np.ndarray, x: np.ndarray, P: np.ndarray, ref: fd.Estimates, what: str) -> None:
+    idx = np.searchsorted(ref.times, times - 1e-9)
+    np.testing.assert_allclose(ref.times[idx], times, atol=1e-12, err_msg=what)
+    # states to a micrometre (the mixtures differ by hypotheses weighing < 1e-12), covariances
+    # relative to their diagonal
+    np.testing.assert_allclose(x, ref.states[idx], rtol=0, atol=1e-6, err_msg=what)
+    d = np.sqrt(np.einsum("nii->ni", ref.covariances[idx]))
+    assert np.max(np.abs(P - ref.covariances[idx]) / (d[:, :, None] * d[:, None, :])) < 1e-6, what
+
+
+@pytest.mark.parametrize(("name", "case", "start", "run"), [
+    ("isam2", "a", 5e3, 79),      # eight terms, three stop along the way
+    ("ekf", "a", 5e3, 79),
+    ("fixed-lag", "b", 45e3, 3),  # eight terms, all live to the end
+])
+def test_fed_scan_by_scan_it_equals_the_registry_from_the_same_initiation(name: str, case: str, start: float,
+                                                                         run: int) -> None:
+    # The registry runs each hypothesis over the whole recording and mixes afterwards; this
+    # tracker runs them side by side, one scan at a time.  From the initiation of the same
+    # held window, with restarts off (this tracker has none), the two must agree: every
+    # filtered mixture, and the final trajectory (iSAM2 smoothed, fixed-lag lagged).
+    sim, model = _recording(case, start, run)
+    m = sim.measurements
+    settings = SETTINGS[name](restarts=False)
+    tracker = GaussianSumTracker(model, name, settings)
+    out = _stream(tracker, m)
+    init = tracker.initiation
+    assert init is not None
+    held = [o for o in out if o[3]]
+    assert held and all(np.all(np.isnan(x)) and P is None for _, x, P, _ in held)
+    ref = fd.run_estimator(name, m, model, init, settings, verify=False)
+    assert len(tracker.weights) == 8 and abs(tracker.weights.sum() - 1.0) < 1e-12
+    live = [o for o in out if not o[3]]
+    assert live[0][0] == pytest.approx(init.t_end)
+    times = np.array([o[0] for o in live])
+    _assert_same(times, np.array([o[1] for o in live]), np.array([o[2] for o in live]),
+                 ref.estimate("filtered"), f"{name} filtered")
+    if name == "isam2":
+        assert any("stopped" in e.message for e in tracker.events)
+    # the most likely term alone is the heaviest hypothesis's own run
+    best = int(np.argmax(tracker.weights))
+    x_mode, _ = tracker.mode
+    if name == "ekf":
+        window = m.subset(m.time <= init.t_end)
+        hyps, _ = hypotheses_of(name, window, model, init, settings)
+        alone = run_ekf(m, model, hyps[best], settings).primary
+        np.testing.assert_allclose(x_mode, alone.states[-1], rtol=0, atol=1e-6)
+    assert tracker.nis.shape[1] == 4 and tracker.nis[-1, 0] == pytest.approx(times[-1])
+    if name != "ekf":
+        t, x, P = tracker.finish()
+        assert P is not None
+        _assert_same(t, x, P, ref.estimate("smoothed" if name == "isam2" else "lagged"), f"{name} final")
+
+
+def test_the_answer_moves_with_a_rigidly_moved_problem() -> None:
+    # computed in the model's computation frame (fgdoppler.estimators.local), like the trackers it holds
+    sim, model = _recording("a", 5e3, 79)
+    c, s = np.cos(0.37), np.sin(0.37)
+    R, t = np.array([[c, -s], [s, c]]), np.array([3.2e5, -7.7e5])
+    g = sim.scenario.geometry
+    moved = fd.TrackingModel.of(fd.Geometry(pairs=tuple(
+        fd.BistaticPair(tx=R @ np.array(p.tx) + t, rx=R @ np.array(p.rx) + t) for p in g.pairs)))
+    a = _stream(GaussianSumTracker(model, "ekf"), sim.measurements)
+    b = _stream(GaussianSumTracker(moved, "ekf"), sim.measurements)
+    for (_, x0, P0, w0), (_, x1, P1, w1) in zip(a, b, strict=True):
+        assert w0 == w1
+        if w0:
+            continue
+        expected = np.concatenate([R @ x0[:2] + t, R @ x0[2:]])
+        assert np.max(np.abs(x1 - expected) / np.maximum(np.abs(expected), 1.0)) < 1e-9
+        T = np.kron(np.eye(2), R)
+        assert P0 is not None and P1 is not None
+        np.testing.assert_allclose(P1, T @ P0 @ T.T, rtol=0, atol=1e-9 * np.abs(P0).max())
+
+
+def test_a_well_observed_start_is_one_hypothesis_and_the_plain_tracker() -> None:
+    # case a 45 km, run 0: the initiation is ok, so one hypothesis, and the tracker is run_isam2 from it
+    sim, model = _recording("a", 45e3, 0)
+    tracker = GaussianSumTracker(model, "isam2", fd.ISAM2Settings(restarts=False))
+    out = _stream(tracker, sim.measurements)
+    assert tracker.initiation is not None and tracker.initiation.status == "ok"
+    assert len(tracker.weights) == 1
+    ref = fd.run_estimator("isam2", sim.measurements, model, tracker.initiation, fd.ISAM2Settings(restarts=False),
+                           verify=False).estimate("filtered")
+    live = [o for o in out if not o[3]]
+    np.testing.assert_array_equal(np.array([o[1] for o in live]), ref.states)
+
+
+def test_bad_use_is_refused_with_a_reason() -> None:
+    sim, model = _recording("a", 45e3, 0)
+    m = sim.measurements
+    with pytest.raises(ValueError, match="estimator must be one of"):
+        GaussianSumTracker(model, "smoother")  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="isam2 takes ISAM2Settings"):
+        GaussianSumTracker(model, "isam2", fd.EKFSettings())
+    with pytest.raises(ValueError, match="built from a window"):
+        GaussianSumTracker(model, "ekf", warmup_seconds=0.0, warmup_per_pair=0)
+    with pytest.raises(ValueError, match="warmup_seconds"):
+        GaussianSumTracker(model, "ekf", warmup_seconds=float("nan"))
+    tracker = GaussianSumTracker(model, "ekf")
+    with pytest.raises(ValueError, match="warming up"):
+        _ = tracker.mode
+    with pytest.raises(ValueError, match="no scan was added"):
+        GaussianSumTracker(model, "isam2").finish()
+    with pytest.raises(ValueError, match="pair"):
+        tracker.add_scan(0.0, [7], [1.0], [1.0])
+    out = _stream(tracker, m)
+    assert not out[-1][3]
+    with pytest.raises(ValueError, match="out of order"):
+        tracker.add_scan(float(m.time[-1]), [0], [1.0], [1.0])
+    with pytest.raises(TypeError, match="keeps no trajectory"):
+        tracker.finish()
+
+
+def test_finish_on_a_short_recording_starts_from_what_is_held() -> None:
+    # a recording shorter than the warm-up: finish() initiates the held scans and solves them,
+    # as the registry's iSAM2 does from the same initiation on the same scans
+    sim, model = _recording("a", 45e3, 0)
+    m = sim.measurements.subset(sim.measurements.time <= 3.0)
+    settings = fd.ISAM2Settings(restarts=False)
+    tracker = GaussianSumTracker(model, "isam2", settings)
+    out = _stream(tracker, m)
+    assert all(o[3] for o in out)
+    t, x, P = tracker.finish()
+    assert tracker.initiation is not None and P is not None
+    ref = fd.run_estimator("isam2", m, model, tracker.initiation, settings, verify=False).estimate("smoothed")
+    _assert_same(t, x, P, ref, "short recording")
