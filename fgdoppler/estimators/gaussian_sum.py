@@ -47,13 +47,28 @@ is over-confident (docs/concepts.md, "Feeding a tracker yourself").
    that for good; the two agree unless a weight of :math:`10^{-12}`
    recovers.)
 
+4. **Restarts** (``settings.restarts``, on by default, with a zone) — at
+   the registry's checkpoints (each time the number of measurements since
+   the start has grown by :data:`~fgdoppler.estimators.restart.GROWTH`)
+   the mixture is tested against the best fit of all the data so far
+   (:func:`~fgdoppler.estimators.restart.fresh_start`); where each lies
+   outside the other's 99.9 % region, the hypotheses are replaced by those
+   of the new initiation, started on all the data up to the checkpoint.
+   For this the tracker keeps every measurement (without restarts it keeps
+   none beyond the warm-up).
+
 Fed the same scans, the filtered estimates equal ``run_estimator``'s from the
-same initiation with ``restarts=False`` (test: ``tests/estimators/test_gaussian_sum.py``).
-What this tracker does not do: restarts (they need a checkpointed refit of
-all the data so far), and the verdict — call :func:`fgdoppler.track` on
-the recording afterwards for both.  Like the trackers it holds, it computes
-in the model's computation frame (:mod:`fgdoppler.estimators.local`) and
-answers in the user's coordinates.
+same initiation (tests: ``tests/estimators/test_gaussian_sum.py``; after a
+restart of a graph tracker only to millimetres, since iSAM2's
+relinearisation thresholds amplify the 1e-10 m by which the two refits
+differ).  :meth:`GaussianSumTracker.finish` solves the whole trajectory;
+after a restart the times before it come from the hypotheses it replaced,
+solved on the data up to the restart (the registry's trajectory there has
+seen the whole recording).  What this tracker does not give is the verdict,
+which needs the whole recording: call :func:`fgdoppler.track` on it
+afterwards.  Like the trackers it holds, it computes in the model's
+computation frame (:mod:`fgdoppler.estimators.local`) and answers in the
+user's coordinates.
 """
 
 from __future__ import annotations
@@ -72,6 +87,7 @@ from fgdoppler.estimators.initiation import Initiation, initiate
 from fgdoppler.estimators.isam2 import ISAM2Tracker
 from fgdoppler.estimators.local import LocalFrame
 from fgdoppler.estimators.registry import hypotheses_of
+from fgdoppler.estimators.restart import GROWTH, fresh_start
 from fgdoppler.estimators.settings import (
     EKFSettings,
     FixedLagSettings,
@@ -82,6 +98,7 @@ from fgdoppler.estimators.verdict import Event
 from fgdoppler.estimators.warmup import WarmUp
 from fgdoppler.estimators.window import feed_from_window_start, start_prior
 from fgdoppler.geometry import Geometry
+from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
 
 __all__ = ["GaussianSumTracker"]
@@ -121,8 +138,9 @@ class GaussianSumTracker:
         :class:`~fgdoppler.estimators.settings.FixedLagSettings`,
         :class:`~fgdoppler.estimators.settings.EKFSettings`); their
         ``components`` bounds the Gaussian sum, their gate and Huber loss
-        apply to every hypothesis and its weighting EKF.  ``restarts`` and
-        the trackers' own warm-up are not used.
+        apply to every hypothesis and its weighting EKF, and ``restarts``
+        to the online re-initiation (step 4).  The trackers' own warm-up is
+        not used: each starts from a window.
     warmup_seconds, warmup_per_pair
         The window to initiate from: held scans spanning this long and
         holding this many measurements per pair (defaults: the initiation
@@ -159,7 +177,14 @@ class GaussianSumTracker:
         #: The initiation of the held window (``None`` while warming up), in the model's computation frame.
         self.initiation: Initiation | None = None
         self._hyps: list[_Hypothesis] = []
+        # hypothesis sets replaced by a restart, with the time each stopped (their trajectories end there)
+        self._retired: list[tuple[float, list[_Hypothesis]]] = []
         self.t: float | None = None
+        self._restarts = bool(settings.restarts) and self.tracking_model.zone is not None
+        # every scan since the first, for the restarts' refits (none kept without restarts)
+        self._kept: list[tuple[float, NDArray[np.intp], FloatArray, FloatArray]] = []
+        self._count = 0
+        self._target = 0.0
 
     # -- public -------------------------------------------------------------------
     @property
@@ -232,6 +257,13 @@ class GaussianSumTracker:
                 # the trackers hold the model already moved into its frame: their answers are local
                 h.x, h.P = h.tracker.add_scan(self.t, c, zz, ss)
         self._stop_negligible()
+        if self._restarts:
+            self._kept.append((self.t, c.copy(), zz.copy(), np.array(ss, dtype=float)))
+            self._count += c.size
+            if c.size and self._count >= np.ceil(self._target):
+                while self._count >= np.ceil(self._target):
+                    self._target *= GROWTH
+                self._checkpoint()
         return self._mixture()
 
     def finish(self) -> tuple[FloatArray, FloatArray, FloatArray | None]:
@@ -257,36 +289,47 @@ class GaussianSumTracker:
             if not self.warmup.times:
                 raise ValueError("no scan was added")
             self._start()
-        live = [h for h in self._hyps if h.alive]
-        w = self._weights()[[i for i, h in enumerate(self._hyps) if h.alive]]
-        parts = [_trajectory(h.tracker) for h in live if h.tracker is not None]
-        n = min(p[0].size for p in parts)
-        times = parts[0][0][-n:]
-        X = np.array([p[1][-n:] for p in parts])
-        mean = np.einsum("h,hni->ni", w / w.sum(), X)
-        cov = None
-        covs = [p[2] for p in parts]
-        if all(c is not None for c in covs):
-            d = X - mean[None]
-            P = np.array([c[-n:] for c in covs if c is not None])
-            cov = np.einsum("h,hnij->nij", w / w.sum(), P + np.einsum("hni,hnj->hnij", d, d))
-            cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
+        times, mean, cov = _set_trajectory(self._hyps)
+        # after a restart the new hypotheses' graphs may start later (a posterior term starts at its
+        # checkpoint): the earlier times come from the set it replaced, solved on the data it had
+        for _, hyps in reversed(self._retired):
+            t_old, m_old, c_old = _set_trajectory(hyps)
+            keep = t_old < times[0] - 1e-9
+            if np.any(keep):
+                times, mean = np.concatenate([t_old[keep], times]), np.concatenate([m_old[keep], mean])
+                cov = None if cov is None or c_old is None else np.concatenate([c_old[keep], cov])
         x_out, P_out = self.local.out(mean, cov)
         return times, x_out, P_out
 
     # -- internals ------------------------------------------------------------------
     def _start(self) -> None:
-        """Initiate the held scans and start one tracker and one weighting EKF per hypothesis."""
-        model, st = self.tracking_model, self.settings
+        """Initiate the held scans and start the hypotheses from them."""
         window = self.warmup.measurements()
         if not len(window.time):
             raise ValueError("the warm-up holds no measurement: nothing to initiate from")
-        init = initiate(window, model)
+        init = initiate(window, self.tracking_model)
+        self._hyps = self._hypotheses(window, init)
+        self.initiation = init
+        self.t = self.warmup.times[-1]
+        if self._restarts:
+            self._kept = [(t, c, z, s) for t, c, z, s in zip(self.warmup.times, self.warmup.channels, self.warmup.z,
+                                                             self.warmup.sigma, strict=True)]
+            # the registry's checkpoints: each time the count since the start has grown by GROWTH
+            self._count = len(window.time)
+            self._target = max(self._count, 1) * GROWTH
+        if len(self._hyps) > 1:
+            self.events.append(Event(time=self.t, message=(
+                f"{len(self._hyps)} hypotheses from the initiation of the first {self.t - self.warmup.times[0]:g} s")))
+
+    def _hypotheses(self, window: Measurements, init: Initiation) -> list[_Hypothesis]:
+        """One tracker and one weighting EKF per hypothesis of ``init`` (whose window ``window`` holds)."""
+        model, st = self.tracking_model, self.settings
         hyps, prior_w = hypotheses_of(self.estimator, window, model, init, st)
         logw0 = np.log(prior_w) if prior_w is not None else -0.5 * np.array([h.cost for h in hyps])
         ekf_settings = st if isinstance(st, EKFSettings) else EKFSettings(
             gate_probability=st.gate_probability, huber_k=st.huber_k)
         fallback = model.zone.prior()[1] if model.zone is not None else None
+        out = []
         for h, lw in zip(hyps, logw0, strict=True):
             P0 = h.P_end if h.P_end is not None else fallback
             if P0 is None:
@@ -301,12 +344,26 @@ class GaussianSumTracker:
                     tracker = FixedLagTracker(model, st, start_prior(model, h))
                 _, xs, Ps = feed_from_window_start(tracker, model, window, h, tracker.events, huber_k=st.huber_k)
                 x, P = xs[-1], Ps[-1]
-            self._hyps.append(_Hypothesis(init=h, ekf=ekf, tracker=tracker, logw0=float(lw), x=x, P=P))
-        self.initiation = init
-        self.t = self.warmup.times[-1]
-        if len(hyps) > 1:
-            self.events.append(Event(time=self.t, message=(
-                f"{len(hyps)} hypotheses from the initiation of the first {self.t - self.warmup.times[0]:g} s")))
+            out.append(_Hypothesis(init=h, ekf=ekf, tracker=tracker, logw0=float(lw), x=x, P=P))
+        return out
+
+    def _checkpoint(self) -> None:
+        """Test the mixture against the best fit of all the data so far; restart there if they disagree."""
+        assert self.t is not None
+        old = self._mixture_local()
+        if old[1] is None:
+            return
+        data = Measurements(time=np.concatenate([np.full(c.size, t) for t, c, _, _ in self._kept]),
+                            pair=np.concatenate([c for _, c, _, _ in self._kept]).astype(np.intp),
+                            doppler=np.concatenate([z for _, _, z, _ in self._kept]),
+                            sigma=np.concatenate([s for _, _, _, s in self._kept]))
+        fresh = fresh_start(data, self.tracking_model, self.settings, (old[0], old[1]), self.t)
+        if fresh is None:
+            return
+        new_init, message = fresh
+        self._retired.append((self.t, self._hyps))
+        self._hyps = self._hypotheses(data, new_init)
+        self.events.append(Event(time=self.t, message=message))
 
     def _heaviest(self) -> _Hypothesis:
         if not self._hyps:
@@ -314,8 +371,7 @@ class GaussianSumTracker:
         return self._hyps[int(np.argmax(self._weights()))]
 
     def _weights(self) -> FloatArray:
-        lw = np.array([h.logw0 + h.ekf.log_likelihood if h.alive else -np.inf for h in self._hyps])
-        return np.exp(lw - logsumexp(lw))
+        return _weights_of(self._hyps)
 
     def _stop_negligible(self) -> None:
         w = self._weights()
@@ -325,19 +381,47 @@ class GaussianSumTracker:
                 self.events.append(Event(time=float(self.t or 0.0), message=(
                     f"hypothesis {i} stopped: weight {w[i]:.1e} below {NEGLIGIBLE:.0e}")))
 
-    def _mixture(self) -> tuple[FloatArray, FloatArray | None]:
+    def _mixture_local(self) -> tuple[FloatArray, FloatArray | None]:
+        """The live hypotheses' mixture in the computation frame."""
         w = self._weights()
         live = [i for i, h in enumerate(self._hyps) if h.alive]
         X = np.array([self._hyps[i].x for i in live])
         wl = w[live] / np.sum(w[live])
         mean = wl @ X
         if any(self._hyps[i].P is None for i in live):
-            return self.local.out(mean, None)
+            return mean, None
         d = X - mean
         P = np.array([self._hyps[i].P for i in live])
         cov = np.einsum("h,hij->ij", wl, P + np.einsum("hi,hj->hij", d, d))
-        x_out, P_out = self.local.out(mean, 0.5 * (cov + cov.T))
-        return x_out, P_out
+        return mean, 0.5 * (cov + cov.T)
+
+    def _mixture(self) -> tuple[FloatArray, FloatArray | None]:
+        return self.local.out(*self._mixture_local())
+
+
+def _weights_of(hyps: list[_Hypothesis]) -> FloatArray:
+    r"""Each hypothesis's weight, :math:`\propto w_{h,0}` times its EKF's predictive likelihood (0 once stopped)."""
+    lw = np.array([h.logw0 + h.ekf.log_likelihood if h.alive else -np.inf for h in hyps])
+    return np.exp(lw - logsumexp(lw))
+
+
+def _set_trajectory(hyps: list[_Hypothesis]) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+    """The live hypotheses' trajectories mixed with their current weights, on the times all of them hold."""
+    w_all = _weights_of(hyps)
+    live = [i for i, h in enumerate(hyps) if h.alive and h.tracker is not None]
+    w = w_all[live] / np.sum(w_all[live])
+    parts = [_trajectory(hyps[i].tracker) for i in live]  # type: ignore[arg-type]
+    n = min(p[0].size for p in parts)
+    times = parts[0][0][-n:]
+    X = np.array([p[1][-n:] for p in parts])
+    mean = np.einsum("h,hni->ni", w, X)
+    covs = [p[2] for p in parts]
+    if any(c is None for c in covs):
+        return times, mean, None
+    d = X - mean[None]
+    P = np.array([c[-n:] for c in covs if c is not None])
+    cov = np.einsum("h,hnij->nij", w, P + np.einsum("hni,hnj->hnij", d, d))
+    return times, mean, 0.5 * (cov + np.swapaxes(cov, -1, -2))
 
 
 def _trajectory(tracker: ISAM2Tracker | FixedLagTracker) -> tuple[FloatArray, FloatArray, FloatArray | None]:

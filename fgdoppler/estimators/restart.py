@@ -74,7 +74,7 @@ from fgdoppler.models.observation import predict_along
 from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["DISAGREEMENT", "GROWTH", "MODE_MARGIN", "PER_PAIR", "checkpoints", "with_restarts"]
+__all__ = ["DISAGREEMENT", "GROWTH", "MODE_MARGIN", "PER_PAIR", "checkpoints", "fresh_start", "with_restarts"]
 
 FloatArray = NDArray[np.float64]
 #: A checkpoint each time the number of measurements since the start has grown by this factor.
@@ -133,11 +133,15 @@ def _state_at(result: TrackResult, t: float) -> tuple[FloatArray, FloatArray] | 
     return e.states[i], e.covariances[i]
 
 
-def _fresh(measurements: Measurements, model: TrackingModel, settings: TrackerSettings, running: TrackResult,
-           tc: float) -> tuple[Initiation, str] | None:
-    """The initiation to restart from at ``tc``, and why; ``None`` when the running estimate stands."""
+def fresh_start(measurements: Measurements, model: TrackingModel, settings: TrackerSettings,
+                old: tuple[FloatArray, FloatArray] | None, tc: float) -> tuple[Initiation, str] | None:
+    """The initiation to restart from at checkpoint ``tc``, and why; ``None`` when the running estimate stands.
+
+    ``old`` is the tracker's filtered ``(x, P)`` at ``tc`` (``None``: nothing
+    to test); only the measurements up to ``tc`` are used (module docstring,
+    steps 1-3).
+    """
     data = measurements.subset(measurements.time <= tc)
-    old = _state_at(running, tc)
     if old is None or len(data) < model.n + 1:
         return None
     isets = InitiationSettings(window="cv", huber_k=settings.huber_k)
@@ -206,7 +210,7 @@ def with_restarts(measurements: Measurements, model: TrackingModel, init: Initia
     t_begin = time.perf_counter()
     result = first
     for tc in checkpoints(measurements, init):
-        fresh = _fresh(measurements, model, settings, result, tc)
+        fresh = fresh_start(measurements, model, settings, _state_at(result, tc), tc)
         if fresh is None:
             continue
         new_init, message = fresh
