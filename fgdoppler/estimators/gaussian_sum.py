@@ -73,7 +73,7 @@ user's coordinates.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -99,6 +99,7 @@ from fgdoppler.estimators.warmup import WarmUp
 from fgdoppler.estimators.window import feed_from_window_start, start_prior
 from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
+from fgdoppler.models.observation import check_channels
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
 
 __all__ = ["GaussianSumTracker"]
@@ -174,8 +175,7 @@ class GaussianSumTracker:
         self.warmup = WarmUp(seconds=float(warmup_seconds), per_pair=warmup_per_pair,
                              n_channels=self.tracking_model.observation.n_channels)
         self.events: list[Event] = []
-        #: The initiation of the held window (``None`` while warming up), in the model's computation frame.
-        self.initiation: Initiation | None = None
+        self._init: Initiation | None = None  # the held window's initiation, in the computation frame
         self._hyps: list[_Hypothesis] = []
         # hypothesis sets replaced by a restart, with the time each stopped (their trajectories end there)
         self._retired: list[tuple[float, list[_Hypothesis]]] = []
@@ -190,7 +190,20 @@ class GaussianSumTracker:
     @property
     def warming_up(self) -> bool:
         """Whether scans are still held (no estimate yet)."""
-        return self.initiation is None
+        return self._init is None
+
+    @property
+    def initiation(self) -> Initiation | None:
+        """The initiation of the held window (``None`` while warming up), in the model's coordinates.
+
+        It keeps the exact copy computed in the computation frame, so
+        ``run_estimator(name, recording, model, tracker.initiation)`` starts
+        where this tracker started.
+        """
+        if self._init is None or self.local.frame is None:
+            return self._init
+        frame = self.local.frame
+        return replace(self._init.transformed(frame, to_world=True), computed_in=(frame, self._init))
 
     @property
     def weights(self) -> FloatArray:
@@ -233,10 +246,11 @@ class GaussianSumTracker:
         Raises
         ------
         ValueError
-            If ``t`` is not after the previous scan, or a channel is not one
-            of the model's pairs.
+            If ``t`` is not after the previous scan, a channel is not one of
+            the model's pairs, or a Doppler or sigma is not a finite number
+            (sigma > 0).
         """
-        if self.initiation is None:
+        if self._init is None:
             if self.warmup.hold(self.tracking_model.observation, float(t), channels, z, sigma, None):
                 self._start()
                 return self._mixture()
@@ -245,7 +259,10 @@ class GaussianSumTracker:
             raise ValueError(f"scan at t = {t} is not after the previous scan at t = {self.t}: out of order")
         c = np.asarray(channels, dtype=np.intp).reshape(-1)
         zz = np.asarray(z, dtype=float).reshape(-1)
-        ss = np.broadcast_to(np.asarray(sigma, dtype=float), zz.shape)
+        ss = np.broadcast_to(np.asarray(sigma, dtype=float), zz.shape).copy()
+        # refused before any hypothesis sees it: a bad value would stop them all at once
+        check_channels(self.tracking_model.observation, Measurements(time=np.full(c.size, float(t)), pair=c,
+                                                                      doppler=zz, sigma=ss))
         self.t = float(t)
         for h in self._hyps:
             if not h.alive:
@@ -285,7 +302,7 @@ class GaussianSumTracker:
         """
         if self.estimator == "ekf":
             raise TypeError("the EKF keeps no trajectory: its filtered estimates are what add_scan returned")
-        if self.initiation is None:
+        if self._init is None:
             if not self.warmup.times:
                 raise ValueError("no scan was added")
             self._start()
@@ -309,7 +326,7 @@ class GaussianSumTracker:
             raise ValueError("the warm-up holds no measurement: nothing to initiate from")
         init = initiate(window, self.tracking_model)
         self._hyps = self._hypotheses(window, init)
-        self.initiation = init
+        self._init = init
         self.t = self.warmup.times[-1]
         if self._restarts:
             self._kept = [(t, c, z, s) for t, c, z, s in zip(self.warmup.times, self.warmup.channels, self.warmup.z,

@@ -94,7 +94,15 @@ def test_the_answer_moves_with_a_rigidly_moved_problem() -> None:
     moved = fd.TrackingModel.of(fd.Geometry(pairs=tuple(
         fd.BistaticPair(tx=R @ np.array(p.tx) + t, rx=R @ np.array(p.rx) + t) for p in g.pairs)))
     a = _stream(GaussianSumTracker(model, "ekf"), sim.measurements)
-    b = _stream(GaussianSumTracker(moved, "ekf"), sim.measurements)
+    tracker = GaussianSumTracker(moved, "ekf")
+    b = _stream(tracker, sim.measurements)
+    # its initiation is given in the moved coordinates, and the registry started from it
+    # (with the exact copy it keeps from the computation frame) gives the same estimates
+    assert tracker.initiation is not None
+    ref = fd.run_estimator("ekf", sim.measurements, moved, tracker.initiation, verify=False).estimate("filtered")
+    live = [o for o in b if not o[3]]
+    _assert_same(np.array([o[0] for o in live]), np.array([o[1] for o in live]), np.array([o[2] for o in live]),
+                 ref, "moved, against the registry")
     for (_, x0, P0, w0), (_, x1, P1, w1) in zip(a, b, strict=True):
         assert w0 == w1
         if w0:
@@ -139,8 +147,19 @@ def test_bad_use_is_refused_with_a_reason() -> None:
         tracker.add_scan(0.0, [7], [1.0], [1.0])
     out = _stream(tracker, m)
     assert not out[-1][3]
+    x_before = out[-1][1]
     with pytest.raises(ValueError, match="out of order"):
         tracker.add_scan(float(m.time[-1]), [0], [1.0], [1.0])
+    late = float(m.time[-1]) + 0.5
+    with pytest.raises(ValueError, match="pair"):
+        tracker.add_scan(late, [0, 7], [1.0, 1.0], [1.0, 1.0])
+    with pytest.raises(ValueError):
+        tracker.add_scan(late, [0], [np.nan], [1.0])
+    with pytest.raises(ValueError):
+        tracker.add_scan(late, [0], [1.0], [0.0])
+    # nothing refused was taken: the same tracker goes on from where it was
+    x_after, _ = tracker.add_scan(late, [], [], [])
+    np.testing.assert_allclose(x_after[:2], x_before[:2] + 0.5 * x_before[2:], rtol=1e-12)
     with pytest.raises(TypeError, match="keeps no trajectory"):
         tracker.finish()
 
