@@ -9,6 +9,7 @@ import fgdoppler as fd
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.gaussian_sum import GaussianSumTracker
 from fgdoppler.estimators.registry import hypotheses_of
+from tests.test_three_d import AIRCRAFT
 
 SETTINGS = {"ekf": fd.EKFSettings, "isam2": fd.ISAM2Settings, "fixed-lag": fd.FixedLagSettings}
 
@@ -221,3 +222,20 @@ def test_after_a_restart_finish_keeps_the_trajectory_before_it() -> None:
                            fd.ISAM2Settings(restarts=False), verify=False).estimate("smoothed")
     _assert_same(t[before & (t < restart.time - 1e-9)], x[before & (t < restart.time - 1e-9)],
                  P[before & (t < restart.time - 1e-9)], ref, "isam2 before the restart")
+
+
+def test_in_3d_with_three_pairs_it_is_the_registry_too() -> None:
+    # the users' own sensors: three ground pairs around a square, an aircraft at 3 km (6-D states);
+    # the start is a Gaussian sum and the tracker restarts twice, as the registry does
+    sim = fd.simulate(AIRCRAFT, np.random.default_rng(3))
+    model = fd.TrackingModel.of(AIRCRAFT.geometry)
+    tracker = GaussianSumTracker(model, "ekf")
+    out = _stream(tracker, sim.measurements)
+    assert tracker.initiation is not None
+    ref = fd.run_estimator("ekf", sim.measurements, model, tracker.initiation, verify=False)
+    ours = [(e.time, e.message) for e in tracker.events if e.message.startswith("online re-initiation")]
+    assert ours and ours == [(e.time, e.message) for e in ref.events if e.message.startswith("online re-initiation")]
+    live = [o for o in out if not o[3]]
+    assert live[-1][1].shape == (6,)
+    _assert_same(np.array([o[0] for o in live]), np.array([o[1] for o in live]), np.array([o[2] for o in live]),
+                 ref.estimate("filtered"), "3-D")
