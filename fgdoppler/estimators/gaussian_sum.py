@@ -61,7 +61,9 @@ Fed the same scans, the filtered estimates equal ``run_estimator``'s from the
 same initiation (tests: ``tests/estimators/test_gaussian_sum.py``; after a
 restart of a graph tracker only to millimetres, since iSAM2's
 relinearisation thresholds amplify the 1e-10 m by which the two refits
-differ).  :meth:`GaussianSumTracker.finish` solves the whole trajectory;
+differ).  With the fixed-lag smoother, :meth:`GaussianSumTracker.lagged`
+gives each state once it is ``lag`` old, mixed with the weights of that
+moment.  :meth:`GaussianSumTracker.finish` solves the whole trajectory;
 after a restart the times before it come from the hypotheses it replaced,
 solved on the data up to the restart (the registry's trajectory there has
 seen the whole recording).  What this tracker does not give is the verdict,
@@ -185,6 +187,9 @@ class GaussianSumTracker:
         self._kept: list[tuple[float, NDArray[np.intp], FloatArray, FloatArray]] = []
         self._count = 0
         self._target = 0.0
+        # fixed-lag: lagged mixtures emitted so far, and the next state index of the current set to emit
+        self._lagged: list[tuple[float, FloatArray, FloatArray | None]] = []
+        self._lagged_next = 0
 
     # -- public -------------------------------------------------------------------
     @property
@@ -236,6 +241,33 @@ class GaussianSumTracker:
         h = self._heaviest()
         return (h.ekf if h.tracker is None else h.tracker).gate.as_array()
 
+    def lagged(self) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+        """``"fixed-lag"`` only: every state that has left the lag window so far, as ``(times, states, covariances)``.
+
+        Each state is the mixture of the live hypotheses' lagged estimates
+        (:attr:`FixedLagTracker.lagged <fgdoppler.estimators.fixed_lag.FixedLagTracker>`:
+        the state as estimated when it was ``lag`` old), weighted as they
+        were when the last of them left — online, so with the data up to
+        then (the registry's lagged mixture, with all the data at hand,
+        uses the final weights).  Covariances are ``None`` if any is
+        indeterminate.
+
+        Raises
+        ------
+        TypeError
+            For ``"isam2"`` and ``"ekf"``.
+        """
+        if self.estimator != "fixed-lag":
+            raise TypeError(f"{self.estimator} has no lag: its filtered estimates are what add_scan returns")
+        n = self.tracking_model.n
+        if not self._lagged:
+            return np.zeros(0), np.zeros((0, n)), np.zeros((0, n, n))
+        times = np.array([t for t, _, _ in self._lagged])
+        states = np.array([x for _, x, _ in self._lagged])
+        covs = None if any(P is None for _, _, P in self._lagged) else np.array([P for _, _, P in self._lagged])
+        x_out, P_out = self.local.out(states, covs)
+        return times, x_out, P_out
+
     def add_scan(self, t: float, channels: ArrayLike, z: ArrayLike,
                  sigma: ArrayLike) -> tuple[FloatArray, FloatArray | None]:
         """Add the measurements of one time; returns the mixture's filtered ``(x, P)``.
@@ -274,6 +306,8 @@ class GaussianSumTracker:
                 # the trackers hold the model already moved into its frame: their answers are local
                 h.x, h.P = h.tracker.add_scan(self.t, c, zz, ss)
         self._stop_negligible()
+        if self.estimator == "fixed-lag":
+            self._emit_lagged()
         if self._restarts:
             self._kept.append((self.t, c.copy(), zz.copy(), np.array(ss, dtype=float)))
             self._count += c.size
@@ -380,7 +414,32 @@ class GaussianSumTracker:
         new_init, message = fresh
         self._retired.append((self.t, self._hyps))
         self._hyps = self._hypotheses(data, new_init)
+        self._lagged_next = 0
         self.events.append(Event(time=self.t, message=message))
+
+    def _emit_lagged(self) -> None:
+        """Mix the states that every live fixed-lag tracker has now let go of (in order, each once)."""
+        live = [(i, h.tracker) for i, h in enumerate(self._hyps) if h.alive and isinstance(h.tracker, FixedLagTracker)]
+        if not live:
+            return
+        w = self._weights()[[i for i, _ in live]]
+        w = w / w.sum()
+        j = self._lagged_next
+        while all(j in tr.lagged for _, tr in live):
+            t_j = float(live[0][1].times[j])
+            j += 1
+            if self._lagged and t_j <= self._lagged[-1][0] + 1e-9:
+                continue  # a restarted set's window repeats times already given
+            X = np.array([tr.lagged[j - 1][0] for _, tr in live])
+            Ps = [tr.lagged[j - 1][1] for _, tr in live]
+            mean = w @ X
+            cov = None
+            if all(P is not None for P in Ps):
+                d = X - mean
+                cov = np.einsum("h,hij->ij", w, np.array(Ps) + np.einsum("hi,hj->hij", d, d))
+                cov = 0.5 * (cov + cov.T)
+            self._lagged.append((t_j, mean, cov))
+        self._lagged_next = j
 
     def _heaviest(self) -> _Hypothesis:
         if not self._hyps:

@@ -239,3 +239,39 @@ def test_in_3d_with_three_pairs_it_is_the_registry_too() -> None:
     assert live[-1][1].shape == (6,)
     _assert_same(np.array([o[0] for o in live]), np.array([o[1] for o in live]), np.array([o[2] for o in live]),
                  ref.estimate("filtered"), "3-D")
+
+
+def test_the_fixed_lag_sum_gives_each_state_once_it_is_lag_old() -> None:
+    # one hypothesis (case a 45 km): the lagged states given online are run_fixed_lag's, in order
+    sim, model = _recording("a", 45e3, 0)
+    m = sim.measurements
+    settings = fd.FixedLagSettings(restarts=False)
+    tracker = GaussianSumTracker(model, "fixed-lag", settings)
+    sizes = []
+    for _, _, _, warming in _stream_each(tracker, m):
+        sizes.append(0 if warming else tracker.lagged()[0].size)
+    t, x, P = tracker.lagged()
+    assert P is not None and t.size > 0 and np.all(np.diff(t) > 0)
+    assert sizes == sorted(sizes)  # given once and kept
+    # a state is given when it is lag old: none younger than the lag at the last scan
+    assert t[-1] <= m.time.max() - settings.lag + 1e-9
+    assert tracker.initiation is not None
+    ref = fd.run_estimator("fixed-lag", m, model, tracker.initiation, settings, verify=False).estimate("lagged")
+    _assert_same(t, x, P, ref, "lagged, one hypothesis")
+    # eight hypotheses (case b 45 km): each state given once, in order
+    sim, model = _recording("b", 45e3, 3)
+    tracker = GaussianSumTracker(model, "fixed-lag", settings)
+    _stream(tracker, sim.measurements)
+    t8, x8, P8 = tracker.lagged()
+    assert len(tracker.weights) == 8 and t8.size > 0 and np.all(np.diff(t8) > 0) and P8 is not None
+    assert np.all(np.isfinite(x8)) and np.all(np.linalg.eigvalsh(P8) > 0)
+    with pytest.raises(TypeError, match="no lag"):
+        GaussianSumTracker(model, "isam2").lagged()
+
+
+def _stream_each(tracker: GaussianSumTracker, m: fd.Measurements):
+    sc = m.scans()
+    for k in range(len(sc)):
+        r = sc.rows(k)
+        x, P = tracker.add_scan(sc.times[k], m.pair[r], m.doppler[r], m.sigma[r])
+        yield float(sc.times[k]), x, P, tracker.warming_up
