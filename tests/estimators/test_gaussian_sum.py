@@ -185,8 +185,8 @@ def test_it_restarts_online_where_the_registry_does() -> None:
     # maximum, and at the checkpoint at 7 s the registry re-initiates on all the data so far
     # (fgdoppler.estimators.restart).  The tracker checks at the same checkpoints, on the data it
     # has seen, and restarts there too; the EKF's estimates then agree to rounding.  (iSAM2
-    # restarts at the same time, but its relinearisation thresholds turn the 1e-10 m by which
-    # the two refits differ into millimetres: the chaos docs/concepts.md describes for frames.)
+    # restarts at the same time, but the restart's sampled window split and its relinearisation
+    # thresholds turn rounding-level differences into millimetres: see the module docstring.)
     sim, model = _recording("a", 5e3, 32)
     m = sim.measurements
     tracker = GaussianSumTracker(model, "ekf")
