@@ -11,9 +11,10 @@ registry's hypotheses from the first 4.5 s, no guess, no prior).  Per variant: m
 smallest share of measurements a run accepted, and how many runs have a
 filtered NEES averaged over t >= 10 s below 20.  Then the paper's six
 scenarios at 2 scans/s (``PAPER_RUNS`` runs each), streamed with no guess
-into one warmed-up iSAM2 and into the Gaussian sum.
+into one warmed-up iSAM2 and into the Gaussian sum; and the scaling track
+for an hour into the Gaussian sum, to time each update.
 
-Run: python studies/streaming_start.py [--out DIR]   (about 9 minutes)
+Run: python studies/streaming_start.py [--out DIR]   (about 10 minutes)
 """
 
 from __future__ import annotations
@@ -130,6 +131,35 @@ def paper_table() -> list[dict[str, object]]:
     return rows
 
 
+def long_feed(duration: float = 3600.0) -> dict[str, object]:
+    """The scaling track for ``duration`` s at 2 scans/s into a ``GaussianSumTracker``: the latency of each update.
+
+    Printed: median and slowest updates (the warm-up's end and the restart checkpoints' refits of all the data
+    so far are the slow ones) and the end position error.
+    """
+    dt = 0.5
+    sc = fd.Scenario(geometry=fd.paper_geometry("a"), x0=(45e3, 4.5e3, -100.0, -20.0), duration=duration - dt, dt=dt)
+    sim = fd.simulate(sc, np.random.default_rng(0))
+    tracker = GaussianSumTracker(fd.TrackingModel.of(sc.geometry), "isam2")
+    m, scans = sim.measurements, sim.measurements.scans()
+    latency = np.zeros(len(scans))
+    x = np.full(4, np.nan)
+    for k in range(len(scans)):
+        rows = scans.rows(k)
+        t0 = time.perf_counter()
+        x, _ = tracker.add_scan(scans.times[k], m.pair[rows], m.doppler[rows], m.sigma[rows])
+        latency[k] = time.perf_counter() - t0
+    slow = np.argsort(latency)[::-1][:5]
+    out = {"scans": len(scans), "hypotheses": len(tracker.weights), "median_ms": float(1e3 * np.median(latency)),
+           "slowest": [(float(scans.times[i]), float(1e3 * latency[i])) for i in slow],
+           "end_error_m": float(np.hypot(*(x - sim.truth.states[-1])[:2]))}
+    print(f"\n{duration:g} s at 2 scans/s into a GaussianSumTracker (isam2): {out['scans']} scans, "
+          f"{out['hypotheses']} hypotheses, median update {out['median_ms']:.2f} ms, slowest (t, ms) "
+          + ", ".join(f"({t:g} s, {ms:.0f})" for t, ms in out["slowest"])
+          + f"; end error {out['end_error_m']:.0f} m", flush=True)
+    return out
+
+
 def main() -> None:
     out = out_dir("studies")
     rows = []
@@ -148,8 +178,10 @@ def main() -> None:
                       f"{row['median_end_error_m']:,.0f} m | {row['min_accepted']:.1%} | "
                       f"{row['nees_below_20']}/{runs} |", flush=True)
         paper = paper_table()
+        long = long_feed()
     out.mkdir(parents=True, exist_ok=True)
-    (out / "streaming_start.json").write_text(json.dumps({"scaling_track": rows, "paper": paper}, indent=1))
+    (out / "streaming_start.json").write_text(json.dumps({"scaling_track": rows, "paper": paper, "long_feed": long},
+                                                         indent=1))
 
 
 if __name__ == "__main__":
