@@ -89,7 +89,7 @@ from scipy.special import logsumexp
 from fgdoppler.estimators.ambiguity import NEGLIGIBLE
 from fgdoppler.estimators.ekf import ExtendedKalmanFilter
 from fgdoppler.estimators.fixed_lag import FixedLagTracker
-from fgdoppler.estimators.initiation import Initiation, initiate
+from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate
 from fgdoppler.estimators.isam2 import ISAM2Tracker
 from fgdoppler.estimators.local import LocalFrame
 from fgdoppler.estimators.registry import hypotheses_of
@@ -148,6 +148,10 @@ class GaussianSumTracker:
         apply to every hypothesis and its weighting EKF, and ``restarts``
         to the online re-initiation (step 4).  The trackers' own warm-up is
         not used: each starts from a window.
+    initiation
+        How the held window is initiated (:class:`~fgdoppler.estimators.initiation.InitiationSettings`,
+        in the model's coordinates: a half plane for sensors on one line, the
+        Huber loss for data with outliers), as ``fd.track(initiation=...)``.
     warmup_seconds, warmup_per_pair
         The window to initiate from: held scans spanning this long and
         holding this many measurements per pair (defaults: the initiation
@@ -162,8 +166,8 @@ class GaussianSumTracker:
     """
 
     def __init__(self, model: TrackingModel | Geometry, estimator: Name = "isam2",
-                 settings: GaussianSumSettings | None = None, *, warmup_seconds: float = 4.5,
-                 warmup_per_pair: int = 10) -> None:
+                 settings: GaussianSumSettings | None = None, *, initiation: InitiationSettings | None = None,
+                 warmup_seconds: float = 4.5, warmup_per_pair: int = 10) -> None:
         if estimator not in _SETTINGS:
             raise ValueError(f"estimator must be one of {', '.join(_SETTINGS)}, got {estimator!r}")
         cls = _SETTINGS[estimator]
@@ -178,6 +182,8 @@ class GaussianSumTracker:
         self.estimator: Name = estimator
         self.settings = settings
         self.local, self.tracking_model = LocalFrame.of(as_tracking_model(model))
+        initiation = initiation or InitiationSettings()
+        self._initiation_settings = initiation if self.local.frame is None else initiation.in_frame(self.local.frame)
         self.warmup = WarmUp(seconds=float(warmup_seconds), per_pair=warmup_per_pair,
                              n_channels=self.tracking_model.observation.n_channels)
         self.events: list[Event] = []
@@ -362,7 +368,7 @@ class GaussianSumTracker:
         window = self.warmup.measurements()
         if not len(window.time):
             raise ValueError("the warm-up holds no measurement: nothing to initiate from")
-        init = initiate(window, self.tracking_model)
+        init = initiate(window, self.tracking_model, self._initiation_settings)
         self._hyps = self._hypotheses(window, init)
         self._init = init
         self.t = self.warmup.times[-1]

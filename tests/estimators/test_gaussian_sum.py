@@ -275,3 +275,32 @@ def _stream_each(tracker: GaussianSumTracker, m: fd.Measurements):
         r = sc.rows(k)
         x, P = tracker.add_scan(sc.times[k], m.pair[r], m.doppler[r], m.sigma[r])
         yield float(sc.times[k]), x, P, tracker.warming_up
+
+
+def test_initiation_settings_reach_the_window_a_half_plane_in_a_moved_frame() -> None:
+    # All sensors on one line: the track and its mirror image fit the data alike.  Without a
+    # half plane both sides stay hypotheses; with one (given in the user's coordinates, here a
+    # rotated and shifted frame) the start is the registry's initiation on that side, and the
+    # stream ends on the target's side.
+    c, s = np.cos(1.1), np.sin(1.1)
+    R, t = np.array([[c, -s], [s, c]]), np.array([2.0e5, -3.0e5])
+    flat = [((50e3, 0.0), (0.0, 0.0)), ((60e3, 0.0), (0.0, 0.0))]
+    g = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=R @ np.array(a) + t, rx=R @ np.array(b) + t) for a, b in flat))
+    x0 = np.array([42e3, 4e3, -60.0, -80.0])
+    start = (*(R @ x0[:2] + t), *(R @ x0[2:]))
+    sim = fd.simulate(fd.Scenario(geometry=g, x0=start, duration=20.0, sigma=0.5), np.random.default_rng(0))
+    side = fd.HalfPlane(point=tuple(t), normal=tuple(R @ np.array([0.0, 1.0])))
+    both = GaussianSumTracker(g, "ekf")
+    _stream(both, sim.measurements)
+    assert both.initiation is not None and both.initiation.ambiguous and len(both.weights) >= 2
+    one = GaussianSumTracker(g, "ekf", initiation=fd.InitiationSettings(half_plane=side))
+    out = _stream(one, sim.measurements)
+    assert one.initiation is not None and not one.initiation.ambiguous
+    window = sim.measurements.subset(sim.measurements.time <= one.initiation.t_end)
+    expected = fd.initiate(window, g, fd.InitiationSettings(half_plane=side))
+    np.testing.assert_allclose(one.initiation.x_end, expected.x_end, rtol=1e-9, atol=1e-6)
+    x_end = out[-1][1]
+    # the mirror image of the end is 2 |y| (4.8 km) away: within 1 km of the truth is its side
+    mirror_gap = 2 * abs(float(np.array([0.0, 1.0]) @ (R.T @ (sim.truth.states[-1][:2] - t))))
+    assert mirror_gap > 2e3
+    assert side.contains(x_end[:2]) and np.hypot(*(x_end[:2] - sim.truth.states[-1][:2])) < 1e3
