@@ -304,3 +304,24 @@ def test_initiation_settings_reach_the_window_a_half_plane_in_a_moved_frame() ->
     mirror_gap = 2 * abs(float(np.array([0.0, 1.0]) @ (R.T @ (sim.truth.states[-1][:2] - t))))
     assert mirror_gap > 2e3
     assert side.contains(x_end[:2]) and np.hypot(*(x_end[:2] - sim.truth.states[-1][:2])) < 1e3
+
+
+def test_whole_trajectories_move_with_a_rigidly_moved_problem() -> None:
+    # finish() and lagged() return many states at once: each moves with the problem (1e-9 relative)
+    sim, _ = _recording("a", 45e3, 0)
+    c, s = np.cos(0.37), np.sin(0.37)
+    R, t = np.array([[c, -s], [s, c]]), np.array([3.2e5, -7.7e5])
+    moved = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=R @ np.array(p.tx) + t, rx=R @ np.array(p.rx) + t)
+                                    for p in sim.scenario.geometry.pairs))
+    T = np.kron(np.eye(2), R)
+    out = {}
+    for label, g in (("original", sim.scenario.geometry), ("moved", moved)):
+        tracker = GaussianSumTracker(g, "fixed-lag", fd.FixedLagSettings(restarts=False))
+        _stream(tracker, sim.measurements)
+        out[label] = (tracker.lagged(), tracker.finish())
+    for (t0, x0, P0), (t1, x1, P1) in zip(out["original"], out["moved"], strict=True):
+        np.testing.assert_array_equal(t0, t1)
+        expected = np.concatenate([x0[:, :2] @ R.T + t, x0[:, 2:] @ R.T], axis=1)
+        assert np.max(np.abs(x1 - expected) / np.maximum(np.abs(expected), 1.0)) < 1e-9
+        assert P0 is not None and P1 is not None
+        np.testing.assert_allclose(P1, T @ P0 @ T.T, rtol=0, atol=1e-9 * np.abs(P0).max())
