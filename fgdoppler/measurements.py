@@ -17,6 +17,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -155,6 +156,22 @@ class Measurements:
             order = np.argsort(t, kind="stable")
             t, p, z, s = t[order], p[order], z[order], s[order]
         return cls(time=t, pair=p, doppler=z, sigma=s)
+
+    @classmethod
+    def from_scans(cls, times: Sequence[float], pairs: Sequence[ArrayLike], doppler: Sequence[ArrayLike],
+                   sigma: Sequence[ArrayLike]) -> Measurements:
+        """Build from scans: scan ``k`` at ``times[k]`` holds the measurements ``pairs[k]``, ``doppler[k]``, ``sigma[k]``.
+
+        Scans without measurements add nothing; within a scan the rows are
+        put in pair order, as everywhere.
+        """
+        def column(cols: Sequence[ArrayLike], dtype: type) -> NDArray:
+            return np.concatenate([np.asarray(c, dtype=dtype).reshape(-1) for c in cols]) if len(cols) else \
+                np.zeros(0, dtype=dtype)
+
+        counts = [np.asarray(p).size for p in pairs]
+        return cls(time=np.repeat(np.asarray(times, dtype=float), counts), pair=column(pairs, np.intp),
+                   doppler=column(doppler, float), sigma=column(sigma, float))
 
     def __len__(self) -> int:
         return int(self.time.size)

@@ -43,6 +43,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 import fgdoppler as fd
+from fgdoppler.analysis.metrics import nees
 from fgdoppler.analysis.workers import one_blas_thread
 from fgdoppler.estimators.results import Estimates
 
@@ -55,18 +56,17 @@ def whole_track_statistic(est: Estimates, ref: Estimates) -> NDArray[np.float64]
     r""":math:`m^2_k` at the times both ``est`` and ``ref`` have a determinate covariance."""
     _, ie, ir = np.intersect1d(np.round(est.times, 9), np.round(ref.times, 9), return_indices=True)
     keep = est.cov_ok[ie] & ref.cov_ok[ir]
-    d = est.states[ie[keep]] - ref.states[ir[keep]]
-    return np.einsum("ki,ki->k", d, np.linalg.solve(est.covariances[ie[keep]], d[:, :, None])[:, :, 0])
+    # the filtered state's NEES with the smoothed state standing in for the truth
+    return nees(est.states[ie[keep]], est.covariances[ie[keep]], ref.states[ir[keep]])
 
 
 def _run_nees(est: Estimates, times: NDArray[np.float64], truth: NDArray[np.float64]) -> float:
     """NEES against the truth averaged over the truth times t >= T_NEES where ``est`` has a state."""
     _, ie, it = np.intersect1d(np.round(est.times, 9), np.round(times, 9), return_indices=True)
     keep = est.cov_ok[ie] & (times[it] >= T_NEES)
-    d = est.states[ie[keep]] - truth[it[keep]]
-    if not d.size:
+    if not np.any(keep):
         return float("nan")
-    return float(np.mean(np.einsum("ki,ki->k", d, np.linalg.solve(est.covariances[ie[keep]], d[:, :, None])[:, :, 0])))
+    return float(np.mean(nees(est.states[ie[keep]], est.covariances[ie[keep]], truth[it[keep]])))
 
 
 @one_blas_thread

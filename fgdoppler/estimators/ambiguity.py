@@ -259,6 +259,32 @@ class _Weights:
         return np.repeat(self.at(self.times[-1:]), n, axis=1)
 
 
+def mixture_moments(w: NDArray[np.float64], X: NDArray[np.float64], P: NDArray[np.float64] | None = None
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    r"""Mean and covariance of a Gaussian mixture, term by term along the leading axis.
+
+    .. math::
+
+        \bar{\mathbf x} = \sum_h w_h \mathbf x_h, \qquad
+        \mathbf P = \sum_h w_h\big(\mathbf P_h + (\mathbf x_h - \bar{\mathbf x})(\mathbf x_h - \bar{\mathbf x})^\top\big)
+
+    ``w`` ``(H, ...)`` are the weights (summing to one over ``H``), ``X``
+    ``(H, ..., d)`` the terms' means, ``P`` ``(H, ..., d, d)`` their
+    covariances (``None``: the mean only).  The covariance is symmetric to
+    the last bit (files keep one triangle).
+    """
+    lead = X.shape[1:-1]
+    h, d = X.shape[0], X.shape[-1]
+    w2, X2 = w.reshape(h, -1), X.reshape(h, -1, d)
+    mean = np.einsum("hn,hni->ni", w2, X2)
+    if P is None:
+        return mean.reshape(*lead, d), None
+    dev = X2 - mean[None]
+    cov = np.einsum("hn,hnij->nij", w2, P.reshape(h, -1, d, d) + np.einsum("hni,hnj->hnij", dev, dev))
+    cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
+    return mean.reshape(*lead, d), cov.reshape(*lead, d, d)
+
+
 def _mixture(kind: str, parts: list[Estimates], W: NDArray[np.float64]) -> Estimates:
     r"""The Gaussian mixture of the hypotheses' estimates: :math:`\bar x = \sum w_h x_h`,
     :math:`P = \sum w_h (P_h + (x_h - \bar x)(x_h - \bar x)')`.
@@ -274,10 +300,7 @@ def _mixture(kind: str, parts: list[Estimates], W: NDArray[np.float64]) -> Estim
     ok = np.array([p.cov_ok if s else np.zeros(len(ref), dtype=bool) for p, s in zip(parts, same, strict=True)])
     w = np.where(same[:, None], W, 0.0)
     w = w / np.maximum(np.sum(w, axis=0, keepdims=True), 1e-300)
-    mean = np.einsum("hn,hni->ni", w, X)
-    d = X - mean[None]
-    cov = np.einsum("hn,hnij->nij", w, P + np.einsum("hni,hnj->hnij", d, d))
-    cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))  # symmetric to the last bit (files keep one triangle)
+    mean, cov = mixture_moments(w, X, P)
     cov_ok = np.all(ok | (w < 1e-9), axis=0)
     return Estimates(kind=kind, times=ref.times, states=mean, covariances=cov, cov_ok=cov_ok)  # type: ignore[arg-type]
 

@@ -168,6 +168,23 @@ class ExtendedKalmanFilter:
         self._P = n
         self.t = float(t)
 
+    def add_scan(self, t: float, channels: ArrayLike, z: ArrayLike, sigma: ArrayLike) -> None:
+        """Predict to ``t`` and apply one scan as ``settings.update`` says (a scan without measurements only predicts).
+
+        ``"sequential"``: one :meth:`update` per measurement, in the order
+        given; ``"scan"``: one :meth:`update_scan`.
+        """
+        c = np.asarray(channels, dtype=np.intp).reshape(-1)
+        zz = np.asarray(z, dtype=float).reshape(-1)
+        ss = np.broadcast_to(np.asarray(sigma, dtype=float), zz.shape)
+        if self.settings.update == "scan":
+            self.update_scan(t, c, zz, ss)
+            return
+        if not c.size:
+            self.predict(t)
+        for p, zi, si in zip(c, zz, ss, strict=True):
+            self.update(t, int(p), float(zi), float(si))
+
     def update_scan(self, t: float, channels: NDArray[np.intp], z: FloatArray, sigma: FloatArray) -> FloatArray:
         """Predict to ``t`` and apply the scan's measurements in one vector update; returns each one's NIS.
 
@@ -312,33 +329,15 @@ def run_ekf(
     _, stream = split_window(measurements, init.t_end)
     start_task(progress, "ekf", len(stream.scans()))
     times, states, covs, loglik = [init.t_end], [ekf.x.copy()], [ekf.P.copy()], [0.0]
-    if settings.update == "scan":
-        scans = stream.scans()
-        for k in range(len(scans)):
-            rows = scans.rows(k)
-            ekf.update_scan(float(scans.times[k]), stream.pair[rows], stream.doppler[rows], stream.sigma[rows])
-            times.append(float(scans.times[k]))
-            states.append(ekf.x.copy())
-            covs.append(ekf.P.copy())
-            loglik.append(ekf.log_likelihood)
-            advance(progress)
-    else:
-        t_prev = None
-        for t, p, z, s in zip(stream.time, stream.pair, stream.doppler, stream.sigma, strict=True):
-            if t_prev is not None and t != t_prev:
-                times.append(t_prev)
-                states.append(ekf.x.copy())
-                covs.append(ekf.P.copy())
-                loglik.append(ekf.log_likelihood)
-                advance(progress)
-            ekf.update(float(t), int(p), float(z), float(s))
-            t_prev = t
-        if t_prev is not None:
-            times.append(t_prev)
-            states.append(ekf.x.copy())
-            covs.append(ekf.P.copy())
-            loglik.append(ekf.log_likelihood)
-            advance(progress)
+    scans = stream.scans()
+    for k in range(len(scans)):
+        rows = scans.rows(k)
+        ekf.add_scan(float(scans.times[k]), stream.pair[rows], stream.doppler[rows], stream.sigma[rows])
+        times.append(float(scans.times[k]))
+        states.append(ekf.x.copy())
+        covs.append(ekf.P.copy())
+        loglik.append(ekf.log_likelihood)
+        advance(progress)
     return TrackResult(
         estimator="ekf",
         settings=settings,

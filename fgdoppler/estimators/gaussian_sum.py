@@ -49,7 +49,8 @@ is over-confident (docs/concepts.md, "Feeding a tracker yourself").
 
 4. **Restarts** (``settings.restarts``, on by default, with a zone) — at
    the registry's checkpoints (each time the number of measurements since
-   the start has grown by :data:`~fgdoppler.estimators.restart.GROWTH`)
+   the start has grown by :data:`~fgdoppler.estimators.restart.GROWTH`,
+   :func:`~fgdoppler.estimators.restart.checkpoint_counts`)
    the mixture is tested against the best fit of all the data so far
    (:func:`~fgdoppler.estimators.restart.fresh_start`); where each lies
    outside the other's 99.9 % region, the hypotheses are replaced by those
@@ -79,6 +80,7 @@ user's coordinates.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from typing import Literal
 
@@ -86,14 +88,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import logsumexp
 
-from fgdoppler.estimators.ambiguity import NEGLIGIBLE
+from fgdoppler.estimators.ambiguity import NEGLIGIBLE, mixture_moments
 from fgdoppler.estimators.ekf import ExtendedKalmanFilter
 from fgdoppler.estimators.fixed_lag import FixedLagTracker
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate
 from fgdoppler.estimators.isam2 import ISAM2Tracker
 from fgdoppler.estimators.local import LocalFrame
 from fgdoppler.estimators.registry import hypotheses_of
-from fgdoppler.estimators.restart import GROWTH, fresh_start
+from fgdoppler.estimators.restart import checkpoint_counts, fresh_start
 from fgdoppler.estimators.settings import (
     EKFSettings,
     FixedLagSettings,
@@ -196,7 +198,8 @@ class GaussianSumTracker:
         # every scan since the first, for the restarts' refits (none kept without restarts)
         self._kept: list[tuple[float, NDArray[np.intp], FloatArray, FloatArray]] = []
         self._count = 0
-        self._target = 0.0
+        self._next_checkpoint: Iterator[int] = iter(())
+        self._checkpoint_at = 0
         # fixed-lag: lagged mixtures emitted so far, and the next state index of the current set to emit
         self._lagged: list[tuple[float, FloatArray, FloatArray | None]] = []
         self._lagged_next = 0
@@ -299,17 +302,17 @@ class GaussianSumTracker:
             return np.full(self.tracking_model.n, np.nan), None
         if self.t is not None and not t > self.t:
             raise ValueError(f"scan at t = {t} is not after the previous scan at t = {self.t}: out of order")
-        c = np.asarray(channels, dtype=np.intp).reshape(-1)
         zz = np.asarray(z, dtype=float).reshape(-1)
-        ss = np.broadcast_to(np.asarray(sigma, dtype=float), zz.shape).copy()
-        # refused before any hypothesis sees it: a bad value would stop them all at once
-        check_channels(self.tracking_model.observation, Measurements(time=np.full(c.size, float(t)), pair=c,
-                                                                      doppler=zz, sigma=ss))
+        # refused before any hypothesis sees it (a bad value would stop them all at once), and in
+        # pair order, the order in which the registry's runners take a scan
+        scan = Measurements.from_scans([float(t)], [channels], [zz], [np.broadcast_to(sigma, zz.shape)])
+        check_channels(self.tracking_model.observation, scan)
+        c, zz, ss = scan.pair, scan.doppler, scan.sigma
         self.t = float(t)
         for h in self._hyps:
             if not h.alive:
                 continue
-            _feed_ekf(h.ekf, self.t, c, zz, ss)
+            h.ekf.add_scan(self.t, c, zz, ss)
             if h.tracker is None:
                 h.x, h.P = h.ekf.x.copy(), h.ekf.P.copy()
             else:
@@ -319,11 +322,11 @@ class GaussianSumTracker:
         if self.estimator == "fixed-lag":
             self._emit_lagged()
         if self._restarts:
-            self._kept.append((self.t, c.copy(), zz.copy(), np.array(ss, dtype=float)))
+            self._kept.append((self.t, c, zz, ss))
             self._count += c.size
-            if c.size and self._count >= np.ceil(self._target):
-                while self._count >= np.ceil(self._target):
-                    self._target *= GROWTH
+            if c.size and self._count >= self._checkpoint_at:
+                while self._count >= self._checkpoint_at:  # several counts in one scan: one check
+                    self._checkpoint_at = next(self._next_checkpoint)
                 self._checkpoint()
         return self._mixture()
 
@@ -377,7 +380,8 @@ class GaussianSumTracker:
                                                              self.warmup.sigma, strict=True)]
             # the registry's checkpoints: each time the count since the start has grown by GROWTH
             self._count = len(window.time)
-            self._target = max(self._count, 1) * GROWTH
+            self._next_checkpoint = checkpoint_counts(self._count)
+            self._checkpoint_at = next(self._next_checkpoint)
         if len(self._hyps) > 1:
             self.events.append(Event(time=self.t, message=(
                 f"{len(self._hyps)} hypotheses from the initiation of the first {self.t - self.warmup.times[0]:g} s")))
@@ -414,10 +418,8 @@ class GaussianSumTracker:
         old = self._mixture_local()
         if old[1] is None:
             return
-        data = Measurements(time=np.concatenate([np.full(c.size, t) for t, c, _, _ in self._kept]),
-                            pair=np.concatenate([c for _, c, _, _ in self._kept]).astype(np.intp),
-                            doppler=np.concatenate([z for _, _, z, _ in self._kept]),
-                            sigma=np.concatenate([s for _, _, _, s in self._kept]))
+        times, pairs, doppler, sigma = zip(*self._kept, strict=True)
+        data = Measurements.from_scans(times, pairs, doppler, sigma)
         fresh = fresh_start(data, self.tracking_model, self.settings, (old[0], old[1]), self.t)
         if fresh is None:
             return
@@ -429,26 +431,16 @@ class GaussianSumTracker:
 
     def _emit_lagged(self) -> None:
         """Mix the states that every live fixed-lag tracker has now let go of (in order, each once)."""
-        live = [(i, h.tracker) for i, h in enumerate(self._hyps) if h.alive and isinstance(h.tracker, FixedLagTracker)]
-        if not live:
-            return
-        w = self._weights()[[i for i, _ in live]]
-        w = w / w.sum()
+        idx, w = _live(self._hyps)
+        live = [tr for i in idx if isinstance(tr := self._hyps[i].tracker, FixedLagTracker)]
         j = self._lagged_next
-        while all(j in tr.lagged for _, tr in live):
-            t_j = float(live[0][1].times[j])
+        while all(j in tr.lagged for tr in live):
+            t_j = float(live[0].times[j])
             j += 1
             if self._lagged and t_j <= self._lagged[-1][0] + 1e-9:
                 continue  # a restarted set's window repeats times already given
-            X = np.array([tr.lagged[j - 1][0] for _, tr in live])
-            Ps = [tr.lagged[j - 1][1] for _, tr in live]
-            mean = w @ X
-            cov = None
-            if all(P is not None for P in Ps):
-                d = X - mean
-                cov = np.einsum("h,hij->ij", w, np.array(Ps) + np.einsum("hi,hj->hij", d, d))
-                cov = 0.5 * (cov + cov.T)
-            self._lagged.append((t_j, mean, cov))
+            terms = [tr.lagged[j - 1] for tr in live]
+            self._lagged.append((t_j, *_mixed(w, [x for x, _ in terms], [P for _, P in terms])))
         self._lagged_next = j
 
     def _heaviest(self) -> _Hypothesis:
@@ -462,27 +454,34 @@ class GaussianSumTracker:
     def _stop_negligible(self) -> None:
         w = self._weights()
         for i, h in enumerate(self._hyps):
-            if h.alive and w[i] < NEGLIGIBLE and np.sum(w >= NEGLIGIBLE) >= 1:
+            if h.alive and w[i] < NEGLIGIBLE:
                 h.alive = False
                 self.events.append(Event(time=float(self.t or 0.0), message=(
                     f"hypothesis {i} stopped: weight {w[i]:.1e} below {NEGLIGIBLE:.0e}")))
 
     def _mixture_local(self) -> tuple[FloatArray, FloatArray | None]:
         """The live hypotheses' mixture in the computation frame."""
-        w = self._weights()
-        live = [i for i, h in enumerate(self._hyps) if h.alive]
-        X = np.array([self._hyps[i].x for i in live])
-        wl = w[live] / np.sum(w[live])
-        mean = wl @ X
-        if any(self._hyps[i].P is None for i in live):
-            return mean, None
-        d = X - mean
-        P = np.array([self._hyps[i].P for i in live])
-        cov = np.einsum("h,hij->ij", wl, P + np.einsum("hi,hj->hij", d, d))
-        return mean, 0.5 * (cov + cov.T)
+        idx, w = _live(self._hyps)
+        return _mixed(w, [self._hyps[i].x for i in idx], [self._hyps[i].P for i in idx])
 
     def _mixture(self) -> tuple[FloatArray, FloatArray | None]:
         return self.local.out(*self._mixture_local())
+
+
+def _live(hyps: list[_Hypothesis]) -> tuple[list[int], FloatArray]:
+    """The live hypotheses' indices and their weights, renormalised over them."""
+    idx = [i for i, h in enumerate(hyps) if h.alive]
+    w = _weights_of(hyps)[idx]
+    return idx, w / w.sum()
+
+
+def _mixed(w: FloatArray, states: list[FloatArray], covs: list[FloatArray | None]
+           ) -> tuple[FloatArray, FloatArray | None]:
+    """The mixture of the terms (:func:`~fgdoppler.estimators.ambiguity.mixture_moments`); no covariance if any is
+    indeterminate."""
+    if any(P is None for P in covs):
+        return mixture_moments(w, np.array(states))
+    return mixture_moments(w, np.array(states), np.array(covs))
 
 
 def _weights_of(hyps: list[_Hypothesis]) -> FloatArray:
@@ -493,21 +492,12 @@ def _weights_of(hyps: list[_Hypothesis]) -> FloatArray:
 
 def _set_trajectory(hyps: list[_Hypothesis]) -> tuple[FloatArray, FloatArray, FloatArray | None]:
     """The live hypotheses' trajectories mixed with their current weights, on the times all of them hold."""
-    w_all = _weights_of(hyps)
-    live = [i for i, h in enumerate(hyps) if h.alive and h.tracker is not None]
-    w = w_all[live] / np.sum(w_all[live])
-    parts = [_trajectory(hyps[i].tracker) for i in live]  # type: ignore[arg-type]
+    idx, w = _live(hyps)
+    parts = [_trajectory(hyps[i].tracker) for i in idx]  # type: ignore[arg-type]
     n = min(p[0].size for p in parts)
-    times = parts[0][0][-n:]
-    X = np.array([p[1][-n:] for p in parts])
-    mean = np.einsum("h,hni->ni", w, X)
-    covs = [p[2] for p in parts]
-    if any(c is None for c in covs):
-        return times, mean, None
-    d = X - mean[None]
-    P = np.array([c[-n:] for c in covs if c is not None])
-    cov = np.einsum("h,hnij->nij", w, P + np.einsum("hni,hnj->hnij", d, d))
-    return times, mean, 0.5 * (cov + np.swapaxes(cov, -1, -2))
+    return (parts[0][0][-n:],
+            *_mixed(np.repeat(w[:, None], n, axis=1), [p[1][-n:] for p in parts],
+                    [None if p[2] is None else p[2][-n:] for p in parts]))
 
 
 def _trajectory(tracker: ISAM2Tracker | FixedLagTracker) -> tuple[FloatArray, FloatArray, FloatArray | None]:
@@ -520,16 +510,3 @@ def _trajectory(tracker: ISAM2Tracker | FixedLagTracker) -> tuple[FloatArray, Fl
     covs = [tracker.lagged[j][1] for j in idx]
     return (np.array([tracker.times[j] for j in idx]), np.array([tracker.lagged[j][0] for j in idx]),
             None if any(c is None for c in covs) else np.array(covs))
-
-
-def _feed_ekf(ekf: ExtendedKalmanFilter, t: float, c: NDArray[np.intp], z: FloatArray, s: FloatArray) -> None:
-    """One scan into an EKF as :func:`~fgdoppler.estimators.ekf.run_ekf` feeds it (its ``update`` mode)."""
-    if ekf.settings.update == "scan":
-        ekf.update_scan(t, c, z, s)
-        return
-    if not c.size:
-        ekf.predict(t)
-    for p, zi, si in zip(c, z, s, strict=True):
-        ekf.update(t, int(p), float(zi), float(si))
-
-

@@ -409,10 +409,8 @@ class ISAM2Tracker:
         counts = [sd.channels.size for sd in self.scans]
         if sum(counts) == 0:
             raise ValueError("the tracker holds no measurements")
-        return Measurements(time=np.repeat(np.asarray(self.times), counts),
-                            pair=np.concatenate([sd.channels for sd in self.scans]),
-                            doppler=np.concatenate([sd.z for sd in self.scans]),
-                            sigma=np.concatenate([sd.sigma for sd in self.scans]))
+        return Measurements.from_scans(self.times, [sd.channels for sd in self.scans], [sd.z for sd in self.scans],
+                                       [sd.sigma for sd in self.scans])
 
     def finish(self, *, covariances: bool = True,
                progress: Progress | None = None) -> tuple[FloatArray, FloatArray | None]:

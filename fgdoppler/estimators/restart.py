@@ -57,7 +57,7 @@ settings turns this off.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import replace
 
 import numpy as np
@@ -74,7 +74,8 @@ from fgdoppler.models.observation import predict_along
 from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["DISAGREEMENT", "GROWTH", "MODE_MARGIN", "PER_PAIR", "checkpoints", "fresh_start", "with_restarts"]
+__all__ = ["DISAGREEMENT", "GROWTH", "MODE_MARGIN", "PER_PAIR", "checkpoint_counts", "checkpoints", "fresh_start",
+           "with_restarts"]
 
 FloatArray = NDArray[np.float64]
 #: A checkpoint each time the number of measurements since the start has grown by this factor.
@@ -91,6 +92,14 @@ MODE_MARGIN = float(2.0 * np.log(1.0 / (1.0 - DISAGREEMENT)))
 Solver = Callable[[Initiation], TrackResult]
 
 
+def checkpoint_counts(n0: int) -> Iterator[int]:
+    """The measurement counts ``ceil(n0 × GROWTH^k)``, k = 1, 2, …, at which checkpoints fall (``n0``: the window's)."""
+    target = float(max(n0, 1))
+    while True:
+        target *= GROWTH
+        yield int(np.ceil(target))
+
+
 def checkpoints(measurements: Measurements, init: Initiation) -> list[float]:
     """Scan times after the window at which the measurement count reaches ``n0 × GROWTH^k``.
 
@@ -101,10 +110,8 @@ def checkpoints(measurements: Measurements, init: Initiation) -> list[float]:
     n0 = int(np.searchsorted(t, init.t_end, side="right"))
     scan_times = measurements.scans().times
     out: list[float] = []
-    target = float(max(n0, 1))
-    while True:
-        target *= GROWTH
-        k = int(np.ceil(target)) - 1
+    for count in checkpoint_counts(n0):
+        k = count - 1
         if k >= t.size:
             break
         tc = float(t[k])

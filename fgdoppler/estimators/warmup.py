@@ -112,7 +112,7 @@ class WarmUp:
         c = np.asarray(channels, dtype=np.intp).reshape(-1)
         zz = np.asarray(z, dtype=float).reshape(-1)
         ss = np.broadcast_to(np.asarray(sigma, dtype=float), zz.shape).copy()
-        check_channels(model, Measurements(time=np.full(c.size, t), pair=c, doppler=zz, sigma=ss))
+        check_channels(model, Measurements.from_scans([t], [c], [zz], [ss]))
         if not self.times and guess is not None:
             self.guess = np.asarray(guess, dtype=float).copy()
         self.times.append(float(t))
@@ -132,10 +132,7 @@ class WarmUp:
 
     def measurements(self) -> Measurements:
         """The held measurements (scans without any are left out)."""
-        counts = [c.size for c in self.channels]
-        return Measurements(time=np.repeat(np.asarray(self.times), counts),
-                            pair=np.concatenate(self.channels).astype(np.intp),
-                            doppler=np.concatenate(self.z), sigma=np.concatenate(self.sigma))
+        return Measurements.from_scans(self.times, self.channels, self.z, self.sigma)
 
     def start(self, model: TrackingModel, prior: tuple[ArrayLike, ArrayLike] | None, *,
               huber_k: float | None, events: list[Event]) -> FloatArray:

@@ -22,14 +22,17 @@ def _recording(case: str, start: float, run: int) -> tuple[fd.Simulation, fd.Tra
     return sim, fd.TrackingModel.of(scens[s].geometry)
 
 
-def _stream(tracker: GaussianSumTracker, m: fd.Measurements) -> list[tuple[float, np.ndarray, np.ndarray | None, bool]]:
+def _stream_each(tracker: GaussianSumTracker, m: fd.Measurements):
+    """Every scan of ``m`` into ``tracker``, yielding ``(time, x, P, warming_up)`` after each."""
     sc = m.scans()
-    out = []
     for k in range(len(sc)):
         r = sc.rows(k)
         x, P = tracker.add_scan(sc.times[k], m.pair[r], m.doppler[r], m.sigma[r])
-        out.append((float(sc.times[k]), x, P, tracker.warming_up))
-    return out
+        yield float(sc.times[k]), x, P, tracker.warming_up
+
+
+def _stream(tracker: GaussianSumTracker, m: fd.Measurements) -> list[tuple[float, np.ndarray, np.ndarray | None, bool]]:
+    return list(_stream_each(tracker, m))
 
 
 def _assert_same(times: np.ndarray, x: np.ndarray, P: np.ndarray, ref: fd.Estimates, what: str) -> None:
@@ -268,13 +271,6 @@ def test_the_fixed_lag_sum_gives_each_state_once_it_is_lag_old() -> None:
     with pytest.raises(TypeError, match="no lag"):
         GaussianSumTracker(model, "isam2").lagged()
 
-
-def _stream_each(tracker: GaussianSumTracker, m: fd.Measurements):
-    sc = m.scans()
-    for k in range(len(sc)):
-        r = sc.rows(k)
-        x, P = tracker.add_scan(sc.times[k], m.pair[r], m.doppler[r], m.sigma[r])
-        yield float(sc.times[k]), x, P, tracker.warming_up
 
 
 def test_initiation_settings_reach_the_window_a_half_plane_in_a_moved_frame() -> None:
