@@ -420,7 +420,8 @@ class GaussianSumTracker:
             return
         times, pairs, doppler, sigma = zip(*self._kept, strict=True)
         data = Measurements.from_scans(times, pairs, doppler, sigma)
-        fresh = fresh_start(data, self.tracking_model, self.settings, (old[0], old[1]), self.t)
+        fresh = fresh_start(data, self.tracking_model, self.settings, (old[0], old[1]), self.t,
+                            half_plane=self._initiation_settings.half_plane)
         if fresh is None:
             return
         new_init, message = fresh

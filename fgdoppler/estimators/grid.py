@@ -101,9 +101,22 @@ class HalfPlane:
 
     def in_frame(self, frame: Frame) -> HalfPlane:
         """The same half plane in ``frame``'s local coordinates."""
+        return self.transformed(frame, to_world=False)
+
+    def transformed(self, frame: Frame, *, to_world: bool) -> HalfPlane:
+        r"""The same half plane out of (``to_world``) or into ``frame``'s local coordinates.
+
+        With :math:`\mathbf u = \mathbf B(\mathbf p - \mathbf o)`, the
+        condition :math:`\mathbf n\cdot(\mathbf p - \mathbf q) \ge 0` reads
+        :math:`(\mathbf B\mathbf n)\cdot(\mathbf u - \mathbf u_q) \ge 0`
+        (:math:`\mathbf B` orthonormal).
+        """
         if frame.is_identity:
             return self
-        return HalfPlane(point=tuple(frame.points_to_local(self.point)), normal=tuple(frame.B @ np.asarray(self.normal)))
+        n = np.asarray(self.normal, dtype=float)
+        if to_world:
+            return HalfPlane(point=tuple(frame.points_to_world(self.point)), normal=tuple(frame.B.T @ n))
+        return HalfPlane(point=tuple(frame.points_to_local(self.point)), normal=tuple(frame.B @ n))
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -273,8 +273,9 @@ class Initiation(Judged):
     reasons: tuple[Reason, ...] = ()
     events: tuple[Event, ...] = ()
     wall_time: float = 0.0
-    #: True if a half plane restricted the search (no mirror ambiguity).
-    half_plane: bool = False
+    #: The half plane that restricted the search (no mirror ambiguity), in this initiation's coordinates;
+    #: online restarts re-initiate on the same side.
+    half_plane: HalfPlane | None = None
     window_summarised: bool = False
     #: The same initiation in the frame it was computed in, with that frame (see :meth:`in_frame_of`).
     computed_in: tuple[Frame, Initiation] | None = field(default=None, repr=False, compare=False)
@@ -327,6 +328,7 @@ class Initiation(Judged):
             P_end=None if self.P_end is None else P(self.P_end),
             candidates=tuple(c.transformed(frame, to_world=to_world) for c in self.candidates),
             alternatives=tuple(c.transformed(frame, to_world=to_world) for c in self.alternatives),
+            half_plane=None if self.half_plane is None else self.half_plane.transformed(frame, to_world=to_world),
             computed_in=None,
         )
 
@@ -345,6 +347,8 @@ class Initiation(Judged):
             "candidates": [c.to_dict() for c in self.candidates],
             "alternatives": [c.to_dict() for c in self.alternatives],
             "ambiguous": self.ambiguous, "events": [e.to_dict() for e in self.events], "wall_time": self.wall_time,
+            "half_plane": None if self.half_plane is None else {
+                "point": list(self.half_plane.point), "normal": list(self.half_plane.normal)},
         }
 
 
@@ -534,7 +538,7 @@ def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: t
         chi2_threshold=threshold, dof=dof, passes_chi2=passes, iterations=fit.iterations,
         candidates=candidates, alternatives=alternatives, n_measurements=len(w.meas),
         reasons=tuple(reasons), events=tuple(Event(time=w.t0, message=n) for n in fit.notes), wall_time=wall,
-        half_plane=settings.half_plane is not None,
+        half_plane=settings.half_plane,
     )
 
 

@@ -171,8 +171,7 @@ def run_estimator(
                                   resolve_ambiguity=resolve_ambiguity, progress=prefixed(progress, "reference"))
     if result.primary.kind == "smoothed" or not verify:
         reference = None
-    half = init.half_plane
-    judged = judge(result, measurements, model, settings, reference, half_plane=half)
+    judged = judge(result, measurements, model, settings, reference, half_plane=init.half_plane is not None)
     return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
 
 

@@ -38,6 +38,12 @@ initiation over *all* data up to :math:`t_c`:
    its own covariance (squared distances 19–181 at the four checkpoints)
    and 8–17 σ by the fit's.
 
+A half plane the user gave the first initiation
+(:attr:`~fgdoppler.estimators.initiation.Initiation.half_plane`) binds both
+fits of step 1 and 2: with sensors on one line the mirror image of the track
+fits the data exactly as well, so without it a tracker drifted onto the
+mirror side would stand, and a fresh fit could land there.
+
 Both guards were measured on a two-hour recording of a slow target seen by
 three pairs (:mod:`benchmarks.bench_long`): with the fit's estimate tested
 against the tracker's covariance alone and the lowest cost always winning,
@@ -64,7 +70,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from fgdoppler.estimators.grid import GridResult
+from fgdoppler.estimators.grid import GridResult, HalfPlane
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate, window_grid
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import TrackerSettings
@@ -141,17 +147,20 @@ def _state_at(result: TrackResult, t: float) -> tuple[FloatArray, FloatArray] | 
 
 
 def fresh_start(measurements: Measurements, model: TrackingModel, settings: TrackerSettings,
-                old: tuple[FloatArray, FloatArray] | None, tc: float) -> tuple[Initiation, str] | None:
+                old: tuple[FloatArray, FloatArray] | None, tc: float, *,
+                half_plane: HalfPlane | None = None) -> tuple[Initiation, str] | None:
     """The initiation to restart from at checkpoint ``tc``, and why; ``None`` when the running estimate stands.
 
     ``old`` is the tracker's filtered ``(x, P)`` at ``tc`` (``None``: nothing
     to test); only the measurements up to ``tc`` are used (module docstring,
-    steps 1-3).
+    steps 1-3).  ``half_plane`` (the first initiation's, in the model's
+    coordinates) holds the fresh start and the running estimate's basin to
+    the side the user gave: a restart never jumps to the mirror image.
     """
     data = measurements.subset(measurements.time <= tc)
     if old is None or len(data) < model.n + 1:
         return None
-    isets = InitiationSettings(window="cv", huber_k=settings.huber_k)
+    isets = InitiationSettings(window="cv", huber_k=settings.huber_k, half_plane=half_plane)
     grid = window_grid(data.spread(PER_PAIR), model, isets)
     new = initiate(data, model, isets, grid_result=grid)
     if new.P_end is None or abs(new.t_end - tc) > 1e-9:
@@ -217,7 +226,7 @@ def with_restarts(measurements: Measurements, model: TrackingModel, init: Initia
     t_begin = time.perf_counter()
     result = first
     for tc in checkpoints(measurements, init):
-        fresh = fresh_start(measurements, model, settings, _state_at(result, tc), tc)
+        fresh = fresh_start(measurements, model, settings, _state_at(result, tc), tc, half_plane=init.half_plane)
         if fresh is None:
             continue
         new_init, message = fresh

@@ -210,3 +210,32 @@ def test_active_region_wall_does_not_shrink_the_covariance() -> None:
 def test_wall_sigma_validation() -> None:
     with pytest.raises(ValueError, match="wall_sigma"):
         InitiationSettings(wall_sigma=(0.0, 0.1))
+
+
+def test_the_initiation_carries_its_half_plane_in_its_own_coordinates() -> None:
+    # Collinear sensors in a rotated, shifted frame; the half plane is given in the user's coordinates.
+    # The initiation reports it in those coordinates (it was solved in the geometry's own frame) and
+    # in_frame_of gives the local one; each side test agrees with the user's at every point.
+    c, s = np.cos(0.8), np.sin(0.8)
+    R, t = np.array([[c, -s], [s, c]]), np.array([-4.0e5, 9.0e5])
+    g = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=R @ np.array(a) + t, rx=R @ np.array(b) + t)
+                                for a, b in (((50e3, 0.0), (0.0, 0.0)), ((60e3, 0.0), (0.0, 0.0)))))
+    x0 = np.array([42e3, 4e3, -60.0, -80.0])
+    sc = fd.Scenario(geometry=g, x0=(*(R @ x0[:2] + t), *(R @ x0[2:])), duration=10.0, sigma=0.5)
+    sim = fd.simulate(sc, np.random.default_rng(0))
+    side = HalfPlane(point=tuple(t), normal=tuple(R @ np.array([0.0, 1.0])))
+    model = fd.TrackingModel.of(g)
+    r = initiate(sim.measurements.first_per_pair(20), model, InitiationSettings(half_plane=side))
+    assert r.half_plane is not None and r.half_plane.contains(r.x_start)
+    np.testing.assert_allclose(r.half_plane.normal, side.normal, atol=1e-12)
+    frame = model.computation_frame
+    local = r.in_frame_of(frame).half_plane
+    assert local is not None
+    pts = np.random.default_rng(1).normal(size=(500, 2)) * 20e3 + t
+    np.testing.assert_array_equal(side.contains(pts), local.contains(frame.points_to_local(pts)))
+    np.testing.assert_array_equal(side.contains(pts), r.half_plane.contains(pts))
+    back = local.transformed(frame, to_world=True)
+    np.testing.assert_allclose(back.point, side.point, rtol=1e-12, atol=1e-6)
+    np.testing.assert_allclose(back.normal, side.normal, atol=1e-12)
+    assert r.to_dict()["half_plane"] is not None
+    assert initiate(sim.measurements.first_per_pair(20), model).half_plane is None
