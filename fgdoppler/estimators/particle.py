@@ -19,14 +19,20 @@ the measurements :math:`z_{1:k}` since the anchor is
         \exp\!\Big(-\tfrac12\sum_{j\le k}\rho\big((z_j - h_j(\mathbf F(t_j - t_a)\mathbf x_a))/\sigma_j\big)\Big),
 
 with :math:`\rho` the squared or Huber loss and :math:`p(\mathbf x_a)` the
-zone as support (the initiation's assumption) times the model's weak prior.
+zone as support (the initiation's assumption; within it the half plane the
+initiation was given, :attr:`~fgdoppler.estimators.initiation.Initiation.half_plane`)
+times the model's weak prior.
 This is iterated batch importance sampling (Chopin 2002):
 
-1. **Start** — the window's posterior :math:`\pi_0` by importance sampling
-   from a Gaussian mixture on the initiation's solutions (its estimate, its
+1. **Start** — the window's posterior :math:`\pi_0`, sampled from a
+   Gaussian mixture on the initiation's solutions (its estimate, its
    alternatives, the grid's best candidates; covariances doubled in
-   standard deviation), resampled, then ``start_move_steps`` Metropolis
-   steps so the samples fill the curved valleys.
+   standard deviation)
+   by adaptive tempering — a sequence of targets from the mixture to
+   :math:`\pi_0`, each step reweighting, resampling and moving the samples
+   (:meth:`_Posterior.sample_from`) so that distant modes keep their due
+   mass — then ``start_move_steps`` Metropolis steps so the samples fill
+   the curved valleys.
 2. **Each later scan** — every measurement is gated against the particles'
    predictive distribution (mean and variance of :math:`h` over the
    particles plus :math:`\sigma^2`, :class:`~fgdoppler.estimators.gating.NISGate`),
@@ -55,6 +61,7 @@ same input and settings give the same track.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,6 +69,7 @@ from numpy.typing import NDArray
 from scipy.special import logsumexp
 
 from fgdoppler.estimators.gating import NISGate
+from fgdoppler.estimators.grid import HalfPlane
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.local import in_computation_frame
 from fgdoppler.estimators.results import Estimates, TrackResult
@@ -81,6 +89,8 @@ FloatArray = NDArray[np.float64]
 
 #: Rows of (particle, measurement) predictions evaluated at once (bounds the memory of a move).
 CHUNK_ROWS = 1 << 20
+#: Smallest tempering step of the start (:meth:`_Posterior.sample_from`): at most 100 stages.
+MIN_TEMPER_STEP = 0.01
 #: Random-walk Metropolis scale per state dimension (Roberts, Gelman & Gilks: 2.38²/d for d unknowns).
 RW_SCALE_NUMERATOR = 2.38**2
 
@@ -104,8 +114,10 @@ class _Data:
 class _Posterior:
     """The particles of :math:`\\mathbf x_a`, their weights and log-posteriors, and the target they follow."""
 
-    def __init__(self, model: TrackingModel, settings: ParticleSettings, t_anchor: float, data: _Data) -> None:
+    def __init__(self, model: TrackingModel, settings: ParticleSettings, t_anchor: float, data: _Data, *,
+                 half_plane: HalfPlane | None = None) -> None:
         self.model = model
+        self.half_plane = half_plane  # the start's side, given by the user: part of the prior's support
         self.settings = settings
         self.t_anchor = t_anchor
         self.data = data
@@ -125,6 +137,8 @@ class _Posterior:
         zone = self.model.zone
         if zone is not None:
             out[~zone.contains(x)] = -np.inf
+        if self.half_plane is not None:
+            out[~self.half_plane.contains(x)] = -np.inf
         prior = self.model.prior()
         if prior is not None:
             Li = np.linalg.inv(np.linalg.cholesky(prior[1]))
@@ -157,29 +171,57 @@ class _Posterior:
     # -- particle operations -------------------------------------------------------------
     def sample_from(self, comps: list[tuple[FloatArray, FloatArray]], n: int, moves: int,
                     rng: np.random.Generator) -> float | None:
-        """Importance-sample ``n`` particles from an equal-weight Gaussian mixture, resample, move.
+        r"""Sample the target by adaptive tempering from an equal-weight Gaussian mixture, then move.
 
-        Each component's covariance is inflated 4× (doubled standard
-        deviations: the proposal must cover a valley's curvature).  Returns
-        the moves' acceptance rate, or ``None`` when no sample has a finite
+        The proposal :math:`q` is the mixture with each covariance inflated
+        4× (doubled standard deviations: it must cover a valley's
+        curvature).  ``n`` draws of :math:`q` on the target's support are
+        carried through the tempered targets
+        :math:`\pi_\beta \propto q^{1-\beta}\,\pi^{\beta}`,
+        :math:`0 = \beta_0 < \beta_1 < \dots < \beta_m = 1`: each next
+        :math:`\beta` is the largest whose incremental weights
+        :math:`\exp\big((\beta_{j+1} - \beta_j)(\log\pi - \log q)\big)`
+        keep the effective sample size at ``ess_threshold`` × ``n``
+        (bisection), after which the particles are resampled and moved by
+        ``move_steps`` Metropolis steps on :math:`\pi_{\beta_{j+1}}`
+        (sequential Monte Carlo samplers, Del Moral, Doucet & Jasra 2006).
+        Then ``moves`` steps on :math:`\pi`.  Importance sampling from
+        :math:`q` in one step left an effective sample size of 15–100 of
+        4,096 on the paper's windows, and with sensors on one line it put
+        all the mass on one of two mirror modes of equal mass.  Returns the
+        last moves' acceptance rate, or ``None`` when no draw has a finite
         posterior (the particles are then left unchanged).
         """
         inflate = 4.0
         chols = np.array([_safe_cholesky(inflate * P, inflate * P) for _, P in comps])
         means = np.array([m for m, _ in comps])
         k = len(comps)
+        half_logdet = np.array([np.sum(np.log(np.diag(c))) for c in chols])
+
+        def log_q(y: FloatArray) -> FloatArray:
+            logq = np.empty((k, y.shape[0]))
+            for c in range(k):
+                sol = np.linalg.solve(chols[c], (y - means[c]).T).T
+                logq[c] = -0.5 * np.sum(sol * sol, axis=1) - half_logdet[c]
+            return np.asarray(logsumexp(logq, axis=0), dtype=float)
+
         label = rng.integers(0, k, n)
         x = means[label] + np.einsum("nij,nj->ni", chols[label], rng.standard_normal((n, means.shape[1])))
-        logq = np.empty((k, n))
-        for c in range(k):
-            sol = np.linalg.solve(chols[c], (x - means[c]).T).T
-            logq[c] = -0.5 * np.sum(sol * sol, axis=1) - np.sum(np.log(np.diag(chols[c])))
         logpost = self.log_target(x)
-        logw = logpost - logsumexp(logq, axis=0)
-        if not np.any(np.isfinite(logw)):
+        if not np.any(np.isfinite(logpost)):
             return None
-        self.x, self.label, self.logpost, self.logw = x, label, logpost, logw
-        self.resample(rng)
+        self.x, self.label, self.logpost = x, label, logpost
+        self.logw = np.where(np.isfinite(logpost), 0.0, -np.inf)
+        self.resample(rng)  # q on the target's support
+        lq = log_q(self.x)
+        beta = 0.0
+        while beta < 1.0:
+            delta = self.logpost - lq
+            nxt = _next_temperature(delta, beta, self.settings.ess_threshold * n)
+            self.logw = (nxt - beta) * delta
+            beta = nxt
+            lq = lq[self.resample(rng)]
+            self.move(self.settings.move_steps, rng, tempering=(beta, log_q, lq))
         return self.move(moves, rng)
 
     def weights(self) -> FloatArray:
@@ -189,17 +231,24 @@ class _Posterior:
         w = self.weights()
         return float(1.0 / np.sum(w * w))
 
-    def resample(self, rng: np.random.Generator) -> None:
-        """Systematic resampling to equal weights."""
+    def resample(self, rng: np.random.Generator) -> NDArray[np.intp]:
+        """Systematic resampling to equal weights; returns the indices drawn."""
         n = self.x.shape[0]
         c = np.cumsum(self.weights())
         c[-1] = 1.0
         idx = np.searchsorted(c, (rng.random() + np.arange(n)) / n)
         self.x, self.logpost, self.label = self.x[idx], self.logpost[idx], self.label[idx]
         self.logw = np.zeros(n)
+        return idx
 
-    def move(self, steps: int, rng: np.random.Generator) -> float:
-        """Random-walk Metropolis on the target, each cluster with its own covariance; mean acceptance."""
+    def move(self, steps: int, rng: np.random.Generator, *,
+             tempering: tuple[float, Callable[[FloatArray], FloatArray], FloatArray] | None = None) -> float:
+        r"""Random-walk Metropolis on the target, each cluster with its own covariance; mean acceptance.
+
+        ``tempering = (β, log q, log q of the particles)`` targets
+        :math:`q^{1-\beta}\pi^\beta` instead (:meth:`sample_from`); the
+        last array is updated in place.
+        """
         if steps == 0:
             return float("nan")
         chol = self._cluster_chol()
@@ -209,8 +258,17 @@ class _Posterior:
             eps = rng.standard_normal(self.x.shape)
             prop = self.x + np.sqrt(scale) * np.einsum("nij,nj->ni", chol[self.label], eps)
             lt = self.log_target(prop)
-            accept = np.log(rng.random(self.x.shape[0])) < lt - self.logpost
+            if tempering is None:
+                ratio = lt - self.logpost
+            else:
+                beta, log_q, lq = tempering
+                lq_prop = log_q(prop)
+                with np.errstate(invalid="ignore"):  # -inf - -inf where both lie off the support
+                    ratio = beta * (lt - self.logpost) + (1.0 - beta) * (lq_prop - lq)
+            accept = np.log(rng.random(self.x.shape[0])) < ratio
             self.x[accept], self.logpost[accept] = prop[accept], lt[accept]
+            if tempering is not None:
+                lq[accept] = lq_prop[accept]
             rate = float(np.mean(accept))
             accepted.append(rate)
             # keep the acceptance in the efficient range (a curved valley wants smaller steps)
@@ -254,6 +312,26 @@ class _Posterior:
         self.t_anchor = t
         self.data = _Data(t=np.empty(0), pair=np.empty(0, dtype=np.intp), z=np.empty(0), sigma=np.empty(0))
         self.logpost = self.log_prior(self.x)
+
+
+def _next_temperature(delta: FloatArray, beta: float, target_ess: float) -> float:
+    r"""The largest :math:`\beta' \in (\beta, 1]` whose weights :math:`e^{(\beta'-\beta)\delta}` keep ``target_ess``.
+
+    The effective sample size :math:`(\sum w)^2/\sum w^2` falls
+    monotonically in :math:`\beta'`; bisection to 1e-6, and a step of at
+    least :data:`MIN_TEMPER_STEP`, so that the schedule ends.
+    """
+    def ess(b: float) -> float:
+        w = np.exp((b - beta) * (delta - np.max(delta)))
+        return float(np.sum(w) ** 2 / np.sum(w * w))
+
+    if ess(1.0) >= target_ess:
+        return 1.0
+    lo, hi = beta, 1.0
+    while hi - lo > 1e-6:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if ess(mid) >= target_ess else (lo, mid)
+    return min(1.0, max(lo, beta + MIN_TEMPER_STEP))
 
 
 def _weighted_cov(x: FloatArray, w: FloatArray) -> FloatArray:
@@ -334,7 +412,7 @@ def _window_posterior(measurements: Measurements, model: TrackingModel, init: In
     t0 = init.t_start
     data = _Data(t=window.time - t0, pair=window.pair.astype(np.intp), z=window.doppler.copy(),
                  sigma=window.sigma.copy())
-    post = _Posterior(model, settings, t0, data)
+    post = _Posterior(model, settings, t0, data, half_plane=init.half_plane)
     return post, _start(post, init, rng)
 
 
