@@ -81,7 +81,7 @@ def test_3d_model_on_the_ground_is_the_2d_model_to_the_bit() -> None:
 
 
 def test_3d_tracks_on_the_ground_equal_the_2d_tracks() -> None:
-    """EKF exactly, smoother to rounding, from the same start (z = 0, vz = 0, no cross-covariance).
+    """EKF exactly, smoother to LM's tolerance, from the same start (z = 0, vz = 0, no cross-covariance).
 
     A well-observed scenario: in a flat valley (e.g. case b, 25 km, without the weak prior)
     Levenberg–Marquardt's stopping point amplifies rounding differences, in 2-D alone as well.
@@ -108,9 +108,15 @@ def test_3d_tracks_on_the_ground_equal_the_2d_tracks() -> None:
     prior = (start[0], np.diag([1e8, 1e8, 1e4, 1e4]))
     s2 = solve_smoother(meas, m2, start, settings, prior=prior)
     s3 = solve_smoother(meas, m3, _lift(start), settings, prior=(_lift(prior[0]), _lift_cov(prior[1], 1e8, 1e4)))
-    assert np.allclose(s2.states, s3.states[:, [0, 1, 3, 4]], rtol=0, atol=1e-6)
     assert np.max(np.abs(s3.states[:, [2, 5]])) <= 1e-6
     assert s2.covariances is not None and s3.covariances is not None
+    # Both stop where LM's predicted decrease is below 1e-12 of the cost, i.e. within
+    # sqrt(2e-12 cost) of the optimum in the Hessian's norm, which bounds every state's own
+    # Mahalanobis distance: the two lie within twice that of each other (measured 8e-7
+    # against 2.9e-5; 7e-5 m, where the rounding of the 6-D blocks led LM along another path).
+    d = s2.states - s3.states[:, [0, 1, 3, 4]]
+    m = np.sqrt(np.einsum("ni,nij,nj->n", d, np.linalg.inv(s2.covariances), d))
+    assert np.max(m) <= 2.0 * np.sqrt(2e-12 * s2.cost)
     idx = np.ix_(range(len(s2.times)), [0, 1, 3, 4], [0, 1, 3, 4])
     assert np.allclose(s2.covariances, s3.covariances[idx], rtol=1e-6, atol=1e-9)
 
