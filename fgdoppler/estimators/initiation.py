@@ -494,19 +494,14 @@ def initiate(
         fit = _refine_lm(w, model, settings, grid, threshold)
     else:
         fit = _refine_closed_form(w, model, settings, grid, candidates, threshold)
-    return _assemble(w, model, settings, fit, candidates, time.perf_counter() - t_begin)
+    return _assemble(w, settings, fit, candidates, time.perf_counter() - t_begin)
 
 
-def _assemble(w: _Window, model: TrackingModel, settings: InitiationSettings, fit: _Fit,
-              candidates: tuple[Candidate, ...], wall: float) -> Initiation:
+def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: tuple[Candidate, ...],
+              wall: float) -> Initiation:
     # Each alternative gets the covariance of the deterministic window fit at its state, so a
-    # tracker can follow it as a hypothesis (see fgdoppler.estimators.ambiguity), with the weak
-    # prior's information where the estimate's own covariance has it (LM's): without it a mirror
-    # image, whose data information is the estimate's, starts several times wider than its twin.
-    prior = model.prior() if settings.method == "lm" else None
-    prior_info = 0.0 if prior is None else np.linalg.inv(prior[1])
-    alternatives = tuple(replace(a, covariance=_inverse(w.information(a.state) + prior_info)[0])
-                         for a in fit.alternatives)
+    # tracker can follow it as a hypothesis (see fgdoppler.estimators.ambiguity).
+    alternatives = tuple(replace(a, covariance=_inverse(w.information(a.state))[0]) for a in fit.alternatives)
     dof = len(w.meas) - w.geometry.state_dim - fit.n_outliers
     threshold = _threshold(w, settings, fit.n_outliers)
     passes = bool(fit.cost <= threshold)

@@ -170,7 +170,7 @@ class _Posterior:
 
     # -- particle operations -------------------------------------------------------------
     def sample_from(self, comps: list[tuple[FloatArray, FloatArray]], n: int, moves: int,
-                    rng: np.random.Generator) -> float | None:
+                    rng: np.random.Generator, *, tempered: bool = True) -> float | None:
         r"""Sample the target by adaptive tempering from an equal-weight Gaussian mixture, then move.
 
         The proposal :math:`q` is the mixture with each covariance inflated
@@ -188,9 +188,11 @@ class _Posterior:
         Then ``moves`` steps on :math:`\pi`.  Importance sampling from
         :math:`q` in one step left an effective sample size of 15–100 of
         4,096 on the paper's windows, and with sensors on one line it put
-        all the mass on one of two mirror modes of equal mass.  Returns the
-        last moves' acceptance rate, or ``None`` when no draw has a finite
-        posterior (the particles are then left unchanged).
+        all the mass on one of two mirror modes of equal mass.
+        ``tempered=False`` keeps that one step (importance weights
+        :math:`\pi/q`, resampled).  Returns the last moves' acceptance rate,
+        or ``None`` when no draw has a finite posterior (the particles are
+        then left unchanged).
         """
         inflate = 4.0
         chols = np.array([_safe_cholesky(inflate * P, inflate * P) for _, P in comps])
@@ -211,6 +213,10 @@ class _Posterior:
         if not np.any(np.isfinite(logpost)):
             return None
         self.x, self.label, self.logpost = x, label, logpost
+        if not tempered:
+            self.logw = logpost - log_q(x)
+            self.resample(rng)
+            return self.move(moves, rng)
         self.logw = np.where(np.isfinite(logpost), 0.0, -np.inf)
         self.resample(rng)  # q on the target's support
         lq = log_q(self.x)
@@ -354,10 +360,22 @@ def _safe_cholesky(cov: FloatArray, fallback: FloatArray) -> FloatArray:
     return np.diag(np.sqrt(np.maximum(np.abs(np.diag(fallback)), 1e-6)))
 
 
-def _components(post: _Posterior, init: Initiation, window: _Data) -> list[tuple[FloatArray, FloatArray]]:
-    """Gaussian components of the start's proposal: the initiation's solutions and grid candidates."""
+def _components(post: _Posterior, init: Initiation, window: _Data, *, alike: bool = False
+                ) -> list[tuple[FloatArray, FloatArray]]:
+    """Gaussian components of the start's proposal: the initiation's solutions and grid candidates.
+
+    ``alike``: each alternative solution is proposed with the window's
+    covariance there *with* the weak prior, as the estimate's own
+    (Levenberg–Marquardt's) covariance has it.  The initiation gives an
+    alternative the data's covariance alone, which with sensors on one line
+    is 6.6 times wider across the line than its mirror twin's: proposed that
+    thinly, the mirror mode lost its mass.
+    """
     points = [init.x_start, *(a.state for a in init.alternatives), *(c.state for c in init.candidates)]
     covs = [init.P_start, *(a.covariance for a in init.alternatives), *(None for _ in init.candidates)]
+    if alike and init.method == "lm":
+        covs[1:1 + len(init.alternatives)] = [_window_covariance(post, a.state, window, with_prior=True)
+                                              for a in init.alternatives]
     out: list[tuple[FloatArray, FloatArray]] = []
     for x, P in zip(points, covs, strict=True):
         x = np.asarray(x, dtype=float)
@@ -372,8 +390,11 @@ def _components(post: _Posterior, init: Initiation, window: _Data) -> list[tuple
     return out
 
 
-def _window_covariance(post: _Posterior, x: FloatArray, window: _Data) -> FloatArray | None:
+def _window_covariance(post: _Posterior, x: FloatArray, window: _Data, *, with_prior: bool = False
+                       ) -> FloatArray | None:
     r"""Inverse Fisher information of the window about the start state ``x`` (analytic Jacobian of the model).
+
+    ``with_prior`` adds the weak prior's information.
 
     Along a constant-velocity track :math:`\mathbf x(t) = \mathbf F(t)\mathbf x`, so the row of a
     measurement at :math:`t` is :math:`\mathbf H(\mathbf x(t))\,\mathbf F(t)`.
@@ -391,29 +412,34 @@ def _window_covariance(post: _Posterior, x: FloatArray, window: _Data) -> FloatA
     J = np.concatenate([H[:, :n // 2], H[:, :n // 2] * d.t[:, None] + H[:, n // 2:]], axis=1)
     Jw = J / d.sigma[:, None]
     info = Jw.T @ Jw
+    prior = post.model.prior() if with_prior else None
+    if prior is not None:
+        info = info + np.linalg.inv(prior[1])
     s = np.linalg.svd(info, compute_uv=False)
     if not np.all(np.isfinite(s)) or s[-1] <= s[0] * 1e-14:
         return None
     return np.asarray(np.linalg.inv(info), dtype=float)
 
 
-def _start(post: _Posterior, init: Initiation, rng: np.random.Generator) -> float:
+def _start(post: _Posterior, init: Initiation, rng: np.random.Generator, tempered: bool = True) -> float:
     """Sample the window's posterior (module docstring, step 1); returns the moves' acceptance rate."""
     st = post.settings
-    rate = post.sample_from(_components(post, init, post.data), st.n_particles, st.start_move_steps, rng)
+    rate = post.sample_from(_components(post, init, post.data, alike=tempered), st.n_particles,
+                            st.start_move_steps, rng, tempered=tempered)
     if rate is None:
         raise ValueError("no start sample has a finite posterior: the window cannot be explained inside the zone")
     return rate
 
 
 def _window_posterior(measurements: Measurements, model: TrackingModel, init: Initiation,
-                      settings: ParticleSettings, rng: np.random.Generator) -> tuple[_Posterior, float]:
+                      settings: ParticleSettings, rng: np.random.Generator, tempered: bool = True
+                      ) -> tuple[_Posterior, float]:
     window, _ = split_window(measurements, init.t_end)
     t0 = init.t_start
     data = _Data(t=window.time - t0, pair=window.pair.astype(np.intp), z=window.doppler.copy(),
                  sigma=window.sigma.copy())
     post = _Posterior(model, settings, t0, data, half_plane=init.half_plane)
-    return post, _start(post, init, rng)
+    return post, _start(post, init, rng, tempered)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -498,8 +524,11 @@ def _kmeans(z: FloatArray, w: FloatArray, k: int, rng: np.random.Generator, iter
 
 
 def window_posterior(measurements: Measurements, model: TrackingModel | Geometry, init: Initiation,
-                     settings: ParticleSettings | None = None) -> WindowPosterior:
+                     settings: ParticleSettings | None = None, *, tempered: bool = True) -> WindowPosterior:
     """Sample the initiation window's posterior (the particle estimator's start, module docstring step 1).
+
+    ``tempered=False``: importance sampling in one step instead of the
+    tempered sequence (:meth:`_Posterior.sample_from`).
 
     Raises
     ------
@@ -508,7 +537,8 @@ def window_posterior(measurements: Measurements, model: TrackingModel | Geometry
     """
     model = as_tracking_model(model)
     settings = settings or ParticleSettings()
-    post, rate = _window_posterior(measurements, model, init, settings, np.random.default_rng(settings.seed))
+    post, rate = _window_posterior(measurements, model, init, settings, np.random.default_rng(settings.seed),
+                                   tempered)
     return WindowPosterior(t_start=init.t_start, t_end=init.t_end, states=post.x.copy(), weights=post.weights(),
                            acceptance=rate)
 

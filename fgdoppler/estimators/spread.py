@@ -129,7 +129,7 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     ratio = min(lo, hi) / quad
     if 1.0 / SAMPLING_LIMIT <= ratio <= SAMPLING_LIMIT:
         return None
-    rate = post.sample_from([(x0, P0)], SAMPLES, MOVES, np.random.default_rng(seed))
+    rate = post.sample_from([(x0, P0)], SAMPLES, MOVES, np.random.default_rng(seed), tempered=False)
     if rate is None:
         return None
     d = post.x - x0
