@@ -115,7 +115,7 @@ def posterior_hypotheses(init: Initiation, measurements: Measurements, model: Tr
 
     # One-step importance sampling, not the particle estimator's tempered start: measured on the
     # slow three-pair track of the long-run benchmark, terms from the tempered posterior let the
-    # online restarts fire in 7 of 30 recordings and each raised the RMSE (by 8-98 %); see the docs.
+    # online restarts fire in 7 of 30 recordings and each raised the RMSE (by 8-97 %); see the docs.
     post = window_posterior(measurements, model, init, ParticleSettings(huber_k=huber_k, seed=seed),
                             tempered=False)
     terms = post.components(k, model, seed=seed)

@@ -27,12 +27,11 @@ This is iterated batch importance sampling (Chopin 2002):
 1. **Start** — the window's posterior :math:`\pi_0`, sampled from a
    Gaussian mixture on the initiation's solutions (its estimate, its
    alternatives, the grid's best candidates; covariances doubled in
-   standard deviation)
-   by adaptive tempering — a sequence of targets from the mixture to
-   :math:`\pi_0`, each step reweighting, resampling and moving the samples
-   (:meth:`_Posterior.sample_from`) so that distant modes keep their due
-   mass — then ``start_move_steps`` Metropolis steps so the samples fill
-   the curved valleys.
+   standard deviation) by adaptive tempering — a sequence of targets from
+   the mixture to :math:`\pi_0`, each step reweighting, resampling and
+   moving the samples (:meth:`_Posterior.sample_from`) so that distant
+   modes keep their due mass — then ``start_move_steps`` Metropolis steps
+   so the samples fill the curved valleys.
 2. **Each later scan** — every measurement is gated against the particles'
    predictive distribution (mean and variance of :math:`h` over the
    particles plus :math:`\sigma^2`, :class:`~fgdoppler.estimators.gating.NISGate`),
