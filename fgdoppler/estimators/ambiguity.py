@@ -116,8 +116,8 @@ def posterior_hypotheses(init: Initiation, measurements: Measurements, model: Tr
     # One-step importance sampling, not the particle estimator's tempered start: measured on the
     # slow three-pair track of the long-run benchmark, terms from the tempered posterior let the
     # online restarts fire in 7 of 30 recordings and each raised the RMSE (by 8-97 %); see the docs.
-    post = window_posterior(measurements, model, init, ParticleSettings(huber_k=huber_k, seed=seed),
-                            tempered=False)
+    post = window_posterior(measurements, model, init,
+                            ParticleSettings(huber_k=huber_k, seed=seed, tempered_start=False))
     terms = post.components(k, model, seed=seed)
     Fi = np.linalg.inv(model.motion.F(init.t_end - init.t_start))
     kept = tuple(r for r in init.reasons if r.code != "ambiguous")

@@ -420,9 +420,10 @@ def _window_covariance(post: _Posterior, x: FloatArray, window: _Data, *, with_p
     return np.asarray(np.linalg.inv(info), dtype=float)
 
 
-def _start(post: _Posterior, init: Initiation, rng: np.random.Generator, tempered: bool = True) -> float:
+def _start(post: _Posterior, init: Initiation, rng: np.random.Generator) -> float:
     """Sample the window's posterior (module docstring, step 1); returns the moves' acceptance rate."""
     st = post.settings
+    tempered = st.tempered_start
     rate = post.sample_from(_components(post, init, post.data, alike=tempered), st.n_particles,
                             st.start_move_steps, rng, tempered=tempered)
     if rate is None:
@@ -431,14 +432,13 @@ def _start(post: _Posterior, init: Initiation, rng: np.random.Generator, tempere
 
 
 def _window_posterior(measurements: Measurements, model: TrackingModel, init: Initiation,
-                      settings: ParticleSettings, rng: np.random.Generator, tempered: bool = True
-                      ) -> tuple[_Posterior, float]:
+                      settings: ParticleSettings, rng: np.random.Generator) -> tuple[_Posterior, float]:
     window, _ = split_window(measurements, init.t_end)
     t0 = init.t_start
     data = _Data(t=window.time - t0, pair=window.pair.astype(np.intp), z=window.doppler.copy(),
                  sigma=window.sigma.copy())
     post = _Posterior(model, settings, t0, data, half_plane=init.half_plane)
-    return post, _start(post, init, rng, tempered)
+    return post, _start(post, init, rng)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -523,11 +523,11 @@ def _kmeans(z: FloatArray, w: FloatArray, k: int, rng: np.random.Generator, iter
 
 
 def window_posterior(measurements: Measurements, model: TrackingModel | Geometry, init: Initiation,
-                     settings: ParticleSettings | None = None, *, tempered: bool = True) -> WindowPosterior:
+                     settings: ParticleSettings | None = None) -> WindowPosterior:
     """Sample the initiation window's posterior (the particle estimator's start, module docstring step 1).
 
-    ``tempered=False``: importance sampling in one step instead of the
-    tempered sequence (:meth:`_Posterior.sample_from`).
+    ``settings.tempered_start=False``: importance sampling in one step
+    instead of the tempered sequence (:meth:`_Posterior.sample_from`).
 
     Raises
     ------
@@ -536,8 +536,7 @@ def window_posterior(measurements: Measurements, model: TrackingModel | Geometry
     """
     model = as_tracking_model(model)
     settings = settings or ParticleSettings()
-    post, rate = _window_posterior(measurements, model, init, settings, np.random.default_rng(settings.seed),
-                                   tempered)
+    post, rate = _window_posterior(measurements, model, init, settings, np.random.default_rng(settings.seed))
     return WindowPosterior(t_start=init.t_start, t_end=init.t_end, states=post.x.copy(), weights=post.weights(),
                            acceptance=rate)
 

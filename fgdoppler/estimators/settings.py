@@ -350,6 +350,12 @@ class ParticleSettings(TrackerSettings):
         Metropolis steps on the initiation window's posterior.
     max_span : float, default 300.0
         Seconds of data a move may re-evaluate before the anchor moves on.
+    tempered_start : bool, default True
+        Carry the start's proposal to the window's posterior by adaptive
+        tempering; ``False``: importance sampling in one step, then the
+        ``start_move_steps`` moves (faster; its sample stays near the
+        proposal's centres, under-dispersed, and can give one of two
+        mirror modes all the mass).
     """
 
     n_particles: int = 4096
@@ -358,6 +364,7 @@ class ParticleSettings(TrackerSettings):
     move_steps: int = 5
     start_move_steps: int = 20
     max_span: float = 300.0
+    tempered_start: bool = True
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -373,3 +380,5 @@ class ParticleSettings(TrackerSettings):
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"{name} must be a whole number >= 0, got {v!r}")
         _positive(self.max_span, "max_span")
+        if not isinstance(self.tempered_start, bool):
+            raise ValueError(f"tempered_start must be True or False, got {self.tempered_start!r}")
