@@ -115,7 +115,7 @@ def posterior_hypotheses(init: Initiation, measurements: Measurements, model: Tr
 
     # One-step importance sampling, not the particle estimator's tempered start: eight terms of the
     # faithful (wider) posterior resolve its valley more coarsely, and a tracker stays near its term;
-    # measured, case a 5 km gained 2-5 % while case b 25 and 45 km lost up to 7 % (docs, "A particle
+    # measured, case a 5 km gained 2-7 % while case b 25 and 45 km lost up to 9 % (docs, "A particle
     # estimator").
     post = window_posterior(measurements, model, init,
                             ParticleSettings(huber_k=huber_k, seed=seed, tempered_start=False))

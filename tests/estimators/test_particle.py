@@ -205,9 +205,9 @@ def test_tempered_start_agrees_with_a_large_independent_sample(seed: int) -> Non
     carried at least an eighth of their number in independent draws, the
     squared Mahalanobis distance of the two means (in the reference's
     covariance) would be about χ²₄ × (8/4,096 + 8/65,536); below 0.03 but for
-    a chance of 0.6 % (χ²₄ beyond 14.5).  Measured 9e-4 to 4.5e-3 on seeds 0–5; the one-step
-    start with 4,096 particles gave 3e-3 to 2.3e-2 (seed 0 has an alternative
-    solution, seeds 2 and 3 none).
+    a chance of 0.6 % (χ²₄ beyond 14.5).  Measured 9e-4 to 4.5e-3 on seeds
+    0–5; the one-step start with 4,096 particles gave 3e-3 to 2.3e-2 (seed 0
+    has an alternative solution, seeds 2 and 3 none).
     """
     sim, model, init = _case("a", 25e3, seed)
     ref = window_posterior(sim.measurements, model, init,
