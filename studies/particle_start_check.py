@@ -16,7 +16,7 @@ Two parts, on the accuracy benchmark's recordings of case a 25 km
    16,384 particles, and paired differences with 95 % bootstrap intervals.
 
 Run: ``python studies/particle_start_check.py [--runs 100] [--seed 2026] [--out DIR]``
-(part 1 about 2 minutes, part 2 about 15 minutes on 2 cores).
+(7 minutes on 2 cores, most of it part 2).
 """
 
 from __future__ import annotations

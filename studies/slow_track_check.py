@@ -11,7 +11,7 @@ recordings.  Per recording: the position RMSE over the whole track with
 then the RMS over recordings and the median.  Run it at two commits to
 measure a change to the start or to the restart rule.
 
-Run: ``python studies/slow_track_check.py [--recordings 30] [--out DIR]`` (about 4 minutes on 2 cores).
+Run: ``python studies/slow_track_check.py [--recordings 30] [--out DIR]`` (about 1 minute on 2 cores).
 """
 
 from __future__ import annotations
