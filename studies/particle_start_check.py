@@ -27,9 +27,11 @@ import os
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import _common  # noqa: F401  (the repository root on the path, for the benchmarks)
 import numpy as np
 
 import fgdoppler as fd
+from benchmarks.bench_accuracy import _on_grid
 from fgdoppler.analysis.metrics import compare_rmse, errors, time_averaged_rmse
 from fgdoppler.analysis.workers import one_blas_thread
 from fgdoppler.estimators.particle import WindowPosterior, window_posterior
@@ -93,10 +95,7 @@ def _track(args: tuple[int, int, bool, int]) -> np.ndarray:
     sim, model, init = _recording(seed, r)
     e = fd.run_estimator("particle", sim.measurements, model, init,
                          fd.ParticleSettings(n_particles=n, tempered_start=tempered), verify=False).primary
-    se = np.full(sim.truth.times.size, np.nan)
-    idx = np.searchsorted(sim.truth.times, e.times)
-    se[idx] = errors(e.states, sim.truth.states[idx])[0]
-    return se
+    return _on_grid(sim.truth.times, e.times, e.states, e.covariances, sim.truth.states, e.cov_ok)[0]
 
 
 def tracks(seed: int, runs: int) -> dict[str, object]:

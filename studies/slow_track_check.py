@@ -20,22 +20,19 @@ import argparse
 import json
 import os
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
+import _common  # noqa: F401  (the repository root on the path, for the benchmarks)
 import numpy as np
 
 import fgdoppler as fd
+from benchmarks.bench_long import recording
 from fgdoppler.analysis.metrics import errors
 from fgdoppler.analysis.workers import one_blas_thread
 
-#: The three pairs of ``benchmarks/bench_long.py`` (not importable from a study script).
-THREE_PAIRS = fd.Geometry(pairs=(
-    fd.BistaticPair(tx=(40e3, 0.0), rx=(0.0, 0.0)),
-    fd.BistaticPair(tx=(40e3, 0.0), rx=(15e3, 25e3)),
-    fd.BistaticPair(tx=(5e3, 30e3), rx=(0.0, 0.0)),
-), name="three")
-SCENARIO = fd.Scenario(geometry=THREE_PAIRS, x0=(15e3, 8e3, 5.0, 5.0), duration=120.0, dt=0.5,
-                       name="slow 7 m/s, 3 pairs, 120 s")
+#: The two-hour slow recording of the long-run benchmark, cut to its first 120 s.
+SCENARIO = replace(recording("slow"), duration=120.0, name="slow 7 m/s, 3 pairs, 120 s")
 
 
 @one_blas_thread
