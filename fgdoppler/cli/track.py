@@ -19,6 +19,7 @@ from fgdoppler.cli.common import (
     grid_spec,
     huber,
 )
+from fgdoppler.estimators.ambiguity import hypothesis_weights
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
 
@@ -220,8 +221,12 @@ def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: A
     verdict = "passes" if init.passes_chi2 else "FAILS"
     print(f"  cost {init.cost:.2f} {verdict} the chi-square test ({init.chi2_threshold:.2f}, {init.dof} dof); "
           f"objective with prior and zone terms {init.objective:.2f}")
-    for a in init.alternatives:
-        print(f"    alternative x0 = {np.round(a.state, 1).tolist()} cost {a.cost:.2f}")
+    weights = hypothesis_weights(init) if init.alternatives else None
+    if weights is not None:
+        print(f"    this solution holds {weights[0]:.1%} of the window posterior in the zone")
+    for i, a in enumerate(init.alternatives):
+        share = "" if weights is None else f", {weights[i + 1]:.1%} of the posterior"
+        print(f"    alternative x0 = {np.round(a.state, 1).tolist()} cost {a.cost:.2f}{share}")
     _print_events(init.events)
     if truth is not None:
         err = init.x_end - truth.at([init.t_end])[0]

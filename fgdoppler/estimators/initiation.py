@@ -63,6 +63,7 @@ from typing import Literal, get_args
 import gtsam
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import logsumexp
 from scipy.stats import chi2
 
 from fgdoppler._text import first_line
@@ -86,8 +87,8 @@ from fgdoppler.models.doppler import StackedTimes, cv_doppler, cv_doppler_jacobi
 from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
 
-__all__ = ["METHODS", "Candidate", "Initiation", "InitiationSettings", "initiate", "lm_params",
-           "residual_landscape", "window_grid"]
+__all__ = ["EVIDENCE_DRAWS", "METHODS", "Candidate", "Initiation", "InitiationSettings", "initiate", "lm_params",
+           "residual_landscape", "window_grid", "window_log_evidence"]
 
 FloatArray = NDArray[np.float64]
 Method = Literal["grid", "ils", "lm"]
@@ -195,11 +196,15 @@ class Candidate:
     passes_chi2: bool = False
     #: Covariance of ``state`` (window Fisher information inverted), where computed.
     covariance: FloatArray | None = None
+    #: Log of the window posterior's mass in this solution's basin inside the zone (see
+    #: :attr:`Initiation.log_evidence`), where computed.
+    log_evidence: float | None = None
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready form."""
         return {"state": self.state.tolist(), "cost": self.cost, "passes_chi2": self.passes_chi2,
-                "covariance": None if self.covariance is None else self.covariance.tolist()}
+                "covariance": None if self.covariance is None else self.covariance.tolist(),
+                "log_evidence": self.log_evidence}
 
     def transformed(self, frame: Frame, *, to_world: bool) -> Candidate:
         """The candidate moved out of (``to_world``) or into ``frame``'s local coordinates."""
@@ -246,6 +251,11 @@ class Initiation(Judged):
         The verdict's findings and the log (:mod:`fgdoppler.estimators.verdict`).
     wall_time
         Seconds for the whole initiation.
+    log_evidence
+        With alternatives (LM only): the log of the window posterior's mass
+        in this solution's basin inside the zone, up to a constant shared by
+        all solutions of the window (:func:`window_log_evidence`); each
+        alternative carries its own.  ``None`` otherwise.
     window_summarised
         True for one term of a Gaussian sum made from the window's posterior
         (:func:`~fgdoppler.estimators.ambiguity.posterior_hypotheses`):
@@ -276,6 +286,7 @@ class Initiation(Judged):
     #: The half plane that restricted the search (no mirror ambiguity), in this initiation's coordinates;
     #: online restarts re-initiate on the same side.
     half_plane: HalfPlane | None = None
+    log_evidence: float | None = None
     window_summarised: bool = False
     #: The same initiation in the frame it was computed in, with that frame (see :meth:`in_frame_of`).
     computed_in: tuple[Frame, Initiation] | None = field(default=None, repr=False, compare=False)
@@ -349,6 +360,7 @@ class Initiation(Judged):
             "ambiguous": self.ambiguous, "events": [e.to_dict() for e in self.events], "wall_time": self.wall_time,
             "half_plane": None if self.half_plane is None else {
                 "point": list(self.half_plane.point), "normal": list(self.half_plane.normal)},
+            "log_evidence": self.log_evidence,
         }
 
 
@@ -434,6 +446,7 @@ class _Fit:
     notes: list[str]
     reasons: list[Reason]
     n_outliers: int = 0
+    log_evidence: float | None = None
 
 
 def initiate(
@@ -527,10 +540,14 @@ def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: t
     if alternatives:
         d = w.geometry.dim
         far = max(float(np.linalg.norm(a.state[:d] - fit.x0[:d])) for a in alternatives)
+        share = ""
+        if fit.log_evidence is not None and all(a.log_evidence is not None for a in alternatives):
+            logz = np.array([fit.log_evidence, *(a.log_evidence for a in alternatives)], dtype=float)
+            share = f", holding {1.0 - float(np.exp(logz[0] - logsumexp(logz))):.1%} of its posterior in the zone"
         reasons.append(Reason(code="ambiguous", status="doubtful", message=(
             f"{len(alternatives)} other solution(s) fit the window as well (costs "
             + ", ".join(f"{a.cost:.1f}" for a in alternatives) + f" vs {fit.cost:.1f}; up to {far / 1e3:.1f} km "
-            "away): the window alone cannot tell them apart")))
+            f"away{share}): the window alone cannot tell them apart")))
     return Initiation(
         method=settings.method, t_start=w.t0, t_end=w.t0 + float(w.scan_times[-1]),
         x_start=np.asarray(fit.x0, dtype=float), x_end=np.asarray(fit.x1, dtype=float),
@@ -538,7 +555,7 @@ def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: t
         chi2_threshold=threshold, dof=dof, passes_chi2=passes, iterations=fit.iterations,
         candidates=candidates, alternatives=alternatives, n_measurements=len(w.meas),
         reasons=tuple(reasons), events=tuple(Event(time=w.t0, message=n) for n in fit.notes), wall_time=wall,
-        half_plane=settings.half_plane,
+        half_plane=settings.half_plane, log_evidence=fit.log_evidence,
     )
 
 
@@ -666,13 +683,71 @@ def _refine_lm(w: _Window, model: TrackingModel, settings: InitiationSettings, g
         P0 = marg.covariances[0]
         P1 = F_end @ P0 @ F_end.T if cv_window else marg.covariances[1]
     alternatives: list[Candidate] = []
+    alt_sols: list[_Solution] = []
     for sol in sols[1:]:
         passes = sol.cost <= _threshold(w, settings, sol.n_outliers)
         if passes and not any(_same(sol.x0, s, settings) for s in [best.x0, *(a.state for a in alternatives)]):
             alternatives.append(Candidate(state=sol.x0, cost=sol.cost, passes_chi2=True))
+            alt_sols.append(sol)
+    log_evidence = None
+    if alternatives:
+        free = _without_wall(graph, model, settings)
+        evidence = [window_log_evidence(free, n_data, s.values, model, settings.max_iterations)
+                    for s in (best, *alt_sols)]
+        if all(e is not None for e in evidence):
+            log_evidence = evidence[0]
+            alternatives = [replace(a, log_evidence=e) for a, e in zip(alternatives, evidence[1:], strict=True)]
     return _Fit(x0=best.x0, x1=x1, P0=P0, P1=P1, cov_message=marg.message, cost=best.cost,
                 objective=best.objective, iterations=best.iterations, alternatives=alternatives, notes=notes,
-                reasons=reasons, n_outliers=best.n_outliers)
+                reasons=reasons, n_outliers=best.n_outliers, log_evidence=log_evidence)
+
+
+#: Draws from a basin's Gaussian that measure how much of it lies inside the zone (fixed seed: reproducible).
+EVIDENCE_DRAWS = 4096
+
+
+def window_log_evidence(free: gtsam.NonlinearFactorGraph, n_data: int, values: gtsam.Values, model: TrackingModel,
+                        max_iterations: int = 100) -> float | None:
+    r"""Log of the window posterior's mass in one solution's basin, inside the zone (Laplace).
+
+    With the objective :math:`o(\mathbf y)` of the window graph without the
+    wall (data and weak prior; :math:`\mathbf y` all the window's states), its
+    minimum :math:`\hat{\mathbf y}` in the basin of ``values`` (LM from
+    there: a solution held at the zone's edge moves out to the mode the data
+    point at), the information :math:`\mathbf A = \mathbf J'\mathbf J` of its
+    whitened linearisation there, and :math:`\hat{\mathbf P}_0` the start
+    state's marginal covariance,
+
+    .. math::
+
+        \log Z \approx -\tfrac12\,o(\hat{\mathbf y}) - \tfrac12\log\det\mathbf A
+        + \log \Pr_{\mathbf x_0 \sim \mathcal N(\hat{\mathbf x}_0,\,\hat{\mathbf P}_0)}[\mathbf x_0 \in \text{zone}],
+
+    up to a constant shared by every solution of the window.  The last term,
+    from :data:`EVIDENCE_DRAWS` draws (at least half a draw, so a basin
+    wholly outside keeps a finite weight), is what the wall's truncation
+    leaves of the basin: near-collinear sensors put the mirror image of a
+    track outside the zone, and that solution, held at the zone's edge, fits
+    the window about as well as the true one but holds little of the
+    posterior.  ``None`` when LM fails or the information is singular.
+    """
+    sol = _lm(free, n_data, values, max_iterations)
+    if isinstance(sol, str):
+        return None
+    try:
+        A, _ = free.linearize(sol.values).jacobian()
+    except RuntimeError:
+        return None
+    sign, logdet = np.linalg.slogdet(A.T @ A)
+    marg = marginal_covariances(free, sol.values, [X(0)])
+    if sign <= 0 or not marg.ok:
+        return None
+    assert marg.covariances is not None
+    share = 1.0
+    if model.zone is not None:
+        draws = np.random.default_rng(0).multivariate_normal(sol.x0, marg.covariances[0], size=EVIDENCE_DRAWS)
+        share = max(float(np.mean(model.zone.contains(draws))), 0.5 / EVIDENCE_DRAWS)
+    return float(-0.5 * sol.objective - 0.5 * logdet + np.log(share))
 
 
 def _threshold(w: _Window, settings: InitiationSettings, n_outliers: int) -> float:

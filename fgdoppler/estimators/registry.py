@@ -17,7 +17,13 @@ from types import MappingProxyType
 import numpy as np
 from numpy.typing import NDArray
 
-from fgdoppler.estimators.ambiguity import Resolution, hypotheses, posterior_hypotheses, resolve
+from fgdoppler.estimators.ambiguity import (
+    Resolution,
+    hypotheses,
+    hypothesis_weights,
+    posterior_hypotheses,
+    resolve,
+)
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.fixed_lag import run_fixed_lag
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate
@@ -202,7 +208,7 @@ def _hypotheses(info: EstimatorInfo, measurements: Measurements, model: Tracking
             return posterior_hypotheses(init, measurements, model, k, huber_k=settings.huber_k)
         except ValueError:  # nothing in the zone explains the window: keep the initiation's own answer
             pass
-    return (hypotheses(init) if init.ambiguous else [init]), None
+    return (hypotheses(init), hypothesis_weights(init)) if init.ambiguous else ([init], None)
 
 
 def _solve(info: EstimatorInfo, measurements: Measurements, model: TrackingModel, hyps: list[Initiation],
