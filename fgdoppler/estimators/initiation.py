@@ -745,7 +745,12 @@ def window_log_evidence(free: gtsam.NonlinearFactorGraph, n_data: int, values: g
     assert marg.covariances is not None
     share = 1.0
     if model.zone is not None:
-        draws = np.random.default_rng(0).multivariate_normal(sol.x0, marg.covariances[0], size=EVIDENCE_DRAWS)
+        P0 = marg.covariances[0]
+        try:  # numpy's own check warns on nearly singular covariances that are still positive definite
+            np.linalg.cholesky(0.5 * (P0 + P0.T))
+        except np.linalg.LinAlgError:
+            return None
+        draws = np.random.default_rng(0).multivariate_normal(sol.x0, P0, size=EVIDENCE_DRAWS, check_valid="ignore")
         share = max(float(np.mean(model.zone.contains(draws))), 0.5 / EVIDENCE_DRAWS)
     return float(-0.5 * sol.objective - 0.5 * logdet + np.log(share))
 
