@@ -296,6 +296,15 @@ class Initiation(Judged):
         """True if other solutions pass the χ² test as well."""
         return bool(self.alternatives)
 
+    def posterior_shares(self) -> FloatArray | None:
+        r"""Each solution's share of the window posterior inside the zone, this one first, then the alternatives.
+
+        :math:`Z_h / \sum_k Z_k` from :attr:`log_evidence`; ``None`` where the
+        evidence was not computed (no alternatives, or not LM).
+        """
+        return _shares([self.log_evidence, *(a.log_evidence for a in self.alternatives)]) if self.alternatives \
+            else None
+
     @property
     def covariance_ok(self) -> bool:
         """True when ``P_start`` and ``P_end`` are available."""
@@ -362,6 +371,14 @@ class Initiation(Judged):
                 "point": list(self.half_plane.point), "normal": list(self.half_plane.normal)},
             "log_evidence": self.log_evidence,
         }
+
+
+def _shares(log_evidence: list[float | None]) -> FloatArray | None:
+    """Normalised ``exp(log_evidence)``, or ``None`` if any is missing."""
+    if any(v is None for v in log_evidence):
+        return None
+    z = np.array(log_evidence, dtype=float)
+    return np.exp(z - logsumexp(z))
 
 
 def _same_numbers(a: Initiation, b: Initiation) -> bool:
@@ -540,10 +557,8 @@ def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: t
     if alternatives:
         d = w.geometry.dim
         far = max(float(np.linalg.norm(a.state[:d] - fit.x0[:d])) for a in alternatives)
-        share = ""
-        if fit.log_evidence is not None and all(a.log_evidence is not None for a in alternatives):
-            logz = np.array([fit.log_evidence, *(a.log_evidence for a in alternatives)], dtype=float)
-            share = f", holding {1.0 - float(np.exp(logz[0] - logsumexp(logz))):.1%} of its posterior in the zone"
+        shares = _shares([fit.log_evidence, *(a.log_evidence for a in alternatives)])
+        share = "" if shares is None else f", holding {1.0 - shares[0]:.1%} of its posterior in the zone"
         reasons.append(Reason(code="ambiguous", status="doubtful", message=(
             f"{len(alternatives)} other solution(s) fit the window as well (costs "
             + ", ".join(f"{a.cost:.1f}" for a in alternatives) + f" vs {fit.cost:.1f}; up to {far / 1e3:.1f} km "
@@ -726,20 +741,21 @@ def window_log_evidence(free: gtsam.NonlinearFactorGraph, n_data: int, values: g
     up to a constant shared by every solution of the window.  The last term,
     from :data:`EVIDENCE_DRAWS` draws (at least half a draw, so a basin
     wholly outside keeps a finite weight), is what the wall's truncation
-    leaves of the basin: near-collinear sensors put the mirror image of a
-    track outside the zone, and that solution, held at the zone's edge, fits
-    the window about as well as the true one but holds little of the
-    posterior.  ``None`` when LM fails or the information is singular.
+    leaves of the basin: a solution held at the zone's edge (on the paper's
+    geometries a slower target near a sensor, or a mirror-side track) can
+    fit the window about as well as the true one and yet hold little of the
+    posterior inside the zone.  ``None`` when LM fails or the information is singular.
     """
     sol = _lm(free, n_data, values, max_iterations)
     if isinstance(sol, str):
         return None
     try:
-        A, _ = free.linearize(sol.values).jacobian()
+        linear = free.linearize(sol.values)
+        A, _ = linear.jacobian()
     except RuntimeError:
         return None
     sign, logdet = np.linalg.slogdet(A.T @ A)
-    marg = marginal_covariances(free, sol.values, [X(0)])
+    marg = marginal_covariances(linear, sol.values, [X(0)])
     if sign <= 0 or not marg.ok:
         return None
     assert marg.covariances is not None

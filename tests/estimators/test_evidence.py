@@ -78,8 +78,7 @@ def test_closed_form_initiations_keep_the_cost_weights() -> None:
 def test_mirror_solutions_outside_the_zone_weigh_what_the_truth_says() -> None:
     """Calibration on the paper's six scenarios (100 runs each, their own seed; about 2 minutes).
 
-    Every alternative there is the near-mirror solution held at the zone's
-    edge.  If the weights are calibrated, the number of windows whose truth
+    Every alternative there is held at the zone's along-baseline edge.  If the weights are calibrated, the number of windows whose truth
     is most probable under an alternative's Gaussian is (close to) Poisson
     with mean the sum of the alternatives' weights: that count is 0 here,
     which the evidence weights explain (P(0) well above 1 %) and the window
@@ -124,5 +123,5 @@ def test_registry_starts_an_ambiguous_initiation_with_the_evidence_weights() -> 
     expected = hypothesis_weights(init)
     assert w is not None and expected is not None and len(hyps) == w.size == 2
     np.testing.assert_array_equal(w, expected)
-    # the mirror held at the zone's edge keeps a few percent, not the half its window cost gives it
+    # the alternative held at the zone's edge keeps a few percent, not the half its window cost gives it
     assert w[1] < 0.05
