@@ -17,7 +17,9 @@ trackers (EKF, iSAM2, fixed-lag) therefore start from several hypotheses
 :func:`resolve` runs the estimator from each and reports one track:
 
 * EKF, iSAM2, fixed-lag ("likelihood"): each hypothesis's weight is its
-  prior weight (the term's weight, or :math:`e^{-c/2}` of its window cost)
+  prior weight (the term's weight, or the solution's share of the window's
+  posterior inside the zone, :func:`hypothesis_weights`; :math:`e^{-c/2}`
+  of its window cost where that was not computed)
   times the predictive likelihood of every later measurement (from an EKF
   per hypothesis); every estimate is the weighted *mixture*,
   :math:`\bar{\mathbf x} = \sum_h w_h\mathbf x_h`,
