@@ -19,7 +19,6 @@ from fgdoppler.cli.common import (
     grid_spec,
     huber,
 )
-from fgdoppler.estimators.ambiguity import hypothesis_weights
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
 
@@ -221,7 +220,7 @@ def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: A
     verdict = "passes" if init.passes_chi2 else "FAILS"
     print(f"  cost {init.cost:.2f} {verdict} the chi-square test ({init.chi2_threshold:.2f}, {init.dof} dof); "
           f"objective with prior and zone terms {init.objective:.2f}")
-    weights = hypothesis_weights(init) if init.alternatives else None
+    weights = init.posterior_shares()
     if weights is not None:
         print(f"    this solution holds {weights[0]:.1%} of the window posterior in the zone")
     for i, a in enumerate(init.alternatives):
