@@ -23,9 +23,11 @@ def _records() -> list[dict[str, object]]:
     for s in range(2):
         for r in range(3):
             res = {name: {"se": rng.random(4), "nees": rng.random(4), "seconds": float(rng.random()),
-                          "status": "ok" if r else "doubtful"} for name in ("ekf", "smoother")}
+                          "wall": float(rng.random()), "status": "ok" if r else "doubtful"}
+                   for name in ("ekf", "smoother")}
             if r != 1:  # the peer did not run in run 1
-                res["filterpy-ekf"] = {"se": rng.random(4), "nees": rng.random(4), "seconds": 0.1, "status": "ran"}
+                res["filterpy-ekf"] = {"se": rng.random(4), "nees": rng.random(4), "seconds": 0.1,
+                                       "wall": float("nan"), "status": "ran"}
             out.append({"s": s, "r": r, "results": res})
     return out
 
@@ -42,6 +44,17 @@ def test_records_round_trip(tmp_path: Path) -> None:
             np.testing.assert_array_equal(x["se"], y["se"])
             np.testing.assert_array_equal(x["nees"], y["nees"])
             assert x["seconds"] == y["seconds"] and x["status"] == y["status"]
+            np.testing.assert_array_equal(x["wall"], y["wall"])
+
+
+def test_records_without_wall_times_still_load(tmp_path: Path) -> None:
+    """Records written before the wall times were kept load with NaN for them."""
+    save_records(_records(), tmp_path / "r.npz")
+    with np.load(tmp_path / "r.npz") as z:
+        old = {k: z[k] for k in z.files if not k.startswith("wall_")}
+    np.savez(tmp_path / "old.npz", **old)
+    back = load_records(tmp_path / "old.npz")
+    assert back and all(np.isnan(x["wall"]) for rec in back for x in rec["results"].values())
 
 
 def test_json_summary_leaves_out_the_per_run_arrays() -> None:
