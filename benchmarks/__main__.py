@@ -13,11 +13,12 @@ from benchmarks import (
     bench_grid,
     bench_long,
     bench_montecarlo,
+    bench_particle,
     bench_scaling,
 )
 
 BENCHES = {"grid": bench_grid, "ekf": bench_ekf, "scaling": bench_scaling, "montecarlo": bench_montecarlo,
-           "long": bench_long, "accuracy": bench_accuracy}
+           "long": bench_long, "particle": bench_particle, "accuracy": bench_accuracy}
 
 
 def main() -> None:

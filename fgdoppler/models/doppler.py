@@ -127,6 +127,63 @@ def _terms(
     return h, dh_dp, dh_dv, mask
 
 
+#: Track-measurement entries :func:`_along` evaluates at once: its dozen temporaries then stay in the
+#: processor's cache (256 KiB each).  Measured on the particle estimator's 4,096 tracks × 120 measurements:
+#: 8-9 ms in blocks of 2^13-2^15 entries against 35 ms in one block (``python -m benchmarks --only particle``).
+ALONG_BLOCK = 1 << 15
+
+
+def _along(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray, *, singular: str = "raise"
+           ) -> tuple[FloatArray, NDArray[np.bool_] | None]:
+    r"""Doppler ``(..., m)`` along constant-velocity tracks: :math:`h(\mathbf p_0 + t_j\mathbf v, \mathbf v)`.
+
+    ``x`` holds the start states ``(..., 2d)``, ``t`` the times ``(m,)``,
+    ``tx`` and ``rx`` the sensors of each time ``(m, d)``.  The arithmetic of
+    :func:`_terms` (without the Jacobian) — the same operations in the same
+    order, so the same numbers to the bit — but one coordinate at a time on
+    contiguous arrays and in blocks of :data:`ALONG_BLOCK` entries: four
+    times faster than the ``(..., m, d)`` layout, whose coordinate slices are
+    strided and whose temporaries do not fit the cache.  ``singular`` as in
+    :func:`_terms`; returns ``(h, mask)``.
+    """
+    lead = x.shape[:-1]
+    flat = x.reshape(-1, x.shape[-1])
+    h = np.empty((flat.shape[0], t.size))
+    bad = np.zeros(h.shape, dtype=bool)
+    rows = max(1, ALONG_BLOCK // max(t.size, 1))
+    for a in range(0, flat.shape[0], rows):
+        h[a:a + rows], bad[a:a + rows] = _along_block(flat[a:a + rows], t, tx, rx)
+    mask: NDArray[np.bool_] | None = None
+    if np.any(bad):
+        if singular == "raise":
+            raise _singular_error(bad)
+        mask = bad.reshape(*lead, t.size)
+    return h.reshape(*lead, t.size), mask
+
+
+def _along_block(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray
+                 ) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """:func:`_along` for one block of tracks ``(n, 2d)``: Doppler and where a track meets a sensor."""
+    d = x.shape[-1] // 2
+    rT = rR = pT = pR = np.zeros(0)
+    for k in range(d):
+        v = x[:, d + k, None]
+        p = x[:, k, None] + t * v
+        a = p - tx[:, k]
+        b = p - rx[:, k]
+        if k == 0:
+            rT, rR, pT, pR = a * a, b * b, a * v, b * v
+        else:
+            rT, rR, pT, pR = rT + a * a, rR + b * b, pT + a * v, pR + b * v
+    rT = np.sqrt(rT)
+    rR = np.sqrt(rR)
+    bad = (rT <= SENSOR_EPS) | (rR <= SENSOR_EPS)
+    if np.any(bad):  # a placeholder distance there; the caller raises or masks
+        rT = np.where(rT <= SENSOR_EPS, 1.0, rT)
+        rR = np.where(rR <= SENSOR_EPS, 1.0, rR)
+    return pT / rT + pR / rR, bad
+
+
 def bistatic_doppler(states: ArrayLike, geometry: Geometry) -> FloatArray:
     """Bistatic Doppler (m/s) of every state for every pair.
 
@@ -230,13 +287,14 @@ def _cv(
     x = _as_states(x0)
     d = x.shape[-1] // 2
     bt = _stacked_times(times, geometry)
+    tx, rx = geometry.positions(d)
+    if not jacobian:
+        h, mask = _along(x, bt.t, tx[bt.pair], rx[bt.pair], singular=singular)
+        return h, None, mask
     t = bt.t[:, None]
     vel = x[..., None, d:]
     pos = x[..., None, :d] + t * vel
-    tx, rx = geometry.positions(d)
     h, dp, dv, mask = _terms(pos, vel, tx[bt.pair], rx[bt.pair], jacobian=jacobian, singular=singular)
-    if not jacobian:
-        return h, None, mask
     assert dp is not None and dv is not None
     return h, np.concatenate([dp, t * dp + dv], axis=-1), mask
 

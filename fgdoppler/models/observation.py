@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.geometry import SENSOR_EPS, Geometry
 from fgdoppler.measurements import Measurements
-from fgdoppler.models.doppler import _as_states, _terms
+from fgdoppler.models.doppler import _along, _as_states, _terms
 
 #: Up to this many rows the model is evaluated in plain floats (less overhead than numpy).
 _SMALL = 4
@@ -128,10 +128,7 @@ class DopplerModel:
         c = np.asarray(channels, dtype=np.intp).reshape(-1)
         if c.size and (c.min() < 0 or c.max() >= self.geometry.n_pairs):
             raise ValueError(f"pair index out of range for a geometry of {self.geometry.n_pairs} pair(s)")
-        vel = x[:, None, d:]
-        pos = x[:, None, :d] + t[None, :, None] * vel
-        h, _, _, mask = _terms(pos, vel, self.geometry.tx[c][None], self.geometry.rx[c][None], jacobian=False,
-                               singular="mask")
+        h, mask = _along(x, t, self.geometry.tx[c], self.geometry.rx[c], singular="mask")
         if mask is not None:
             h = np.where(mask, np.nan, h)
         return h
