@@ -76,3 +76,13 @@ def test_inconsistent_runs_counts_the_runs_beyond_the_quantile_and_the_verdicts_
     assert inconsistent_runs(nees, t, statuses) == (2, 1)
     assert inconsistent_runs(nees, t, ["doubtful"] * 5) == (2, 0)
     assert inconsistent_runs(np.zeros((0, 4)), t, []) == (0, 0)
+
+
+def test_the_table_says_when_other_jobs_ran_beside_it() -> None:
+    """CPU times beside other jobs come out longer: the Markdown says so when the load exceeds the workers."""
+    from benchmarks.bench_accuracy import _load_note
+
+    busy = _load_note({"load": {"average_15_min": 4.2, "workers": 2, "cores": 2}})
+    quiet = _load_note({"load": {"average_15_min": 2.1, "workers": 2, "cores": 2}})
+    assert "other jobs ran beside it" in busy and "other jobs" not in quiet and "2.1" in quiet
+    assert _load_note({}) == ""  # re-summarised records: no load known
