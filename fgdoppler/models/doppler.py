@@ -128,8 +128,9 @@ def _terms(
 
 
 #: Track-measurement entries :func:`_along` evaluates at once: its dozen temporaries then stay in the
-#: processor's cache (256 KiB each).  Measured on the particle estimator's 4,096 tracks × 120 measurements:
-#: 8-9 ms in blocks of 2^13-2^15 entries against 35 ms in one block (``python -m benchmarks --only particle``).
+#: processor's cache (256 KiB each).  Measured once on 4,096 tracks × 120 measurements (the particle
+#: estimator's): 7-9 ms in blocks of 2^13-2^16 entries, 17 ms in blocks of 2^17, 35 ms in one block; against
+#: the per-state model's layout: ``python -m benchmarks --only particle``.
 ALONG_BLOCK = 1 << 15
 
 
