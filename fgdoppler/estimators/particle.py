@@ -86,10 +86,8 @@ __all__ = ["WindowPosterior", "run_particle", "window_posterior"]
 
 FloatArray = NDArray[np.float64]
 
-#: (Particle, measurement) entries of the likelihood evaluated at once: the temporaries of a block stay in the
-#: processor's cache (as :data:`fgdoppler.models.doppler.ALONG_BLOCK`).  Measured on the paper's recordings,
-#: 4,096 particles, the same track to the bit: a run 15-27 % faster than in blocks of 2^20 entries (cases a 5
-#: and 25 km, b 45 km).
+#: (Particle, measurement) entries of the likelihood evaluated at once: bounds the memory of a move and keeps
+#: its arrays small (the Doppler inside is blocked further, :data:`fgdoppler.models.doppler.ALONG_BLOCK`).
 CHUNK_ROWS = 1 << 15
 #: Smallest tempering step of the start (:meth:`_Posterior.sample_from`): at most 100 stages.
 MIN_TEMPER_STEP = 0.01

@@ -127,11 +127,13 @@ def _terms(
     return h, dh_dp, dh_dv, mask
 
 
-#: Track-measurement entries :func:`_along` evaluates at once: its dozen temporaries then stay in the
-#: processor's cache (256 KiB each).  Measured once on 4,096 tracks × 120 measurements (the particle
-#: estimator's): 7-9 ms in blocks of 2^13-2^16 entries, 17 ms in blocks of 2^17, 35 ms in one block; against
-#: the per-state model's layout: ``python -m benchmarks --only particle``.
-ALONG_BLOCK = 1 << 15
+#: Track-measurement entries :func:`_along` evaluates at once.  Its dozen temporaries of 64 KiB each then
+#: stay in the processor's cache and below glibc's default threshold for serving an allocation by mapping
+#: fresh pages (128 KiB): larger ones are mapped and unmapped block after block, and the page faults cost
+#: more than the arithmetic.  Measured on a particle run (4,096 tracks × up to 120 measurements, fresh
+#: process): 0.44-0.65 s in blocks of 2^13-2^14 entries, 1.0 s in blocks of 2^15, 1.1 s with the per-state
+#: model's layout in one block (``python -m benchmarks --only particle``).
+ALONG_BLOCK = 1 << 13
 
 
 def _along(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray, *, singular: str = "raise"
@@ -142,8 +144,9 @@ def _along(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray, *, sing
     ``tx`` and ``rx`` the sensors of each time ``(m, d)``.  The arithmetic of
     :func:`_terms` (without the Jacobian) — the same operations in the same
     order, so the same numbers to the bit — but one coordinate at a time on
-    contiguous arrays and in blocks of :data:`ALONG_BLOCK` entries: four
-    times faster than the ``(..., m, d)`` layout, whose coordinate slices are
+    contiguous arrays and in blocks of :data:`ALONG_BLOCK` entries, whose
+    temporaries stay in the cache and need no fresh pages: several times
+    faster than the ``(..., m, d)`` layout, whose coordinate slices are
     strided and whose temporaries do not fit the cache.  ``singular`` as in
     :func:`_terms`; returns ``(h, mask)``.
     """
