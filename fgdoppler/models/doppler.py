@@ -91,29 +91,13 @@ def _terms(
     dT = pos - tx
     dR = pos - rx
     d = pos.shape[-1]
-    # explicit component sums: the 3-D model at z = 0 is then the 2-D model to the bit
-    rT = dT[..., 0] ** 2 + dT[..., 1] ** 2
-    rR = dR[..., 0] ** 2 + dR[..., 1] ** 2
-    if d == 3:
-        rT = rT + dT[..., 2] ** 2
-        rR = rR + dR[..., 2] ** 2
-    rT = np.sqrt(rT)
-    rR = np.sqrt(rR)
-    bad = (rT <= SENSOR_EPS) | (rR <= SENSOR_EPS)
+    rT, rR, pT, pR, bad = _ranges([dT[..., k] for k in range(d)], [dR[..., k] for k in range(d)],
+                                  [vel[..., k] for k in range(d)])
     mask: NDArray[np.bool_] | None = None
     if np.any(bad):
         if singular == "raise":
             raise _singular_error(bad)
-        rT = np.where(rT <= SENSOR_EPS, 1.0, rT)
-        rR = np.where(rR <= SENSOR_EPS, 1.0, rR)
         mask = bad
-    vx = vel[..., 0]
-    vy = vel[..., 1]
-    pT = dT[..., 0] * vx + dT[..., 1] * vy
-    pR = dR[..., 0] * vx + dR[..., 1] * vy
-    if d == 3:
-        pT = pT + dT[..., 2] * vel[..., 2]
-        pR = pR + dR[..., 2] * vel[..., 2]
     rdT = pT / rT
     rdR = pR / rR
     h = rdT + rdR
@@ -125,6 +109,30 @@ def _terms(
     dh_dp = (vel - rdT[..., None] * uT) / rT[..., None] + (vel - rdR[..., None] * uR) / rR[..., None]
     dh_dv = uT + uR
     return h, dh_dp, dh_dv, mask
+
+
+def _ranges(dT: Sequence[FloatArray], dR: Sequence[FloatArray], v: Sequence[FloatArray]
+            ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
+    r"""The pieces of :math:`h = \Delta\mathbf p_T\cdot\mathbf v/r_T + \Delta\mathbf p_R\cdot\mathbf v/r_R`.
+
+    ``dT``, ``dR`` and ``v`` hold the coordinates of :math:`\Delta\mathbf p_T`,
+    :math:`\Delta\mathbf p_R` and :math:`\mathbf v` (broadcastable arrays).
+    Returns ``(r_T, r_R, Δp_T·v, Δp_R·v, singular)``, with the distance 1 as
+    a placeholder where a target sits on a sensor (``singular``; the caller
+    raises or masks).  Explicit component sums in a fixed order: the 3-D model
+    at z = 0 is then the 2-D model to the bit, and every layout that calls
+    this gives the same numbers.
+    """
+    rT2, rR2, pT, pR = dT[0] * dT[0], dR[0] * dR[0], dT[0] * v[0], dR[0] * v[0]
+    for a, b, w in zip(dT[1:], dR[1:], v[1:], strict=True):
+        rT2, rR2, pT, pR = rT2 + a * a, rR2 + b * b, pT + a * w, pR + b * w
+    rT = np.sqrt(rT2)
+    rR = np.sqrt(rR2)
+    bad = (rT <= SENSOR_EPS) | (rR <= SENSOR_EPS)
+    if np.any(bad):
+        rT = np.where(rT <= SENSOR_EPS, 1.0, rT)
+        rR = np.where(rR <= SENSOR_EPS, 1.0, rR)
+    return rT, rR, pT, pR, bad
 
 
 #: Track-measurement entries :func:`_along` evaluates at once.  Its dozen temporaries of 64 KiB each then
@@ -169,22 +177,10 @@ def _along_block(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray
                  ) -> tuple[FloatArray, NDArray[np.bool_]]:
     """:func:`_along` for one block of tracks ``(n, 2d)``: Doppler and where a track meets a sensor."""
     d = x.shape[-1] // 2
-    rT = rR = pT = pR = np.zeros(0)
-    for k in range(d):
-        v = x[:, d + k, None]
-        p = x[:, k, None] + t * v
-        a = p - tx[:, k]
-        b = p - rx[:, k]
-        if k == 0:
-            rT, rR, pT, pR = a * a, b * b, a * v, b * v
-        else:
-            rT, rR, pT, pR = rT + a * a, rR + b * b, pT + a * v, pR + b * v
-    rT = np.sqrt(rT)
-    rR = np.sqrt(rR)
-    bad = (rT <= SENSOR_EPS) | (rR <= SENSOR_EPS)
-    if np.any(bad):  # a placeholder distance there; the caller raises or masks
-        rT = np.where(rT <= SENSOR_EPS, 1.0, rT)
-        rR = np.where(rR <= SENSOR_EPS, 1.0, rR)
+    # contiguous (n, m) arrays per coordinate: p = p0 + t v, then its offsets from the sensors
+    p = [x[:, k, None] + t * x[:, d + k, None] for k in range(d)]
+    rT, rR, pT, pR, bad = _ranges([p[k] - tx[:, k] for k in range(d)], [p[k] - rx[:, k] for k in range(d)],
+                                  [x[:, d + k, None] for k in range(d)])
     return pT / rT + pR / rR, bad
 
 

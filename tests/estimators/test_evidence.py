@@ -78,8 +78,9 @@ def test_closed_form_initiations_keep_the_cost_weights() -> None:
 def test_mirror_solutions_outside_the_zone_weigh_what_the_truth_says() -> None:
     """Calibration on the paper's six scenarios (100 runs each, their own seed; about 2 minutes).
 
-    Every alternative there is held at the zone's along-baseline edge.  If the weights are calibrated, the number of windows whose truth
-    is most probable under an alternative's Gaussian is (close to) Poisson
+    Every alternative there is held at the zone's along-baseline edge.  If
+    the weights are calibrated, the number of windows whose truth is most
+    probable under an alternative's Gaussian is (close to) Poisson
     with mean the sum of the alternatives' weights: that count is 0 here,
     which the evidence weights explain (P(0) well above 1 %) and the window
     costs' e^{-c/2} weights do not (their mean puts P(0) below 1 %).
