@@ -55,6 +55,7 @@ Speed lower bound
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -70,6 +71,9 @@ from fgdoppler.zone import Zone
 __all__ = ["GridResult", "GridSpec", "HalfPlane", "grid_costs", "grid_search", "grid_states", "speed_lower_bound"]
 
 FloatArray = NDArray[np.float64]
+#: Sensor terms :func:`_product_costs` holds at once for later measurements at the same instant (each a chunk's
+#: worth of candidates, 128 KiB at the default chunk): bounds the memory a long synchronous window can take.
+MAX_SHARED_TERMS = 64
 
 
 def _axis(start: float, stop: float, step: float, name: str) -> FloatArray:
@@ -307,6 +311,15 @@ def _product_costs(
     element-wise operations.  Positions are processed ``chunk // n_vel`` at a
     time so the working set stays in cache; the arithmetic per element does
     not depend on the chunking, so results are identical for any chunk.
+
+    A term :math:`\dot r` depends on the sensor and the time only, so where
+    several pairs share a sensor and measure at the same instant (one
+    transmitter seen by several receivers, as in the paper's case a with its
+    shared receiver) it is computed once and held for the later measurements
+    (at most :data:`MAX_SHARED_TERMS` at a time); the sums are taken in the
+    same order, so the costs are the same to the bit.  With one transmitter
+    and four synchronous receivers this takes the grid from 4 × 2 to 4 + 1
+    terms per instant.
     """
     d = pos.shape[1]
     sensors, inverse = np.unique(np.vstack(geometry.positions(d)), axis=0, return_inverse=True)
@@ -317,6 +330,10 @@ def _product_costs(
     s2 = vel[:, 0] ** 2 + vel[:, 1] ** 2
     if d == 3:
         s2 = s2 + vel[:, 2] ** 2
+    # how many times each (sensor, time) term is needed: a transmitter seen by several receivers at one
+    # instant (or a receiver shared by several transmitters) needs its term once
+    uses = Counter(zip((int(i) for i in np.concatenate([t_idx, r_idx])),
+                       (float(v) for v in np.concatenate([times.t, times.t])), strict=True))
     out = np.empty((pos.shape[0], vel.shape[0]))
     step = max(1, chunk // max(1, vel.shape[0]))
     for start in range(0, pos.shape[0], step):
@@ -333,6 +350,8 @@ def _product_costs(
         h = np.empty_like(acc)
         d2 = np.empty_like(acc)
         num = np.empty_like(acc)
+        left = dict(uses)
+        kept: dict[tuple[int, float], FloatArray] = {}
         # In place and without a per-element guard: a trajectory through a sensor makes
         # d2 = 0 (or a round-off negative) and its cost inf/NaN, mapped to inf once at the end.
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -340,15 +359,22 @@ def _product_costs(
                 t = times.t[j]
                 ts2 = t * s2
                 h.fill(0.0)
-                for si in (t_idx[j], r_idx[j]):
-                    Us = U[:, si, :]
-                    np.multiply(Us, 2.0 * t, out=d2)
-                    d2 += c[:, si, None]
-                    d2 += t * ts2
-                    np.sqrt(d2, out=d2)
-                    np.add(Us, ts2, out=num)
-                    num /= d2
-                    h += num
+                for si in (int(t_idx[j]), int(r_idx[j])):
+                    key = (si, float(t))
+                    left[key] -= 1
+                    term = kept.pop(key, None) if left[key] == 0 else kept.get(key)
+                    if term is None:
+                        term = num if left[key] == 0 or len(kept) >= MAX_SHARED_TERMS else np.empty_like(acc)
+                        Us = U[:, si, :]
+                        np.multiply(Us, 2.0 * t, out=d2)
+                        d2 += c[:, si, None]
+                        d2 += t * ts2
+                        np.sqrt(d2, out=d2)
+                        np.add(Us, ts2, out=term)
+                        term /= d2
+                        if term is not num:
+                            kept[key] = term
+                    h += term
                 np.subtract(z[j], h, out=h)
                 h *= w[j]
                 if huber_k is None:
