@@ -346,45 +346,59 @@ def _product_costs(
             e = p[:, None, 2] - sensors[None, :, 2]
             c = c + e * e
             U = U + e[:, :, None] * vel[None, None, :, 2]
-        acc = np.zeros((p.shape[0], vel.shape[0]))
-        h = np.empty_like(acc)
-        d2 = np.empty_like(acc)
-        num = np.empty_like(acc)
-        left = dict(uses)
-        kept: dict[tuple[int, float], FloatArray] = {}
-        # In place and without a per-element guard: a trajectory through a sensor makes
-        # d2 = 0 (or a round-off negative) and its cost inf/NaN, mapped to inf once at the end.
-        with np.errstate(divide="ignore", invalid="ignore"):
-            for j in range(times.size):
-                t = times.t[j]
-                ts2 = t * s2
-                h.fill(0.0)
-                for si in (int(t_idx[j]), int(r_idx[j])):
-                    key = (si, float(t))
-                    left[key] -= 1
-                    term = kept.pop(key, None) if left[key] == 0 else kept.get(key)
-                    if term is None:
-                        term = num if left[key] == 0 or len(kept) >= MAX_SHARED_TERMS else np.empty_like(acc)
-                        Us = U[:, si, :]
-                        np.multiply(Us, 2.0 * t, out=d2)
-                        d2 += c[:, si, None]
-                        d2 += t * ts2
-                        np.sqrt(d2, out=d2)
-                        np.add(Us, ts2, out=term)
-                        term /= d2
-                        if term is not num:
-                            kept[key] = term
-                    h += term
-                np.subtract(z[j], h, out=h)
-                h *= w[j]
-                if huber_k is None:
-                    h *= h
-                else:
-                    h = huber_rho(h, huber_k)
-                acc += h
+        acc = _chunk_costs(U, c, s2, times, (t_idx, r_idx), uses, z, w, huber_k)
         acc[~np.isfinite(acc)] = np.inf
         out[start:start + step] = acc
     return out
+
+
+def _chunk_costs(U: FloatArray, c: FloatArray, s2: FloatArray, times: StackedTimes,
+                 sensor_idx: tuple[NDArray[np.intp], NDArray[np.intp]], uses: Counter[tuple[int, float]],
+                 z: FloatArray, w: FloatArray, huber_k: float | None) -> FloatArray:
+    """:func:`_product_costs` for one chunk of positions: ``U`` ``(P, S, V)``, ``c`` ``(P, S)``, ``s2`` ``(V,)``.
+
+    ``uses`` counts how often each (sensor, time) term is needed; a term
+    needed again later is held until its last use (at most
+    :data:`MAX_SHARED_TERMS` at once, beyond that it is computed again).
+    """
+    t_idx, r_idx = sensor_idx
+    acc = np.zeros(U[:, 0, :].shape)
+    h = np.empty_like(acc)
+    d2 = np.empty_like(acc)
+    num = np.empty_like(acc)
+    left = dict(uses)
+    kept: dict[tuple[int, float], FloatArray] = {}
+    # In place and without a per-element guard: a trajectory through a sensor makes
+    # d2 = 0 (or a round-off negative) and its cost inf/NaN, mapped to inf once by the caller.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for j in range(times.size):
+            t = times.t[j]
+            ts2 = t * s2
+            h.fill(0.0)
+            for si in (int(t_idx[j]), int(r_idx[j])):
+                key = (si, float(t))
+                left[key] -= 1
+                term = kept.pop(key, None) if left[key] == 0 else kept.get(key)
+                if term is None:
+                    term = num if left[key] == 0 or len(kept) >= MAX_SHARED_TERMS else np.empty_like(acc)
+                    Us = U[:, si, :]
+                    np.multiply(Us, 2.0 * t, out=d2)
+                    d2 += c[:, si, None]
+                    d2 += t * ts2
+                    np.sqrt(d2, out=d2)
+                    np.add(Us, ts2, out=term)
+                    term /= d2
+                    if term is not num:
+                        kept[key] = term
+                h += term
+            np.subtract(z[j], h, out=h)
+            h *= w[j]
+            if huber_k is None:
+                h *= h
+            else:
+                h = huber_rho(h, huber_k)
+            acc += h
+    return acc
 
 
 def grid_search(
