@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -43,26 +44,32 @@ def test_chunked_and_unchunked_costs_identical() -> None:
     np.testing.assert_allclose(c1, a.costs, rtol=1e-12)
 
 
-def test_shared_sensor_terms_change_no_cost(monkeypatch) -> None:
+@pytest.mark.parametrize("dim", [2, 3])
+def test_shared_sensor_terms_change_no_cost(monkeypatch: pytest.MonkeyPatch, dim: int) -> None:
     """One transmitter seen by three receivers at the same instants, one receiver shared with a second
-    transmitter: the product kernel
+    transmitter, on the ground (2-D) or at heights (3-D, the grid's altitude levels): the product kernel
     computes each (sensor, time) term once and reuses it; the costs are those it gives computing every term
     afresh (no reuse, or a store of one term), to the bit, and the per-state kernel's to rounding."""
     import dataclasses
 
     import fgdoppler.estimators.grid as grid
 
-    geo = fd.Geometry(pairs=(*(fd.BistaticPair(tx=(0.0, 0.0), rx=r) for r in [(12e3, 3e3), (-9e3, 6e3), (5e3, -4e3)]),
-                             fd.BistaticPair(tx=(30e3, 0.0), rx=(12e3, 3e3))))
-    sc = dataclasses.replace(fd.paper_scenario("a", 25e3), geometry=geo, time_offsets=(0.0,) * 4)
+    z = (0.0, 100.0, 50.0) if dim == 3 else ()
+    rxs = [(12e3, 3e3), (-9e3, 6e3), (5e3, -4e3)]
+    geo = fd.Geometry(pairs=(*(fd.BistaticPair(tx=(0.0, 0.0, *z[1:2]), rx=(*r, *z[2:3])) for r in rxs),
+                             fd.BistaticPair(tx=(30e3, 0.0, *z[:1]), rx=(*rxs[0], *z[2:3]))))
+    sc = dataclasses.replace(fd.paper_scenario("a", 25e3, altitude=2e3 if dim == 3 else None), geometry=geo,
+                             time_offsets=(0.0,) * 4)
     w = fd.simulate(sc, np.random.default_rng(3)).measurements.spread(6)
     o = w.stacked_order()
     bt = fd.StackedTimes(pair=w.pair[o], t=w.time[o] - w.time[0])
-    zone = fd.Zone(along=(15e3, 35e3), across=(2e3, 12e3), speed_max=300.0)
+    zone = geo.zone if dim == 3 else fd.Zone(along=(15e3, 35e3), across=(2e3, 12e3), speed_max=300.0)
+    spec = GridSpec(position_step=2e3) if dim == 3 else KM
     results = []
     for cap in (grid.MAX_SHARED_TERMS, 1, 0):
         monkeypatch.setattr(grid, "MAX_SHARED_TERMS", cap)
-        results.append(grid_search(geo, bt, w.doppler[o], w.sigma[o], zone, KM, k_best=10, chunk=500))
+        results.append(grid_search(geo, bt, w.doppler[o], w.sigma[o], zone, spec, k_best=10, chunk=500))
+    assert results[0].states.shape[1] == 2 * dim
     for r in results[1:]:
         np.testing.assert_array_equal(r.costs, results[0].costs)
         np.testing.assert_array_equal(r.states, results[0].states)
