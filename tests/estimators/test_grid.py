@@ -178,3 +178,38 @@ def test_speed_bound_above_the_zone_names_the_option() -> None:
 
     with pytest.raises(ValueError, match="--speed-max"):
         GridSpec().axes(PAPER_ZONE, 50e3, 250.0)
+
+
+@pytest.mark.parametrize(("case", "k_best", "first_share", "options"), [
+    ("a", 5, None, {}),
+    ("b", 40, 1e-5, {"huber_k": 1.5}),  # a first batch of a few candidates: the batches must double, often
+    ("a", 12, 1e-4, {"half_plane": HalfPlane(normal=(0.0, -1.0))}),
+    ("3d", 8, 1e-4, {}),
+])
+def test_pruned_search_is_the_exhaustive_search(monkeypatch: pytest.MonkeyPatch, case: str, k_best: int,
+                                                first_share: float | None, options: dict) -> None:
+    """The grid scores every candidate on a quarter of the data and only the promising ones on all of it; the
+    K best local minima and their costs must be those of scoring the whole grid on every measurement, to the bit
+    (forced by a stride longer than the window)."""
+    import fgdoppler.estimators.grid as grid
+
+    if case == "3d":
+        sc = fd.paper_scenario("a", 25e3, altitude=3e3)
+        sim = fd.simulate(sc, np.random.default_rng(4))
+        w = sim.measurements.spread(8)
+        zone, spec = sc.geometry.zone, GridSpec(position_step=2e3)
+    else:
+        sim = fd.simulate(fd.paper_scenario(case, 5e3 if case == "b" else 25e3), np.random.default_rng(2))
+        w = sim.measurements.spread(16)
+        zone, spec = PAPER_ZONE, GridSpec()
+    o = w.stacked_order()
+    bt = fd.StackedTimes(pair=w.pair[o], t=w.time[o] - w.time[0])
+    geo = sim.scenario.geometry
+    if first_share is not None:
+        monkeypatch.setattr(grid, "PRUNE_FIRST_SHARE", first_share)
+    pruned = grid_search(geo, bt, w.doppler[o], w.sigma[o], zone, spec, k_best=k_best, **options)
+    monkeypatch.setattr(grid, "PRUNE_STRIDE", 10**9)
+    whole = grid_search(geo, bt, w.doppler[o], w.sigma[o], zone, spec, k_best=k_best, **options)
+    assert pruned.costs.size == k_best
+    np.testing.assert_array_equal(pruned.costs, whole.costs)
+    np.testing.assert_array_equal(pruned.states, whole.states)
