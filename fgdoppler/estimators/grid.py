@@ -43,9 +43,9 @@ Pruned search
     and 10.9 km for the default 0–12.5 km) with level flight (:math:`\dot z = 0`); the
     initiation's Levenberg–Marquardt then refines all six components from
     the best candidates.  The cost is ``altitude_levels`` times the 2-D grid's:
-    for the paper's zone and window 744,480 candidates in 0.12 s against
-    186,120 in 0.03 s in 2-D (measured on the 2-core machine, another job
-    running).  Levels at mid-slices rather than at
+    for the paper's zone and window 744,480 candidates in 0.055 s against
+    186,120 in 0.015 s in 2-D (0.10 s and 0.025 s without the pruned search
+    below; 2-core machine, median of 7, 2026-11-23).  Levels at mid-slices rather than at
     the band's ends keep candidates off the sensors' plane, where the
     Doppler's derivative with respect to height vanishes (a target at
     :math:`z = 0` and its mirror at :math:`-z` give the same Doppler for
