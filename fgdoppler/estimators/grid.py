@@ -22,8 +22,9 @@ Resolution (:class:`GridSpec`)
     where a side would get fewer than 5 nodes; speed step
     :math:`s_{\max}/20` (the paper's 10 m/s up to 200 m/s); heading step 20°.
     Cost: (position nodes) × (speeds) × (headings) × (measurements) Doppler
-    evaluations, about 1 ns each — 50 ms for the paper's 517 × 19 × 18 × 20
-    when every candidate is scored on every measurement.
+    evaluations, about 7 ns each on the 2-core machine — 26 ms for the
+    paper's 186,120 candidates × 20 measurements when every candidate is
+    scored on every measurement (2026-11-23).
 
 Pruned search
     The cost is a sum of non-negative terms, so its sum over part of the
