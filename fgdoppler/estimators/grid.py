@@ -590,12 +590,12 @@ def _best_minima(scorer: _Scorer, shape: tuple[int, ...], modes: list[str], k_be
     scoring all of it.  The cost is a sum of non-negative terms, so its sum
     :math:`b_i` over part of the measurements (:meth:`_Scorer.part`) bounds it
     from below.  The candidates with the lowest bounds are scored in full
-    (:data:`PRUNE_FIRST_SHARE` of the grid); with :math:`	au` the lowest bound
+    (:data:`PRUNE_FIRST_SHARE` of the grid); with :math:`\tau` the lowest bound
     of those not scored, every unscored candidate costs at least
-    :math:`	au`.  Giving them an infinite cost changes no comparison
-    with a candidate of cost below :math:`	au`, and every candidate of cost
-    below :math:`	au` has been scored: so the local minima below
-    :math:`	au` (less :data:`PRUNE_MARGIN` for rounding) are exactly the
+    :math:`\tau`.  Giving them an infinite cost changes no comparison
+    with a candidate of cost below :math:`\tau`, and every candidate of cost
+    below :math:`\tau` has been scored: so the local minima below
+    :math:`\tau` (less :data:`PRUNE_MARGIN` for rounding) are exactly the
     whole grid's.  When fewer than ``k_best`` lie below it, twice as many
     more are scored, up to the whole grid.  On the paper's windows and the trackers'
     restart checks 0.0-1.8 % of the candidates have a bound below the
@@ -607,9 +607,7 @@ def _best_minima(scorer: _Scorer, shape: tuple[int, ...], modes: list[str], k_be
         cost = scorer.all()
         if allowed is not None:
             cost[~allowed] = np.inf
-        flat = _local_minima(cost, shape, modes)
-        flat = flat[np.argsort(cost[flat], kind="stable")][:k_best]
-        return flat, cost[flat]
+        return _lowest(_local_minima(cost, shape, modes), cost, k_best)
     bound = part.all()
     if allowed is not None:
         bound[~allowed] = np.inf
@@ -629,6 +627,11 @@ def _best_minima(scorer: _Scorer, shape: tuple[int, ...], modes: list[str], k_be
         flat = _local_minima(cost, shape, modes)
         flat = flat[cost[flat] < tau]
         if flat.size >= k_best or rest.size == 0:
-            flat = flat[np.argsort(cost[flat], kind="stable")][:k_best]
-            return flat, cost[flat]
+            return _lowest(flat, cost, k_best)
         batch *= 2
+
+
+def _lowest(flat: NDArray[np.intp], cost: FloatArray, k: int) -> tuple[NDArray[np.intp], FloatArray]:
+    """The ``k`` of the candidates ``flat`` with the lowest costs, best first (ties: lower index first), and those costs."""
+    flat = flat[np.argsort(cost[flat], kind="stable")][:k]
+    return flat, cost[flat]
