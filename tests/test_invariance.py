@@ -21,7 +21,7 @@ from fgdoppler.cli import main
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.fixed_lag import FixedLagTracker, run_fixed_lag
 from fgdoppler.estimators.isam2 import ISAM2Tracker, run_isam2
-from fgdoppler.estimators.particle import run_particle
+from fgdoppler.estimators.particle import run_map, run_particle
 from fgdoppler.estimators.smoother import run_smoother
 
 THREE = fd.Geometry(pairs=(fd.BistaticPair(tx=(40e3, 0.0), rx=(0.0, 0.0)),
@@ -161,7 +161,7 @@ def test_trackers_fed_by_hand_move_with_the_problem(originals: dict, scenario: s
 
 
 RUNNERS = {"ekf": run_ekf, "isam2": run_isam2, "fixed-lag": run_fixed_lag, "smoother": run_smoother,
-           "particle": run_particle}
+           "particle": run_particle, "map": run_map}
 
 
 @pytest.mark.parametrize("motion", ["rotate", "reflect"])

@@ -60,8 +60,8 @@ def test_every_estimator_counts_each_task_to_its_total(case_b, name: str) -> Non
     else:
         own = rec.tasks[0]
         assert own[0] == name
-        # the window is one step of the streaming trackers; the EKF and the particle filter start after it
-        assert own[1] == n_after_window + (0 if name in ("ekf", "particle") else 1)
+        # the window is one step of the streaming trackers; the EKF and the particle estimators start after it
+        assert own[1] == n_after_window + (0 if name in ("ekf", "particle", "map") else 1)
         assert any(n.startswith("reference: smoother") for n in names)  # the verdict's reference run
 
 

@@ -29,7 +29,7 @@ from fgdoppler.estimators.fixed_lag import run_fixed_lag
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate
 from fgdoppler.estimators.isam2 import run_isam2
 from fgdoppler.estimators.judge import judge
-from fgdoppler.estimators.particle import run_particle
+from fgdoppler.estimators.particle import run_map, run_particle
 from fgdoppler.estimators.restart import with_restarts
 from fgdoppler.estimators.results import TrackResult
 from fgdoppler.estimators.settings import (
@@ -93,6 +93,8 @@ ESTIMATORS: Mapping[str, EstimatorInfo] = MappingProxyType({
     "particle": EstimatorInfo(name="particle", run=run_particle, settings=ParticleSettings, resolution="native",
                               online=True,
                               summary="particle filter: the posterior by sequential Monte Carlo (resample-move)"),
+    "map": EstimatorInfo(name="map", run=run_map, settings=ParticleSettings, resolution="native", online=True,
+                         summary="filtered MAP: the particle posterior's mode given all data so far"),
 })
 
 #: Old names still accepted (the documentation used them), with a DeprecationWarning.

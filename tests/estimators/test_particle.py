@@ -8,9 +8,12 @@ from scipy.stats import chi2
 
 import fgdoppler as fd
 from fgdoppler.estimators.ambiguity import _mixture
+from fgdoppler.estimators.initiation import InitiationSettings
 from fgdoppler.estimators.particle import (
     MIN_TEMPER_STEP,
     _next_temperature,
+    _window_posterior,
+    run_map,
     run_particle,
     window_posterior,
 )
@@ -218,3 +221,67 @@ def test_tempered_start_agrees_with_a_large_independent_sample(seed: int) -> Non
     d = post.weights @ x - ref.weights @ r
     cov = np.cov(r.T, aweights=ref.weights)
     assert float(d @ np.linalg.solve(cov, d)) < 0.03
+
+
+# -- the filtered MAP: the same posterior read at its mode ---------------------------------------------------
+
+MODE_CASES = [("a", 45e3, 1), ("a", 5e3, 2), ("b", 45e3, 3), ("a", 25e3, 4)]
+
+
+@pytest.mark.parametrize(("case", "x", "seed"), MODE_CASES)
+def test_map_window_mode_is_gtsams_optimum_of_the_same_objective(case: str, x: float, seed: int) -> None:
+    """The first estimate (window end) is the optimum Levenberg–Marquardt finds in GTSAM on the same posterior.
+
+    ``initiate(window="cv")`` minimises the same thing over the window: the
+    deterministic constant-velocity data cost, the weak prior, the zone (a
+    wall, zero inside).  Both optimisers stop once a step gains less than
+    about 1e-5 of a cost of order 10, i.e. within a cost of ~1e-4 of the
+    optimum, and a point at squared Mahalanobis distance m² from it costs
+    m²/2 more: m² below 1e-3.
+    """
+    sim, model, init = _case(case, x, seed)
+    cv = fd.initiate(sim.measurements.first_per_pair(10), model, InitiationSettings(window="cv"))
+    assert cv.P_end is not None
+    first = run_map(sim.measurements, model, init).primary
+    assert abs(first.times[0] - cv.t_end) < 1e-12
+    d = first.states[0] - cv.x_end
+    assert float(d @ np.linalg.solve(cv.P_end, d)) < 1e-3
+
+
+@pytest.mark.parametrize(("case", "x", "seed"), MODE_CASES)
+def test_map_mode_is_the_highest_point_and_stationary(case: str, x: float, seed: int) -> None:
+    """Above every particle, and the log posterior's central-difference gradient vanishes there."""
+    sim, model, init = _case(case, x, seed)
+    post, _ = _window_posterior(sim.measurements, model, init, fd.ParticleSettings(), np.random.default_rng(0))
+    mode = post.mode(post.x[[int(np.argmax(post.logpost))]])
+    top = float(post.log_target(mode[None])[0])
+    assert top >= float(np.max(post.logpost))
+    assert init.P_start is not None
+    sd = np.sqrt(np.diag(init.P_start))
+    h = 1e-4
+    grad = np.array([(post.log_target((mode + h * sd[i] * e)[None])[0]
+                      - post.log_target((mode - h * sd[i] * e)[None])[0]) / (2 * h)
+                     for i, e in enumerate(np.eye(model.n))])
+    # per standard deviation: a gradient g there puts the optimum about g standard deviations away
+    assert np.max(np.abs(grad)) < 1e-2
+
+
+def test_map_and_particle_share_the_posterior_covariance_differs_by_the_offset() -> None:
+    """Same particles, same random numbers: P_map = P_particle + (mean - mode)(mean - mode)' at every time."""
+    sim, model, init = _case("a", 5e3, 2)
+    mean = run_particle(sim.measurements, model, init).primary
+    mode = run_map(sim.measurements, model, init).primary
+    np.testing.assert_array_equal(mean.times, mode.times)
+    d = mean.states - mode.states
+    expected = mean.covariances + np.einsum("ti,tj->tij", d, d)
+    np.testing.assert_allclose(mode.covariances, expected, rtol=1e-9, atol=1e-9 * float(np.max(np.abs(expected))))
+    assert np.any(np.abs(d[:, :2]) > 10.0)  # in this curved valley the two points do differ
+
+
+def test_map_is_registered_online_with_particle_settings() -> None:
+    info = fd.ESTIMATORS["map"]
+    assert info.online and info.settings is fd.ParticleSettings and info.resolution == "native"
+    sim, model, init = _case("a", 45e3, 1)
+    res = fd.run_estimator("map", sim.measurements, model, init)
+    assert res.estimator == "map" and res.primary.kind == "filtered"
+    assert str(res.status) == "ok"
