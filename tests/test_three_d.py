@@ -254,7 +254,7 @@ def test_a_3d_recording_goes_through_the_command_line(tmp_path: Path) -> None:
     assert main(["simulate", "--case", "b", "--altitude", "0", "12000", "--start-x", "5000", "--start-z", "2000",
                  "--velocity", "10", "-100", "2", "--duration", "12", "--out", str(sim)]) == 0
     assert (sim / "truth.csv").read_text().splitlines()[0] == "time,x,y,z,vx,vy,vz"
-    for est in ("ekf", "isam2", "fixed-lag", "smoother", "particle"):
+    for est in ("ekf", "isam2", "fixed-lag", "smoother", "particle", "map"):
         out = tmp_path / f"{est}.csv"
         code = main(["track", str(sim / "measurements.csv"), "--geometry", str(sim / "geometry.toml"), "--estimator",
                      est, "--truth", str(sim / "truth.csv"), "--out", str(out), "--allow-failed"])

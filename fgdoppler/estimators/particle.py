@@ -43,7 +43,11 @@ This is iterated batch importance sampling (Chopin 2002):
    its own scale).
 3. **Estimates** — the weighted mean and covariance of
    :math:`\mathbf F(t - t_a)\mathbf x_a`, plus the process noise
-   :math:`\mathbf Q(t - t_a)` accumulated since the anchor.
+   :math:`\mathbf Q(t - t_a)` accumulated since the anchor
+   (:func:`run_particle`); or, the filtered MAP (:func:`run_map`), the
+   posterior's mode :math:`\arg\max_{\mathbf x_a}\pi_k` found by
+   Levenberg–Marquardt from the best particle and the previous mode, with
+   the particles' second moment about it as covariance.
 
 A move needs the likelihood of every measurement since the anchor, so its
 cost grows with the span.  After ``max_span`` seconds the anchor moves to
@@ -338,8 +342,8 @@ class _Posterior:
             cov = cov + m.Q(dt)
         return point, cov
 
-    def mode(self, starts: FloatArray) -> FloatArray:
-        r"""The highest posterior density reached by Levenberg–Marquardt from each row of ``starts`` (anchor states).
+    def mode(self, previous: FloatArray | None = None) -> FloatArray:
+        r"""The posterior mode (an anchor state) by Levenberg–Marquardt, warm-started from ``previous``.
 
         Each climb minimises :math:`-\log\pi_k`: Gauss–Newton on the
         whitened residuals :math:`r_j = (h_j(\mathbf F(t_j - t_a)\mathbf x) - z_j)/\sigma_j`
@@ -349,15 +353,23 @@ class _Posterior:
         :math:`\log\pi_k` itself — so a step off the prior's support (the zone,
         the half plane: both convex) is never kept.  Stops when a step gains
         less than :data:`MODE_TOLERANCE` or after :data:`MODE_ITERATIONS`.
-        Returns the best end point (the first start if none has a finite
-        posterior).
+
+        The climb from ``previous`` (the last report's mode, which the new data
+        move a little) ends on a local maximum of value :math:`v`; a particle
+        standing higher than :math:`v` lies in another basin, and only then is
+        a second climb run from the highest particle, the higher end kept.
+        Without ``previous`` the climb starts from the highest particle.  Either
+        way the mode stands at least as high as every particle.
         """
-        best, best_value = np.array(starts[0], dtype=float), -np.inf
-        for x0 in starts:
-            x, value = self._climb(np.array(x0, dtype=float))
-            if value > best_value:
-                best, best_value = x, value
-        return best
+        best = self.x[int(np.argmax(self.logpost))]
+        if previous is None:
+            return self._climb(np.array(best, dtype=float))[0]
+        x, value = self._climb(np.array(previous, dtype=float))
+        if float(np.max(self.logpost)) > value:
+            y, other = self._climb(np.array(best, dtype=float))
+            if other > value:
+                return y
+        return x
 
     def _prior_quadratic(self) -> tuple[FloatArray, FloatArray] | None:
         """``(m, L^{-1})`` of the prior's Gaussian factor (the re-anchored summary or the weak prior), if any."""
@@ -710,9 +722,9 @@ def run_map(
 
     The particle estimator's posterior (the same particles, the same random
     numbers as :func:`run_particle`) read at its mode instead of its mean:
-    at each report time :math:`t`, Levenberg–Marquardt from the particle of
-    highest posterior density and from the previous report's mode
-    (:meth:`_Posterior.mode`) finds :math:`\hat{\mathbf x}_a`, the most
+    at each report time :math:`t`, Levenberg–Marquardt from the previous
+    report's mode, and from the particle of highest posterior density where
+    that stands higher (:meth:`_Posterior.mode`), finds :math:`\hat{\mathbf x}_a`, the most
     probable anchor state, and the estimate is
     :math:`\mathbf F(t - t_a)\hat{\mathbf x}_a` with the particles' second
     moment about it (:meth:`_Posterior.spread_about`) as covariance — the
@@ -756,11 +768,11 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         nonlocal last_mode
         if not mode:
             return post.moments(t)
-        starts = [post.x[int(np.argmax(post.logpost))]]
+        previous = None
         if last_mode is not None:
             ta, xa = last_mode
-            starts.append(post.model.motion.propagate(xa, post.t_anchor - ta) if ta != post.t_anchor else xa)
-        x_mode = post.mode(np.array(starts))
+            previous = post.model.motion.propagate(xa, post.t_anchor - ta) if ta != post.t_anchor else xa
+        x_mode = post.mode(previous)
         last_mode = (post.t_anchor, x_mode)
         return post.spread_about(x_mode, t)
 
