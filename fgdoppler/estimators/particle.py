@@ -46,8 +46,9 @@ This is iterated batch importance sampling (Chopin 2002):
    :math:`\mathbf Q(t - t_a)` accumulated since the anchor
    (:func:`run_particle`); or, the filtered MAP (:func:`run_map`), the
    posterior's mode :math:`\arg\max_{\mathbf x_a}\pi_k` found by
-   Levenberg–Marquardt from the best particle and the previous mode, with
-   the particles' second moment about it as covariance.
+   Levenberg–Marquardt from the previous mode (and from the best particle
+   where that stands higher), with the particles' second moment about it as
+   covariance.
 
 A move needs the likelihood of every measurement since the anchor, so its
 cost grows with the span.  After ``max_span`` seconds the anchor moves to
@@ -335,9 +336,7 @@ class _Posterior:
         dt = t - self.t_anchor
         xs = m.propagate(self.x, dt) if dt != 0 else self.x
         point = m.propagate(x_anchor, dt) if dt != 0 else np.array(x_anchor, dtype=float)
-        w = self.weights()
-        d = xs - point
-        cov = (d * (w / max(float(np.sum(w)), 1e-300))[:, None]).T @ d
+        cov = _weighted_cov(xs, self.weights(), centre=point)
         if dt > 0:
             cov = cov + m.Q(dt)
         return point, cov
@@ -467,12 +466,12 @@ def _next_temperature(delta: FloatArray, beta: float, target_ess: float) -> floa
     return min(1.0, max(lo, beta + MIN_TEMPER_STEP))
 
 
-def _weighted_cov(x: FloatArray, w: FloatArray) -> FloatArray:
+def _weighted_cov(x: FloatArray, w: FloatArray, centre: FloatArray | None = None) -> FloatArray:
+    """Weighted second moment of the rows of ``x`` about ``centre`` (default: their weighted mean, the covariance)."""
     s = float(np.sum(w))
     if x.shape[0] == 0 or s <= 0:
         return np.eye(x.shape[1])
-    mean = w @ x / s
-    d = x - mean
+    d = x - (w @ x / s if centre is None else centre)
     return (d * (w / s)[:, None]).T @ d
 
 
