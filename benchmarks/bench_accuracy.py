@@ -332,10 +332,16 @@ def markdown(summary: dict[str, Any], seed: int, wall: float) -> str:
             ver = " ".join(f"{k[0]}{c}" for k, c in v.items()) if set(v) != {"ran"} else ""
             cells.append(f"{e['seconds']:.3f} {ver}".strip())
         lines.append(f"| {n} | " + " | ".join(cells) + " |")
-    lines += ["", "| goal | scenario | met | numbers | evidence |", "|---|---|---|---|---|"]
-    for g, sn, met, detail, evidence in goals(summary):
-        lines.append(f"| {g} | {sn} | {'yes' if met else '**no**'} | {detail} | {evidence} |")
+    lines += ["", *goal_table(goals(summary))]
     return "\n".join(lines) + "\n"
+
+
+def goal_table(rows: list[tuple[str, str, bool, str, str]]) -> list[str]:
+    """The goals (:func:`goals`) as the lines of a Markdown table (read back by ``studies/reproduction_page.py``)."""
+    lines = ["| goal | scenario | met | numbers | evidence |", "|---|---|---|---|---|"]
+    for g, sn, met, detail, evidence in rows:
+        lines.append(f"| {g} | {sn} | {'yes' if met else '**no**'} | {detail} | {evidence} |")
+    return lines
 
 
 def _load_note(summary: dict[str, Any]) -> str:

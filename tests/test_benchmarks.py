@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import importlib.util
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 from scipy.stats import chi2
@@ -10,6 +12,7 @@ from scipy.stats import chi2
 from benchmarks.bench_accuracy import (
     RUN_NEES_LEVEL,
     T_NEES,
+    goal_table,
     inconsistent_runs,
     json_summary,
     load_records,
@@ -86,3 +89,40 @@ def test_the_table_says_when_other_jobs_ran_beside_it() -> None:
     quiet = _load_note({"load": {"average_15_min": 2.1, "workers": 2, "cores": 2}})
     assert "other jobs ran beside it" in busy and "other jobs" not in quiet and "2.1" in quiet
     assert _load_note({}) == ""  # re-summarised records: no load known
+
+
+def _reproduction_page() -> ModuleType:
+    path = Path(__file__).resolve().parents[1] / "studies" / "reproduction_page.py"
+    spec = importlib.util.spec_from_file_location("reproduction_page", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_reproduction_page_reads_back_the_goals_the_benchmark_writes(tmp_path: Path) -> None:
+    """docs/reproduction.md marks the goals from the benchmark's own Markdown: writer and reader agree."""
+    page = _reproduction_page()
+    scenarios = list(page.SCENARIO_COLUMNS)
+    rng = np.random.default_rng(5)
+    met: dict[tuple[int, str, str], bool] = {}
+    for seed in (7, 2026):
+        rows = []
+        for goal in ("1: EKF <= plain EKF and UKF", "2: best online <= best peer filter"):
+            for sn in scenarios:
+                met[seed, goal, sn] = bool(rng.random() < 0.5)
+                rows.append((goal, sn, met[seed, goal, sn], "ekf 1 vs 2", ""))
+        rows.append(("3: smoother <= 1.1 x smoothing CRLB", scenarios[2], True, "0.94", ""))
+        text = f"100 runs per scenario, seed {seed}.\n\n| x |\n|---|\n\n" + "\n".join(goal_table(rows)) + "\n"
+        (tmp_path / f"accuracy_seed{seed}.md").write_text(text)
+        back = page.goal_rows(text)
+        assert back == {(g, page.SCENARIO_COLUMNS[sn]): "yes" if ok else "no" for g, sn, ok, _, _ in rows}
+    part = page.accuracy_part(tmp_path)
+    assert "seeds 7 and 2026" in part and "100 runs per scenario" in part
+    for goal in ("1: EKF <= plain EKF and UKF", "2: best online <= best peer filter"):
+        line = next(x for x in part.splitlines() if x.startswith(f"| {goal} |"))
+        cells = [c.strip() for c in line.strip("|").split("|")[1:]]
+        assert cells == [" / ".join("yes" if met[seed, goal, sn] else "no" for seed in (7, 2026)) for sn in scenarios]
+    crlb = next(x for x in part.splitlines() if x.startswith("| 3:"))
+    assert crlb.count("yes / yes") == 1 and crlb.count("– / –") == 5
+    assert page.accuracy_part(tmp_path / "nothing") == ""
