@@ -56,7 +56,8 @@ the current scan: the particles are propagated with process-noise samples
 and the older data are summarised by the moment-matched Gaussian of the
 propagated cloud (exact for a Gaussian posterior; by then the posterior of
 a recording this long is close to one), and each resampling is followed by
-one Metropolis step instead of ``move_steps``.
+one Metropolis step instead of ``move_steps``.  The run's closing event
+counts the re-anchorings.
 
 Random numbers come from ``numpy.random.default_rng(settings.seed)``: the
 same input and settings give the same track.
@@ -780,7 +781,7 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
     states.append(point)
     covs.append(cov)
     total = 0.0
-    n_resample = 0
+    n_resample = n_reanchor = 0
     for k in range(len(scans)):
         sl = scans.rows(k)
         t = float(scans.times[k])
@@ -788,6 +789,7 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         if post.ess() < settings.ess_threshold * settings.n_particles:
             if t - post.t_anchor > settings.max_span:
                 post.reanchor(t, rng)
+                n_reanchor += 1
             post.resample(rng)
             # Past the first anchor the older data are a Gaussian summary and the posterior is close to
             # Gaussian: one Metropolis step per resampling restores diversity at a fifth of the cost
@@ -804,7 +806,10 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
     finite = [r for r in rates if np.isfinite(r)]
     events.append(Event(time=times[-1], message=(
         f"{settings.n_particles} particles, {n_resample} resample-move steps, mean Metropolis acceptance "
-        f"{np.mean(finite) if finite else float('nan'):.2f}" + ("; estimates at the posterior mode" if mode else ""))))
+        f"{np.mean(finite) if finite else float('nan'):.2f}"
+        + (f"; {n_reanchor} re-anchoring(s), the data older than {settings.max_span:g} s summarised by a Gaussian"
+           if n_reanchor else "")
+        + ("; estimates at the posterior mode" if mode else ""))))
     return TrackResult(
         estimator=name,
         settings=settings,

@@ -285,3 +285,33 @@ def test_map_is_registered_online_with_particle_settings() -> None:
     res = fd.run_estimator("map", sim.measurements, model, init)
     assert res.estimator == "map" and res.primary.kind == "filtered"
     assert str(res.status) == "ok"
+
+
+@pytest.mark.parametrize(("case", "x", "seed"), [("a", 45e3, 0), ("a", 45e3, 1), ("b", 5e3, 1)])
+def test_reanchoring_keeps_a_gaussian_posterior(case: str, x: float, seed: int) -> None:
+    """Past ``max_span`` the older data become a Gaussian summary: where the posterior is Gaussian, nothing is lost.
+
+    In the well-observed scenarios the posterior is close to Gaussian, so the
+    moment-matched summary carries what the older data said; re-anchoring
+    every 5 s must leave the final estimate within Monte Carlo error of the
+    run that keeps every measurement (measured: squared Mahalanobis distance
+    0.01-0.14 and covariance eigenvalue ratios 0.63-1.4 over six runs; a
+    summary that dropped or double-counted the older data would move the
+    estimate by standard deviations and scale the covariance by the data's
+    share).  Both read-outs, mean and mode, and the run says it re-anchored.
+    """
+    scen = fd.paper_scenario(case, x)
+    sim = fd.simulate(scen, np.random.default_rng(seed))
+    model = fd.TrackingModel.of(scen.geometry)
+    m = sim.measurements
+    init = fd.initiate(m.first_per_pair(10), model)
+    for name in ("particle", "map"):
+        whole = fd.run_estimator(name, m, model, init, verify=False)
+        short = fd.run_estimator(name, m, model, init, fd.ParticleSettings(max_span=5.0), verify=False)
+        assert "re-anchoring" not in " ".join(e.message for e in whole.events)
+        assert any("re-anchoring(s)" in e.message for e in short.events)
+        a, b = whole.primary, short.primary
+        d = b.states[-1] - a.states[-1]
+        assert d @ np.linalg.solve(a.covariances[-1], d) < 0.5
+        ratio = np.linalg.eigvals(np.linalg.solve(a.covariances[-1], b.covariances[-1])).real
+        assert 0.5 < ratio.min() and ratio.max() < 2.0
