@@ -2,7 +2,7 @@
 
 Run: fgdoppler reproduce --runs 100 --out output/reproduce && python studies/reproduction_page.py output/reproduce
 
-With ``--accuracy DIR`` (default ``output/bench_accuracy`` when it exists) the
+With ``--accuracy DIR`` (default ``output/bench_accuracy``) the
 page also marks which goals of the accuracy issue hold, from the Markdown
 tables ``accuracy_seed<N>.md`` that ``python -m benchmarks.bench_accuracy``
 writes there (one per seed).
@@ -188,7 +188,10 @@ if __name__ == "__main__":
     parser.add_argument("folder", nargs="?", type=Path, default=Path("output/reproduce"),
                         help="a `fgdoppler reproduce` output folder (default output/reproduce)")
     parser.add_argument("--accuracy", type=Path, default=None,
-                        help="the accuracy benchmark's output folder (default output/bench_accuracy if it exists)")
+                        help="the accuracy benchmark's output folder (default output/bench_accuracy)")
     args = parser.parse_args()
-    default = Path("output/bench_accuracy")
-    main(args.folder, accuracy=args.accuracy if args.accuracy is not None else (default if default.is_dir() else None))
+    accuracy = args.accuracy if args.accuracy is not None else Path("output/bench_accuracy")
+    if not list(accuracy.glob("accuracy_seed*.md")):
+        print(f"no accuracy_seed*.md in {accuracy}: the page leaves out the accuracy goals "
+              "(run python -m benchmarks.bench_accuracy first)")
+    main(args.folder, accuracy=accuracy)
