@@ -278,3 +278,30 @@ def test_track_reports_the_verdict_on_stderr_and_exits_3_when_failed(tmp_path: P
     assert "status failed" in err and "exit status 3" in err
     assert out.exists()  # the outputs are written so that they can be looked at
     assert main(["track", str(sim / "noisy.csv"), "--estimator", "ekf", "--allow-failed"]) == 0
+
+
+def test_track_particle_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--particles and --particle-seed reach the particle estimators; the seed alone changes the random numbers."""
+    sim = tmp_path / "sim"
+    main(["simulate", "--case", "b", "--start-x", "5000", "--seed", "3", "--out", str(sim)])
+    capsys.readouterr()
+    base = ["track", str(sim / "measurements.csv"), "--geometry", "b", "--json"]
+
+    def last_state(*extra: str) -> tuple[list[float], str]:
+        assert main([*base, *extra]) == 0
+        d = json.loads(capsys.readouterr().out)
+        return d["states"][-1], " ".join(e["message"] for e in d["events"])
+
+    x1, events = last_state("--estimator", "map", "--particles", "256", "--particle-seed", "3")
+    assert "256 particles" in events
+    assert last_state("--estimator", "map", "--particles", "256", "--particle-seed", "3")[0] == x1
+    x2, _ = last_state("--estimator", "particle", "--particles", "256", "--particle-seed", "3")
+    x3, _ = last_state("--estimator", "particle", "--particles", "256", "--particle-seed", "4")
+    assert x2 != x3  # another seed, another Monte Carlo sample of the same posterior
+    for bad, msg in ((["--estimator", "particle", "--particles", "10"], "n_particles must be >= 64"),
+                     (["--estimator", "map", "--particle-seed", "-1"], "seed must be a whole number"),
+                     (["--estimator", "ekf", "--particles", "512"], "not to ekf"),
+                     (["--particles", "512"], "not to init")):
+        assert main([*base[:-1], *bad]) == 2  # without --json the initiation would print the geometry first
+        captured = capsys.readouterr()
+        assert msg in captured.err and "geometry" not in captured.out  # refused before any work

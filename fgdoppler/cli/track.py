@@ -56,6 +56,11 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    help="target known to satisfy (NX, NY) . (p - (PX, PY)) >= 0, e.g. 0 0 0 1 for y >= 0")
     p.add_argument("--q", type=float, default=None, help="process noise PSD in m^2/s^3 (default 1e-3)")
     p.add_argument("--lag", type=float, default=5.0, help="fixed-lag smoother lag in s (default 5)")
+    p.add_argument("--particles", type=int, default=None, metavar="N",
+                   help="particle and map estimators: number of particles (default 4096)")
+    p.add_argument("--particle-seed", type=int, default=None, metavar="S",
+                   help="particle and map estimators: seed of their random numbers (default 0; the same seed gives "
+                        "the same track, another seed shows the Monte Carlo spread)")
     add_huber_option(p)
     p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy) for --plot and errors")
     p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
@@ -126,6 +131,10 @@ def _run(args: argparse.Namespace) -> int:
     from fgdoppler.simulation import Trajectory
 
     _check_outputs(args)
+    if args.estimator != "init":  # bad tracker options are reported before any work
+        _tracker_settings(args, ALIASES.get(args.estimator, args.estimator))
+    elif args.particles is not None or args.particle_seed is not None:
+        raise CLIError("--particles and --particle-seed apply to --estimator particle or map, not to init")
     if args.init_per_pair < 3:
         raise CLIError("--init-per-pair must be >= 3")
     if not (math.isfinite(args.init_seconds) and args.init_seconds >= 0):
@@ -257,22 +266,33 @@ def _plot_landscape(args: argparse.Namespace, init: Any, window: Any, geom: Any,
     return plotting.figure_bytes(ax, args.plot.suffix.lower().lstrip("."))
 
 
+def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
+    """The settings of tracker ``name`` from the options (a CLIError for values it rejects)."""
+    from fgdoppler.estimators.settings import FixedLagSettings, ParticleSettings
+
+    k = huber(args)
+    particle = {key: v for key, v in (("n_particles", args.particles), ("seed", args.particle_seed)) if v is not None}
+    if particle and ESTIMATORS[name].settings is not ParticleSettings:
+        raise CLIError(f"--particles and --particle-seed apply to the particle estimators "
+                       f"({', '.join(n for n, i in ESTIMATORS.items() if i.settings is ParticleSettings)}), "
+                       f"not to {name}")
+    try:
+        return (FixedLagSettings(lag=args.lag, huber_k=k) if name == "fixed-lag"
+                else ESTIMATORS[name].settings(huber_k=k, **particle))
+    except ValueError as exc:
+        raise CLIError(f"--{'lag' if name == 'fixed-lag' else 'particles/--particle-seed'}: {exc}") from None
+
+
 def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, truth: Any, where: dict[str, Any]) -> str:
     from fgdoppler import plotting
     from fgdoppler.estimators.registry import run_estimator
-    from fgdoppler.estimators.settings import FixedLagSettings
     from fgdoppler.progress import TqdmProgress
 
     name = args.estimator
     if name in ALIASES:
         print(f"note: --estimator {name} is now called {ALIASES[name]}", file=sys.stderr)
         name = ALIASES[name]
-    k = huber(args)
-    try:
-        settings = (FixedLagSettings(lag=args.lag, huber_k=k) if name == "fixed-lag"
-                    else ESTIMATORS[name].settings(huber_k=k))
-    except ValueError as exc:
-        raise CLIError(f"--lag: {exc}") from None
+    settings = _tracker_settings(args, name)
     with TqdmProgress() as bar:  # drawn on stderr only when it is a terminal
         result = run_estimator(name, meas, model, init, settings, progress=bar)
     e = result.primary
