@@ -131,8 +131,9 @@ def _run(args: argparse.Namespace) -> int:
     from fgdoppler.simulation import Trajectory
 
     _check_outputs(args)
+    tracker = None
     if args.estimator != "init":  # bad tracker options are reported before any work
-        _tracker_settings(args, ALIASES.get(args.estimator, args.estimator))
+        tracker = _tracker_settings(args, ALIASES.get(args.estimator, args.estimator))
     elif args.particles is not None or args.particle_seed is not None:
         raise CLIError("--particles and --particle-seed apply to --estimator particle or map, not to init")
     if args.init_per_pair < 3:
@@ -166,7 +167,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.estimator == "init":
         status = _report_initiation(args, init, window, geom, truth, where)
     else:
-        status = _run_tracker(args, init, meas, model, truth, where)
+        status = _run_tracker(args, tracker, init, meas, model, truth, where)
     return _exit_status(status, args)
 
 
@@ -283,7 +284,8 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
         raise CLIError(f"--{'lag' if name == 'fixed-lag' else 'particles/--particle-seed'}: {exc}") from None
 
 
-def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, truth: Any, where: dict[str, Any]) -> str:
+def _run_tracker(args: argparse.Namespace, settings: Any, init: Any, meas: Any, model: Any, truth: Any,
+                 where: dict[str, Any]) -> str:
     from fgdoppler import plotting
     from fgdoppler.estimators.registry import run_estimator
     from fgdoppler.progress import TqdmProgress
@@ -292,7 +294,6 @@ def _run_tracker(args: argparse.Namespace, init: Any, meas: Any, model: Any, tru
     if name in ALIASES:
         print(f"note: --estimator {name} is now called {ALIASES[name]}", file=sys.stderr)
         name = ALIASES[name]
-    settings = _tracker_settings(args, name)
     with TqdmProgress() as bar:  # drawn on stderr only when it is a terminal
         result = run_estimator(name, meas, model, init, settings, progress=bar)
     e = result.primary
