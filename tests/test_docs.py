@@ -127,7 +127,8 @@ def test_settings_pages_show_every_true_default(site: Path) -> None:
     from fgdoppler.estimators.grid import GridSpec
 
     classes = (fd.Scenario, fd.InitiationSettings, GridSpec, fd.EKFSettings, fd.ISAM2Settings,
-               fd.FixedLagSettings, fd.SmootherSettings, fd.ParticleSettings, MonteCarloSpec)
+               fd.FixedLagSettings, fd.SmootherSettings, fd.ParticleSettings, fd.MapSettings,
+               MonteCarloSpec)
     missing = []
     for cls in classes:
         page = site / "api" / "generated" / f"{cls.__module__}.{cls.__name__}.html"

@@ -273,9 +273,9 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
 
     k = huber(args)
     particle = {key: v for key, v in (("n_particles", args.particles), ("seed", args.particle_seed)) if v is not None}
-    if particle and ESTIMATORS[name].settings is not ParticleSettings:
+    if particle and not issubclass(ESTIMATORS[name].settings, ParticleSettings):
         raise CLIError(f"--particles and --particle-seed apply to the particle estimators "
-                       f"({', '.join(n for n, i in ESTIMATORS.items() if i.settings is ParticleSettings)}), "
+                       f"({', '.join(n for n, i in ESTIMATORS.items() if issubclass(i.settings, ParticleSettings))}), "
                        f"not to {name}")
     try:
         return (FixedLagSettings(lag=args.lag, huber_k=k) if name == "fixed-lag"

@@ -38,6 +38,7 @@ This is iterated batch importance sampling (Chopin 2002):
    the accepted ones reweight the particles; when the effective sample
    size falls below ``ess_threshold`` × N the particles are resampled
    (systematic) and moved by ``move_steps`` random-walk Metropolis steps
+   (5; 3 for the mode, :class:`~fgdoppler.estimators.settings.MapSettings`)
    targeting :math:`\pi_k`, each particle with the covariance of its own
    cluster (the mixture component it descends from, so a mirror mode keeps
    its own scale).
@@ -78,7 +79,7 @@ from fgdoppler.estimators.grid import HalfPlane
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.local import in_computation_frame
 from fgdoppler.estimators.results import Estimates, TrackResult
-from fgdoppler.estimators.settings import ParticleSettings
+from fgdoppler.estimators.settings import MapSettings, ParticleSettings
 from fgdoppler.estimators.verdict import Event, Reason
 from fgdoppler.estimators.window import split_window
 from fgdoppler.geometry import Geometry
@@ -720,8 +721,11 @@ def run_map(
 ) -> TrackResult:
     r"""The filtered MAP: at each scan the most probable state given all the data so far.
 
-    The particle estimator's posterior (the same particles, the same random
-    numbers as :func:`run_particle`) read at its mode instead of its mean:
+    The particle estimator's posterior read at its mode instead of its mean
+    (with the same settings, the same particles and random numbers as
+    :func:`run_particle`; its defaults, :class:`MapSettings`, move the
+    particles less after each resampling, since the mode needs less of
+    the posterior's detail than the mean):
     at each report time :math:`t`, Levenberg–Marquardt from the previous
     report's mode, and from the particle of highest posterior density where
     that stands higher (:meth:`_Posterior.mode`), finds :math:`\hat{\mathbf x}_a`, the most
@@ -746,7 +750,7 @@ def run_map(
     ValueError
         If the window cannot be explained by any start inside the zone.
     """
-    return _run(measurements, model, init, settings or ParticleSettings(), progress, mode=True)
+    return _run(measurements, model, init, settings or MapSettings(), progress, mode=True)
 
 
 def _run(measurements: Measurements, model: TrackingModel, init: Initiation, settings: ParticleSettings,

@@ -36,6 +36,7 @@ from fgdoppler.estimators.settings import (
     EKFSettings,
     FixedLagSettings,
     ISAM2Settings,
+    MapSettings,
     ParticleSettings,
     SmootherSettings,
     TrackerSettings,
@@ -93,7 +94,7 @@ ESTIMATORS: Mapping[str, EstimatorInfo] = MappingProxyType({
     "particle": EstimatorInfo(name="particle", run=run_particle, settings=ParticleSettings, resolution="native",
                               online=True,
                               summary="particle filter: the posterior by sequential Monte Carlo (resample-move)"),
-    "map": EstimatorInfo(name="map", run=run_map, settings=ParticleSettings, resolution="native", online=True,
+    "map": EstimatorInfo(name="map", run=run_map, settings=MapSettings, resolution="native", online=True,
                          summary="filtered MAP: the particle posterior's mode given all data so far"),
 })
 

@@ -267,10 +267,14 @@ def test_map_mode_is_the_highest_point_and_stationary(case: str, x: float, seed:
 
 
 def test_map_and_particle_share_the_posterior_covariance_differs_by_the_offset() -> None:
-    """Same particles, same random numbers: P_map = P_particle + (mean - mode)(mean - mode)' at every time."""
+    """Same settings, same particles: P_map = P_particle + (mean - mode)(mean - mode)' at every time.
+
+    ``MapSettings`` differ from ``ParticleSettings`` only in ``move_steps``, so with that set equal the two
+    estimators run on the same particles and random numbers.
+    """
     sim, model, init = _case("a", 5e3, 2)
     mean = run_particle(sim.measurements, model, init).primary
-    mode = run_map(sim.measurements, model, init).primary
+    mode = run_map(sim.measurements, model, init, fd.MapSettings(move_steps=fd.ParticleSettings().move_steps)).primary
     np.testing.assert_array_equal(mean.times, mode.times)
     d = mean.states - mode.states
     expected = mean.covariances + np.einsum("ti,tj->tij", d, d)
@@ -278,13 +282,27 @@ def test_map_and_particle_share_the_posterior_covariance_differs_by_the_offset()
     assert np.any(np.abs(d[:, :2]) > 10.0)  # in this curved valley the two points do differ
 
 
-def test_map_is_registered_online_with_particle_settings() -> None:
+def test_map_settings_differ_from_the_particle_estimators_only_in_moves() -> None:
+    """Every default but ``move_steps`` is the particle estimator's; the checks are the same."""
+    import dataclasses
+
+    base, own = fd.ParticleSettings(), fd.MapSettings()
+    assert isinstance(own, fd.ParticleSettings)
+    differ = {f.name for f in dataclasses.fields(base) if getattr(base, f.name) != getattr(own, f.name)}
+    assert differ == {"move_steps"} and own.move_steps < base.move_steps
+    with pytest.raises(ValueError, match="move_steps"):
+        fd.MapSettings(move_steps=-1)
+
+
+def test_map_is_registered_online_with_its_settings() -> None:
     info = fd.ESTIMATORS["map"]
-    assert info.online and info.settings is fd.ParticleSettings and info.resolution == "native"
+    assert info.online and info.settings is fd.MapSettings and info.resolution == "native"
     sim, model, init = _case("a", 45e3, 1)
     res = fd.run_estimator("map", sim.measurements, model, init)
     assert res.estimator == "map" and res.primary.kind == "filtered"
     assert str(res.status) == "ok"
+    with pytest.raises(TypeError, match="map takes MapSettings, got ParticleSettings"):
+        fd.run_estimator("map", sim.measurements, model, init, fd.ParticleSettings())
 
 
 @pytest.mark.parametrize(("case", "x", "seed"), [("a", 45e3, 0), ("a", 45e3, 1), ("b", 5e3, 1)])
@@ -307,7 +325,7 @@ def test_reanchoring_keeps_a_gaussian_posterior(case: str, x: float, seed: int) 
     init = fd.initiate(m.first_per_pair(10), model)
     for name in ("particle", "map"):
         whole = fd.run_estimator(name, m, model, init, verify=False)
-        short = fd.run_estimator(name, m, model, init, fd.ParticleSettings(max_span=5.0), verify=False)
+        short = fd.run_estimator(name, m, model, init, fd.ESTIMATORS[name].settings(max_span=5.0), verify=False)
         assert "re-anchoring" not in " ".join(e.message for e in whole.events)
         assert any("re-anchoring(s)" in e.message for e in short.events)
         a, b = whole.primary, short.primary
