@@ -391,10 +391,10 @@ class MapSettings(ParticleSettings):
     The mode reads the particles only for its covariance (their second
     moment about it) and for where to start a second climb, so it needs
     less of the posterior's detail than the mean does: three Metropolis
-    steps after each resampling instead of five give ``map`` the same track
-    to the metre on the accuracy benchmark's poorly observed recordings in
-    about 0.73 times the CPU time (docs/concepts.md, "The filtered mode",
-    with the numbers).  Every other parameter means what it means in
+    steps after each resampling instead of five leave ``map``'s track within
+    2.5 m in every scenario of the accuracy benchmark (100 runs, two seeds;
+    one scenario 36 m better) for 0.73-0.79 times the CPU time
+    (docs/concepts.md, "The filtered mode", with the numbers).  Every other parameter means what it means in
     :class:`ParticleSettings`; ``MapSettings(move_steps=5)`` runs on the
     same particles and random numbers as the particle estimator's defaults.
 
