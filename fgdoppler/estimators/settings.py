@@ -393,7 +393,7 @@ class MapSettings(ParticleSettings):
     less of the posterior's detail than the mean does: three Metropolis
     steps after each resampling instead of five leave ``map``'s track within
     2.5 m in every scenario of the accuracy benchmark (100 runs, two seeds;
-    one scenario 36 m better) for 0.73-0.79 times the CPU time
+    one scenario 36 m better) for 0.72-0.79 times the CPU time
     (docs/concepts.md, "The filtered mode", with the numbers).  Every other parameter means what it means in
     :class:`ParticleSettings`; ``MapSettings(move_steps=5)`` runs on the
     same particles and random numbers as the particle estimator's defaults.
