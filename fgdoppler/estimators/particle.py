@@ -362,15 +362,26 @@ class _Posterior:
         Without ``previous`` the climb starts from the highest particle.  Either
         way the mode stands at least as high as every particle.
         """
+        return self.mode_and_switch(previous)[0]
+
+    def mode_and_switch(self, previous: FloatArray | None = None) -> tuple[FloatArray, float | None]:
+        r""":meth:`mode`, and by how much the new basin's peak stands higher (log density) when it left ``previous``'s.
+
+        The second element is ``None`` when the mode stayed in the basin of
+        ``previous`` (or there was none); otherwise the gain
+        :math:`\log\pi_k(\text{new}) - \log\pi_k(\text{old})`, so
+        :math:`e^{\text{gain}}` is how much more probable the new peak is: a
+        small gain means two peaks the data barely tell apart.
+        """
         best = self.x[int(np.argmax(self.logpost))]
         if previous is None:
-            return self._climb(np.array(best, dtype=float))[0]
+            return self._climb(np.array(best, dtype=float))[0], None
         x, value = self._climb(np.array(previous, dtype=float))
         if float(np.max(self.logpost)) > value:
             y, other = self._climb(np.array(best, dtype=float))
             if other > value:
-                return y
-        return x
+                return y, other - value
+        return x, None
 
     def _prior_quadratic(self) -> tuple[FloatArray, FloatArray] | None:
         """``(m, L^{-1})`` of the prior's Gaussian factor (the re-anchored summary or the weak prior), if any."""
@@ -741,7 +752,11 @@ def run_map(
     leave a long, nearly flat valley that the zone truncates, the mode can
     lie anywhere along it and the mean, which weighs the whole truncated
     valley, is the better point.  docs/concepts.md ("The filtered mode")
-    says which scenario is which, measured.  After a re-anchoring
+    says which scenario is which, measured.  When the mode leaves one peak
+    of the posterior for another (a higher one that a particle revealed),
+    the run says so in an event — where, how far, and how much more
+    probable the new peak is — since such a jump can be kilometres for a
+    likelihood ratio of a few.  After a re-anchoring
     (``max_span``) the older data are a Gaussian summary centred on the
     particles' mean, so on long recordings the two read-outs converge.
 
@@ -767,6 +782,7 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
     scans = stream.scans()
     start_task(progress, name, len(scans))
     last_mode: tuple[float, FloatArray] | None = None  # (anchor time, anchor state) of the previous report's mode
+    jumps: list[float] = []  # log-density gains of the mode's moves to another peak
 
     def report(t: float) -> tuple[FloatArray, FloatArray]:
         nonlocal last_mode
@@ -776,7 +792,14 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         if last_mode is not None:
             ta, xa = last_mode
             previous = post.model.motion.propagate(xa, post.t_anchor - ta) if ta != post.t_anchor else xa
-        x_mode = post.mode(previous)
+        x_mode, gain = post.mode_and_switch(previous)
+        if gain is not None and previous is not None:
+            jumps.append(gain)
+            here, there = (post.model.motion.propagate(v, t - post.t_anchor) for v in (previous, x_mode))
+            events.append(Event(time=t, message=(
+                f"the mode moved to another peak of the posterior, "
+                f"{float(np.linalg.norm((there - here)[:post.model.dim])):.0f} m away, "
+                f"more probable by a factor {np.exp(gain):.3g} (log density +{gain:.2f})")))
         last_mode = (post.t_anchor, x_mode)
         return post.spread_about(x_mode, t)
 
@@ -813,7 +836,9 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         f"{np.mean(finite) if finite else float('nan'):.2f}"
         + (f"; {n_reanchor} re-anchoring(s), the data older than {settings.max_span:g} s summarised by a Gaussian"
            if n_reanchor else "")
-        + ("; estimates at the posterior mode" if mode else ""))))
+        + ("; estimates at the posterior mode" if mode else "")
+        + (f"; the mode moved to another peak {len(jumps)} time(s), the closest call a factor "
+           f"{np.exp(min(jumps)):.3g} in probability" if jumps else ""))))
     return TrackResult(
         estimator=name,
         settings=settings,

@@ -305,6 +305,46 @@ def test_map_is_registered_online_with_its_settings() -> None:
         fd.run_estimator("map", sim.measurements, model, init, fd.ParticleSettings())
 
 
+def test_map_reports_when_its_mode_moves_to_another_peak() -> None:
+    """A jump of the mode between two peaks is an event, with the distance the track really jumped.
+
+    The recording (``fgdoppler reproduce --seed 2026``'s run 16 of case a
+    25 km) has two peaks a likelihood ratio of about 3 apart, 20 km from
+    each other along the valley: the mode leaves for the far one at 11 s and
+    comes back at 15.5 s (docs/concepts.md, "The filtered mode").  Each
+    event's distance is between the previous mode carried to the scan's time
+    and the new one, so the reported track moves by that distance give or
+    take one scan's travel and the new peak's climb (under 5 % + 300 m
+    here); between other scans it moves by far less.  The closing event
+    counts them; the particle estimator (the mean) never reports one.
+    """
+    import re
+
+    scenarios = fd.paper_scenarios()
+    seq = np.random.SeedSequence(2026).spawn(len(scenarios) * 20)[1 * 20 + 16]
+    scen = scenarios[1]
+    sim = fd.simulate(scen, np.random.default_rng(seq))
+    model = fd.TrackingModel.of(scen.geometry)
+    init = fd.initiate(sim.measurements.first_per_pair(10), model)
+    res = run_map(sim.measurements, model, init)
+    pattern = re.compile(r"the mode moved to another peak of the posterior, (\d+) m away, "
+                         r"more probable by a factor ([\d.e+]+) \(log density \+([\d.]+)\)")
+    jumps = [(e.time, *pattern.match(e.message).groups()) for e in res.events if pattern.match(e.message)]
+    assert len(jumps) >= 1
+    assert f"the mode moved to another peak {len(jumps)} time(s)" in res.events[-1].message
+    track = res.primary
+    step = np.linalg.norm(np.diff(track.states[:, :2], axis=0), axis=1)
+    at = {int(np.flatnonzero(np.isclose(track.times, t))[0]) - 1 for t, *_ in jumps}
+    for t, metres, factor, gain in jumps:
+        k = int(np.flatnonzero(np.isclose(track.times, t))[0]) - 1
+        assert abs(step[k] - float(metres)) < 0.05 * float(metres) + 300.0
+        assert float(factor) > 1.0 and float(factor) == pytest.approx(np.exp(float(gain)), rel=1e-2)
+    others = np.delete(step, sorted(at))
+    assert others.max() < 0.25 * min(float(j[1]) for j in jumps)
+    mean = run_particle(sim.measurements, model, init)
+    assert not any("another peak" in e.message for e in mean.events)
+
+
 @pytest.mark.parametrize(("case", "x", "seed"), [("a", 45e3, 0), ("a", 45e3, 1), ("b", 5e3, 1)])
 def test_reanchoring_keeps_a_gaussian_posterior(case: str, x: float, seed: int) -> None:
     """Past ``max_span`` the older data become a Gaussian summary: where the posterior is Gaussian, nothing is lost.
