@@ -80,7 +80,7 @@ from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.local import in_computation_frame
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import MapSettings, ParticleSettings
-from fgdoppler.estimators.verdict import Event, Reason
+from fgdoppler.estimators.verdict import Event
 from fgdoppler.estimators.window import split_window
 from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
@@ -829,27 +829,31 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         covs.append(cov)
         loglik.append(total)
         advance(progress)
-    reasons: list[Reason] = []
-    finite = [r for r in rates if np.isfinite(r)]
-    events.append(Event(time=times[-1], message=(
-        f"{settings.n_particles} particles, {n_resample} resample-move steps, mean Metropolis acceptance "
-        f"{np.mean(finite) if finite else float('nan'):.2f}"
-        + (f"; {n_reanchor} re-anchoring(s), the data older than {settings.max_span:g} s summarised by a Gaussian"
-           if n_reanchor else "")
-        + ("; estimates at the posterior mode" if mode else "")
-        + (f"; the mode moved to another peak {len(jumps)} time(s), the closest call a factor "
-           f"{np.exp(min(jumps)):.3g} in probability" if jumps else ""))))
+    events.append(Event(time=times[-1], message=_summary(settings, rates, n_resample, n_reanchor, mode, jumps)))
     return TrackResult(
         estimator=name,
         settings=settings,
         estimates=(Estimates.from_lists("filtered", times, states, covs),),
-        reasons=tuple(reasons),
+        reasons=(),
         events=tuple(events),
         nis=gate.as_array(),
         log_likelihood=np.array(loglik),
         iterations=n_resample,
         wall_time=time.perf_counter() - t_begin,
     )
+
+
+def _summary(settings: ParticleSettings, rates: list[float], n_resample: int, n_reanchor: int, mode: bool,
+             jumps: list[float]) -> str:
+    """The run's closing event: particles, moves, acceptance, re-anchorings and the mode's jumps between peaks."""
+    finite = [r for r in rates if np.isfinite(r)]
+    return (f"{settings.n_particles} particles, {n_resample} resample-move steps, mean Metropolis acceptance "
+            f"{np.mean(finite) if finite else float('nan'):.2f}"
+            + (f"; {n_reanchor} re-anchoring(s), the data older than {settings.max_span:g} s summarised by a "
+               "Gaussian" if n_reanchor else "")
+            + ("; estimates at the posterior mode" if mode else "")
+            + (f"; the mode moved to another peak {len(jumps)} time(s), the closest call a factor "
+               f"{np.exp(min(jumps)):.3g} in probability" if jumps else ""))
 
 
 def _update(post: _Posterior, gate: NISGate, t: float, pair: NDArray[np.intp], z: FloatArray,
