@@ -305,3 +305,17 @@ def test_track_particle_options(tmp_path: Path, capsys: pytest.CaptureFixture[st
         assert main([*base[:-1], *bad]) == 2  # without --json the initiation would print the geometry first
         captured = capsys.readouterr()
         assert msg in captured.err and "geometry" not in captured.out  # refused before any work
+
+
+def test_track_prints_the_closing_event_even_past_the_limit(capsys: pytest.CaptureFixture[str]) -> None:
+    """Past ten events the summary shows the first nine, how many it leaves out, and the run's closing one."""
+    from fgdoppler.cli.track import _print_events
+    from fgdoppler.estimators.verdict import Event
+
+    events = [Event(time=float(k), message=f"gate {k}") for k in range(14)] + [Event(time=30.0, message="closing")]
+    _print_events(events)
+    lines = capsys.readouterr().out.splitlines()
+    assert [ln.split(": ", 1)[1] for ln in lines[:9]] == [f"gate {k}" for k in range(9)]
+    assert "5 more event(s)" in lines[9] and lines[10].endswith("closing") and len(lines) == 11
+    _print_events(events[:10])
+    assert len(capsys.readouterr().out.splitlines()) == 10  # at the limit: all of them, nothing left out

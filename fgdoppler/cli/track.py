@@ -191,10 +191,14 @@ def _print_verdict(status: str, reasons: Any) -> None:
 
 
 def _print_events(events: Any, limit: int = 10) -> None:
-    for e in list(events)[:limit]:
+    """The first events and, when there are more than ``limit``, the last one too: a run's closing summary."""
+    events = list(events)
+    shown = events if len(events) <= limit else events[:limit - 1]
+    for e in shown:
         print(f"  event at t = {e.time:g}: {e.message}")
     if len(events) > limit:
-        print(f"  ... and {len(events) - limit} more event(s)")
+        print(f"  ... {len(events) - limit} more event(s): all are in the JSON (--json, or --out's .json) ...")
+        print(f"  event at t = {events[-1].time:g}: {events[-1].message}")
 
 
 def _write(args: argparse.Namespace, csv_text: str, json_text: str, figure: bytes | None) -> None:
