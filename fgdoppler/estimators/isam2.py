@@ -33,6 +33,13 @@ survives the ill-conditioning of Doppler-only graphs.
 Verdict reasons: ``covariance`` (some filtered covariances indeterminate),
 ``not-converged`` (the final smoothing hit its iteration cap), both
 ``"doubtful"``.
+
+Through :func:`~fgdoppler.estimators.registry.run_estimator` the filtered
+covariances are then checked against posterior samples of the data so far
+and widened where those spread further
+(``ISAM2Settings.sampled_covariance``,
+:func:`~fgdoppler.estimators.spread.filtered_spread`); :func:`run_isam2`
+and the tracker report the Gaussian marginals themselves.
 """
 
 from __future__ import annotations

@@ -214,6 +214,24 @@ class ISAM2Settings(StreamingSettings):
         (:meth:`~fgdoppler.estimators.isam2.ISAM2Tracker.finish`).
     smoothed_covariances : bool, default True
         Compute the marginal covariance of every smoothed state at the end.
+    sampled_covariance : bool, default True
+        At checks every ``sampling_interval`` seconds, draw posterior samples
+        of the data so far about the filtered estimate and widen the
+        filtered covariances wherever the samples spread more than twice as
+        far (in variance) as the Gaussian marginal says
+        (:func:`~fgdoppler.estimators.spread.filtered_spread`; applied by
+        :func:`~fgdoppler.estimators.registry.run_estimator`, not by the
+        trackers fed by hand, ``ISAM2Tracker`` and ``GaussianSumTracker``).  The
+        estimates do not change.  On a poorly observed track the marginal is
+        a Laplace approximation of a curved, long-tailed posterior and
+        understates the error: measured on the paper's case a 5 km (100
+        runs, seed 2026) the run-averaged NEES of the filtered estimates
+        drops from 9.17 to 6.39, at 0.07 s a run (docs/concepts.md).
+    sampling_interval : float, default 5.0
+        Seconds between two checks; doubled after each check that widened
+        nothing (up to 8 times), and never less than a tenth of the time
+        since the first measurement, so a long recording costs a bounded
+        number of samples per measurement.
     """
 
     relinearize_position: float = 10.0
@@ -224,6 +242,8 @@ class ISAM2Settings(StreamingSettings):
     wildfire_threshold: float = 0.01
     final_passes: int = 100
     smoothed_covariances: bool = True
+    sampled_covariance: bool = True
+    sampling_interval: float = 5.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -235,6 +255,9 @@ class ISAM2Settings(StreamingSettings):
             _count(self.relinearize_history, "relinearize_history")
         _count(self.relinearize_every, "relinearize_every")
         _count(self.final_passes, "final_passes")
+        _positive(self.sampling_interval, "sampling_interval")
+        if not isinstance(self.sampled_covariance, bool):
+            raise ValueError(f"sampled_covariance must be True or False, got {self.sampled_covariance!r}")
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -230,7 +230,9 @@ def test_ekf_from_a_window_in_time_is_consistent_at_20_hz() -> None:
 
 @pytest.mark.parametrize("bad", [{"relinearize_history": -1}, {"relinearize_history": 2.5},
                                  {"relinearize_every": 0}, {"relinearize_window": 0},
-                                 {"relinearize_position": 0.0}, {"wildfire_threshold": float("nan")}])
+                                 {"relinearize_position": 0.0}, {"wildfire_threshold": float("nan")},
+                                 {"sampling_interval": 0.0}, {"sampling_interval": float("inf")},
+                                 {"sampled_covariance": 1}])
 def test_isam2_settings_reject_bad_values(bad: dict) -> None:
     name = next(iter(bad))
     with pytest.raises(ValueError, match=name):
