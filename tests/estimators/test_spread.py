@@ -10,6 +10,7 @@ import pytest
 import fgdoppler as fd
 import fgdoppler.estimators.registry as registry
 from fgdoppler.estimators.spread import (
+    FILTER_NOISE_MAX,
     FILTER_WIDEN_MIN,
     _enclosing,
     filtered_spread,
@@ -160,3 +161,28 @@ def test_the_filtered_check_leaves_out_what_the_gate_rejected(monkeypatch: pytes
     (kept,) = seen
     assert len(kept) == len(m) - 1
     assert not np.any((kept.time == m.time[j]) & (kept.pair == m.pair[j]))
+
+
+def test_no_check_where_the_process_noise_outgrows_the_filters_covariance() -> None:
+    """The samples move deterministically; where Q(t - t0) exceeds the filter's covariance, no check samples.
+
+    The same estimates with covariances 1e4 times too small from 19.5 s on
+    (whitened process noise since the start far above FILTER_NOISE_MAX
+    there) keep them as they are from 19.5 s on — a check falls there (every
+    5 s from 4.5 s, each widening), so nothing is carried over — while
+    before they are widened exactly as with the true covariances (on a slow 600 s track the
+    noise term alone had widened a consistent filter, NEES 3.52 -> 2.73).
+    """
+    sim, model, init = _run(0, 79)
+    e = fd.run_estimator("isam2", sim.measurements, model, init, fd.ISAM2Settings(sampled_covariance=False)).primary
+    late = e.times >= 19.5
+    tiny = e.covariances.copy()
+    tiny[late] *= 1e-4
+    Li = np.linalg.inv(np.linalg.cholesky(tiny[late][0]))
+    assert np.linalg.eigvalsh(Li @ model.motion.Q(e.times[late][0] - sim.measurements.time.min()) @ Li.T).max() \
+        > FILTER_NOISE_MAX
+    one = filtered_spread(sim.measurements, model, e.times, e.states, e.covariances, e.cov_ok, interval=5.0)
+    two = filtered_spread(sim.measurements, model, e.times, e.states, tiny, e.cov_ok, interval=5.0)
+    assert one is not None and two is not None
+    np.testing.assert_array_equal(two[0][~late], one[0][~late])
+    np.testing.assert_array_equal(two[0][late], tiny[late])
