@@ -330,15 +330,9 @@ def _widening(measurements: Measurements, model: TrackingModel, t0: float, t: fl
         drawn = _sample_about(post, x0, 0.5 * (P0 + P0.T), FILTER_SAMPLES, FILTER_MOVES, rng)
         if drawn is None:
             return None
-        S = _forward(model, drawn[0], t - t0)
+        return _whitened_widening(P, _forward(model, drawn[0], t - t0), FILTER_WIDEN_MIN)
     except np.linalg.LinAlgError:
         return None
-    M = Li @ S @ Li.T
-    lam, V = np.linalg.eigh(0.5 * (M + M.T))
-    grow = np.isfinite(lam) & (lam > FILTER_WIDEN_MIN)
-    if not np.any(grow):
-        return None
-    return np.asarray((V * np.where(grow, lam, 1.0)) @ V.T, dtype=float)
 
 
 def _sd_ratio(P: FloatArray, S: FloatArray, pos: slice, t: float) -> tuple[float, float, float, float]:
@@ -366,9 +360,27 @@ def _enclosing(laplace: FloatArray, sampled: FloatArray) -> FloatArray:
     estimate) did not reach, and a covariance that is too small is the
     failure this module exists to prevent.
     """
-    L = np.linalg.cholesky(laplace)
-    Li = np.linalg.inv(L)
-    M = Li @ sampled @ Li.T
+    widening = _whitened_widening(laplace, sampled, 1.0)
+    return laplace if widening is None else _whitened_apply(laplace, widening)
+
+
+def _whitened_widening(P: FloatArray, S: FloatArray, min_ratio: float) -> FloatArray | None:
+    r"""The whitened widening :math:`\mathbf V\mathbf\Lambda'\mathbf V^\top` of ``P`` towards ``S`` (``None``: none).
+
+    With :math:`\mathbf P = \mathbf L\mathbf L^\top` and
+    :math:`\mathbf L^{-1}\mathbf S\mathbf L^{-\top} = \mathbf V\mathbf\Lambda\mathbf V^\top`,
+    :math:`\lambda'_i = \lambda_i` where :math:`\lambda_i >` ``min_ratio`` and 1
+    elsewhere; ``min_ratio = 1`` gives :math:`\max(\mathbf\Lambda, \mathbf I)`.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If ``P`` is not positive definite.
+    """
+    Li = np.linalg.inv(np.linalg.cholesky(P))
+    M = Li @ S @ Li.T
     lam, V = np.linalg.eigh(0.5 * (M + M.T))
-    out = L @ (V * np.maximum(lam, 1.0)) @ V.T @ L.T
-    return np.asarray(0.5 * (out + out.T), dtype=float)
+    grow = np.isfinite(lam) & (lam > min_ratio)
+    if not np.any(grow):
+        return None
+    return np.asarray((V * np.where(grow, lam, 1.0)) @ V.T, dtype=float)
