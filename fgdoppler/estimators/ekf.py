@@ -32,6 +32,14 @@ at one time) update together, linearised once at the prediction:
 (and Stone Soup's with one Detection per scan).  Each measurement is gated
 by its own χ²₁ test against the prediction; a Huber weight inflates its
 :math:`\sigma_j^2` as above, from its own :math:`S_{jj}`.
+
+Through :func:`~fgdoppler.estimators.registry.run_estimator` the filtered
+covariances are then checked against posterior samples of the data so far
+and widened where those spread further
+(``EKFSettings.sampled_covariance``,
+:func:`~fgdoppler.estimators.spread.filtered_spread`), as iSAM2's are;
+:func:`run_ekf` and :class:`ExtendedKalmanFilter` report the filter's own
+covariances.
 """
 
 from __future__ import annotations

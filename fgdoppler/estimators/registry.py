@@ -38,6 +38,7 @@ from fgdoppler.estimators.settings import (
     ISAM2Settings,
     MapSettings,
     ParticleSettings,
+    SampledCovarianceSettings,
     SmootherSettings,
     TrackerSettings,
 )
@@ -182,7 +183,7 @@ def run_estimator(
     if result.primary.kind == "smoothed" or not verify:
         reference = None
     judged = judge(result, measurements, model, settings, reference, half_plane=init.half_plane is not None)
-    if isinstance(settings, ISAM2Settings) and settings.sampled_covariance:
+    if isinstance(settings, SampledCovarianceSettings) and settings.sampled_covariance:
         judged = _with_sampled_covariances(judged, measurements, model, settings)
     return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
 
@@ -226,7 +227,7 @@ def _solve(info: EstimatorInfo, measurements: Measurements, model: TrackingModel
 
 
 def _with_sampled_covariances(result: TrackResult, measurements: Measurements, model: TrackingModel,
-                              settings: ISAM2Settings) -> TrackResult:
+                              settings: SampledCovarianceSettings) -> TrackResult:
     """The filtered covariances widened to posterior samples of the data so far (:func:`~fgdoppler.estimators.spread.filtered_spread`).
 
     The samples see the measurements the tracker kept: those its gate

@@ -11,6 +11,7 @@ import fgdoppler as fd
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.gaussian_sum import GaussianSumTracker
 from fgdoppler.estimators.registry import hypotheses_of
+from fgdoppler.estimators.settings import SampledCovarianceSettings
 from tests.test_three_d import AIRCRAFT
 
 SETTINGS = {"ekf": fd.EKFSettings, "isam2": fd.ISAM2Settings, "fixed-lag": fd.FixedLagSettings}
@@ -67,9 +68,10 @@ def test_fed_scan_by_scan_it_equals_the_registry_from_the_same_initiation(name: 
     assert init is not None
     held = [o for o in out if o[3]]
     assert held and all(np.all(np.isnan(x)) and P is None for _, x, P, _ in held)
-    # the registry's check of iSAM2's covariances against posterior samples is not the tracker's
-    # (ISAM2Settings.sampled_covariance): compare with it off
-    ref_settings = replace(settings, sampled_covariance=False) if isinstance(settings, fd.ISAM2Settings) else settings
+    # the registry's check of the filtered covariances against posterior samples is not the tracker's
+    # (SampledCovarianceSettings.sampled_covariance, EKF and iSAM2): compare with it off
+    ref_settings = replace(settings, sampled_covariance=False) \
+        if isinstance(settings, SampledCovarianceSettings) else settings
     ref = fd.run_estimator(name, m, model, init, ref_settings, verify=False)
     assert len(tracker.weights) == 8 and abs(tracker.weights.sum() - 1.0) < 1e-12
     live = [o for o in out if not o[3]]
@@ -108,7 +110,8 @@ def test_the_answer_moves_with_a_rigidly_moved_problem() -> None:
     # its initiation is given in the moved coordinates, and the registry started from it
     # (with the exact copy it keeps from the computation frame) gives the same estimates
     assert tracker.initiation is not None
-    ref = fd.run_estimator("ekf", sim.measurements, moved, tracker.initiation, verify=False).estimate("filtered")
+    ref = fd.run_estimator("ekf", sim.measurements, moved, tracker.initiation, fd.EKFSettings(sampled_covariance=False),
+                           verify=False).estimate("filtered")
     live = [o for o in b if not o[3]]
     _assert_same(np.array([o[0] for o in live]), np.array([o[1] for o in live]), np.array([o[2] for o in live]),
                  ref, "moved, against the registry")
@@ -240,7 +243,8 @@ def test_in_3d_with_three_pairs_it_is_the_registry_too() -> None:
     tracker = GaussianSumTracker(model, "ekf")
     out = _stream(tracker, sim.measurements)
     assert tracker.initiation is not None
-    ref = fd.run_estimator("ekf", sim.measurements, model, tracker.initiation, verify=False)
+    ref = fd.run_estimator("ekf", sim.measurements, model, tracker.initiation, fd.EKFSettings(sampled_covariance=False),
+                           verify=False)
     ours = [(e.time, e.message) for e in tracker.events if e.message.startswith("online re-initiation")]
     assert ours and ours == [(e.time, e.message) for e in ref.events if e.message.startswith("online re-initiation")]
     live = [o for o in out if not o[3]]

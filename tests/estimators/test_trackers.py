@@ -240,6 +240,13 @@ def test_isam2_settings_reject_bad_values(bad: dict) -> None:
     ISAM2Settings(relinearize_history=0)  # 0 switches the history check off
 
 
+@pytest.mark.parametrize("bad", [{"sampling_interval": -1.0}, {"sampling_interval": float("nan")},
+                                 {"sampled_covariance": "yes"}, {"update": "iterated"}])
+def test_ekf_settings_reject_bad_values(bad: dict) -> None:
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        EKFSettings(**bad)
+
+
 def test_outlier_is_gated_by_nis_and_downweighted_by_huber() -> None:
     _, sim, model, init = _setup("a", 45e3)
     m = sim.measurements
