@@ -79,6 +79,26 @@ def _truth_nees(sim: fd.Simulation, e: fd.Estimates) -> float:
     return float(v[e.times >= 10].mean())
 
 
+def _plain_and_widened(name: str, s: int, r: int) -> tuple[fd.Simulation, fd.TrackResult, fd.TrackResult]:
+    """A filter through the registry without and with the sampled check; asserts what the check may not change.
+
+    The estimates and where covariances exist are the filter's; the checked
+    covariances enclose the filter's at every time (whitened eigenvalues >= 1).
+    """
+    sim, model, init = _run(s, r)
+    kind: type[fd.EKFSettings | fd.ISAM2Settings] = fd.EKFSettings if name == "ekf" else fd.ISAM2Settings
+    off = kind(sampled_covariance=False)
+    plain = fd.run_estimator(name, sim.measurements, model, init, off)
+    wide = fd.run_estimator(name, sim.measurements, model, init)
+    a, b = plain.primary, wide.primary
+    np.testing.assert_array_equal(a.states, b.states)
+    np.testing.assert_array_equal(a.cov_ok, b.cov_ok)
+    for P, S in zip(a.covariances[a.cov_ok], b.covariances[b.cov_ok], strict=True):
+        Li = np.linalg.inv(np.linalg.cholesky(P))
+        assert np.linalg.eigvalsh(Li @ S @ Li.T).min() > 1 - 1e-9
+    return sim, plain, wide
+
+
 def test_filtered_covariances_widen_where_the_posterior_reaches_further_and_the_estimates_stay() -> None:
     """iSAM2 on case a 5 km, seed 2026, run 79: its Gaussian marginals put the truth at a NEES of 335.
 
@@ -88,15 +108,8 @@ def test_filtered_covariances_widen_where_the_posterior_reaches_further_and_the_
     done, and the verdict's ``reference`` test still judges the filter's own
     covariance (doubtful: it understates the smoother's uncertainty).
     """
-    sim, model, init = _run(0, 79)
-    plain = fd.run_estimator("isam2", sim.measurements, model, init, fd.ISAM2Settings(sampled_covariance=False))
-    wide = fd.run_estimator("isam2", sim.measurements, model, init)
+    sim, plain, wide = _plain_and_widened("isam2", 0, 79)
     a, b = plain.primary, wide.primary
-    np.testing.assert_array_equal(a.states, b.states)
-    np.testing.assert_array_equal(a.cov_ok, b.cov_ok)
-    for P, S in zip(a.covariances[a.cov_ok], b.covariances[b.cov_ok], strict=True):
-        Li = np.linalg.inv(np.linalg.cholesky(P))
-        assert np.linalg.eigvalsh(Li @ S @ Li.T).min() > 1 - 1e-9
     assert _truth_nees(sim, b) < 0.5 * _truth_nees(sim, a)
     assert [r.code for r in wide.reasons if r.code == "nonlinear" and r.status == "ok"] == ["nonlinear"]
     assert {r.code for r in plain.reasons if r.status == "doubtful"} == {"reference"}
@@ -114,15 +127,8 @@ def test_the_ekfs_covariances_are_checked_as_isam2s_are() -> None:
     benchmark's 100 runs of that scenario 6.28 -> 3.48), and the finding
     says so.
     """
-    sim, model, init = _run(4, 36)
-    plain = fd.run_estimator("ekf", sim.measurements, model, init, fd.EKFSettings(sampled_covariance=False))
-    wide = fd.run_estimator("ekf", sim.measurements, model, init)
+    sim, plain, wide = _plain_and_widened("ekf", 4, 36)
     a, b = plain.primary, wide.primary
-    np.testing.assert_array_equal(a.states, b.states)
-    np.testing.assert_array_equal(a.cov_ok, b.cov_ok)
-    for P, S in zip(a.covariances[a.cov_ok], b.covariances[b.cov_ok], strict=True):
-        Li = np.linalg.inv(np.linalg.cholesky(P))
-        assert np.linalg.eigvalsh(Li @ S @ Li.T).min() > 1 - 1e-9
     assert _truth_nees(sim, b) < 0.25 * _truth_nees(sim, a)
     assert [r.code for r in wide.reasons if r.code == "nonlinear" and r.status == "ok"] == ["nonlinear"]
     assert wide.status == plain.status == "doubtful"
