@@ -23,6 +23,11 @@ def _positive(value: float, name: str) -> None:
         raise ValueError(f"{name} must be a positive number, got {value!r}")
 
 
+def _flag(value: bool, name: str) -> None:
+    if not isinstance(value, bool):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+
+
 def _count(value: int, name: str) -> None:
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
         raise ValueError(f"{name} must be a whole number >= 1, got {value!r}")
@@ -95,8 +100,7 @@ class GaussianSumSettings(TrackerSettings):
     def __post_init__(self) -> None:
         super().__post_init__()
         _count(self.components, "components")
-        if not isinstance(self.restarts, bool):
-            raise ValueError(f"restarts must be True or False, got {self.restarts!r}")
+        _flag(self.restarts, "restarts")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -176,8 +180,7 @@ class SampledCovarianceSettings(GaussianSumSettings):
     def __post_init__(self) -> None:
         super().__post_init__()
         _positive(self.sampling_interval, "sampling_interval")
-        if not isinstance(self.sampled_covariance, bool):
-            raise ValueError(f"sampled_covariance must be True or False, got {self.sampled_covariance!r}")
+        _flag(self.sampled_covariance, "sampled_covariance")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -423,8 +426,7 @@ class ParticleSettings(TrackerSettings):
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"{name} must be a whole number >= 0, got {v!r}")
         _positive(self.max_span, "max_span")
-        if not isinstance(self.tempered_start, bool):
-            raise ValueError(f"tempered_start must be True or False, got {self.tempered_start!r}")
+        _flag(self.tempered_start, "tempered_start")
 
 
 @dataclass(frozen=True, kw_only=True)
