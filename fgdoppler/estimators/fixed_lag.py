@@ -10,6 +10,14 @@ fixed-lag smoothed track).  States that leave the window before the end are
 reported from the last scan at which they were in it; at the end the whole
 remaining window is reported.
 
+Through :func:`~fgdoppler.estimators.registry.run_estimator` the lagged
+covariances are then checked against posterior samples of the data up to
+``lag`` seconds after each estimate's time, the data it has read, and
+widened where those spread further (``FixedLagSettings.sampled_covariance``,
+:func:`~fgdoppler.estimators.spread.filtered_spread` with ``lag``);
+:func:`run_fixed_lag` and :class:`FixedLagTracker` report the smoother's own
+marginals.
+
 Known marginalisation failures of GTSAM's fixed-lag smoothers (an
 "indeterminant linear system" during marginalisation, or a key that is
 requested after it was marginalised) surface as :class:`RuntimeError`.  They

@@ -228,9 +228,10 @@ def _solve(info: EstimatorInfo, measurements: Measurements, model: TrackingModel
 
 def _with_sampled_covariances(result: TrackResult, measurements: Measurements, model: TrackingModel,
                               settings: SampledCovarianceSettings) -> TrackResult:
-    """The filtered covariances widened to posterior samples of the data so far (:func:`~fgdoppler.estimators.spread.filtered_spread`).
+    """The primary covariances widened to posterior samples of the data the estimates have read (:func:`~fgdoppler.estimators.spread.filtered_spread`).
 
-    The samples see the measurements the tracker kept: those its gate
+    A filter's estimates have read the data so far; a fixed-lag smoother's
+    lagged ones the data up to its lag after their time.  The samples see the measurements the tracker kept: those its gate
     rejected (``result.nis``) are left out, as the tracker left them out.
     It runs after the verdict: the ``reference`` test compares the
     tracker's own Gaussian covariance with the offline smoother's, a
@@ -247,8 +248,10 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
         drop = np.fromiter(((float(t), int(c)) in out for t, c in zip(measurements.time, measurements.pair,
                                                                       strict=True)), dtype=bool, count=len(measurements))
         kept = measurements.subset(~drop)
+    # a fixed-lag smoother's lagged estimates have read the data up to its lag after their time
+    lag = settings.lag if isinstance(settings, FixedLagSettings) else 0.0
     widened = filtered_spread(kept, model, e.times, e.states, e.covariances, e.cov_ok,
-                              interval=settings.sampling_interval, huber_k=settings.huber_k)
+                              interval=settings.sampling_interval, lag=lag, huber_k=settings.huber_k)
     if widened is None:
         return result
     primary = replace(e, covariances=widened[0])

@@ -93,6 +93,18 @@ the :math:`\mathbf Q(t_c - t_0)` term alone widened 26 of 27 checks and
 brought it to 2.73 (+30 % time); with it, 3 of 12 checks widen, NEES 3.52,
 +0.1 s.  On the paper's 30 s scenarios it changes 2 of the 1,200 runs of
 the accuracy benchmark, neither run-averaged NEES.
+
+Lagged estimates
+----------------
+The fixed-lag smoother's estimate of the state at :math:`t` has read the
+data up to about :math:`t + \ell` (its lag): ``filtered_spread(...,
+lag=ℓ)`` samples, at a check at :math:`t_c`, the posterior given the
+measurements up to :math:`t_c + \ell` instead, everything else as above.
+A check that ignored the look-ahead would credit the estimate with less
+data than it saw: measured on the fixed-lag smoother's 600 runs of the
+accuracy benchmark (seed 2026), the lag-blind check brought the
+run-averaged NEES of case b 45 km from 3.77 to 2.12, the lag-aware one to
+2.97, and case a 5 km from 6.04 to 3.80 and 4.62 (docs/concepts.md).
 """
 
 from __future__ import annotations
@@ -241,7 +253,7 @@ def _forward(model: TrackingModel, sigma0: FloatArray, dt: float) -> FloatArray:
 
 
 def filtered_spread(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
-                    covariances: FloatArray, usable: NDArray[np.bool_], *, interval: float,
+                    covariances: FloatArray, usable: NDArray[np.bool_], *, interval: float, lag: float = 0.0,
                     huber_k: float | None = None, seed: int = 0) -> tuple[FloatArray, Reason] | None:
     r"""A filter's covariances widened to enclose the posterior mean-square error sampled from the data so far.
 
@@ -266,6 +278,11 @@ def filtered_spread(measurements: Measurements, model: TrackingModel, times: Flo
         ``(n,)``: where the covariance exists (``Estimates.cov_ok``); the others are left alone.
     interval
         Seconds between checks.
+    lag
+        Seconds of data after its time that an estimate has read (0 for a
+        filter, the lag for a fixed-lag smoother's lagged estimates): a
+        check at :math:`t_c` samples the posterior given the measurements
+        up to :math:`t_c + \ell`.
     huber_k
         Huber threshold of the likelihood (``None``: Gaussian).
     seed
@@ -278,6 +295,8 @@ def filtered_spread(measurements: Measurements, model: TrackingModel, times: Flo
         finding with what was widened, by how much, and where most; ``None``
         when no check widened anything.
     """
+    if not (np.isfinite(lag) and lag >= 0.0):
+        raise ValueError(f"lag must be a finite number >= 0, got {lag!r}")
     out = np.array(covariances, dtype=float, copy=True)
     if len(measurements) == 0 or out.shape[0] == 0:
         return None
@@ -294,7 +313,7 @@ def filtered_spread(measurements: Measurements, model: TrackingModel, times: Flo
             widening = None
         elif t >= next_check:
             checks += 1
-            widening = _widening(measurements.between(t0, t), model, t0, t, states[k], P, huber_k,
+            widening = _widening(measurements.between(t0, t + lag), model, t0, t, states[k], P, huber_k,
                                  np.random.default_rng([seed, checks]))
             quiet = 0 if widening is not None else min(quiet + 1, FILTER_BACKOFF)
             next_check = t + max(interval * 2.0**quiet, 0.1 * (t - t0))
@@ -305,11 +324,13 @@ def filtered_spread(measurements: Measurements, model: TrackingModel, times: Flo
             out[k] = _whitened_apply(P, widening)
     if widened == 0:
         return None
+    what = "filtered covariances" if lag == 0.0 else "lagged covariances"
+    seen = "the data so far" if lag == 0.0 else f"the data up to {lag:g} s later"
     reason = Reason(code="nonlinear", status="ok", message=(
-        f"filtered covariances widened to enclose posterior samples of the data so far at {widened} of {checks} "
+        f"{what} widened to enclose posterior samples of {seen} at {widened} of {checks} "
         f"checks ({FILTER_SAMPLES} samples each, every {interval:g} s or more): the Gaussian covariance understated "
         f"the uncertainty; most at t = {worst[1]:.1f} s, position sigma along the major axis {worst[2]:.0f} m "
-        f"where the filter said {worst[3]:.0f} m"))
+        f"where the {'filter' if lag == 0.0 else 'smoother'} said {worst[3]:.0f} m"))
     return out, reason
 
 

@@ -247,6 +247,13 @@ def test_ekf_settings_reject_bad_values(bad: dict) -> None:
         EKFSettings(**bad)
 
 
+@pytest.mark.parametrize("bad", [{"sampling_interval": 0.0}, {"sampling_interval": float("inf")},
+                                 {"sampled_covariance": None}, {"lag": -5.0}])
+def test_fixed_lag_settings_reject_bad_values(bad: dict) -> None:
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        FixedLagSettings(**bad)
+
+
 def test_outlier_is_gated_by_nis_and_downweighted_by_huber() -> None:
     _, sim, model, init = _setup("a", 45e3)
     m = sim.measurements
