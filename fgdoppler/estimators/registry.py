@@ -231,8 +231,9 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
     """The primary covariances widened to posterior samples of the data the estimates have read (:func:`~fgdoppler.estimators.spread.filtered_spread`).
 
     A filter's estimates have read the data so far; a fixed-lag smoother's
-    lagged ones the data up to its lag after their time.  The samples see the measurements the tracker kept: those its gate
-    rejected (``result.nis``) are left out, as the tracker left them out.
+    lagged ones the data up to its lag after their time.  The samples see
+    the measurements the tracker kept: those its gate rejected
+    (``result.nis``) are left out, as the tracker left them out.
     It runs after the verdict: the ``reference`` test compares the
     tracker's own Gaussian covariance with the offline smoother's, a
     witness of poor observability that a widened covariance would hide

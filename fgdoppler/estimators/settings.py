@@ -313,7 +313,8 @@ class FixedLagSettings(StreamingSettings, SampledCovarianceSettings):
         seconds after their time (measured on the paper's six scenarios,
         100 runs each, seed 2026: the run-averaged NEES of case a 5 km
         6.04 -> 4.62, case b 25 km 4.91 -> 3.56, case b 45 km 3.77 -> 2.97,
-        slightly conservative there; docs/concepts.md).
+        slightly conservative there; seed 7: 4.60 -> 3.55, 4.66 -> 3.54,
+        4.77 -> 3.48; docs/concepts.md).
     """
 
     lag: float = 5.0
