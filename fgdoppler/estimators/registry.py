@@ -249,10 +249,9 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
         drop = np.fromiter(((float(t), int(c)) in out for t, c in zip(measurements.time, measurements.pair,
                                                                       strict=True)), dtype=bool, count=len(measurements))
         kept = measurements.subset(~drop)
-    # a fixed-lag smoother's lagged estimates have read the data up to its lag after their time
-    lag = settings.lag if isinstance(settings, FixedLagSettings) else 0.0
     widened = filtered_spread(kept, model, e.times, e.states, e.covariances, e.cov_ok,
-                              interval=settings.sampling_interval, lag=lag, huber_k=settings.huber_k)
+                              interval=settings.sampling_interval, lag=settings.look_ahead,
+                              huber_k=settings.huber_k)
     if widened is None:
         return result
     primary = replace(e, covariances=widened[0])

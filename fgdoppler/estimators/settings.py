@@ -184,6 +184,11 @@ class SampledCovarianceSettings(GaussianSumSettings):
         _positive(self.sampling_interval, "sampling_interval")
         _flag(self.sampled_covariance, "sampled_covariance")
 
+    @property
+    def look_ahead(self) -> float:
+        """Seconds of data after its time that an estimate has read (0: a filter's, data so far)."""
+        return 0.0
+
 
 @dataclass(frozen=True, kw_only=True)
 class EKFSettings(SampledCovarianceSettings):
@@ -326,6 +331,11 @@ class FixedLagSettings(StreamingSettings, SampledCovarianceSettings):
         super().__post_init__()
         _positive(self.lag, "lag")
         _count(self.final_iterations, "final_iterations")
+
+    @property
+    def look_ahead(self) -> float:
+        """The lagged estimates have read the data up to ``lag`` seconds after their time."""
+        return self.lag
 
 
 @dataclass(frozen=True, kw_only=True)
