@@ -1,0 +1,203 @@
+r"""The exact posterior of a simulated recording: what a perfect Bayesian estimator would report.
+
+A reference for the accuracy benchmark's consistency goal, not an
+estimator: it needs the truth's motion model to be exactly the one it
+assumes.  The paper's targets fly exactly constant velocity, so the state
+at any time is a fixed linear map of the first one,
+:math:`\mathbf x(t) = \mathbf F(t - t_0)\,\mathbf x_0`, and with a flat prior
+the posterior of :math:`\mathbf x_0` given the measurements up to :math:`T` is
+
+.. math::
+
+    p(\mathbf x_0 \mid z_{t_j \le T}) \propto
+        \exp\Big(-\tfrac12 \sum_{t_j \le T}
+        \big(z_j - h_{c_j}(\mathbf F(t_j - t_0)\mathbf x_0)\big)^2 / \sigma_j^2\Big).
+
+Its mean and covariance, carried to :math:`t` by :math:`\mathbf F(t - t_0)`,
+are the minimum-mean-square-error estimate of the state at :math:`t`: the
+filtered one for :math:`T = t`, the lagged one for :math:`T = t + \ell`, the
+smoothed one for :math:`T` the last measurement's time.  Because
+:math:`\mathbf F` is invertible the truth's NEES at :math:`t` under that
+posterior equals its NEES at :math:`t_0`, so one sampled posterior per
+:math:`T` serves every time.
+
+Sampling is adaptive importance sampling with multivariate Student-*t*
+proposals (:data:`DOF` degrees of freedom): first about the least-squares
+optimum with :data:`FIRST_SCALE` times its Gauss–Newton covariance, then
+:data:`PASSES` times about the previous pass's weighted mean with
+:data:`LATER_SCALE` times its weighted covariance, the last of them with as
+many samples as it needs for :data:`ESS_TARGET` effective ones.  The
+moments are the last pass's.  Measured on the hardest posterior of the
+paper's scenarios (case a 5 km, seed 2026, run 1, the data up to 10 s),
+six seeds against one draw of 400,000 samples: the whitened covariance's
+eigenvalues within 0.81-1.09 and the truth's NEES 29.1-33.5 (against 30.6);
+with twice the covariance and 20,000 samples in every pass instead, the
+eigenvalues were off by up to 60 % and the NEES ranged 19-36.  No Markov chain and no code shared with the
+library's own samplers (:mod:`fgdoppler.estimators.spread`,
+:mod:`fgdoppler.estimators.particle`), which it is used to judge.  It maps
+one mode: the optimiser starts from every given start and keeps the lowest
+cost, and :attr:`ExactPosterior.other_mode` says when another start ended in
+a distinct optimum that would carry at least :data:`OTHER_MODE_MASS` of the
+posterior (judged by the cost difference alone).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+from scipy.special import logsumexp
+
+import fgdoppler as fd
+from fgdoppler.models.observation import predict_along
+
+__all__ = ["DOF", "ExactPosterior", "exact_posterior", "exact_track"]
+
+FloatArray = NDArray[np.float64]
+
+#: Degrees of freedom of the Student-t proposals (heavy tails for the first, blind pass).
+DOF = 3.0
+#: The first proposal's covariance in units of the Gauss-Newton covariance at the optimum.
+FIRST_SCALE = 16.0
+#: Later proposals' covariance in units of the previous pass's weighted covariance.
+LATER_SCALE = 4.0
+#: Proposal passes after the first (the last of them sized for ESS_TARGET).
+PASSES = 3
+#: Samples per adaptation pass (and at least in the last one).
+SAMPLES = 20_000
+#: The last pass draws enough samples for this effective sample size (its moments are the answer) ...
+ESS_TARGET = 10_000
+#: ... but no more than this many.
+MAX_SAMPLES = 400_000
+#: A distinct optimum whose cost is within ``-2 log`` of this share of the best one's is reported.
+OTHER_MODE_MASS = 0.01
+
+
+@dataclass(frozen=True, kw_only=True)
+class ExactPosterior:
+    r"""Mean and covariance of the first state given the measurements up to ``t_end``.
+
+    Attributes
+    ----------
+    t0
+        The time of the first measurement: ``mean`` and ``covariance`` are of the state then.
+    t_end
+        The last measurement time the posterior conditions on.
+    mean, covariance
+        The posterior's first two moments, :math:`(2d,)` and :math:`(2d, 2d)`.
+    ess
+        Kish's effective sample size of the last pass, :math:`1/\sum_i w_i^2`.
+    other_mode
+        Another start converged to a distinct optimum that would hold at least
+        :data:`OTHER_MODE_MASS` of the posterior: the moments describe one mode only.
+    """
+
+    t0: float
+    t_end: float
+    mean: FloatArray
+    covariance: FloatArray
+    ess: float
+    other_mode: bool
+
+    def nees(self, state: FloatArray, t: float, motion: fd.ConstantVelocity) -> float:
+        r"""The NEES of ``state`` at time ``t``, :math:`\mathbf e^\top\mathbf P^{-1}\mathbf e` with
+        :math:`\mathbf e = \mathbf F(t_0 - t)\,\mathbf x - \bar{\mathbf x}_0` (invariant under the map)."""
+        e = motion.F(self.t0 - t) @ np.asarray(state, dtype=float) - self.mean
+        return float(e @ np.linalg.solve(self.covariance, e))
+
+    def position_error(self, state: FloatArray, t: float, motion: fd.ConstantVelocity) -> float:
+        """Squared position error of the posterior mean carried to ``t`` against ``state``."""
+        d = state.size // 2
+        e = np.asarray(state, dtype=float)[:d] - (motion.F(t - self.t0) @ self.mean)[:d]
+        return float(e @ e)
+
+
+def exact_posterior(measurements: fd.Measurements, model: fd.TrackingModel, t_end: float,
+                    starts: Sequence[FloatArray], rng: np.random.Generator, *, samples: int = SAMPLES
+                    ) -> ExactPosterior:
+    r"""Sample :math:`p(\mathbf x_0 \mid z_{t_j \le t_\mathrm{end}})` (module docstring).
+
+    ``starts`` are candidate first states at the first measurement's time
+    (at least one).  Raises :class:`ValueError` when no start gives a
+    determinate Gauss–Newton covariance (the data up to ``t_end`` do not fix
+    the four parameters).
+    """
+    if not starts:
+        raise ValueError("exact_posterior needs at least one start")
+    t0 = float(np.min(measurements.time))
+    sel = measurements.time <= t_end + 1e-9
+    tt = measurements.time[sel] - t0
+    pair, z, sigma = measurements.pair[sel], measurements.doppler[sel], measurements.sigma[sel]
+    obs = model.observation
+    dim = np.asarray(starts[0]).size
+    if tt.size < dim:
+        raise ValueError(f"the data up to {t_end:g} s do not determine the first state ({tt.size} measurements "
+                         f"for {dim} unknowns)")
+
+    def residual(x0: FloatArray) -> FloatArray:
+        r = (z - predict_along(obs, np.atleast_2d(x0), tt, pair)[0]) / sigma
+        return np.nan_to_num(r, nan=1e6)
+
+    def cost(xs: FloatArray) -> FloatArray:
+        return np.sum(((z - predict_along(obs, xs, tt, pair)) / sigma) ** 2, axis=1)
+
+    fits = [least_squares(residual, np.asarray(s, dtype=float), method="lm") for s in starts]
+    best = min(fits, key=lambda f: f.cost)
+    info = best.jac.T @ best.jac
+    if np.linalg.cond(info) > 1e14:
+        raise ValueError(f"the data up to {t_end:g} s do not determine the first state (Gauss-Newton "
+                         f"information condition number {np.linalg.cond(info):.1e})")
+    spread = np.linalg.inv(info) * FIRST_SCALE
+    far = 2.0 * np.log(1.0 / OTHER_MODE_MASS)
+    other = any(2.0 * (f.cost - best.cost) < far and _distinct(f.x, best.x, info) for f in fits)
+    centre = best.x
+    n = samples
+    for k in range(PASSES + 1):
+        chol = np.linalg.cholesky(0.5 * (spread + spread.T))
+        x, w = _weighted(centre, chol, n, rng, cost)
+        ess = float(1.0 / np.sum(w * w))
+        centre = w @ x
+        dev = x - centre
+        cov = dev.T @ (dev * w[:, None])
+        spread = cov * LATER_SCALE
+        if k == PASSES - 1:
+            # the last pass draws as many samples as this proposal needs for ESS_TARGET effective ones
+            n = int(np.clip(ESS_TARGET * n / max(ess, 1.0), samples, MAX_SAMPLES))
+    return ExactPosterior(t0=t0, t_end=float(t_end), mean=centre, covariance=0.5 * (cov + cov.T),
+                          ess=ess, other_mode=other)
+
+
+def _weighted(centre: FloatArray, chol: FloatArray, n: int, rng: np.random.Generator,
+              cost: Callable[[FloatArray], FloatArray]) -> tuple[FloatArray, FloatArray]:
+    r"""``n`` draws from the Student-t proposal about ``centre`` (scale ``chol chol^T``) and their normalised
+    importance weights :math:`w_i \propto e^{-c(\mathbf x_i)/2} / q(\mathbf x_i)`."""
+    dim = centre.size
+    g = rng.standard_normal((n, dim))
+    u = rng.chisquare(DOF, n) / DOF
+    x = centre + (g @ chol.T) / np.sqrt(u)[:, None]
+    log_q = -0.5 * (DOF + dim) * np.log1p(np.sum(g * g, axis=1) / u / DOF) - np.sum(np.log(np.diag(chol)))
+    c = cost(x)
+    log_w = np.where(np.isfinite(c), -0.5 * c - log_q, -np.inf)
+    return x, np.exp(log_w - logsumexp(log_w))
+
+
+def _distinct(x: FloatArray, best: FloatArray, info: FloatArray) -> bool:
+    """Farther from ``best`` than 5 standard deviations of its Gauss-Newton covariance."""
+    e = x - best
+    return bool(e @ info @ e > 25.0)
+
+
+def exact_track(measurements: fd.Measurements, model: fd.TrackingModel, times: FloatArray,
+                starts: Sequence[FloatArray], seed: int, *, samples: int = SAMPLES) -> list[ExactPosterior]:
+    """The exact posterior given the data up to each of ``times`` (each later one also started from the
+    previous one's mean), independently seeded per time."""
+    out: list[ExactPosterior] = []
+    cand = [np.asarray(s, dtype=float) for s in starts]
+    for k, t_end in enumerate(times):
+        post = exact_posterior(measurements, model, float(t_end), cand + [p.mean for p in out[-1:]],
+                               np.random.default_rng([seed, k]), samples=samples)
+        out.append(post)
+    return out
