@@ -50,11 +50,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 from scipy.special import logsumexp
+from scipy.stats import chi2
 
 import fgdoppler as fd
 from fgdoppler.models.observation import predict_along
 
-__all__ = ["DOF", "ExactPosterior", "exact_posterior", "exact_track"]
+__all__ = ["DOF", "ESS_TARGET", "TAIL_LEVEL", "ExactPosterior", "exact_posterior", "exact_track"]
 
 FloatArray = NDArray[np.float64]
 
@@ -72,6 +73,8 @@ SAMPLES = 20_000
 ESS_TARGET = 10_000
 #: ... but no more than this many.
 MAX_SAMPLES = 400_000
+#: Level of the ellipsoid that :attr:`ExactPosterior.tail_mass` measures the posterior's mass outside of.
+TAIL_LEVEL = 0.999
 #: A distinct optimum whose cost is within ``-2 log`` of this share of the best one's is reported.
 OTHER_MODE_MASS = 0.01
 
@@ -90,6 +93,10 @@ class ExactPosterior:
         The posterior's first two moments, :math:`(2d,)` and :math:`(2d, 2d)`.
     ess
         Kish's effective sample size of the last pass, :math:`1/\sum_i w_i^2`.
+    tail_mass
+        The posterior's mass outside the :data:`TAIL_LEVEL` ellipsoid of its own mean and covariance
+        (:math:`1 -` ``TAIL_LEVEL`` for a Gaussian): how far the mean and covariance fall short of
+        describing it.
     other_mode
         Another start converged to a distinct optimum that would hold at least
         :data:`OTHER_MODE_MASS` of the posterior: the moments describe one mode only.
@@ -100,6 +107,7 @@ class ExactPosterior:
     mean: FloatArray
     covariance: FloatArray
     ess: float
+    tail_mass: float
     other_mode: bool
 
     def nees(self, state: FloatArray, t: float, motion: fd.ConstantVelocity) -> float:
@@ -166,8 +174,10 @@ def exact_posterior(measurements: fd.Measurements, model: fd.TrackingModel, t_en
         if k == PASSES - 1:
             # the last pass draws as many samples as this proposal needs for ESS_TARGET effective ones
             n = int(np.clip(ESS_TARGET * n / max(ess, 1.0), samples, MAX_SAMPLES))
-    return ExactPosterior(t0=t0, t_end=float(t_end), mean=centre, covariance=0.5 * (cov + cov.T),
-                          ess=ess, other_mode=other)
+    cov = 0.5 * (cov + cov.T)
+    far_out = np.einsum("ij,ij->i", dev, np.linalg.solve(cov, dev.T).T) > chi2.ppf(TAIL_LEVEL, dim)
+    return ExactPosterior(t0=t0, t_end=float(t_end), mean=centre, covariance=cov, ess=ess,
+                          tail_mass=float(w[far_out].sum()), other_mode=other)
 
 
 def _weighted(centre: FloatArray, chol: FloatArray, n: int, rng: np.random.Generator,
