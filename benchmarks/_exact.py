@@ -4,16 +4,22 @@ A reference for the accuracy benchmark's consistency goal, not an
 estimator: it needs the truth's motion model to be exactly the one it
 assumes.  The paper's targets fly exactly constant velocity, so the state
 at any time is a fixed linear map of the first one,
-:math:`\mathbf x(t) = \mathbf F(t - t_0)\,\mathbf x_0`, and with a flat prior
-the posterior of :math:`\mathbf x_0` given the measurements up to :math:`T` is
+:math:`\mathbf x(t) = \mathbf F(t - t_0)\,\mathbf x_0`, and the posterior
+of :math:`\mathbf x_0` given the measurements up to :math:`T` is
 
 .. math::
 
-    p(\mathbf x_0 \mid z_{t_j \le T}) \propto
+    p(\mathbf x_0 \mid z_{t_j \le T}) \propto p(\mathbf x_0)
         \exp\Big(-\tfrac12 \sum_{t_j \le T}
-        \big(z_j - h_{c_j}(\mathbf F(t_j - t_0)\mathbf x_0)\big)^2 / \sigma_j^2\Big).
+        \big(z_j - h_{c_j}(\mathbf F(t_j - t_0)\mathbf x_0)\big)^2 / \sigma_j^2\Big),
 
-Its mean and covariance, carried to :math:`t` by :math:`\mathbf F(t - t_0)`,
+with :math:`p(\mathbf x_0)` the model's weak Gaussian prior
+(:meth:`fgdoppler.models.tracking.TrackingModel.prior`) on the zone as
+support (zero outside :meth:`fgdoppler.zone.Zone.contains`): the posterior
+that fgdoppler's estimators approximate, exactly the particle estimator's
+target (:mod:`fgdoppler.estimators.particle`) without its half plane.  A
+model without a zone or a weak prior drops that factor.  Its mean and
+covariance, carried to :math:`t` by :math:`\mathbf F(t - t_0)`,
 are the minimum-mean-square-error estimate of the state at :math:`t`: the
 filtered one for :math:`T = t`, the lagged one for :math:`T = t + \ell`, the
 smoothed one for :math:`T` the last measurement's time.  Because
@@ -30,9 +36,8 @@ many samples as it needs for :data:`ESS_TARGET` effective ones.  The
 moments are the last pass's.  Measured on the hardest posterior of the
 paper's scenarios (case a 5 km, seed 2026, run 1, the data up to 10 s),
 six seeds against one draw of 400,000 samples: the whitened covariance's
-eigenvalues within 0.81-1.09 and the truth's NEES 29.1-33.5 (against 30.6);
-with twice the covariance and 20,000 samples in every pass instead, the
-eigenvalues were off by up to 60 % and the NEES ranged 19-36.  No Markov chain and no code shared with the
+eigenvalues within 0.97-1.26 and the truth's NEES 28.4-34.8 (against
+35.2).  No Markov chain and no code shared with the
 library's own samplers (:mod:`fgdoppler.estimators.spread`,
 :mod:`fgdoppler.estimators.particle`), which it is used to judge.  It maps
 one mode: the optimiser starts from every given start and keeps the lowest
@@ -145,12 +150,23 @@ def exact_posterior(measurements: fd.Measurements, model: fd.TrackingModel, t_en
         raise ValueError(f"the data up to {t_end:g} s do not determine the first state ({tt.size} measurements "
                          f"for {dim} unknowns)")
 
+    prior = model.prior()
+    whiten = None if prior is None else np.linalg.inv(np.linalg.cholesky(prior[1]))
+    support = None if model.zone is None else model.zone.contains
+
     def residual(x0: FloatArray) -> FloatArray:
         r = (z - predict_along(obs, np.atleast_2d(x0), tt, pair)[0]) / sigma
+        if prior is not None and whiten is not None:
+            r = np.concatenate([r, whiten @ (x0 - prior[0])])
         return np.nan_to_num(r, nan=1e6)
 
     def cost(xs: FloatArray) -> FloatArray:
-        return np.sum(((z - predict_along(obs, xs, tt, pair)) / sigma) ** 2, axis=1)
+        c = np.sum(((z - predict_along(obs, xs, tt, pair)) / sigma) ** 2, axis=1)
+        if prior is not None and whiten is not None:
+            c = c + np.sum(((xs - prior[0]) @ whiten.T) ** 2, axis=1)
+        if support is not None:
+            c = np.where(support(xs), c, np.inf)
+        return c
 
     fits = [least_squares(residual, np.asarray(s, dtype=float), method="lm") for s in starts]
     best = min(fits, key=lambda f: f.cost)
@@ -166,6 +182,8 @@ def exact_posterior(measurements: fd.Measurements, model: fd.TrackingModel, t_en
     for k in range(PASSES + 1):
         chol = np.linalg.cholesky(0.5 * (spread + spread.T))
         x, w = _weighted(centre, chol, n, rng, cost)
+        if not np.all(np.isfinite(w)):
+            raise ValueError(f"no sample of the posterior given the data up to {t_end:g} s lies in the zone")
         ess = float(1.0 / np.sum(w * w))
         centre = w @ x
         dev = x - centre
