@@ -112,10 +112,10 @@ comparison?") discusses every "no".
 
 Goal 4's second clause asks the verdict to flag every run whose own NEES,
 averaged over t >= 10 s, exceeds the chi-square(4) 99.9 % quantile ({misses}).
-The exact posterior is the benchmark's reference row: the posterior of
-the truth's exactly constant-velocity motion given the same data,
-importance-sampled, read as a mean and a covariance as every estimator
-is.  Where even it is inconsistent the truth lies in the tail of a curved
+The exact posterior is the benchmark's reference row: the posterior that
+every estimator approximates (the truth's exactly constant-velocity
+motion, the zone, the weak prior) given the same data, importance-sampled
+and read as a mean and a covariance, as every estimator's answer is.  Where even it is inconsistent the truth lies in the tail of a curved
 posterior that no mean and covariance enclose, while the data fit the
 truth as well as the likelihood promises (docs/concepts.md, "What the
 exact posterior says").
