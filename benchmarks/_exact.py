@@ -219,13 +219,21 @@ def _distinct(x: FloatArray, best: FloatArray, info: FloatArray) -> bool:
 
 
 def exact_track(measurements: fd.Measurements, model: fd.TrackingModel, times: FloatArray,
-                starts: Sequence[FloatArray], seed: int, *, samples: int = SAMPLES) -> list[ExactPosterior]:
-    """The exact posterior given the data up to each of ``times`` (each later one also started from the
-    previous one's mean), independently seeded per time."""
-    out: list[ExactPosterior] = []
+                starts: Sequence[FloatArray], seed: int, *, samples: int = SAMPLES) -> dict[float, ExactPosterior]:
+    """The exact posterior given the data up to each of ``times``, keyed by that time.
+
+    Each is started from ``starts`` and the previous one's mean and seeded by ``(seed, index of the
+    time)``; a time whose data do not fix the state is left out.
+    """
+    out: dict[float, ExactPosterior] = {}
     cand = [np.asarray(s, dtype=float) for s in starts]
+    previous: list[FloatArray] = []
     for k, t_end in enumerate(times):
-        post = exact_posterior(measurements, model, float(t_end), cand + [p.mean for p in out[-1:]],
-                               np.random.default_rng([seed, k]), samples=samples)
-        out.append(post)
+        try:
+            post = exact_posterior(measurements, model, float(t_end), cand + previous,
+                                   np.random.default_rng([seed, k]), samples=samples)
+        except ValueError:
+            continue
+        out[float(t_end)] = post
+        previous = [post.mean]
     return out

@@ -62,7 +62,7 @@ from scipy.stats import chi2
 
 import fgdoppler as fd
 from benchmarks._common import Row
-from benchmarks._exact import ExactPosterior, exact_posterior
+from benchmarks._exact import exact_track
 from fgdoppler.analysis.bounds import crlb_deterministic
 from fgdoppler.analysis.metrics import compare_rmse, errors, nees, nees_band, time_averaged_rmse
 from fgdoppler.analysis.workers import one_blas_thread
@@ -163,15 +163,7 @@ def exact_rows(m: fd.Measurements, model: fd.TrackingModel, init: fd.Initiation,
               model.motion.F(t0 - init.t_start) @ init.x_start]
     ends = np.union1d(t0 + np.arange(T_NEES, last - t0 - 1e-6, EXACT_STEP), [last])
     cpu = time.process_time()
-    posts: dict[float, ExactPosterior] = {}
-    previous: list[FloatArray] = []
-    for k, t_end in enumerate(ends):
-        try:
-            post = exact_posterior(m, model, float(t_end), starts + previous, np.random.default_rng([seed, k]))
-        except ValueError:
-            continue
-        posts[round(float(t_end), 6)] = post
-        previous = [post.mean]
+    posts = {round(t_end, 6): post for t_end, post in exact_track(m, model, ends, starts, seed).items()}
     cpu = time.process_time() - cpu
     lag = fd.FixedLagSettings().lag
     given = {"exact-filtered": lambda t: t, "exact-lagged": lambda t: min(t + lag, last),
