@@ -60,7 +60,8 @@ from scipy.stats import chi2
 import fgdoppler as fd
 from fgdoppler.models.observation import predict_along
 
-__all__ = ["DOF", "ESS_TARGET", "TAIL_LEVEL", "ExactPosterior", "exact_posterior", "exact_track"]
+__all__ = ["DOF", "ESS_TARGET", "TAIL_LEVEL", "ExactPosterior", "doppler_residual", "exact_posterior",
+           "exact_track"]
 
 FloatArray = NDArray[np.float64]
 
@@ -128,40 +129,55 @@ class ExactPosterior:
         return float(e @ e)
 
 
+def doppler_residual(measurements: fd.Measurements, model: fd.TrackingModel, t_end: float
+                     ) -> Callable[[FloatArray], FloatArray]:
+    r"""Normalised residuals :math:`(z_j - h_{c_j}(\mathbf F(t_j - t_0)\mathbf x_0))/\sigma_j` of the
+    measurements up to ``t_end`` as a function of the first state ``(n, 2d)`` → ``(n, m)`` (NaN where a
+    track passes through a sensor); :math:`t_0` is the first measurement's time."""
+    t0 = float(np.min(measurements.time))
+    sel = measurements.time <= t_end + 1e-9
+    tt = measurements.time[sel] - t0
+    pair, z, sigma = measurements.pair[sel], measurements.doppler[sel], measurements.sigma[sel]
+    obs = model.observation
+
+    def residual(xs: FloatArray) -> FloatArray:
+        return (z - predict_along(obs, np.atleast_2d(xs), tt, pair)) / sigma
+
+    return residual
+
+
 def exact_posterior(measurements: fd.Measurements, model: fd.TrackingModel, t_end: float,
                     starts: Sequence[FloatArray], rng: np.random.Generator, *, samples: int = SAMPLES
                     ) -> ExactPosterior:
     r"""Sample :math:`p(\mathbf x_0 \mid z_{t_j \le t_\mathrm{end}})` (module docstring).
 
     ``starts`` are candidate first states at the first measurement's time
-    (at least one).  Raises :class:`ValueError` when no start gives a
-    determinate Gauss–Newton covariance (the data up to ``t_end`` do not fix
-    the four parameters).
+    (at least one).  Raises :class:`ValueError` when the data up to
+    ``t_end`` do not fix the state (fewer measurements than unknowns, or no
+    determinate Gauss–Newton covariance) or when no sample lies in the zone.
     """
     if not starts:
         raise ValueError("exact_posterior needs at least one start")
     t0 = float(np.min(measurements.time))
-    sel = measurements.time <= t_end + 1e-9
-    tt = measurements.time[sel] - t0
-    pair, z, sigma = measurements.pair[sel], measurements.doppler[sel], measurements.sigma[sel]
-    obs = model.observation
+    n_data = int(np.sum(measurements.time <= t_end + 1e-9))
     dim = np.asarray(starts[0]).size
-    if tt.size < dim:
-        raise ValueError(f"the data up to {t_end:g} s do not determine the first state ({tt.size} measurements "
+    if n_data < dim:
+        raise ValueError(f"the data up to {t_end:g} s do not determine the first state ({n_data} measurements "
                          f"for {dim} unknowns)")
+    doppler = doppler_residual(measurements, model, t_end)
 
     prior = model.prior()
     whiten = None if prior is None else np.linalg.inv(np.linalg.cholesky(prior[1]))
     support = None if model.zone is None else model.zone.contains
 
     def residual(x0: FloatArray) -> FloatArray:
-        r = (z - predict_along(obs, np.atleast_2d(x0), tt, pair)[0]) / sigma
+        r = doppler(x0)[0]
         if prior is not None and whiten is not None:
             r = np.concatenate([r, whiten @ (x0 - prior[0])])
         return np.nan_to_num(r, nan=1e6)
 
     def cost(xs: FloatArray) -> FloatArray:
-        c = np.sum(((z - predict_along(obs, xs, tt, pair)) / sigma) ** 2, axis=1)
+        c = np.sum(doppler(xs) ** 2, axis=1)
         if prior is not None and whiten is not None:
             c = c + np.sum(((xs - prior[0]) @ whiten.T) ** 2, axis=1)
         if support is not None:

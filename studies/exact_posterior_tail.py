@@ -44,9 +44,8 @@ from scipy.optimize import least_squares
 from scipy.stats import chi2
 
 import fgdoppler as fd
-from benchmarks._exact import exact_posterior
+from benchmarks._exact import doppler_residual, exact_posterior
 from fgdoppler.analysis.workers import one_blas_thread
-from fgdoppler.models.observation import predict_along
 
 LEVEL = 0.999
 
@@ -64,9 +63,10 @@ def one_run(args: tuple[int, int, int]) -> dict[str, Any]:
     init = fd.initiate(m.first_per_pair(10), model)
     start = model.motion.F(t0 - init.t_start) @ init.x_start
 
+    doppler = doppler_residual(m, model, float(np.max(m.time)))
+
     def residual(x: np.ndarray) -> np.ndarray:
-        return np.nan_to_num((m.doppler - predict_along(model.observation, x[None], m.time - t0, m.pair)[0])
-                             / m.sigma, nan=1e6)
+        return np.nan_to_num(doppler(x)[0], nan=1e6)
 
     # the best fit from the initiation and from the truth: the lower is the minimum the statistic needs
     best = min((least_squares(residual, x, method="lm") for x in (start, truth0)), key=lambda f: f.cost)

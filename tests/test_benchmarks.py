@@ -135,10 +135,16 @@ def test_the_reproduction_page_reads_back_the_goals_the_benchmark_writes(tmp_pat
     assert page.accuracy_part(tmp_path / "nothing") == ""
 
 
-def _paper_run(s: int, r: int, seed: int = 2026) -> tuple[fd.TrackingModel, fd.Measurements, np.ndarray]:
+def _paper_simulation(s: int, r: int, seed: int = 2026) -> tuple[fd.TrackingModel, fd.Simulation]:
+    """Run ``r`` of paper scenario ``s``, as the accuracy benchmark simulates it."""
     scen = fd.paper_scenarios()[s]
-    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([seed, s, r])))
-    return fd.TrackingModel.of(scen.geometry), sim.measurements, sim.truth.states[0]
+    return fd.TrackingModel.of(scen.geometry), fd.simulate(scen, np.random.default_rng(
+        np.random.SeedSequence([seed, s, r])))
+
+
+def _paper_run(s: int, r: int, seed: int = 2026) -> tuple[fd.TrackingModel, fd.Measurements, np.ndarray]:
+    model, sim = _paper_simulation(s, r, seed)
+    return model, sim.measurements, sim.truth.states[0]
 
 
 def _gauss_newton(model: fd.TrackingModel, m: fd.Measurements, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -222,9 +228,8 @@ def test_the_exact_posterior_refuses_data_that_do_not_fix_the_state() -> None:
 def test_the_exact_rows_hold_one_posterior_per_conditioning_time() -> None:
     """Filtered at t, lagged at t + lag and smoothed at the end: the same sampled posterior where those
     coincide (bit-identical), and the NEES at every time equals the first state's (F is invertible)."""
-    model, m, _ = _paper_run(2, 0)
-    scen = fd.paper_scenarios()[2]
-    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([2026, 2, 0])))
+    model, sim = _paper_simulation(2, 0)
+    m = sim.measurements
     init = fd.initiate(m.first_per_pair(10), model)
     ref = fd.run_estimator("smoother", m, model, init)
     tt, truth = sim.truth.times, sim.truth.states
