@@ -307,6 +307,34 @@ def test_track_particle_options(tmp_path: Path, capsys: pytest.CaptureFixture[st
         assert msg in captured.err and "geometry" not in captured.out  # refused before any work
 
 
+def test_track_most_likely_reports_the_smoothers_mode(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Case a 25 km: by default the smoother reports the posterior mean there, ``--most-likely`` its mode.
+
+    The two tracks differ by one start offset carried by the constant-velocity
+    model (spread's "Skewed valleys"), the finding says which was reported, and
+    the option is refused, before any work, by every other estimator.
+    """
+    sim = tmp_path / "sim"
+    main(["simulate", "--case", "a", "--start-x", "25000", "--seed", "2", "--out", str(sim)])
+    capsys.readouterr()
+    base = ["track", str(sim / "measurements.csv"), "--geometry", "a", "--estimator", "smoother", "--json"]
+
+    def run(*extra: str) -> dict:
+        assert main([*base, *extra]) == 0
+        return json.loads(capsys.readouterr().out)
+
+    mean, mode = run(), run("--most-likely")
+    said = [r["message"] for r in mean["reasons"] if r["code"] == "nonlinear"]
+    assert len(said) == 1 and "posterior mean" in said[0]
+    assert not any(r["code"] == "nonlinear" for r in mode["reasons"])
+    apart = np.linalg.norm(np.subtract(mean["states"][0][:2], mode["states"][0][:2]))
+    assert 10.0 < apart < 1000.0  # measured 46 m (0.33 sigma, most of it in velocity); sigma ~1.4 km
+    assert main(["track", str(sim / "measurements.csv"), "--geometry", "a", "--estimator", "ekf",
+                 "--most-likely"]) == 2
+    captured = capsys.readouterr()
+    assert "--most-likely applies to the smoother, not to ekf" in captured.err and "geometry" not in captured.out
+
+
 def test_track_prints_the_closing_event_even_past_the_limit(capsys: pytest.CaptureFixture[str]) -> None:
     """Past ten events the summary shows the first nine, how many it leaves out, and the run's closing one."""
     from fgdoppler.cli.track import _print_events

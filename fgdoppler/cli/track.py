@@ -61,6 +61,9 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--particle-seed", type=int, default=None, metavar="S",
                    help="particle and map estimators: seed of their random numbers (default 0; the same seed gives "
                         "the same track, another seed shows the Monte Carlo spread)")
+    p.add_argument("--most-likely", action="store_true",
+                   help="smoother: always report the most likely track (by default, where the posterior is skewed "
+                        "about it, the posterior mean, which is closer to the truth on average)")
     add_huber_option(p)
     p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy) for --plot and errors")
     p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
@@ -273,7 +276,7 @@ def _plot_landscape(args: argparse.Namespace, init: Any, window: Any, geom: Any,
 
 def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
     """The settings of tracker ``name`` from the options (a CLIError for values it rejects)."""
-    from fgdoppler.estimators.settings import FixedLagSettings, ParticleSettings
+    from fgdoppler.estimators.settings import FixedLagSettings, ParticleSettings, SmootherSettings
 
     k = huber(args)
     particle = {key: v for key, v in (("n_particles", args.particles), ("seed", args.particle_seed)) if v is not None}
@@ -281,6 +284,10 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
         raise CLIError(f"--particles and --particle-seed apply to the particle estimators "
                        f"({', '.join(n for n, i in ESTIMATORS.items() if issubclass(i.settings, ParticleSettings))}), "
                        f"not to {name}")
+    if args.most_likely and name != "smoother":
+        raise CLIError(f"--most-likely applies to the smoother, not to {name}")
+    if name == "smoother":
+        return SmootherSettings(huber_k=k, posterior_mean=not args.most_likely)
     try:
         return (FixedLagSettings(lag=args.lag, huber_k=k) if name == "fixed-lag"
                 else ESTIMATORS[name].settings(huber_k=k, **particle))

@@ -600,18 +600,19 @@ def run_smoother(
     sol, more_notes, altitude_reasons = _restarts_3d(measurements, model, settings, sol, progress)
     notes += more_notes
     reasons = list(sol.reasons) + altitude_reasons
+    states = list(sol.states)
     covs = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
     if settings.sampled_covariance and sol.covariances is not None and np.all(np.isfinite(sol.covariances[0])):
         sampled = posterior_spread(measurements, model, sol.times, sol.states, sol.covariances,
-                                   huber_k=settings.huber_k)
+                                   huber_k=settings.huber_k, mean=settings.posterior_mean)
         if sampled is not None:
-            covs = list(sampled[0])
-            reasons.append(sampled[1])
+            states, covs = list(sampled.states), list(sampled.covariances)
+            reasons.append(sampled.reason)
     t_last = float(sol.times[-1])
     return TrackResult(
         estimator="smoother",
         settings=settings,
-        estimates=(Estimates.from_lists("smoothed", list(sol.times), list(sol.states), covs),),
+        estimates=(Estimates.from_lists("smoothed", list(sol.times), states, covs),),
         reasons=tuple(reasons),
         events=tuple(Event(time=t_last, message=n) for n in notes),
         iterations=sol.iterations,

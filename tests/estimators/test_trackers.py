@@ -254,6 +254,12 @@ def test_fixed_lag_settings_reject_bad_values(bad: dict) -> None:
         FixedLagSettings(**bad)
 
 
+@pytest.mark.parametrize("bad", [{"sampled_covariance": 1}, {"posterior_mean": "yes"}, {"posterior_mean": None}])
+def test_smoother_settings_reject_bad_values(bad: dict) -> None:
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        SmootherSettings(**bad)
+
+
 def test_outlier_is_gated_by_nis_and_downweighted_by_huber() -> None:
     _, sim, model, init = _setup("a", 45e3)
     m = sim.measurements
