@@ -19,6 +19,13 @@ Cost per iteration is O(N) in the number of states, with a small constant:
   undamped system by an O(N) backward recursion
   (:func:`~fgdoppler.estimators.marginals.chain_solve`).
 
+The reported track is the maximum a posteriori one, except where the
+posterior is skewed about it while the cost stays near-quadratic (the
+paper's 25 km scenarios): there it is the posterior mean, with the
+samples' covariance (:mod:`fgdoppler.estimators.spread`, "Skewed valleys";
+``SmootherSettings.posterior_mean``).  ``TrackResult.cost`` is the cost at
+the maximum a posteriori track either way.
+
 Verdict reasons: ``not-converged`` (LM hit its iteration cap or found no
 step that reduces the cost), ``covariance`` (indeterminate marginals), each
 ``"doubtful"``; the χ² test of the solution is the judge's

@@ -1,4 +1,4 @@
-r"""Covariances where the likelihood is not Gaussian: posterior samples about the smoother's or a filter's estimate.
+r"""Covariances (and the smoother's point) where the likelihood is not Gaussian: posterior samples about an estimate.
 
 The smoother reports the maximum a posteriori trajectory and, by default,
 the Laplace covariance — the inverse Hessian of the cost at that optimum.
