@@ -32,14 +32,13 @@ Run: python studies/exact_posterior_tail.py [--runs 100] [--seed 2026] [--worker
 
 from __future__ import annotations
 
-import argparse
 import json
-from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 from typing import Any
 
-import _common  # noqa: F401  (the repository root on the path, for the benchmarks)
 import numpy as np
+
+# _common also puts the repository root on the path, for the benchmarks
+from _common import each_run, paper_run
 from scipy.optimize import least_squares
 from scipy.stats import chi2
 
@@ -54,13 +53,10 @@ LEVEL = 0.999
 def one_run(args: tuple[int, int, int]) -> dict[str, Any]:
     """The truth's likelihood-ratio statistic, the exact posterior's NEES and its tail mass for one run."""
     s, r, seed = args
-    scen = fd.paper_scenarios()[s]
-    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([seed, s, r])))
-    model = fd.TrackingModel.of(scen.geometry)
+    sim, model, init = paper_run(s, r, seed)
     m = sim.measurements
     t0 = float(np.min(m.time))
     truth0 = sim.truth.states[int(np.argmin(np.abs(sim.truth.times - t0)))]
-    init = fd.initiate(m.first_per_pair(10), model)
     start = model.motion.F(t0 - init.t_start) @ init.x_start
 
     doppler = doppler_residual(m, model, float(np.max(m.time)))
@@ -99,15 +95,7 @@ def summary(rows: list[dict[str, Any]]) -> str:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(prog="python studies/exact_posterior_tail.py")
-    p.add_argument("--runs", type=int, default=100)
-    p.add_argument("--seed", type=int, default=2026)
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--out", type=Path, default=Path("output/exact_posterior"))
-    args = p.parse_args()
-    tasks = [(s, r, args.seed) for s in range(len(fd.paper_scenarios())) for r in range(args.runs)]
-    with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        rows = list(pool.map(one_run, tasks, chunksize=4))
+    args, rows = each_run(one_run, "exact_posterior_tail.py", "exact_posterior")
     text = (f"{args.runs} runs per scenario, seed {args.seed}; q = {chi2.ppf(LEVEL, 4):.2f} "
             f"(the chi-square(4) {100 * LEVEL:g} % quantile)\n\n" + summary(rows) + "\n")
     args.out.mkdir(parents=True, exist_ok=True)

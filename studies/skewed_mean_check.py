@@ -28,14 +28,11 @@ Run: python studies/skewed_mean_check.py [--runs 100] [--seed 2026] [--workers 2
 
 from __future__ import annotations
 
-import argparse
 import json
-from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 from typing import Any
 
-import _common  # noqa: F401  (a non-interactive backend)
 import numpy as np
+from _common import each_run, paper_run
 
 import fgdoppler as fd
 from fgdoppler.analysis.metrics import compare_rmse
@@ -60,11 +57,8 @@ def _squared_errors(sim: fd.Simulation, e: fd.Estimates, shift: np.ndarray | Non
 def one_run(args: tuple[int, int, int]) -> dict[str, Any]:
     """The probe, the check's shift and the three tracks' squared errors for one run."""
     s, r, seed = args
-    scen = fd.paper_scenarios()[s]
-    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([seed, s, r])))
-    model = fd.TrackingModel.of(scen.geometry)
+    sim, model, init = paper_run(s, r, seed)
     m = sim.measurements
-    init = fd.initiate(m.first_per_pair(10), model)
     mode = fd.run_estimator("smoother", m, model, init, fd.SmootherSettings(posterior_mean=False), verify=False)
     default = fd.run_estimator("smoother", m, model, init, verify=False)
     e = mode.primary
@@ -116,15 +110,7 @@ def summary(rows: list[dict[str, Any]]) -> str:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(prog="python studies/skewed_mean_check.py")
-    p.add_argument("--runs", type=int, default=100)
-    p.add_argument("--seed", type=int, default=2026)
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--out", type=Path, default=Path("output/skewed_mean"))
-    args = p.parse_args()
-    tasks = [(s, r, args.seed) for s in range(len(fd.paper_scenarios())) for r in range(args.runs)]
-    with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        rows = list(pool.map(one_run, tasks, chunksize=4))
+    args, rows = each_run(one_run, "skewed_mean_check.py", "skewed_mean")
     text = (f"{args.runs} runs per scenario, seed {args.seed}; the check's limit w > {spread.MEAN_SHIFT_MIN:g}\n\n"
             + summary(rows) + "\n")
     args.out.mkdir(parents=True, exist_ok=True)

@@ -29,16 +29,11 @@ Run: python studies/whole_track_check.py [--out DIR] [--runs 100] [--seed 2026] 
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
-from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 from typing import Any
 
-os.environ.setdefault("MPLBACKEND", "Agg")
-
 import numpy as np
+from _common import each_run, paper_run
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
@@ -73,11 +68,8 @@ def _run_nees(est: Estimates, times: NDArray[np.float64], truth: NDArray[np.floa
 def one_run(args: tuple[int, int, int]) -> list[dict[str, Any]]:
     """Per filter of run ``r`` of scenario ``s``: run NEES, status and the two statistics of the check."""
     s, r, seed = args
-    scen = fd.paper_scenarios()[s]
-    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([seed, s, r])))
-    model = fd.TrackingModel.of(scen.geometry)
+    sim, model, init = paper_run(s, r, seed)
     m = sim.measurements
-    init = fd.initiate(m.first_per_pair(10), model)
     ref = fd.run_estimator("smoother", m, model, init)
     out = []
     for name in FILTERS:
@@ -108,15 +100,8 @@ def tally(rows: list[dict[str, Any]]) -> dict[str, int]:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser()
-    p.add_argument("--out", type=Path, default=Path("output") / "studies")
-    p.add_argument("--runs", type=int, default=100)
-    p.add_argument("--seed", type=int, default=2026)
-    p.add_argument("--workers", type=int, default=2)
-    args = p.parse_args()
-    tasks = [(s, r, args.seed) for s in range(len(fd.paper_scenarios())) for r in range(args.runs)]
-    with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        rows = [row for part in pool.map(one_run, tasks, chunksize=2) for row in part]
+    args, parts = each_run(one_run, "whole_track_check.py", "studies", chunksize=2)
+    rows = [row for part in parts for row in part]
     t = tally(rows)
     print(f"seed {args.seed}, {args.runs} runs per scenario, filters {', '.join(FILTERS)}:")
     print(f"  inconsistent runs judged ok: {t['missed']}; the maximum test flags {t['missed_max']}, "
