@@ -313,7 +313,7 @@ def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
     reason = Reason(code="nonlinear", status="ok", message=(
         f"the posterior is skewed about the most likely track (the cost is near-quadratic 3 standard deviations "
         f"along the major axis, {ratio:.3g} times its quadratic model, but the posterior mean lies {np.sqrt(w):.2f} "
-        f"of them, {np.linalg.norm(d[pos]):.0f} m, from it): the reported track is the posterior mean of "
+        f"standard deviations (Mahalanobis) from it, {np.linalg.norm(d[pos]):.0f} m in position): the reported track is the posterior mean of "
         f"{SAMPLES} samples (Metropolis acceptance {rate:.2f}), with their covariance; position sigma along the "
         f"major axis {_major_sd(sigma0, pos):.0f} m (Laplace {_major_sd(P0, pos):.0f} m)"))
     return PosteriorSpread(states=shifted, covariances=_carried(model, sigma0, times, t0), reason=reason)
