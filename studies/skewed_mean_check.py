@@ -45,12 +45,11 @@ T_RMSE = 5.0
 
 def _squared_errors(sim: fd.Simulation, e: fd.Estimates, shift: np.ndarray | None = None) -> np.ndarray:
     """Squared position error at the truth's times (the estimate at the nearest time, shifted by ``F(t - t0) shift``)."""
-    out = np.full(sim.truth.times.size, np.nan)
-    for i, t in enumerate(sim.truth.times):
-        k = int(np.argmin(np.abs(e.times - t)))
-        x = e.states[k] if shift is None else e.states[k] + fd.ConstantVelocity().F(float(e.times[k] - e.times[0])) @ shift
-        out[i] = float(np.sum((sim.truth.states[i, :2] - x[:2]) ** 2))
-    return out
+    k = np.argmin(np.abs(e.times[None, :] - sim.truth.times[:, None]), axis=1)
+    x = e.states[k]
+    if shift is not None:
+        x = x + fd.ConstantVelocity().propagate(shift, e.times[k] - e.times[0])
+    return np.sum((sim.truth.states[:, :2] - x[:, :2]) ** 2, axis=1)
 
 
 @one_blas_thread

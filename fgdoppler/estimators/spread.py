@@ -308,7 +308,7 @@ def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
     w = float(d @ info @ d)
     sigma0 = _weighted_cov(post.x, np.full(post.x.shape[0], 1.0 / post.x.shape[0]))
     t0 = float(times[0])
-    shifted = np.asarray(states, dtype=float) + np.array([model.motion.F(float(t) - t0) @ d for t in times])
+    shifted = np.asarray(states, dtype=float) + model.motion.propagate(d, np.asarray(times, dtype=float) - t0)
     pos = slice(0, model.dim)
     reason = Reason(code="nonlinear", status="ok", message=(
         f"the posterior is skewed about the most likely track (the cost is near-quadratic 3 standard deviations "
@@ -325,9 +325,10 @@ def _major_sd(M: FloatArray, pos: slice) -> float:
 
 
 def _carried(model: TrackingModel, sigma0: FloatArray, times: FloatArray, t0: float) -> FloatArray:
-    """:func:`_forward` at every time: ``(n, d, d)``."""
-    n = model.n
-    return np.array([_forward(model, sigma0, float(t) - t0) for t in times]).reshape(len(times), n, n)
+    """:func:`_forward` at every time, in one batch: ``(n, d, d)`` (``Q(0) = 0``, so the first needs no case)."""
+    dt = np.asarray(times, dtype=float) - t0
+    F = model.motion.F(dt)
+    return np.asarray(F @ sigma0 @ np.swapaxes(F, -1, -2) + model.motion.Q(dt), dtype=float)
 
 
 def _posterior(measurements: Measurements, model: TrackingModel, t0: float, huber_k: float | None, seed: int,
