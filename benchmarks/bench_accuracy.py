@@ -452,7 +452,8 @@ def study(runs: int, seed: int, workers: int, *, exact: bool = True
 
 def save_records(records: list[dict[str, Any]], path: Path) -> None:
     """Per-run squared errors, NEES, times and verdicts as ``.npz`` (keys ``<field>_<s>_<name>``)."""
-    arrays: dict[str, np.ndarray] = {}
+    # Any, not ndarray: numpy's stub would match the unpacked dict against savez_compressed's allow_pickle
+    arrays: dict[str, Any] = {}
     for s in sorted({rec["s"] for rec in records}):
         recs = sorted((rec for rec in records if rec["s"] == s), key=lambda rec: rec["r"])
         for name in dict.fromkeys(n for rec in recs for n in rec["results"]):
