@@ -43,12 +43,13 @@ from fgdoppler.estimators.curvature import probe_rises
 T_RMSE = 5.0
 
 
-def _squared_errors(sim: fd.Simulation, e: fd.Estimates, shift: np.ndarray | None = None) -> np.ndarray:
+def _squared_errors(sim: fd.Simulation, e: fd.Estimates, motion: fd.ConstantVelocity,
+                    shift: np.ndarray | None = None) -> np.ndarray:
     """Squared position error at the truth's times (the estimate at the nearest time, shifted by ``F(t - t0) shift``)."""
     k = np.argmin(np.abs(e.times[None, :] - sim.truth.times[:, None]), axis=1)
     x = e.states[k]
     if shift is not None:
-        x = x + fd.ConstantVelocity().propagate(shift, e.times[k] - e.times[0])
+        x = x + motion.propagate(shift, e.times[k] - e.times[0])
     return np.sum((sim.truth.states[:, :2] - x[:, :2]) ** 2, axis=1)
 
 
@@ -81,8 +82,9 @@ def one_run(args: tuple[int, int, int]) -> dict[str, Any]:
     everywhere = post.x.mean(axis=0) - x0
     return {"s": s, "r": r, "ratio": min(lo, hi) / quad, "w": float(d @ info @ d),
             "mean_reported": any("posterior mean of" in x.message for x in default.reasons),
-            "se_map": _squared_errors(sim, e).tolist(), "se_default": _squared_errors(sim, default.primary).tolist(),
-            "se_everywhere": _squared_errors(sim, e, everywhere).tolist(), "t": sim.truth.times.tolist()}
+            "se_map": _squared_errors(sim, e, model.motion).tolist(),
+            "se_default": _squared_errors(sim, default.primary, model.motion).tolist(),
+            "se_everywhere": _squared_errors(sim, e, model.motion, everywhere).tolist(), "t": sim.truth.times.tolist()}
 
 
 def summary(rows: list[dict[str, Any]]) -> str:

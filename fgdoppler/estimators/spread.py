@@ -325,7 +325,10 @@ def _major_sd(M: FloatArray, pos: slice) -> float:
 
 
 def _carried(model: TrackingModel, sigma0: FloatArray, times: FloatArray, t0: float) -> FloatArray:
-    """:func:`_forward` at every time, in one batch: ``(n, d, d)`` (``Q(0) = 0``, so the first needs no case)."""
+    r""":math:`\mathbf F(t_k - t_0)\,\mathbf\Sigma_0\,\mathbf F(t_k - t_0)^\top + \mathbf Q(t_k - t_0)` at every time, in one batch: ``(n, d, d)``.
+
+    :math:`\mathbf Q(0) = 0`, so a time equal to ``t0`` needs no case.
+    """
     dt = np.asarray(times, dtype=float) - t0
     F = model.motion.F(dt)
     return np.asarray(F @ sigma0 @ np.swapaxes(F, -1, -2) + model.motion.Q(dt), dtype=float)
@@ -350,12 +353,6 @@ def _sample_about(post: _Posterior, x0: FloatArray, P0: FloatArray, samples: int
         return None
     d = post.x - x0
     return d.T @ d / samples, rate
-
-
-def _forward(model: TrackingModel, sigma0: FloatArray, dt: float) -> FloatArray:
-    r""":math:`\mathbf F(\Delta t)\,\mathbf\Sigma_0\,\mathbf F(\Delta t)^\top + \mathbf Q(\Delta t)` (no noise at :math:`\Delta t = 0`)."""
-    F = model.motion.F(dt)
-    return np.asarray(F @ sigma0 @ F.T + (model.motion.Q(dt) if dt > 0 else 0.0), dtype=float)
 
 
 def filtered_spread(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
@@ -457,7 +454,7 @@ def _widening(measurements: Measurements, model: TrackingModel, t0: float, t: fl
         drawn = _sample_about(post, x0, 0.5 * (P0 + P0.T), FILTER_SAMPLES, FILTER_MOVES, rng)
         if drawn is None:
             return None
-        return _whitened_widening(P, _forward(model, drawn[0], t - t0), FILTER_WIDEN_MIN)
+        return _whitened_widening(P, _carried(model, drawn[0], np.array([t]), t0)[0], FILTER_WIDEN_MIN)
     except np.linalg.LinAlgError:
         return None
 
