@@ -255,12 +255,13 @@ def run_stonesoup_pf(model: fd.TrackingModel, meas: fd.Measurements, *, n_partic
     dets = detections(meas, model.geometry, epoch)
     times, xs, Ps = [], [], []
     for k, det in enumerate(dets):
-        previous = state
         prediction = predictor.predict(state, timestamp=det.timestamp)
         state = updater.update(SingleHypothesis(prediction, det))
         if np.ptp(np.asarray(state.log_weight, dtype=float)) == 0.0:  # resampled (and moved once)
+            # the move's prior term pairs each particle with its own parent: the resampled state's
+            # parent (indexed with it), as the updater's own first move does
             for _ in range(moves - 1):
-                state = regulariser.regularise(previous, state)
+                state = regulariser.regularise(state.parent, state)
         last_of_scan = k + 1 == len(dets) or dets[k + 1].timestamp != det.timestamp
         if last_of_scan:
             times.append(det.metadata["time"])
