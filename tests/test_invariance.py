@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 import fgdoppler as fd
+from fgdoppler.analysis.metrics import nees
 from fgdoppler.cli import main
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.fixed_lag import FixedLagTracker, run_fixed_lag
@@ -183,8 +184,8 @@ def test_runners_called_directly_move_with_the_problem(originals: dict, motion: 
 
 
 def _mahalanobis(a: fd.Estimates, b: fd.Estimates) -> np.ndarray:
-    d = b.states - a.states
-    return np.sqrt(np.einsum("ki,kij,kj->k", d, np.linalg.inv(a.covariances), d))
+    """Distance of ``b``'s states from ``a``'s in ``a``'s standard deviations (the root of the NEES form)."""
+    return np.sqrt(nees(b.states, a.covariances, a.states))
 
 
 def test_renumbering_the_pairs_after_the_first_changes_no_answer() -> None:
