@@ -200,6 +200,27 @@ class Geometry:
         """The sensors' own frame (:func:`fgdoppler.frames.sensor_frame`): identity for the paper's geometries."""
         return sensor_frame(self._tx, self._rx)
 
+    @cached_property
+    def scan_rank(self) -> NDArray[np.intp]:
+        """Each pair's place in the order in which a filter takes simultaneous measurements, ``(n_pairs,)``.
+
+        The pairs sorted by their receiver's, then their transmitter's
+        coordinates in the sensors' own frame (:attr:`frame`, snapped as in
+        :meth:`in_frame`), lexicographically; pairs at the same positions
+        share a rank.  The order belongs to the sensors, not to their
+        numbering: renumbering the pairs after the first (which defines the
+        frame) permutes the ranks with them, and a rigidly moved copy of the
+        geometry has the same ones, to the bit.  A sequential filter's answer
+        depends slightly on the order of a scan's updates
+        (:meth:`fgdoppler.estimators.ekf.ExtendedKalmanFilter.add_scan`).
+        """
+        local = self.in_frame(self.frame)
+        keys = np.hstack([local.rx, local.tx])
+        _, rank = np.unique(keys, axis=0, return_inverse=True)
+        out = np.asarray(rank, dtype=np.intp).reshape(-1)
+        out.setflags(write=False)
+        return out
+
     def default_zone(self, *, speed_max: float = DEFAULT_SPEED_MAX) -> Zone:
         """The default detectable zone in :attr:`frame` (:func:`fgdoppler.zone.default_zone`)."""
         return default_zone(self.frame, self._tx, self._rx, speed_max=speed_max)

@@ -3,7 +3,8 @@ r"""Extended Kalman filter: the paper's dynamic estimator and the baseline of th
 Prediction with the shared NCV model,
 :math:`\mathbf x^- = \mathbf F\mathbf x`, :math:`\mathbf P^- = \mathbf F\mathbf P\mathbf F' + \mathbf Q`;
 then one *scalar* update per measurement in time order (so asynchronous pairs
-need nothing special):
+need nothing special; simultaneous ones in the sensors' own order,
+:attr:`~fgdoppler.geometry.Geometry.scan_rank`, whatever the pairs' numbering):
 
 .. math::
 
@@ -46,6 +47,7 @@ from __future__ import annotations
 
 import math
 import time
+from itertools import pairwise
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -125,6 +127,9 @@ class ExtendedKalmanFilter:
         self.t = float(t0)
         # plain-float fast path of models that offer one (DopplerModel.scalar)
         self._scalar = getattr(self.model, "scalar", None)
+        # the sensors' own order of a scan's pairs (DopplerModel.scan_rank; None: by channel)
+        rank = getattr(self.model, "scan_rank", None)
+        self._rank: list[int] | None = None if rank is None else [int(r) for r in rank]
         self._Q: dict[float, list[list[float]]] = {}
         self.events: list[Event] = []
         self.gate = NISGate(self.settings.gate_probability, self.events)
@@ -179,8 +184,11 @@ class ExtendedKalmanFilter:
     def add_scan(self, t: float, channels: ArrayLike, z: ArrayLike, sigma: ArrayLike) -> None:
         """Predict to ``t`` and apply one scan as ``settings.update`` says (a scan without measurements only predicts).
 
-        ``"sequential"``: one :meth:`update` per measurement, in the order
-        given; ``"scan"``: one :meth:`update_scan`.
+        ``"sequential"``: one :meth:`update` per measurement, in the sensors'
+        order — by the pairs' :attr:`~fgdoppler.geometry.Geometry.scan_rank`
+        (by channel for a model without one), then by sigma and Doppler —
+        whatever the order given or the pairs' numbering; ``"scan"``: one
+        :meth:`update_scan`.
         """
         c = np.asarray(channels, dtype=np.intp).reshape(-1)
         zz = np.asarray(z, dtype=float).reshape(-1)
@@ -190,8 +198,29 @@ class ExtendedKalmanFilter:
             return
         if not c.size:
             self.predict(t)
+        elif c.size > 1:
+            order = self._scan_order(c, zz, ss)
+            if order is not None:
+                c, zz, ss = c[order], zz[order], ss[order]
         for p, zi, si in zip(c, zz, ss, strict=True):
             self.update(t, int(p), float(zi), float(si))
+
+    def _scan_order(self, c: NDArray[np.intp], z: FloatArray, sigma: FloatArray) -> list[int] | None:
+        """The permutation that puts a scan's rows in the sensors' order (``None``: they are in it already).
+
+        Sequential updates of a nonlinear model do not commute (a linearisation effect, of the order of the
+        noise: docs/concepts.md), so the order is the sensors' — not the rows' or the pairs' numbering.
+        """
+        channels = c.tolist()
+        rank = self._rank
+        if rank is None or min(channels) < 0 or max(channels) >= len(rank):
+            ranks = channels  # by channel (a bad one is refused by the update)
+        else:
+            ranks = [rank[i] for i in channels]
+        if all(a < b for a, b in pairwise(ranks)):
+            return None  # the common case, a scan fed in pair order: no work
+        s, v = sigma.tolist(), z.tolist()
+        return sorted(range(len(channels)), key=lambda j: (ranks[j], s[j], v[j]))
 
     def update_scan(self, t: float, channels: NDArray[np.intp], z: FloatArray, sigma: FloatArray) -> FloatArray:
         """Predict to ``t`` and apply the scan's measurements in one vector update; returns each one's NIS.

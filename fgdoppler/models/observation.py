@@ -133,6 +133,11 @@ class DopplerModel:
             h = np.where(mask, np.nan, h)
         return h
 
+    @property
+    def scan_rank(self) -> NDArray[np.intp]:
+        """Each pair's place in a scan's update order (:attr:`fgdoppler.geometry.Geometry.scan_rank`)."""
+        return self.geometry.scan_rank
+
     @cached_property
     def scalar(self) -> Callable[[list[float], int], tuple[float, list[float]]]:
         """``scalar(state, channel)``: Doppler of one pair at one state and its Jacobian row, in plain floats.

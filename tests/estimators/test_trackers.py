@@ -182,6 +182,42 @@ def test_linear_gaussian_surrogate_ekf_isam2_fixed_lag_agree_with_kalman() -> No
             np.testing.assert_allclose(P, Pr, rtol=1e-8, atol=1e-8 * np.abs(Pr).max())
 
 
+def test_ekf_takes_a_scan_in_the_sensors_order_whatever_the_rows_or_the_numbering() -> None:
+    # Sequential scalar updates of a nonlinear model do not commute, so the EKF fixes the order of a scan's
+    # updates by the sensors (Geometry.scan_rank): the rows' order and the numbering of the pairs after the
+    # first must not change a bit of the answer.  Three pairs measuring at once, a broad start (where the
+    # order matters most).
+    g = fd.Geometry(pairs=(fd.BistaticPair(tx=(40e3, 0.0), rx=(0.0, 0.0)),
+                           fd.BistaticPair(tx=(40e3, 0.0), rx=(15e3, 25e3)),
+                           fd.BistaticPair(tx=(5e3, 30e3), rx=(0.0, 0.0))))
+    truth = np.array([20e3, 10e3, -60.0, 70.0])
+    x0, P0 = truth + np.array([3e3, -2e3, 40.0, -30.0]), np.diag([4e6, 4e6, 2.5e3, 2.5e3])
+    at_1s = truth + np.array([-60.0, 70.0, 0.0, 0.0])  # the truth at the scan's time, t = 1 s
+    z = fd.DopplerModel(geometry=g).predict(np.tile(at_1s, (3, 1)), [0, 1, 2]) + np.random.default_rng(5).normal(0, 1, 3)
+
+    def scan(geometry: fd.Geometry, channels: list[int], doppler: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ekf = ExtendedKalmanFilter(fd.TrackingModel.of(geometry), x0, P0, 0.0, EKFSettings(gate_probability=None))
+        ekf.add_scan(1.0, channels, doppler, 1.0)
+        return ekf.x, ekf.P
+
+    x_ref, P_ref = scan(g, [0, 1, 2], z)
+    for rows in ([0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]):
+        x, P = scan(g, rows, z[rows])
+        np.testing.assert_array_equal(x, x_ref)
+        np.testing.assert_array_equal(P, P_ref)
+    perm = [0, 2, 1]  # pairs 1 and 2 swapped: old pair i is new pair new_of[i]
+    new_of = np.argsort(perm)
+    x, P = scan(fd.Geometry(pairs=tuple(g.pairs[i] for i in perm)), new_of.tolist(), z)
+    np.testing.assert_array_equal(x, x_ref)
+    np.testing.assert_array_equal(P, P_ref)
+    # the order does matter here: the same updates one by one in the pairs' numbering differ
+    ekf = ExtendedKalmanFilter(fd.TrackingModel.of(g), x0, P0, 0.0, EKFSettings(gate_probability=None))
+    for c in (0, 1, 2):
+        ekf.update(1.0, c, float(z[c]), 1.0)
+    assert list(np.argsort(g.scan_rank)) != [0, 1, 2]
+    assert np.max(np.abs(ekf.x - x_ref)) > 1e-6 * np.max(np.abs(x_ref))
+
+
 # -- bad conditions ------------------------------------------------------------------------
 def _paper_at_20_hz(duration: float):
     """Paper geometry (a), a well-observed track (the scaling benchmark's), 20 scans/s, seed 0."""
