@@ -208,8 +208,9 @@ def test_renumbering_the_pairs_after_the_first_changes_no_answer() -> None:
     # others differently is the same problem.  Case a with a third transmitter, all pairs measuring at once,
     # started 5 km out (a curved valley, where a small difference grows most), pairs 1 and 2 swapped.
     # Every estimator agrees to round-off (measured: initiation 4e-11 relative; EKF 6e-11 standard
-    # deviations, fixed-lag 1e-10, smoother 2e-11, particle 8e-10, map 5e-13; iSAM2 2e-5, whose incremental
-    # elimination follows the order its factors arrive in): the filters take a scan's measurements in the
+    # deviations, fixed-lag 1e-10, smoother 2e-11, particle 8e-10, map 5e-13; iSAM2 1.6e-5, its sensitivity to
+    # round-off, not to the numbering: the same recording's start scaled by 1 + 1e-11 moves it by 1.8e-5):
+    # the filters take a scan's measurements in the
     # sensors' order (Geometry.scan_rank), not the pairs' numbering, which moved them by 0.09 / 0.04 / 0.02
     # standard deviations here.  Swapping the first pair instead tilts the frame by 1.1 degrees: the
     # initiation moves by 2 %, the filters by 0.4-0.6 and the particle estimator by 0.45.
