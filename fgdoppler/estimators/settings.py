@@ -380,6 +380,11 @@ class SmootherSettings(TrackerSettings):
         10 ms to check, 0.2 s where it applies).  Measured on the paper's
         25 km scenarios (100 runs, seeds 2026 and 7) the mean is 33-87 m
         closer to the truth; ``False`` reports the most likely track.
+    mode_search : bool, default True
+        2-D: initiate the whole recording again (multi-start), smooth from
+        each of its solutions, keep the lowest cost and report a rival track
+        that explains the data about as well (``competing``); 3-D always
+        searches its altitude levels and the whole recording.
     """
 
     max_iterations: int = 100
@@ -389,12 +394,14 @@ class SmootherSettings(TrackerSettings):
     wall_sigma: tuple[float, float] = (10.0, 0.1)
     sampled_covariance: bool = True
     posterior_mean: bool = True
+    mode_search: bool = True
 
     def __post_init__(self) -> None:
         super().__post_init__()
         _count(self.max_iterations, "max_iterations")
         _flag(self.sampled_covariance, "sampled_covariance")
         _flag(self.posterior_mean, "posterior_mean")
+        _flag(self.mode_search, "mode_search")
         if not (len(self.wall_sigma) == 2 and all(v > 0 for v in self.wall_sigma)):
             raise ValueError(f"wall_sigma must be two positive numbers, got {self.wall_sigma}")
 
