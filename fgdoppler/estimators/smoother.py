@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import gtsam
 import numpy as np
@@ -60,6 +61,9 @@ from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.progress import Progress, advance, prefixed, start_task
 from fgdoppler.zone import Zone
+
+if TYPE_CHECKING:
+    from fgdoppler.estimators.grid import HalfPlane
 
 __all__ = ["SmootherSolution", "initial_trajectory", "rts_smooth", "run_smoother", "solve_smoother"]
 
@@ -441,17 +445,19 @@ def _reinitiate(measurements: Measurements, model: TrackingModel, settings: Smoo
 
 
 def _recording_starts(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
-                      progress: Progress | None = None, *, per_pair: int) -> list[FloatArray]:
+                      progress: Progress | None = None, *, per_pair: int,
+                      half_plane: HalfPlane | None = None) -> list[FloatArray]:
     """Start trajectories of the multi-start initiation of the whole recording: its best solution first, then
     its alternatives, each the constant-velocity track of the solution at every scan time.
 
     The grid scores ``per_pair`` measurements of each pair, evenly spread over
     the recording; Levenberg–Marquardt refines its best candidates on every
-    measurement (deterministic constant velocity).
+    measurement (deterministic constant velocity).  ``half_plane`` (the
+    initiation's) binds them to the side the user gave.
     """
     from fgdoppler.estimators.initiation import InitiationSettings, initiate, window_grid
 
-    init_settings = InitiationSettings(window="cv", huber_k=settings.huber_k)
+    init_settings = InitiationSettings(window="cv", huber_k=settings.huber_k, half_plane=half_plane)
     # The grid only has to find the basins, and its cost grows with the measurements it
     # scores: search a bounded, evenly spread subset, then let LM refine each candidate
     # against every measurement.
@@ -479,7 +485,7 @@ def _smooth_from(measurements: Measurements, model: TrackingModel, settings: Smo
 
 
 def _modes_2d(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
-              sol: SmootherSolution, progress: Progress | None = None
+              sol: SmootherSolution, progress: Progress | None = None, *, half_plane: HalfPlane | None = None
               ) -> tuple[SmootherSolution, list[str], list[Reason]]:
     r"""2-D: smooth again from each other mode of a multi-start over the whole recording; report rivals.
 
@@ -495,14 +501,18 @@ def _modes_2d(measurements: Measurements, model: TrackingModel, settings: Smooth
     :data:`MODES_PER_PAIR` measurements of each pair scored by the grid);
     the smoother runs from each solution whose start lies outside the
     current solution's 99.9 % region (the others are its own mode); a
-    distinct solution of lower cost replaces it; and another solution is a
-    rival — a ``competing`` finding, ``doubtful`` — by the rule of
-    :func:`_restarts_3d`.
+    distinct solution whose cost is lower by more than
+    :data:`~fgdoppler.estimators.ambiguity.COMPETING` replaces it (between
+    modes the data cannot tell apart the initiation's stays, and the
+    verdict says so); and another solution is a rival — a ``competing``
+    finding, ``doubtful`` — by the rule of :func:`_restarts_3d`.  A half
+    plane given to the initiation binds the search too.
     """
     zone = model.zone
     if model.dim != 2 or zone is None or not isinstance(model.observation, DopplerModel):
         return sol, [], []
-    starts = _recording_starts(measurements, model, settings, progress, per_pair=MODES_PER_PAIR)
+    starts = _recording_starts(measurements, model, settings, progress, per_pair=MODES_PER_PAIR,
+                               half_plane=half_plane)
     if sol.covariances is not None and np.all(np.isfinite(sol.covariances[0])):
         limit = float(chi2.ppf(0.999, model.n))
         P0 = sol.covariances[0]
@@ -512,21 +522,27 @@ def _modes_2d(measurements: Measurements, model: TrackingModel, settings: Smooth
         except np.linalg.LinAlgError:
             pass
     found = [sol, *_smooth_from(measurements, model, settings, starts, progress)]
-    return _best_and_rival(found, sol, zone, same_mode_stays=True)
+    from fgdoppler.estimators.ambiguity import COMPETING
+
+    return _best_and_rival(found, sol, zone, margin=COMPETING)
 
 
 def _best_and_rival(found: list[SmootherSolution], sol: SmootherSolution, zone: Zone, *,
-                    same_mode_stays: bool = False) -> tuple[SmootherSolution, list[str], list[Reason]]:
+                    margin: float | None = None) -> tuple[SmootherSolution, list[str], list[Reason]]:
     """The lowest-cost solution, a note if it moved the track, and its findings (floor and rival).
 
-    With ``same_mode_stays`` a solution that ends within 50 m or three of
-    ``sol``'s standard deviations of ``sol`` (the same mode, found again)
-    does not replace it, whatever its cost: only another mode does.
+    With a ``margin``, ``sol`` stays unless another *mode* (ending farther
+    than 50 m and three of ``sol``'s standard deviations from it) costs
+    less by more than ``margin``: the same mode found again, or one the data
+    cannot tell from it, does not replace it.
     """
     k = sol.states.shape[1] // 2
-    if same_mode_stays:
+    if margin is not None:
         found = [sol, *(s for s in found if s is not sol and _apart(sol, s))]
-    best = min(found, key=lambda s: s.cost)
+        better = [s for s in found if s.cost < sol.cost - margin]
+        best = min(better, key=lambda s: s.cost) if better else sol
+    else:
+        best = min(found, key=lambda s: s.cost)
     end = best.states[-1, :k]
     moved = float(np.linalg.norm(sol.states[-1, :k] - end))
     notes = []
@@ -684,7 +700,12 @@ def run_smoother(
     data: the window's initiation led to a wrong basin) and
     ``settings.reinitiate`` is set, the whole recording is initiated again
     (multi-start, deterministic constant velocity) and smoothed from there;
-    the lower cost wins and an event says so.
+    the lower cost wins and an event says so.  In 2-D with
+    ``settings.mode_search`` the whole recording is searched for other modes
+    in any case (:func:`_modes_2d`): a distinct mode of lower cost replaces
+    the track, and one that explains the data about as well is a
+    ``competing`` finding; in 3-D the altitude levels and the whole recording
+    are searched (:func:`_restarts_3d`).
     """
     settings = settings or SmootherSettings()
     t_begin = time.perf_counter()
@@ -705,7 +726,8 @@ def run_smoother(
     if model.dim == 3:
         sol, more_notes, mode_reasons = _restarts_3d(measurements, model, settings, sol, progress)
     elif settings.mode_search:
-        sol, more_notes, mode_reasons = _modes_2d(measurements, model, settings, sol, progress)
+        sol, more_notes, mode_reasons = _modes_2d(measurements, model, settings, sol, progress,
+                                                  half_plane=init.half_plane)
     else:
         more_notes, mode_reasons = [], []
     notes += more_notes

@@ -118,3 +118,26 @@ def test_a_rival_mode_is_reported_by_its_cost_and_its_share_of_the_error() -> No
     assert _rival_reason([best, sol((0.0, 1e3), 110.0)], best, zone) is not None
     assert _rival_reason([best, sol((1e3, 0.0), 120.0)], best, zone) is None
     assert _rival_reason([best, sol((20.0, 0.0), 99.0)], best, zone) is None
+
+
+def test_the_mode_search_keeps_to_the_half_plane_the_user_gave() -> None:
+    # All sensors on y = 0: the mirror image (x, -y, vx, -vy) of every track fits the data exactly.  The
+    # whole recording's multi-start would find it as a rival of equal cost; bound by the initiation's
+    # half plane it searches the north side only, so the smoother's track and verdict there are what they
+    # are without the search, and without the half plane the mirror is reported.
+    from fgdoppler.estimators.grid import HalfPlane
+
+    g = fd.Geometry(pairs=(fd.BistaticPair(tx=(50e3, 0.0), rx=(0.0, 0.0)),
+                           fd.BistaticPair(tx=(60e3, 0.0), rx=(0.0, 0.0))))
+    sim = fd.simulate(fd.Scenario(geometry=g, x0=(42e3, 4e3, -60.0, -80.0), duration=30.0, sigma=0.5),
+                      np.random.default_rng(0))
+    m = sim.measurements
+    north = fd.initiate(m.first_per_pair(20), g,
+                        fd.InitiationSettings(half_plane=HalfPlane(point=(0.0, 0.0), normal=(0.0, 1.0))))
+    on, off = (fd.run_estimator("smoother", m, g, north, fd.SmootherSettings(mode_search=ms)) for ms in (True, False))
+    assert np.all(on.primary.states[:, 1] > 0)
+    np.testing.assert_array_equal(on.primary.states, off.primary.states)
+    assert not any(r.code == "competing" and r.status != "ok" for r in on.reasons)
+    both = fd.initiate(m.first_per_pair(20), g)
+    free = fd.run_estimator("smoother", m, g, both, fd.SmootherSettings(mode_search=True))
+    assert free.status != "ok"  # the mirror image: reported, whichever side the track is on

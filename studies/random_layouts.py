@@ -1,0 +1,111 @@
+"""Random sensor layouts: how often does an estimator end kilometres off and call it ``ok``?
+
+Each draw (seeded, ``--draws`` of them) places two to four bistatic pairs
+anywhere in an 80 km square (each baseline longer than 8 km), starts a
+target uniformly inside the geometry's default zone (at least 2 km from
+every sensor), at 50-200 m/s (the zone's speed bound) in a uniform heading,
+and records 30 s at 2 scans/s.  Every estimator runs from the default
+initiation; the smoother also with ``SmootherSettings(mode_search=False)``
+(the whole recording's mode search off), and the filters' verdict then uses
+that smoother as its reference, so both columns are what a user got with
+and without the search.  An answer is *wrong* as in the verdict tests
+(``tests/estimators/test_verdict.py``): its final position is farther from
+the truth than three standard deviations along its covariance's major
+axis.  Printed: per estimator, the wrong-and-``ok`` count and the ``ok``
+count, with and without the search, and every draw that is wrong and
+``ok`` either way.
+
+Run: ``python studies/random_layouts.py [--draws 60] [--out DIR]`` (about 20 minutes on 2 cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import _common  # noqa: F401  (the repository root on the path, for the benchmarks)
+import numpy as np
+
+import fgdoppler as fd
+from fgdoppler.analysis.workers import one_blas_thread
+
+SPEED = (50.0, 200.0)
+SQUARE = 40e3
+MIN_BASELINE = 8e3
+MIN_SENSOR_DISTANCE = 2e3
+
+
+def draw(i: int) -> tuple[fd.Geometry, tuple[float, float, float, float], np.random.Generator]:
+    """Layout, start state and the generator that then simulates draw ``i``."""
+    rng = np.random.default_rng([77, i])
+    n = int(rng.integers(2, 5))
+    while True:
+        pairs = []
+        for _ in range(n):
+            while True:
+                tx, rx = rng.uniform(-SQUARE, SQUARE, 2), rng.uniform(-SQUARE, SQUARE, 2)
+                if np.hypot(*(tx - rx)) > MIN_BASELINE:
+                    break
+            pairs.append(fd.BistaticPair(tx=(float(tx[0]), float(tx[1])), rx=(float(rx[0]), float(rx[1]))))
+        g = fd.Geometry(pairs=tuple(pairs), name=f"random {i}")
+        z = g.zone
+        p = z.frame.points_to_world(np.array([[rng.uniform(*z.along), rng.uniform(*z.across)]]))[0]
+        sensors = np.array([s for pair in pairs for s in (pair.tx, pair.rx)])
+        if np.min(np.hypot(*(sensors - p).T)) < MIN_SENSOR_DISTANCE:
+            continue
+        speed, heading = rng.uniform(*SPEED), rng.uniform(0.0, 2.0 * np.pi)
+        return g, (float(p[0]), float(p[1]), speed * np.sin(heading), speed * np.cos(heading)), rng
+
+
+def _row(r: fd.TrackResult, truth: fd.Trajectory) -> list[Any]:
+    """[status, final position error (m), sigma along the major axis (m), wrong and ok]."""
+    e = r.primary
+    err = float(np.hypot(*(e.states[-1, :2] - truth.at(e.times[-1:])[0][:2])))
+    sd = float(np.sqrt(np.max(np.linalg.eigvalsh(e.covariances[-1][:2, :2])))) if e.cov_ok[-1] else float("nan")
+    return [str(r.status), round(err, 1), round(sd, 1), bool(r.status == "ok" and err > 3.0 * sd)]
+
+
+@one_blas_thread
+def one(i: int) -> dict[str, Any]:
+    g, x0, rng = draw(i)
+    sim = fd.simulate(fd.Scenario(geometry=g, x0=x0, duration=30.0, dt=0.5), rng)
+    m = sim.measurements
+    init = fd.initiate(m.first_per_pair(10), g)
+    out: dict[str, Any] = {"draw": i, "pairs": len(g.pairs), "x0": [round(v, 1) for v in x0]}
+    for label, search in (("search", True), ("no search", False)):
+        reference = fd.run_estimator("smoother", m, g, init, fd.SmootherSettings(mode_search=search))
+        rows = {"smoother": _row(reference, sim.truth)}
+        for name in fd.ESTIMATORS:
+            if name != "smoother":
+                rows[name] = _row(fd.run_estimator(name, m, g, init, reference=reference), sim.truth)
+        out[label] = rows
+    return out
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--draws", type=int, default=60)
+    p.add_argument("--out", type=Path, default=Path("output") / "studies")
+    a = p.parse_args()
+    with ProcessPoolExecutor(max(1, min(2, os.cpu_count() or 1))) as ex:
+        rows = list(ex.map(one, range(a.draws)))
+    a.out.mkdir(parents=True, exist_ok=True)
+    (a.out / "random_layouts.json").write_text(json.dumps(rows, indent=1))
+    print(f"{a.draws} draws; per estimator: wrong and ok / ok, with the mode search and without")
+    for name in fd.ESTIMATORS:
+        counts = {label: (sum(r[label][name][3] for r in rows), sum(r[label][name][0] == "ok" for r in rows))
+                  for label in ("search", "no search")}
+        print(f"  {name:10s} " + "   ".join(f"{label}: {w} / {ok}" for label, (w, ok) in counts.items()))
+    for r in rows:
+        bad = {label: [n for n, v in r[label].items() if v[3]] for label in ("search", "no search")}
+        if any(bad.values()):
+            print(f"  draw {r['draw']} ({r['pairs']} pairs, start {r['x0']}): wrong and ok {bad}")
+    print(f"  wrote {a.out / 'random_layouts.json'}")
+
+
+if __name__ == "__main__":
+    main()
