@@ -67,3 +67,17 @@ def each_run(one_run: Callable[[tuple[int, int, int]], Any], prog: str, out: str
     tasks = [(s, r, args.seed) for s in range(len(fd.paper_scenarios())) for r in range(args.runs)]
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
         return args, list(pool.map(one_run, tasks, chunksize=chunksize))
+
+
+def each_count(one: Callable[[int], Any], description: str, name: str, default: int
+               ) -> tuple[argparse.Namespace, list[Any]]:
+    """Parse ``--<name> N --out DIR`` and map ``one`` over ``range(N)`` on up to two processes.
+
+    Returns the parsed options (``DIR`` default ``output/studies``) and ``one``'s results in order.
+    """
+    p = argparse.ArgumentParser(description=description)
+    p.add_argument(f"--{name}", type=int, default=default)
+    p.add_argument("--out", type=Path, default=Path("output") / "studies")
+    args = p.parse_args()
+    with ProcessPoolExecutor(max(1, min(2, os.cpu_count() or 1))) as pool:
+        return args, list(pool.map(one, range(getattr(args, name))))

@@ -20,14 +20,10 @@ Run: ``python studies/random_layouts.py [--draws 60] [--out DIR]`` (about 20 min
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
-from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 from typing import Any
 
-import _common  # noqa: F401  (the repository root on the path, for the benchmarks)
+import _common  # the repository root on the path, and the runner
 import numpy as np
 
 import fgdoppler as fd
@@ -87,12 +83,7 @@ def one(i: int) -> dict[str, Any]:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--draws", type=int, default=60)
-    p.add_argument("--out", type=Path, default=Path("output") / "studies")
-    a = p.parse_args()
-    with ProcessPoolExecutor(max(1, min(2, os.cpu_count() or 1))) as ex:
-        rows = list(ex.map(one, range(a.draws)))
+    a, rows = _common.each_count(one, __doc__.splitlines()[0], "draws", 60)
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "random_layouts.json").write_text(json.dumps(rows, indent=1))
     print(f"{a.draws} draws; per estimator: wrong and ok / ok, with the mode search and without")

@@ -16,14 +16,10 @@ Run: ``python studies/slow_track_check.py [--recordings 30] [--out DIR]`` (about
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
-from pathlib import Path
 
-import _common  # noqa: F401  (the repository root on the path, for the benchmarks)
+import _common  # the repository root on the path, and the runner
 import numpy as np
 
 import fgdoppler as fd
@@ -53,12 +49,7 @@ def one(seed: int) -> dict[str, float]:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--recordings", type=int, default=30)
-    p.add_argument("--out", type=Path, default=Path("output") / "studies")
-    a = p.parse_args()
-    with ProcessPoolExecutor(max(1, min(2, os.cpu_count() or 1))) as ex:
-        rows = list(ex.map(one, range(a.recordings)))
+    a, rows = _common.each_count(one, __doc__.splitlines()[0], "recordings", 30)
     for r in rows:
         print(f"recording {r['seed']:3d}: RMSE {r['no restarts']:8.0f} m without restarts, {r['restarts']:8.0f} m "
               f"with ({r['fired']} fired)")
