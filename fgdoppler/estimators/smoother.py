@@ -51,7 +51,7 @@ from fgdoppler.estimators.local import in_computation_frame
 from fgdoppler.estimators.marginals import chain_solve, check_covariances
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import SmootherSettings
-from fgdoppler.estimators.spread import posterior_spread
+from fgdoppler.estimators.spread import MAX_SPAN, posterior_spread
 from fgdoppler.estimators.verdict import Event, Judged, Reason
 from fgdoppler.factors import X
 from fgdoppler.measurements import Measurements, Scans
@@ -506,10 +506,15 @@ def _modes_2d(measurements: Measurements, model: TrackingModel, settings: Smooth
     modes the data cannot tell apart the initiation's stays, and the
     verdict says so); and another solution is a rival — a ``competing``
     finding, ``doubtful`` — by the rule of :func:`_restarts_3d`.  A half
-    plane given to the initiation binds the search too.
+    plane given to the initiation binds the search too.  Recordings longer
+    than :data:`~fgdoppler.estimators.spread.MAX_SPAN` are not searched:
+    the search fits deterministic constant-velocity tracks, which a track
+    with process noise leaves over a long recording (and each fit would
+    cost a pass over every measurement).
     """
     zone = model.zone
-    if model.dim != 2 or zone is None or not isinstance(model.observation, DopplerModel):
+    if model.dim != 2 or zone is None or not isinstance(model.observation, DopplerModel) \
+            or float(sol.times[-1] - sol.times[0]) > MAX_SPAN:
         return sol, [], []
     starts = _recording_starts(measurements, model, settings, progress, per_pair=MODES_PER_PAIR,
                                half_plane=half_plane)

@@ -141,3 +141,25 @@ def test_the_mode_search_keeps_to_the_half_plane_the_user_gave() -> None:
     both = fd.initiate(m.first_per_pair(20), g)
     free = fd.run_estimator("smoother", m, g, both, fd.SmootherSettings(mode_search=True))
     assert free.status != "ok"  # the mirror image: reported, whichever side the track is on
+
+
+def test_recordings_longer_than_the_sampled_span_are_not_searched(monkeypatch) -> None:
+    # Over more than spread.MAX_SPAN (300 s) a deterministic constant-velocity fit of the whole recording
+    # no longer describes a track with process noise: the search is not run there (and on a 30 s one it is).
+    import fgdoppler.estimators.smoother as smoother
+
+    calls: list[int] = []
+    real = smoother._recording_starts
+
+    def counting(*args, **kwargs):  # type: ignore[no-untyped-def]
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(smoother, "_recording_starts", counting)
+    scen = fd.paper_scenarios()[3]  # case b 5 km, well observed
+    for duration, searched in ((30.0, True), (smoother.MAX_SPAN + 10.0, False)):
+        calls.clear()
+        m = fd.simulate(fd.Scenario(geometry=scen.geometry, x0=scen.x0, duration=duration, dt=scen.dt),
+                        np.random.default_rng(0)).measurements
+        fd.run_estimator("smoother", m, scen.geometry, fd.initiate(m.first_per_pair(10), scen.geometry))
+        assert bool(calls) is searched, duration
