@@ -7,6 +7,7 @@ import os
 import sys
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -69,15 +70,20 @@ def each_run(one_run: Callable[[tuple[int, int, int]], Any], prog: str, out: str
         return args, list(pool.map(one_run, tasks, chunksize=chunksize))
 
 
-def each_count(one: Callable[[int], Any], description: str, name: str, default: int
-               ) -> tuple[argparse.Namespace, list[Any]]:
+def each_count(one: Callable[..., Any], description: str, name: str, default: int,
+               options: dict[str, float] | None = None) -> tuple[argparse.Namespace, list[Any]]:
     """Parse ``--<name> N --out DIR`` and map ``one`` over ``range(N)`` on up to two processes.
 
-    Returns the parsed options (``DIR`` default ``output/studies``) and ``one``'s results in order.
+    Each of ``options`` (name: default) is a float option ``--<name>`` (``_`` spelt ``-``), passed to
+    ``one`` as a keyword argument.  Returns the parsed options (``DIR`` default ``output/studies``) and
+    ``one``'s results in order.
     """
     p = argparse.ArgumentParser(description=description)
     p.add_argument(f"--{name}", type=int, default=default)
+    for option, value in (options or {}).items():
+        p.add_argument(f"--{option.replace('_', '-')}", dest=option, type=float, default=value)
     p.add_argument("--out", type=Path, default=Path("output") / "studies")
     args = p.parse_args()
+    task = partial(one, **{option: getattr(args, option) for option in options or {}})
     with ProcessPoolExecutor(max(1, min(2, os.cpu_count() or 1))) as pool:
-        return args, list(pool.map(one, range(getattr(args, name))))
+        return args, list(pool.map(task, range(getattr(args, name))))
