@@ -663,11 +663,11 @@ def _rival_reason(found: list[SmootherSolution], best: SmootherSolution, zone: Z
     has_cov = _sigma_along(best, np.eye(k)[0]) > 0.0
     rivals = []
     for s in found:
+        if not _apart(best, s):
+            continue
         d_vec = s.states[-1, :k] - end
         d = float(np.linalg.norm(d_vec))
-        sd = _sigma_along(best, d_vec / d) if d > 0 else 0.0
-        if d <= max(50.0, 3.0 * sd):
-            continue
+        sd = _sigma_along(best, d_vec / d)
         if floor is not None and float(np.min(zone.frame.states_to_local(s.states)[:, 2])) < floor - max(50.0, 3.0 * sd):
             continue
         delta = s.cost - best.cost
