@@ -70,10 +70,10 @@ __all__ = ["SmootherSolution", "initial_trajectory", "rts_smooth", "run_smoother
 FloatArray = NDArray[np.float64]
 
 REINITIATE_PER_PAIR = 64
+"""Measurements per pair the re-initiation's grid scores (evenly spread over the recording)."""
 #: Measurements per pair the grid of the 2-D whole-recording mode search scores (:func:`_modes_2d`), as the
 #: trackers' restart checks (:data:`fgdoppler.estimators.restart.PER_PAIR`).
 MODES_PER_PAIR = 16
-"""Measurements per pair the re-initiation's grid scores (evenly spread over the recording)."""
 
 
 @dataclass(frozen=True, kw_only=True)
