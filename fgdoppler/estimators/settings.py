@@ -361,7 +361,8 @@ class SmootherSettings(TrackerSettings):
         initiation (:class:`~fgdoppler.estimators.initiation.InitiationSettings`):
         a steep wall (``wall_sigma``) keeps it inside.  When the wall holds
         the start and the data prefer one outside, the verdict says so
-        (``boundary``).  Without it, a poorly observed recording can settle
+        (``boundary``; with ``mode_search`` the modes beyond the wall are
+        searched, not only the held track's basin).  Without it, a poorly observed recording can settle
         in a second likelihood mode that starts outside the zone, 10-14 km
         from the truth (case a 5 km and case b 45 km: 2-5 runs in 100).
     wall_sigma : tuple of float, default (10.0, 0.1)
@@ -383,8 +384,11 @@ class SmootherSettings(TrackerSettings):
     mode_search : bool, default True
         2-D: initiate the whole recording again (multi-start), smooth from
         each of its solutions, keep the lowest cost and report a rival track
-        that explains the data about as well (``competing``); 3-D always
-        searches its altitude levels and the whole recording.
+        that explains the data about as well (``competing``); and where the
+        zone wall holds the track, search beyond it as well (the window's and
+        the whole recording's initiation over the zone widened where the
+        wall holds) before the ``boundary`` test.  3-D always searches its
+        altitude levels and the whole recording.
     """
 
     max_iterations: int = 100
