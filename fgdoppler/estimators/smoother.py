@@ -53,7 +53,6 @@ from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.estimators.spread import MAX_SPAN, posterior_spread
 from fgdoppler.estimators.verdict import Event, Judged, Reason
-from fgdoppler.estimators.window import split_window
 from fgdoppler.factors import X
 from fgdoppler.measurements import Measurements, Scans
 from fgdoppler.models.motion import ConstantVelocity
@@ -78,7 +77,8 @@ MODES_PER_PAIR = 16
 #: Grid candidates the 2-D whole-recording mode search refines (the initiation's ``k_best``; 5 by default).
 #: Over a whole recording the modes are narrow and the grid's cost at a node near one can rank below
 #: nodes of broader, worse basins: on two random layouts (docs/concepts.md, "Modes of the whole
-#: recording") the truth's mode, 12 and 20 lower in cost, was first found at 10 and at 20.
+#: recording") the truth's mode, 12 and 21 lower in cost, was first found at 10 and at 20 (the second
+#: over the zone widened beyond its wall, :func:`_beyond_wall_2d`).
 MODES_K_BEST = 20
 #: How far the search behind a zone wall that holds the track (:func:`_beyond_wall_2d`) widens the bound.
 WIDEN = 1.5
@@ -368,8 +368,8 @@ def _boundary_reasons(prob: _Problem, x: FloatArray, max_iterations: int) -> lis
     As in the initiation: the solution is re-solved without the wall from
     where it stopped; ``"doubtful"`` when that lowers the objective by more
     than the χ²₁ 95 % quantile (the data prefer a start outside the zone),
-    informational otherwise.  In 2-D the whole recording is also searched
-    beyond the wall (:func:`_beyond_wall_2d`).
+    informational otherwise.  In 2-D :func:`run_smoother` also searches the
+    data's modes beyond the wall (:func:`_beyond_wall_2d`).
     """
     if prob.wall_cost(x) == 0.0:
         return []
@@ -827,7 +827,7 @@ def run_smoother(
     notes += more_notes
     reasons = list(sol.reasons) + mode_reasons
     if settings.mode_search:
-        beyond = _beyond_wall_2d(measurements, model, settings, sol, split_window(measurements, init.t_end)[0],
+        beyond = _beyond_wall_2d(measurements, model, settings, sol, measurements.between(init.t_start, init.t_end),
                                  progress, half_plane=init.half_plane)
         if beyond is not None:
             reasons = [beyond if r.code == "boundary" else r for r in reasons]
