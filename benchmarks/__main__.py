@@ -12,13 +12,15 @@ from benchmarks import (
     bench_ekf,
     bench_grid,
     bench_long,
+    bench_mode_search,
     bench_montecarlo,
     bench_particle,
     bench_scaling,
 )
 
 BENCHES = {"grid": bench_grid, "ekf": bench_ekf, "scaling": bench_scaling, "montecarlo": bench_montecarlo,
-           "long": bench_long, "particle": bench_particle, "accuracy": bench_accuracy}
+           "long": bench_long, "particle": bench_particle, "modes": bench_mode_search,
+           "accuracy": bench_accuracy}
 
 
 def main() -> None:

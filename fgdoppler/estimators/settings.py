@@ -389,6 +389,16 @@ class SmootherSettings(TrackerSettings):
         the whole recording's initiation over the zone widened where the
         wall holds) before the ``boundary`` test.  3-D always searches its
         altitude levels and the whole recording.
+    mode_candidates : int, default 20
+        Grid candidates the whole-recording searches of ``mode_search``
+        refine by Levenberg–Marquardt (the initiation's ``k_best``, 5 by
+        default there).  Over a whole recording the modes are narrow, and the
+        grid's cost at a node near one can rank below nodes of broader,
+        worse basins: on two random layouts (docs/concepts.md, "Modes of the
+        whole recording") the truth's mode, 12 and 21 lower in cost, was
+        first found with 10 and with 20 (the second beyond the zone wall).
+        Measured: 0.05-0.13 s more per smoother run on the paper's recordings
+        with 20 than with 5 (``python -m benchmarks --only modes``).
     """
 
     max_iterations: int = 100
@@ -399,10 +409,12 @@ class SmootherSettings(TrackerSettings):
     sampled_covariance: bool = True
     posterior_mean: bool = True
     mode_search: bool = True
+    mode_candidates: int = 20
 
     def __post_init__(self) -> None:
         super().__post_init__()
         _count(self.max_iterations, "max_iterations")
+        _count(self.mode_candidates, "mode_candidates")
         _flag(self.sampled_covariance, "sampled_covariance")
         _flag(self.posterior_mean, "posterior_mean")
         _flag(self.mode_search, "mode_search")

@@ -74,12 +74,6 @@ REINITIATE_PER_PAIR = 64
 #: Measurements per pair the grid of the 2-D whole-recording mode search scores (:func:`_modes_2d`), as the
 #: trackers' restart checks (:data:`fgdoppler.estimators.restart.PER_PAIR`).
 MODES_PER_PAIR = 16
-#: Grid candidates the 2-D whole-recording mode search refines (the initiation's ``k_best``; 5 by default).
-#: Over a whole recording the modes are narrow and the grid's cost at a node near one can rank below
-#: nodes of broader, worse basins: on two random layouts (docs/concepts.md, "Modes of the whole
-#: recording") the truth's mode, 12 and 21 lower in cost, was first found at 10 and at 20 (the second
-#: over the zone widened beyond its wall, :func:`_beyond_wall_2d`).
-MODES_K_BEST = 20
 #: How far the search behind a zone wall that holds the track (:func:`_beyond_wall_2d`) widens the bound.
 WIDEN = 1.5
 
@@ -456,7 +450,7 @@ def _beyond_wall_2d(measurements: Measurements, model: TrackingModel, settings: 
         pass
     try:
         starts += _recording_starts(measurements, wide, settings, progress, per_pair=MODES_PER_PAIR,
-                                    half_plane=half_plane, k_best=MODES_K_BEST)
+                                    half_plane=half_plane, k_best=settings.mode_candidates)
     except ValueError:
         pass
     free = _smooth_from(measurements, model, replace(settings, region_bound=False, covariances=False), starts,
@@ -604,7 +598,7 @@ def _modes_2d(measurements: Measurements, model: TrackingModel, settings: Smooth
             or float(sol.times[-1] - sol.times[0]) > MAX_SPAN:
         return sol, [], []
     starts = _recording_starts(measurements, model, settings, progress, per_pair=MODES_PER_PAIR,
-                               half_plane=half_plane, k_best=MODES_K_BEST)
+                               half_plane=half_plane, k_best=settings.mode_candidates)
     if sol.covariances is not None and np.all(np.isfinite(sol.covariances[0])):
         limit = float(chi2.ppf(0.999, model.n))
         P0 = sol.covariances[0]

@@ -200,17 +200,15 @@ def test_a_mode_beyond_the_speed_bound_is_found_by_the_boundary_check() -> None:
     assert abs(found - 229.2) < 10.0, wall[True].message
 
 
-def test_the_mode_search_refines_enough_candidates_to_find_a_narrow_mode(monkeypatch) -> None:
+def test_the_mode_search_refines_enough_candidates_to_find_a_narrow_mode() -> None:
     # Two long crossing baselines (draw 3 of `studies/random_layouts.py --speed-max 250`).  The whole
     # recording's likelihood has narrow modes tens of kilometres apart; the initiation's window lands in a
     # wrong one and the grid over the whole recording ranks the truth's mode below broader, worse basins:
-    # refining its 5 best candidates (the initiation's default) misses it, 20 (MODES_K_BEST) find it.
+    # refining its 5 best candidates (the initiation's default) misses it, 20 (mode_candidates) find it.
     # Measured over seeds 0-5: without the search 3 tracks were 38 km off with a sigma under 1 km and "ok";
     # with it two of them (seeds 1, 2) moved to the truth's mode (cost 92.76 -> 91.04, 126.68 -> 115.05) and
     # the third is "doubtful" (competing).  Here (seed 1) the wrong mode costs only 1.7 more than the truth's:
     # the data cannot tell them apart, so the answer must say so (competing), whichever it reports.
-    from fgdoppler.estimators import smoother
-
     g = fd.Geometry(pairs=(fd.BistaticPair(tx=(-32247.0, 39368.0), rx=(32083.0, -37472.0)),
                            fd.BistaticPair(tx=(38434.0, 35804.0), rx=(-10088.0, 32700.0))))
     scen = fd.Scenario(geometry=g, x0=(46715.0, 30189.0, 50.2, -140.9), duration=30.0, dt=0.5)
@@ -225,8 +223,7 @@ def test_the_mode_search_refines_enough_candidates_to_find_a_narrow_mode(monkeyp
 
     off = fd.run_estimator("smoother", m, g, init, fd.SmootherSettings(mode_search=False))
     found = fd.run_estimator("smoother", m, g, init)
-    monkeypatch.setattr(smoother, "MODES_K_BEST", 5)
-    few = fd.run_estimator("smoother", m, g, init)
+    few = fd.run_estimator("smoother", m, g, init, fd.SmootherSettings(mode_candidates=5))
     assert off.status == "ok" and wrong(off)  # what the search is for
     assert wrong(few) and few.cost > found.cost  # what the number of candidates is for
     assert not wrong(found) and found.cost < off.cost
