@@ -17,7 +17,8 @@ axis.  Printed: per estimator, the wrong-and-``ok`` count and the ``ok``
 count, with and without the search, and every draw that is wrong and
 ``ok`` either way.
 
-Run: ``python studies/random_layouts.py [--draws 60] [--speed-max 200] [--out DIR]`` (about 20 minutes on 2 cores).
+Run: ``python studies/random_layouts.py [--draws 60] [--first 0] [--speed-max 200] [--out DIR]`` (draws
+``first`` to ``first + draws - 1``; about 20 minutes per 60 draws on 2 cores).
 """
 
 from __future__ import annotations
@@ -70,7 +71,8 @@ def _row(r: fd.TrackResult, truth: fd.Trajectory) -> list[Any]:
 
 
 @one_blas_thread
-def one(i: int, speed_max: float = 200.0) -> dict[str, Any]:
+def one(k: int, speed_max: float = 200.0, first: float = 0.0) -> dict[str, Any]:
+    i = k + int(first)
     g, x0, rng = draw(i, speed_max)
     sim = fd.simulate(fd.Scenario(geometry=g, x0=x0, duration=30.0, dt=0.5), rng)
     m = sim.measurements
@@ -90,7 +92,7 @@ def one(i: int, speed_max: float = 200.0) -> dict[str, Any]:
 
 
 def main() -> None:
-    a, all_rows = _common.each_count(one, __doc__.splitlines()[0], "draws", 60, {"speed_max": 200.0})
+    a, all_rows = _common.each_count(one, __doc__.splitlines()[0], "draws", 60, {"speed_max": 200.0, "first": 0.0})
     rows = [r for r in all_rows if "refused" not in r]
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "random_layouts.json").write_text(json.dumps(all_rows, indent=1))
