@@ -423,8 +423,9 @@ def _beyond_wall_2d(measurements: Measurements, model: TrackingModel, settings: 
     starts outside the bound, fits the data better by 19.  So both
     initiations are run again over the zone widened where the wall holds
     (:func:`_widened`) — the initiation window's (``window``: what the user
-    would get with the wider zone; it finds that mode) and the whole
-    recording's (:func:`_recording_starts`) — the smoother runs without the
+    would get with the wider zone; it finds that mode on the study's draw)
+    and the whole recording's (:func:`_recording_starts`; it finds it on
+    another seed of that layout, where the window's does not) — the smoother runs without the
     wall from each of their solutions (their constant-velocity tracks) and
     from the held track, and the lowest cost :math:`c_f` found is tested
     against the held track's cost without the wall :math:`c_h`:
