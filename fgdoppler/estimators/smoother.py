@@ -437,8 +437,7 @@ def _beyond_wall_2d(measurements: Measurements, model: TrackingModel, settings: 
     from fgdoppler.estimators.initiation import InitiationSettings, initiate
 
     zone = model.zone
-    if model.dim != 2 or zone is None or not settings.region_bound \
-            or not isinstance(model.observation, DopplerModel) or float(sol.times[-1] - sol.times[0]) > MAX_SPAN \
+    if zone is None or not settings.region_bound or not _searchable_2d(model, sol) \
             or not any(r.code == "boundary" for r in sol.reasons):
         return None
     wide = model.with_zone(_widened(zone, sol.states[0]))
@@ -566,6 +565,13 @@ def _smooth_from(measurements: Measurements, model: TrackingModel, settings: Smo
     return out
 
 
+def _searchable_2d(model: TrackingModel, sol: SmootherSolution) -> bool:
+    """Whether the 2-D whole-recording searches apply: a 2-D Doppler model with a zone, a recording no longer
+    than :data:`~fgdoppler.estimators.spread.MAX_SPAN` (:func:`_modes_2d` says why)."""
+    return model.dim == 2 and model.zone is not None and isinstance(model.observation, DopplerModel) \
+        and float(sol.times[-1] - sol.times[0]) <= MAX_SPAN
+
+
 def _modes_2d(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
               sol: SmootherSolution, progress: Progress | None = None, *, half_plane: HalfPlane | None = None
               ) -> tuple[SmootherSolution, list[str], list[Reason]]:
@@ -595,8 +601,7 @@ def _modes_2d(measurements: Measurements, model: TrackingModel, settings: Smooth
     cost a pass over every measurement).
     """
     zone = model.zone
-    if model.dim != 2 or zone is None or not isinstance(model.observation, DopplerModel) \
-            or float(sol.times[-1] - sol.times[0]) > MAX_SPAN:
+    if zone is None or not _searchable_2d(model, sol):
         return sol, [], []
     starts = _recording_starts(measurements, model, settings, progress, per_pair=MODES_PER_PAIR,
                                half_plane=half_plane, k_best=settings.mode_candidates)
