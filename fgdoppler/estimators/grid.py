@@ -451,7 +451,7 @@ def _chunk_costs(U: FloatArray, c: FloatArray, s2: FloatArray, times: StackedTim
             if huber_k is None:
                 h *= h
             else:
-                h = huber_rho(h, huber_k)
+                huber_rho(h, huber_k, out=h)
             acc += h
     return acc
 

@@ -9,6 +9,7 @@ reproduction all read it.  Every runner has the signature
 
 from __future__ import annotations
 
+import functools
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
@@ -32,6 +33,7 @@ from fgdoppler.estimators.judge import judge
 from fgdoppler.estimators.particle import run_map, run_particle
 from fgdoppler.estimators.restart import with_restarts
 from fgdoppler.estimators.results import TrackResult
+from fgdoppler.estimators.search_memo import SearchMemo
 from fgdoppler.estimators.settings import (
     EKFSettings,
     FixedLagSettings,
@@ -223,7 +225,10 @@ def _solve(info: EstimatorInfo, measurements: Measurements, model: TrackingModel
            weights: NDArray[np.float64] | None = None) -> TrackResult:
     if len(hyps) == 1:
         return info.run(measurements, model, hyps[0], settings, progress=progress)
-    return resolve(info.run, info.resolution, measurements, model, hyps, settings, progress, weights)
+    run = info.run
+    if info.resolution == "cost":  # the smoother: its whole-recording searches are the same for every hypothesis
+        run = functools.partial(run, memo=SearchMemo(measurements))
+    return resolve(run, info.resolution, measurements, model, hyps, settings, progress, weights)
 
 
 def _with_sampled_covariances(result: TrackResult, measurements: Measurements, model: TrackingModel,

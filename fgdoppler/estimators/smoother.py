@@ -50,6 +50,7 @@ from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
 from fgdoppler.estimators.local import in_computation_frame
 from fgdoppler.estimators.marginals import chain_solve, check_covariances
 from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.search_memo import SearchMemo
 from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.estimators.spread import MAX_SPAN, posterior_spread
 from fgdoppler.estimators.verdict import Event, Judged, Reason
@@ -411,7 +412,7 @@ def _widened(zone: Zone, x0: FloatArray) -> Zone:
 
 def _beyond_wall_2d(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
                     sol: SmootherSolution, window: Measurements, progress: Progress | None = None, *,
-                    half_plane: HalfPlane | None = None) -> Reason | None:
+                    half_plane: HalfPlane | None = None, memo: SearchMemo | None = None) -> Reason | None:
     r"""2-D: the ``boundary`` test of a track held by the zone wall, against the data's modes beyond the wall.
 
     The test in :func:`solve_smoother` releases the wall from where the
@@ -432,7 +433,8 @@ def _beyond_wall_2d(measurements: Measurements, model: TrackingModel, settings: 
     ``"doubtful"`` when :math:`c_h - c_f > \chi^2_{1,0.95}`.  The track
     itself stays: the zone is the user's, and the finding tells them to
     widen it.  ``None`` where the wall does not hold or the search does
-    not apply (as :func:`_modes_2d`).
+    not apply (as :func:`_modes_2d`).  A ``memo`` runs each search once for
+    all of a call's hypotheses.
     """
     from fgdoppler.estimators.initiation import InitiationSettings, initiate
 
@@ -441,25 +443,31 @@ def _beyond_wall_2d(measurements: Measurements, model: TrackingModel, settings: 
             or not any(r.code == "boundary" for r in sol.reasons):
         return None
     wide = model.with_zone(_widened(zone, sol.states[0]))
-    starts = [sol.states]
-    try:
-        again = initiate(window, wide, InitiationSettings(huber_k=settings.huber_k, half_plane=half_plane))
-        starts += [model.motion.propagate(x, sol.times - again.t_start)
-                   for x in (again.x_start, *(a.state for a in again.alternatives))]
-    except ValueError:
-        pass
+    assert wide.zone is not None
+
+    def window_starts() -> list[FloatArray]:
+        try:
+            again = initiate(window, wide, InitiationSettings(huber_k=settings.huber_k, half_plane=half_plane))
+        except ValueError:
+            return []
+        return [model.motion.propagate(x, sol.times - again.t_start)
+                for x in (again.x_start, *(a.state for a in again.alternatives))]
+
+    w = wide.zone
+    key = ("window", window.time.tobytes(), window.pair.tobytes(), half_plane, settings.huber_k,
+           (w.along, w.across, w.altitude, w.speed_max))
+    starts = [sol.states, *(window_starts() if memo is None else memo.starts(measurements, key, window_starts))]
     try:
         starts += _recording_starts(measurements, wide, settings, progress, per_pair=MODES_PER_PAIR,
-                                    half_plane=half_plane, k_best=settings.mode_candidates)
+                                    half_plane=half_plane, k_best=settings.mode_candidates, memo=memo)
     except ValueError:
         pass
     free = _smooth_from(measurements, model, replace(settings, region_bound=False, covariances=False), starts,
-                        progress)
+                        progress, memo)
     if not free:
         return None
     best = min(free, key=lambda s: s.cost)
     inside = _Problem(model, measurements, settings.huber_k, model.prior(), sol.times).data_cost(sol.states)
-    assert wide.zone is not None
     searched = (f" (searched to {wide.zone.speed_max:.0f} m/s, along {wide.zone.along[0] / 1e3:.1f} to "
                 f"{wide.zone.along[1] / 1e3:.1f} km, across {wide.zone.across[0] / 1e3:.1f} to "
                 f"{wide.zone.across[1] / 1e3:.1f} km)")
@@ -515,19 +523,21 @@ def initial_trajectory(measurements: Measurements, model: TrackingModel, init: I
 
 
 def _reinitiate(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
-                progress: Progress | None = None, per_pair: int = REINITIATE_PER_PAIR) -> SmootherSolution | None:
+                progress: Progress | None = None, per_pair: int = REINITIATE_PER_PAIR,
+                memo: SearchMemo | None = None) -> SmootherSolution | None:
     """Multi-start deterministic-CV ML over the whole recording, then the full smoother from its best solution.
 
     The grid scores ``per_pair`` measurements of each pair, evenly spread over the recording.
     """
-    starts = _recording_starts(measurements, model, settings, progress, per_pair=per_pair)
-    found = _smooth_from(measurements, model, settings, starts[:1], progress)
+    starts = _recording_starts(measurements, model, settings, progress, per_pair=per_pair, memo=memo)
+    found = _smooth_from(measurements, model, settings, starts[:1], progress, memo)
     return found[0] if found else None
 
 
 def _recording_starts(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
                       progress: Progress | None = None, *, per_pair: int,
-                      half_plane: HalfPlane | None = None, k_best: int = 5) -> list[FloatArray]:
+                      half_plane: HalfPlane | None = None, k_best: int = 5,
+                      memo: SearchMemo | None = None) -> list[FloatArray]:
     """Start trajectories of the multi-start initiation of the whole recording: its best solution first, then
     its alternatives, each the constant-velocity track of the solution at every scan time.
 
@@ -535,7 +545,14 @@ def _recording_starts(measurements: Measurements, model: TrackingModel, settings
     the recording; Levenberg–Marquardt refines its ``k_best`` best distinct
     candidates on every measurement (deterministic constant velocity).
     ``half_plane`` (the initiation's) binds them to the side the user gave.
+    A ``memo`` runs each search once for all of a call's hypotheses.
     """
+    if memo is not None:
+        zone = model.zone
+        key = ("starts", per_pair, k_best, half_plane, settings.huber_k,
+               None if zone is None else (zone.along, zone.across, zone.altitude, zone.speed_max))
+        return list(memo.starts(measurements, key, lambda: _recording_starts(
+            measurements, model, settings, progress, per_pair=per_pair, half_plane=half_plane, k_best=k_best)))
     from fgdoppler.estimators.initiation import InitiationSettings, initiate, window_grid
 
     init_settings = InitiationSettings(window="cv", huber_k=settings.huber_k, half_plane=half_plane, k_best=k_best)
@@ -552,16 +569,28 @@ def _recording_starts(measurements: Measurements, model: TrackingModel, settings
 
 
 def _smooth_from(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
-                 starts: list[FloatArray], progress: Progress | None = None) -> list[SmootherSolution]:
-    """The smoother from each start trajectory (those it cannot start from are left out)."""
+                 starts: list[FloatArray], progress: Progress | None = None, memo: SearchMemo | None = None
+                 ) -> list[SmootherSolution]:
+    """The smoother from each start trajectory (those it cannot start from are left out).
+
+    A ``memo`` solves from each start once for all of a call's hypotheses.
+    """
     out = []
     for i, x0 in enumerate(starts):
         name = "re-initiated" if len(starts) == 1 else f"re-initiated {i + 1}/{len(starts)}"
-        try:
-            out.append(solve_smoother(measurements, model, x0, settings, prior=model.prior(),
-                                      progress=prefixed(progress, name)))
-        except ValueError:
-            continue
+
+        def solve(x0: FloatArray = x0, name: str = name) -> SmootherSolution | None:
+            try:
+                return solve_smoother(measurements, model, x0, settings, prior=model.prior(),
+                                      progress=prefixed(progress, name))
+            except ValueError:
+                return None
+
+        x0 = np.asarray(x0, dtype=float)
+        sol = solve() if memo is None else memo.solution(measurements, ("solution", x0.shape, x0.tobytes(), settings),
+                                                          solve)
+        if sol is not None:
+            out.append(sol)
     return out
 
 
@@ -573,8 +602,8 @@ def _searchable_2d(model: TrackingModel, sol: SmootherSolution) -> bool:
 
 
 def _modes_2d(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
-              sol: SmootherSolution, progress: Progress | None = None, *, half_plane: HalfPlane | None = None
-              ) -> tuple[SmootherSolution, list[str], list[Reason]]:
+              sol: SmootherSolution, progress: Progress | None = None, *, half_plane: HalfPlane | None = None,
+              memo: SearchMemo | None = None) -> tuple[SmootherSolution, list[str], list[Reason]]:
     r"""2-D: smooth again from each other mode of a multi-start over the whole recording; report rivals.
 
     The initiation sees a few seconds of data, whose likelihood can hold
@@ -604,7 +633,7 @@ def _modes_2d(measurements: Measurements, model: TrackingModel, settings: Smooth
     if zone is None or not _searchable_2d(model, sol):
         return sol, [], []
     starts = _recording_starts(measurements, model, settings, progress, per_pair=MODES_PER_PAIR,
-                               half_plane=half_plane, k_best=settings.mode_candidates)
+                               half_plane=half_plane, k_best=settings.mode_candidates, memo=memo)
     if sol.covariances is not None and np.all(np.isfinite(sol.covariances[0])):
         limit = float(chi2.ppf(0.999, model.n))
         P0 = sol.covariances[0]
@@ -613,7 +642,7 @@ def _modes_2d(measurements: Measurements, model: TrackingModel, settings: Smooth
                       > limit]
         except np.linalg.LinAlgError:
             pass
-    found = [sol, *_smooth_from(measurements, model, settings, starts, progress)]
+    found = [sol, *_smooth_from(measurements, model, settings, starts, progress, memo)]
     from fgdoppler.estimators.ambiguity import COMPETING
 
     return _best_and_rival(found, sol, zone, margin=COMPETING)
@@ -655,7 +684,7 @@ def _apart(a: SmootherSolution, b: SmootherSolution) -> bool:
 
 
 def _restarts_3d(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
-                 sol: SmootherSolution, progress: Progress | None = None
+                 sol: SmootherSolution, progress: Progress | None = None, memo: SearchMemo | None = None
                  ) -> tuple[SmootherSolution, list[str], list[Reason]]:
     r"""3-D only: smooth again from other starts, keep the lowest cost, and report rival solutions.
 
@@ -686,11 +715,12 @@ def _restarts_3d(measurements: Measurements, model: TrackingModel, settings: Smo
     zone = model.zone
     if model.dim != 3 or zone is None or zone.altitude is None:
         return sol, [], []
-    return _best_and_rival(_restart_solutions(measurements, model, settings, sol, zone, progress), sol, zone)
+    return _best_and_rival(_restart_solutions(measurements, model, settings, sol, zone, progress, memo), sol, zone)
 
 
 def _restart_solutions(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
-                       sol: SmootherSolution, zone: Zone, progress: Progress | None) -> list[SmootherSolution]:
+                       sol: SmootherSolution, zone: Zone, progress: Progress | None,
+                       memo: SearchMemo | None = None) -> list[SmootherSolution]:
     """``sol`` and the smoother's solutions from level flight at each grid altitude and from a global multi-start."""
     from fgdoppler.estimators.grid import GridSpec
 
@@ -708,7 +738,7 @@ def _restart_solutions(measurements: Measurements, model: TrackingModel, setting
     if isinstance(model.observation, DopplerModel):
         # the grid only has to find the basins: a quarter of the 2-D re-initiation's measurements keeps the
         # 3-D grid (four altitude levels) at the 2-D one's cost
-        again = _reinitiate(measurements, model, settings, progress, per_pair=REINITIATE_PER_PAIR // 4)
+        again = _reinitiate(measurements, model, settings, progress, per_pair=REINITIATE_PER_PAIR // 4, memo=memo)
         if again is not None:
             found.append(again)
     return found
@@ -785,6 +815,7 @@ def run_smoother(
     settings: SmootherSettings | None = None,
     *,
     progress: Progress | None = None,
+    memo: SearchMemo | None = None,
 ) -> TrackResult:
     """Offline reconstruction of a whole recording (initiation → EKF start → LM) with marginals.
 
@@ -799,7 +830,11 @@ def run_smoother(
     ``competing`` finding; where the zone wall holds the track, the
     ``boundary`` test also looks beyond the wall (:func:`_beyond_wall_2d`).
     In 3-D the altitude levels and the whole recording are searched
-    (:func:`_restarts_3d`).
+    (:func:`_restarts_3d`).  The runs from the hypotheses of an ambiguous
+    initiation share a ``memo`` (:class:`~fgdoppler.estimators.search_memo.SearchMemo`,
+    made by :func:`~fgdoppler.estimators.registry.run_estimator`): each of
+    those searches then runs once, not once per hypothesis, with the same
+    results.
     """
     settings = settings or SmootherSettings()
     t_begin = time.perf_counter()
@@ -813,22 +848,22 @@ def run_smoother(
         # offline, every measurement is available, so initiate again from all of them.
         notes.append(f"cost {sol.cost:.1f} fails the 99.9 % chi-square check ({threshold:.1f}): "
                      "re-initiated from the whole recording")
-        again = _reinitiate(measurements, model, settings, progress)
+        again = _reinitiate(measurements, model, settings, progress, memo=memo)
         if again is not None and again.cost < sol.cost:
             sol = again
             notes += list(again.notes)
     if model.dim == 3:
-        sol, more_notes, mode_reasons = _restarts_3d(measurements, model, settings, sol, progress)
+        sol, more_notes, mode_reasons = _restarts_3d(measurements, model, settings, sol, progress, memo)
     elif settings.mode_search:
         sol, more_notes, mode_reasons = _modes_2d(measurements, model, settings, sol, progress,
-                                                  half_plane=init.half_plane)
+                                                  half_plane=init.half_plane, memo=memo)
     else:
         more_notes, mode_reasons = [], []
     notes += more_notes
     reasons = list(sol.reasons) + mode_reasons
     if settings.mode_search:
         beyond = _beyond_wall_2d(measurements, model, settings, sol, measurements.between(init.t_start, init.t_end),
-                                 progress, half_plane=init.half_plane)
+                                 progress, half_plane=init.half_plane, memo=memo)
         if beyond is not None:
             reasons = [beyond if r.code == "boundary" else r for r in reasons]
     states = list(sol.states)

@@ -26,13 +26,23 @@ __all__ = ["huber_residuals", "huber_rho", "huber_weights"]
 FloatArray = NDArray[np.float64]
 
 
-def huber_rho(r: ArrayLike, k: float | None) -> FloatArray:
-    r"""The Huber loss :math:`\rho(r)` of whitened residuals (the squares without ``k``)."""
+def huber_rho(r: ArrayLike, k: float | None, *, out: FloatArray | None = None) -> FloatArray:
+    r"""The Huber loss of whitened residuals: :math:`\rho(r) = r^2` for :math:`|r| \le k`, else
+    :math:`2k|r| - k^2` (the squares without ``k``).
+
+    ``out`` (which may be ``r`` itself) receives the loss, as numpy's own
+    ``out``: the grid's hot loop takes it without allocating the loss anew.
+    """
     r = np.asarray(r, dtype=float)
     if k is None:
-        return r * r
-    a = np.abs(r)
-    return np.where(a <= k, r * r, 2.0 * k * a - k * k)
+        return np.multiply(r, r, out=out)
+    linear = np.abs(r)
+    beyond = linear > k
+    rho = np.asarray(np.multiply(r, r, out=out))  # a 0-d input gives a scalar, which copyto cannot fill
+    linear *= 2.0 * k
+    linear -= k * k
+    np.copyto(rho, linear, where=beyond)
+    return rho
 
 
 def huber_weights(whitened: ArrayLike, k: float | None) -> FloatArray:

@@ -7,6 +7,7 @@ import pytest
 
 import fgdoppler as fd
 import fgdoppler.estimators.ambiguity as amb
+from fgdoppler.estimators.smoother import MODES_PER_PAIR
 
 
 def _case(s: int, r: int) -> tuple[fd.Measurements, fd.TrackingModel, fd.Initiation]:
@@ -40,3 +41,61 @@ def test_stopped_hypotheses_leave_every_estimate_unchanged(monkeypatch: pytest.M
         np.testing.assert_allclose(a.states, b.states, rtol=0, atol=1e-6)
         np.testing.assert_allclose(a.covariances, b.covariances, rtol=1e-9, atol=1e-6)
     np.testing.assert_array_equal(pruned.hypothesis, full.hypothesis)
+
+
+def test_the_smoothers_of_the_hypotheses_search_the_recording_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Case a 45 km run 1 (two hypotheses): the whole-recording mode search is the same for both.
+
+    Through the registry each whole-recording grid (named here by the
+    measurements it scores) runs once for the two hypotheses' smoothers (a
+    :class:`~fgdoppler.estimators.search_memo.SearchMemo`); resolved without
+    the memo the same grids run, the mode search's once per hypothesis.  The
+    track, its covariances, cost, findings and events are the same to the bit.
+    """
+    import fgdoppler.estimators.initiation as initiation
+    from fgdoppler.estimators.registry import ESTIMATORS, hypotheses_of
+
+    m, model, init = _case(2, 1)
+    settings = fd.SmootherSettings(sampled_covariance=False)
+    hyps, weights = hypotheses_of("smoother", m, model, init, settings)
+    assert len(hyps) == 2
+    grids: list[int] = []
+    counted = initiation.window_grid
+
+    def counting(scored: fd.Measurements, *args: object, **kwargs: object) -> object:
+        grids.append(len(scored))
+        return counted(scored, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(initiation, "window_grid", counting)
+    shared = fd.run_estimator("smoother", m, model, init, settings, verify=False)
+    with_memo = sorted(grids)
+    grids.clear()
+    alone = amb.resolve(ESTIMATORS["smoother"].run, "cost", m, model, hyps, settings, None, weights)
+    assert with_memo and with_memo == sorted(set(grids)) and len(grids) > len(with_memo)
+    assert grids.count(2 * MODES_PER_PAIR) == 2  # the mode search's grid, two pairs: once per hypothesis
+    a, b = shared.primary, alone.primary
+    np.testing.assert_array_equal(a.states, b.states)
+    np.testing.assert_array_equal(a.covariances, b.covariances)
+    assert shared.cost == alone.cost
+    assert [(r.code, r.status, r.message) for r in shared.reasons if r.code != "chi2"] == \
+        [(r.code, r.status, r.message) for r in alone.reasons]
+    assert [e.message for e in shared.events] == [e.message for e in alone.events]
+
+
+def test_a_search_memo_serves_one_recording() -> None:
+    from fgdoppler.estimators.search_memo import SearchMemo
+
+    m, _, _ = _case(2, 1)
+    memo = SearchMemo(m)
+    calls: list[str] = []
+
+    def search(name: str) -> list[np.ndarray]:
+        calls.append(name)
+        return [np.full(4, len(calls), dtype=float)]
+
+    first = memo.starts(m, "k", lambda: search("first"))
+    again = memo.starts(m, "k", lambda: search("again"))
+    other = memo.starts(m, "other", lambda: search("other"))
+    assert calls == ["first", "other"] and again is first and other[0][0] == 2.0
+    with pytest.raises(ValueError, match="one recording"):
+        memo.starts(m.first_per_pair(10), "k", list)

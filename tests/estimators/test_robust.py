@@ -25,6 +25,22 @@ def test_the_three_forms_of_the_loss_agree() -> None:
     assert np.array_equal(huber_rho(r, None), r * r) and np.all(huber_weights(r, None) == 1.0)
 
 
+def test_the_loss_in_place_is_the_loss() -> None:
+    # the grid's hot loop writes the loss over the residuals (out=r): the same numbers, to the bit, as a fresh
+    # array and as the definition, at the kink, at zero and for non-finite residuals
+    k = 1.345
+    r = np.concatenate([np.linspace(-20.0, 20.0, 4001), [k, -k, 0.0, -0.0, np.inf, -np.inf, np.nan]])
+    a = np.abs(r)
+    with np.errstate(invalid="ignore"):
+        defined = np.where(a <= k, r * r, 2.0 * k * a - k * k)
+    fresh = huber_rho(r, k)
+    in_place = r.copy()
+    assert huber_rho(in_place, k, out=in_place) is in_place
+    np.testing.assert_array_equal(fresh, defined)
+    np.testing.assert_array_equal(in_place, defined)
+    assert float(huber_rho(3.0, k)) == 2.0 * k * 3.0 - k * k and float(huber_rho(-1.0, k)) == 1.0
+
+
 def _outliers(m: fd.Measurements, rng: np.random.Generator) -> fd.Measurements:
     z = m.doppler.copy()
     idx = rng.choice(len(m), round(0.05 * len(m)), replace=False)
