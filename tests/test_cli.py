@@ -335,6 +335,29 @@ def test_track_most_likely_reports_the_smoothers_mode(tmp_path: Path, capsys: py
     assert "--most-likely applies to the smoother, not to ekf" in captured.err and "geometry" not in captured.out
 
 
+def test_track_mode_candidates_reach_the_smoothers_settings(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                                           ) -> None:
+    """``--mode-candidates N`` sets ``SmootherSettings.mode_candidates``, ``0`` turns the mode search off; the
+    option is refused, before any work, by every other estimator and below 0."""
+    sim = tmp_path / "sim"
+    main(["simulate", "--case", "a", "--start-x", "45000", "--seed", "2", "--out", str(sim)])
+    capsys.readouterr()
+    base = ["track", str(sim / "measurements.csv"), "--geometry", "a", "--estimator", "smoother", "--json"]
+    defaults = fd.SmootherSettings()
+    for extra, search, candidates in (([], defaults.mode_search, defaults.mode_candidates),
+                                      (["--mode-candidates", "0"], False, defaults.mode_candidates),
+                                      (["--mode-candidates", "7"], True, 7)):
+        assert main([*base, *extra]) == 0
+        settings = json.loads(capsys.readouterr().out)["settings"]
+        assert (settings["mode_search"], settings["mode_candidates"]) == (search, candidates)
+    for bad, msg in ((["--estimator", "ekf", "--mode-candidates", "5"], "--mode-candidates applies to the smoother"),
+                     (["--estimator", "smoother", "--mode-candidates", "-1"], "--mode-candidates must be >= 0"),
+                     (["--mode-candidates", "5"], "--mode-candidates applies to the smoother, not to init")):
+        assert main([*base[:-3], *bad]) == 2
+        captured = capsys.readouterr()
+        assert msg in captured.err and "geometry" not in captured.out
+
+
 def test_track_prints_the_closing_event_even_past_the_limit(capsys: pytest.CaptureFixture[str]) -> None:
     """Past ten events the summary shows the first nine, how many it leaves out, and the run's closing one."""
     from fgdoppler.cli.track import _print_events

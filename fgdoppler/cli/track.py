@@ -64,6 +64,9 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--most-likely", action="store_true",
                    help="smoother: always report the most likely track (by default, where the posterior is skewed "
                         "about it, the posterior mean, which is closer to the truth on average)")
+    p.add_argument("--mode-candidates", type=int, default=None, metavar="N",
+                   help="smoother: grid candidates its whole-recording mode search refines (default 20; 0 turns "
+                        "the search off: faster, but a track in a wrong mode of the likelihood can be reported ok)")
     add_huber_option(p)
     p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy) for --plot and errors")
     p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
@@ -139,6 +142,9 @@ def _run(args: argparse.Namespace) -> int:
         tracker = _tracker_settings(args, ALIASES.get(args.estimator, args.estimator))
     elif args.particles is not None or args.particle_seed is not None:
         raise CLIError("--particles and --particle-seed apply to --estimator particle or map, not to init")
+    elif args.mode_candidates is not None or args.most_likely:
+        option = "--mode-candidates" if args.mode_candidates is not None else "--most-likely"
+        raise CLIError(f"{option} applies to the smoother, not to init")
     if args.init_per_pair < 3:
         raise CLIError("--init-per-pair must be >= 3")
     if not (math.isfinite(args.init_seconds) and args.init_seconds >= 0):
@@ -284,10 +290,16 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
         raise CLIError(f"--particles and --particle-seed apply to the particle estimators "
                        f"({', '.join(n for n, i in ESTIMATORS.items() if issubclass(i.settings, ParticleSettings))}), "
                        f"not to {name}")
-    if args.most_likely and name != "smoother":
-        raise CLIError(f"--most-likely applies to the smoother, not to {name}")
+    for given, option in ((args.most_likely, "--most-likely"), (args.mode_candidates is not None, "--mode-candidates")):
+        if given and name != "smoother":
+            raise CLIError(f"{option} applies to the smoother, not to {name}")
     if name == "smoother":
-        return SmootherSettings(huber_k=k, posterior_mean=not args.most_likely)
+        modes: dict[str, Any] = {}
+        if args.mode_candidates is not None:
+            if args.mode_candidates < 0:
+                raise CLIError(f"--mode-candidates must be >= 0 (0: no mode search), got {args.mode_candidates}")
+            modes = {"mode_search": False} if args.mode_candidates == 0 else {"mode_candidates": args.mode_candidates}
+        return SmootherSettings(huber_k=k, posterior_mean=not args.most_likely, **modes)
     try:
         return (FixedLagSettings(lag=args.lag, huber_k=k) if name == "fixed-lag"
                 else ESTIMATORS[name].settings(huber_k=k, **particle))
