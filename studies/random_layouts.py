@@ -39,20 +39,28 @@ MIN_BASELINE = 8e3
 MIN_SENSOR_DISTANCE = 2e3
 
 
+def random_pairs(rng: np.random.Generator, n: int, *, ground: bool = False) -> tuple[fd.BistaticPair, ...]:
+    """``n`` pairs anywhere in the square, each baseline longer than :data:`MIN_BASELINE`; with ``ground``
+    3-D sensors at ``z = 0``."""
+    pairs = []
+    for _ in range(n):
+        while True:
+            tx, rx = rng.uniform(-SQUARE, SQUARE, 2), rng.uniform(-SQUARE, SQUARE, 2)
+            if np.hypot(*(tx - rx)) > MIN_BASELINE:
+                break
+        z = (0.0,) if ground else ()
+        pairs.append(fd.BistaticPair(tx=(float(tx[0]), float(tx[1]), *z), rx=(float(rx[0]), float(rx[1]), *z)))
+    return tuple(pairs)
+
+
 def draw(i: int, speed_max: float = 200.0
          ) -> tuple[fd.Geometry, tuple[float, float, float, float], np.random.Generator]:
     """Layout, start state and the generator that then simulates draw ``i``."""
     rng = np.random.default_rng([77, i])
     n = int(rng.integers(2, 5))
     while True:
-        pairs = []
-        for _ in range(n):
-            while True:
-                tx, rx = rng.uniform(-SQUARE, SQUARE, 2), rng.uniform(-SQUARE, SQUARE, 2)
-                if np.hypot(*(tx - rx)) > MIN_BASELINE:
-                    break
-            pairs.append(fd.BistaticPair(tx=(float(tx[0]), float(tx[1])), rx=(float(rx[0]), float(rx[1]))))
-        g = fd.Geometry(pairs=tuple(pairs), name=f"random {i}")
+        pairs = random_pairs(rng, n)
+        g = fd.Geometry(pairs=pairs, name=f"random {i}")
         z = g.zone
         p = z.frame.points_to_world(np.array([[rng.uniform(*z.along), rng.uniform(*z.across)]]))[0]
         sensors = np.array([s for pair in pairs for s in (pair.tx, pair.rx)])
@@ -62,32 +70,47 @@ def draw(i: int, speed_max: float = 200.0
         return g, (float(p[0]), float(p[1]), speed * np.sin(heading), speed * np.cos(heading)), rng
 
 
-def _row(r: fd.TrackResult, truth: fd.Trajectory) -> list[Any]:
-    """[status, final position error (m), sigma along the major axis (m), wrong and ok]."""
+def row(r: fd.TrackResult, truth: fd.Trajectory) -> list[Any]:
+    """[status, final position error (m), sigma along the major axis (m), wrong and ok], in 2-D or 3-D."""
     e = r.primary
-    err = float(np.hypot(*(e.states[-1, :2] - truth.at(e.times[-1:])[0][:2])))
-    sd = float(np.sqrt(np.max(np.linalg.eigvalsh(e.covariances[-1][:2, :2])))) if e.cov_ok[-1] else float("nan")
+    k = e.states.shape[1] // 2
+    err = float(np.linalg.norm(e.states[-1, :k] - truth.at(e.times[-1:])[0][:k]))
+    sd = float(np.sqrt(np.max(np.linalg.eigvalsh(e.covariances[-1][:k, :k])))) if e.cov_ok[-1] else float("nan")
     return [str(r.status), round(err, 1), round(sd, 1), bool(r.status == "ok" and err > 3.0 * sd)]
+
+
+def every_estimator(m: fd.Measurements, g: fd.Geometry, init: fd.Initiation, truth: fd.Trajectory,
+                    settings: fd.SmootherSettings | None = None) -> dict[str, list[Any]]:
+    """:func:`row` of every estimator; the smoother (with ``settings``) is the others' verdict reference."""
+    reference = fd.run_estimator("smoother", m, g, init, settings)
+    rows = {"smoother": row(reference, truth)}
+    for name in fd.ESTIMATORS:
+        if name != "smoother":
+            rows[name] = row(fd.run_estimator(name, m, g, init, reference=reference), truth)
+    return rows
+
+
+def recorded(i: int, g: fd.Geometry, x0: tuple[float, ...], rng: np.random.Generator
+             ) -> tuple[dict[str, Any], fd.Simulation, fd.Initiation | None]:
+    """Draw ``i``'s record (its number, pairs and start), its 30 s recording and the default initiation
+    (``None`` when the initiation refuses it — a target faster than the zone's bound —, said in the record)."""
+    sim = fd.simulate(fd.Scenario(geometry=g, x0=x0, duration=30.0, dt=0.5), rng)
+    out: dict[str, Any] = {"draw": i, "pairs": len(g.pairs), "x0": [round(v, 1) for v in x0]}
+    try:
+        return out, sim, fd.initiate(sim.measurements.first_per_pair(10), g)
+    except ValueError as exc:
+        return {**out, "refused": str(exc)}, sim, None
 
 
 @one_blas_thread
 def one(k: int, speed_max: float = 200.0, first: float = 0.0) -> dict[str, Any]:
     i = k + int(first)
-    g, x0, rng = draw(i, speed_max)
-    sim = fd.simulate(fd.Scenario(geometry=g, x0=x0, duration=30.0, dt=0.5), rng)
-    m = sim.measurements
-    out: dict[str, Any] = {"draw": i, "pairs": len(g.pairs), "x0": [round(v, 1) for v in x0]}
-    try:
-        init = fd.initiate(m.first_per_pair(10), g)
-    except ValueError as exc:  # a target faster than the zone's bound: refused, with the reason
-        return {**out, "refused": str(exc)}
+    out, sim, init = recorded(i, *draw(i, speed_max))
+    if init is None:
+        return out
     for label, search in (("search", True), ("no search", False)):
-        reference = fd.run_estimator("smoother", m, g, init, fd.SmootherSettings(mode_search=search))
-        rows = {"smoother": _row(reference, sim.truth)}
-        for name in fd.ESTIMATORS:
-            if name != "smoother":
-                rows[name] = _row(fd.run_estimator(name, m, g, init, reference=reference), sim.truth)
-        out[label] = rows
+        out[label] = every_estimator(sim.measurements, sim.scenario.geometry, init, sim.truth,
+                                     fd.SmootherSettings(mode_search=search))
     return out
 
 
