@@ -24,6 +24,7 @@ Run: ``python studies/random_layouts.py [--draws 60] [--first 0] [--speed-max 20
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Any
 
 import _common  # the repository root on the path, and the runner
@@ -114,13 +115,20 @@ def one(k: int, speed_max: float = 200.0, first: float = 0.0) -> dict[str, Any]:
     return out
 
 
+def saved(all_rows: list[dict[str, Any]], out: Path, name: str, columns: str) -> list[dict[str, Any]]:
+    """Write every draw's record to ``out/name``, say how many were refused and what the ``columns`` are,
+    and return the records of the draws that ran."""
+    rows = [r for r in all_rows if "refused" not in r]
+    out.mkdir(parents=True, exist_ok=True)
+    (out / name).write_text(json.dumps(all_rows, indent=1))
+    print(f"{len(all_rows)} draws, {len(all_rows) - len(rows)} refused (a target faster than the zone's bound); "
+          f"per estimator: {columns}")
+    return rows
+
+
 def main() -> None:
     a, all_rows = _common.each_count(one, __doc__.splitlines()[0], "draws", 60, {"speed_max": 200.0, "first": 0.0})
-    rows = [r for r in all_rows if "refused" not in r]
-    a.out.mkdir(parents=True, exist_ok=True)
-    (a.out / "random_layouts.json").write_text(json.dumps(all_rows, indent=1))
-    print(f"{a.draws} draws, {len(all_rows) - len(rows)} refused (a target faster than the zone's bound); "
-          "per estimator: wrong and ok / ok, with the mode search and without")
+    rows = saved(all_rows, a.out, "random_layouts.json", "wrong and ok / ok, with the mode search and without")
     for name in fd.ESTIMATORS:
         counts = {label: (sum(r[label][name][3] for r in rows), sum(r[label][name][0] == "ok" for r in rows))
                   for label in ("search", "no search")}

@@ -24,12 +24,18 @@ Run: ``python studies/random_layouts_3d.py [--draws 60] [--first 0] [--speed-max
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 import _common  # the repository root on the path, and the runner
 import numpy as np
-from random_layouts import MIN_SENSOR_DISTANCE, SPEED_MIN, every_estimator, random_pairs, recorded
+from random_layouts import (
+    MIN_SENSOR_DISTANCE,
+    SPEED_MIN,
+    every_estimator,
+    random_pairs,
+    recorded,
+    saved,
+)
 
 import fgdoppler as fd
 from fgdoppler.analysis.workers import one_blas_thread
@@ -79,11 +85,7 @@ def one(k: int, speed_max: float = 200.0, first: float = 0.0, ceiling: float = 4
 def main() -> None:
     a, all_rows = _common.each_count(one, __doc__.splitlines()[0], "draws", 60,
                                      {"speed_max": 200.0, "first": 0.0, "ceiling": 4500.0})
-    rows = [r for r in all_rows if "refused" not in r]
-    a.out.mkdir(parents=True, exist_ok=True)
-    (a.out / "random_layouts_3d.json").write_text(json.dumps(all_rows, indent=1))
-    print(f"{a.draws} draws, {len(all_rows) - len(rows)} refused (a target faster than the zone's bound); "
-          "per estimator: wrong and ok / ok / all")
+    rows = saved(all_rows, a.out, "random_layouts_3d.json", "wrong and ok / ok / all")
     for name in fd.ESTIMATORS:
         wrong = sum(r["rows"][name][3] for r in rows)
         ok = sum(r["rows"][name][0] == "ok" for r in rows)
