@@ -40,13 +40,14 @@ MIN_BASELINE = 8e3
 MIN_SENSOR_DISTANCE = 2e3
 
 
-def random_pairs(rng: np.random.Generator, n: int, *, ground: bool = False) -> tuple[fd.BistaticPair, ...]:
-    """``n`` pairs anywhere in the square, each baseline longer than :data:`MIN_BASELINE`; with ``ground``
-    3-D sensors at ``z = 0``."""
+def random_pairs(rng: np.random.Generator, n: int, *, ground: bool = False, square: float = SQUARE
+                 ) -> tuple[fd.BistaticPair, ...]:
+    """``n`` pairs anywhere in the square of half-side ``square`` (m), each baseline longer than
+    :data:`MIN_BASELINE`; with ``ground`` 3-D sensors at ``z = 0``."""
     pairs = []
     for _ in range(n):
         while True:
-            tx, rx = rng.uniform(-SQUARE, SQUARE, 2), rng.uniform(-SQUARE, SQUARE, 2)
+            tx, rx = rng.uniform(-square, square, 2), rng.uniform(-square, square, 2)
             if np.hypot(*(tx - rx)) > MIN_BASELINE:
                 break
         z = (0.0,) if ground else ()

@@ -2,7 +2,8 @@
 
 The 3-D counterpart of ``random_layouts.py``.  Each draw (seeded,
 ``--draws`` of them) places two to four bistatic pairs on the ground
-(``z = 0``) anywhere in an 80 km square (each baseline longer than 8 km),
+(``z = 0``) anywhere in a square (``--square``: half its side in km, default
+40, an 80 km square; each baseline longer than 8 km),
 and starts an aircraft uniformly inside the geometry's default zone —
 horizontally in its box, at 500 m to ``--ceiling`` (default 4,500 m) above
 the ground and inside the default altitude band (0 to a quarter of the
@@ -19,7 +20,8 @@ block).  Printed: per estimator, the wrong-and-``ok`` count and the ``ok``
 count, and every draw that is wrong and ``ok``.
 
 Run: ``python studies/random_layouts_3d.py [--draws 60] [--first 0] [--speed-max 200] [--ceiling 4500]
-[--out DIR]`` (draws ``first`` to ``first + draws - 1``).
+[--square 40] [--out DIR]`` (draws ``first`` to ``first + draws - 1``; a smaller square brings the
+sensors closer to the aircraft, which sees its height better).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import numpy as np
 from random_layouts import (
     MIN_SENSOR_DISTANCE,
     SPEED_MIN,
+    SQUARE,
     every_estimator,
     random_pairs,
     recorded,
@@ -46,13 +49,13 @@ FLOOR = 500.0
 CLIMB = 3.0
 
 
-def draw(i: int, speed_max: float = 200.0, ceiling: float = 4500.0
+def draw(i: int, speed_max: float = 200.0, ceiling: float = 4500.0, square: float = SQUARE
          ) -> tuple[fd.Geometry, tuple[float, ...], np.random.Generator]:
     """Layout, start state ``(x, y, z, vx, vy, vz)`` and the generator that then simulates draw ``i``."""
     rng = np.random.default_rng([77, 3, i])
     n = int(rng.integers(2, 5))
     while True:
-        pairs = random_pairs(rng, n, ground=True)
+        pairs = random_pairs(rng, n, ground=True, square=square)
         g = fd.Geometry(pairs=pairs, name=f"random 3-D {i}")
         z = g.zone
         assert z.altitude is not None
@@ -70,9 +73,10 @@ def draw(i: int, speed_max: float = 200.0, ceiling: float = 4500.0
 
 
 @one_blas_thread
-def one(k: int, speed_max: float = 200.0, first: float = 0.0, ceiling: float = 4500.0) -> dict[str, Any]:
+def one(k: int, speed_max: float = 200.0, first: float = 0.0, ceiling: float = 4500.0,
+        square: float = SQUARE / 1e3) -> dict[str, Any]:
     i = k + int(first)
-    out, sim, init = recorded(i, *draw(i, speed_max, ceiling))
+    out, sim, init = recorded(i, *draw(i, speed_max, ceiling, square * 1e3))
     if init is None:
         return out
     out["initiation"] = str(init.status)
@@ -84,7 +88,7 @@ def one(k: int, speed_max: float = 200.0, first: float = 0.0, ceiling: float = 4
 
 def main() -> None:
     a, all_rows = _common.each_count(one, __doc__.splitlines()[0], "draws", 60,
-                                     {"speed_max": 200.0, "first": 0.0, "ceiling": 4500.0})
+                                     {"speed_max": 200.0, "first": 0.0, "ceiling": 4500.0, "square": SQUARE / 1e3})
     rows = saved(all_rows, a.out, "random_layouts_3d.json", "wrong and ok / ok / all")
     for name in fd.ESTIMATORS:
         wrong = sum(r["rows"][name][3] for r in rows)
