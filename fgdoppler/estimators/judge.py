@@ -43,6 +43,12 @@ the status is the worst of them, :mod:`fgdoppler.estimators.verdict`).
     inside it, and the whole recording says otherwise (or cannot place the
     start at all — a target moving along a bistatic ellipse and a slow target
     next to a sensor both give near-zero Doppler).
+    Also ``"doubtful"``, for every estimator, when the data need a speed
+    above the zone's bound (:func:`needed_speed`): a bistatic Doppler is
+    at most twice the target's speed, and a track held inside the zone
+    cannot be the target's.  The initiation's window may not show it (the
+    target may turn later); the trackers' restart checks and the
+    smoother's searches then find nothing in the zone to start from.
 ``units`` — ``"doubtful"`` when the track moves faster than
     :data:`SPEED_FACTOR` times the zone's speed bound, or lies more than
     :data:`REMOTE_FACTOR` sensor extents from every sensor: the signature of
@@ -73,7 +79,7 @@ from fgdoppler.models.observation import DopplerModel
 from fgdoppler.models.tracking import TrackingModel
 
 __all__ = ["COVARIANCE_RATIO", "LEVEL", "LOST", "MIN_MEASUREMENTS", "REJECT_DOUBTFUL", "REJECT_FAILED",
-           "REJECT_ROBUST", "REMOTE_FACTOR", "SPEED_FACTOR", "ZONE_TOLERANCE", "judge"]
+           "REJECT_ROBUST", "REMOTE_FACTOR", "SPEED_FACTOR", "ZONE_TOLERANCE", "judge", "needed_speed"]
 
 #: Level of the verdict's χ² tests: a consistent track fails one in a thousand times.
 LEVEL = 0.999
@@ -118,6 +124,7 @@ def judge(result: TrackResult, measurements: Measurements, model: TrackingModel,
         reasons += _reference_reasons(result.primary, reference)
     reasons += _data_reasons(measurements, model, half_plane)
     reasons += _zone_reasons(result, model)
+    reasons += _speed_reasons(measurements, model)
     reasons += _unit_reasons(result, model)
     return replace(result, reasons=tuple(reasons))
 
@@ -133,6 +140,39 @@ def _zone_reasons(result: TrackResult, model: TrackingModel) -> list[Reason]:
         "the track starts outside the zone the initiation assumed (excess along, across, speed: "
         + ", ".join(f"{v:.0f}" for v in excess) + "): the data prefer another start, or cannot place it "
         "(a target moving along a bistatic ellipse and a slow one next to a sensor look alike)"))]
+
+
+def needed_speed(measurements: Measurements, n_sigma: float = 5.0) -> float:
+    r"""The speed the data need at least (m/s): :math:`\tfrac12\max_j(|Z_j| - n\sigma_j)`, robust to isolated
+    outliers.
+
+    A bistatic Doppler (range rate) is at most twice the speed: each of its
+    two range rates is at most the speed.  Each pair's values
+    :math:`|Z_j| - n\sigma_j` enter as the median of three consecutive ones
+    (time order), so one gross outlier cannot raise the bound, and a true
+    peak lowers it at most to its neighbours' (a weaker bound, never a false
+    one); a pair with fewer than three measurements does not count.
+    """
+    best = 0.0
+    for p in np.unique(measurements.pair):
+        sel = measurements.pair == p
+        order = np.argsort(measurements.time[sel], kind="stable")
+        a = (np.abs(measurements.doppler[sel]) - n_sigma * measurements.sigma[sel])[order]
+        if a.size >= 3:
+            best = max(best, float(np.max(np.median(np.stack([a[:-2], a[1:-1], a[2:]]), axis=0))))
+    return 0.5 * best
+
+
+def _speed_reasons(measurements: Measurements, model: TrackingModel) -> list[Reason]:
+    if model.zone is None or not isinstance(model.observation, DopplerModel):
+        return []
+    need = needed_speed(measurements)
+    if need <= model.zone.speed_max:
+        return []
+    return [Reason(code="zone", status="doubtful", message=(
+        f"the data need a speed of at least {need:.0f} m/s (a bistatic Doppler is at most twice the speed), above "
+        f"the zone's bound of {model.zone.speed_max:.0f} m/s: the target is faster than the zone allows, and no "
+        "track inside it is the target's (raise the speed bound, --speed-max or [zone] speed_max)"))]
 
 
 def _data_reasons(measurements: Measurements, model: TrackingModel, half_plane: bool) -> list[Reason]:

@@ -161,7 +161,10 @@ def fresh_start(measurements: Measurements, model: TrackingModel, settings: Trac
     if old is None or len(data) < model.n + 1:
         return None
     isets = InitiationSettings(window="cv", huber_k=settings.huber_k, half_plane=half_plane)
-    grid = window_grid(data.spread(PER_PAIR), model, isets)
+    try:
+        grid = window_grid(data.spread(PER_PAIR), model, isets)
+    except ValueError:  # the data so far need a speed above the zone's bound: nothing in the zone to restart from
+        return None
     new = initiate(data, model, isets, grid_result=grid)
     if new.P_end is None or abs(new.t_end - tc) > 1e-9:
         return None

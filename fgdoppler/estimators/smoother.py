@@ -527,9 +527,14 @@ def _reinitiate(measurements: Measurements, model: TrackingModel, settings: Smoo
                 memo: SearchMemo | None = None) -> SmootherSolution | None:
     """Multi-start deterministic-CV ML over the whole recording, then the full smoother from its best solution.
 
-    The grid scores ``per_pair`` measurements of each pair, evenly spread over the recording.
+    The grid scores ``per_pair`` measurements of each pair, evenly spread over the recording.  ``None`` where
+    no start can be found — also when the recording needs a speed above the zone's bound, which the grid
+    refuses to search (the verdict's ``zone`` finding says so, :mod:`fgdoppler.estimators.judge`).
     """
-    starts = _recording_starts(measurements, model, settings, progress, per_pair=per_pair, memo=memo)
+    try:
+        starts = _recording_starts(measurements, model, settings, progress, per_pair=per_pair, memo=memo)
+    except ValueError:
+        return None
     found = _smooth_from(measurements, model, settings, starts[:1], progress, memo)
     return found[0] if found else None
 
@@ -632,8 +637,11 @@ def _modes_2d(measurements: Measurements, model: TrackingModel, settings: Smooth
     zone = model.zone
     if zone is None or not _searchable_2d(model, sol):
         return sol, [], []
-    starts = _recording_starts(measurements, model, settings, progress, per_pair=MODES_PER_PAIR,
-                               half_plane=half_plane, k_best=settings.mode_candidates, memo=memo)
+    try:
+        starts = _recording_starts(measurements, model, settings, progress, per_pair=MODES_PER_PAIR,
+                                   half_plane=half_plane, k_best=settings.mode_candidates, memo=memo)
+    except ValueError:  # the recording needs a speed above the zone's bound: the verdict's `zone` finding
+        return sol, [], []
     if sol.covariances is not None and np.all(np.isfinite(sol.covariances[0])):
         limit = float(chi2.ppf(0.999, model.n))
         P0 = sol.covariances[0]

@@ -249,3 +249,51 @@ def test_the_search_beyond_the_wall_widens_only_the_bounds_that_hold() -> None:
     assert wide.along == (-5e3, 10e3) and wide.across == (-8e3, 4e3) and wide.speed_max == 200.0
     # inside the zone nothing moves
     assert _widened(zone, np.concatenate([frame.points_to_world(np.array([5e3, 0.0])), [0.0, 0.0]])) == zone
+
+
+def test_a_target_faster_than_the_zone_allows_after_the_window_is_reported_not_a_crash() -> None:
+    # Three pairs in general position (draw 248 of `studies/random_layouts.py --speed-max 250`, rounded to
+    # 0.1 m); the target flies at 242.6 m/s against the default zone's 200 m/s.  Its first 10 measurements per
+    # pair need only 192 m/s (the initiation accepts them), the whole recording 211 m/s: the smoother's
+    # whole-recording searches and the trackers' restart checks found nothing in the zone to start from and
+    # raised the grid's ValueError out of run_estimator.  Now every estimator answers, and none says `ok`:
+    # each carries the `zone` finding with the speed the data need.
+    from fgdoppler.estimators.grid import speed_lower_bound
+    from fgdoppler.estimators.judge import needed_speed
+
+    pairs = (fd.BistaticPair(tx=(14522.7, 15999.4), rx=(-22635.8, 6324.6)),
+             fd.BistaticPair(tx=(-31444.3, 24764.1), rx=(14183.8, 17765.6)),
+             fd.BistaticPair(tx=(12781.8, -5764.5), rx=(-15419.7, 13958.4)))
+    g = fd.Geometry(pairs=pairs)
+    sim = fd.simulate(fd.Scenario(geometry=g, x0=(-21389.2, 28035.6, -230.0, 77.0), duration=30.0, dt=0.5),
+                      np.random.default_rng(0))
+    m = sim.measurements
+    window = m.first_per_pair(10)
+    assert speed_lower_bound(window.doppler, window.sigma) < g.zone.speed_max < needed_speed(m) < 242.6
+    init = fd.initiate(window, g)
+    reference = fd.run_estimator("smoother", m, g, init)
+    for name in fd.ESTIMATORS:
+        r = reference if name == "smoother" else fd.run_estimator(name, m, g, init, reference=reference)
+        zone = [x for x in r.reasons if x.code == "zone" and "need a speed of at least" in x.message]
+        assert r.status != "ok" and len(zone) == 1 and zone[0].status == "doubtful", (name, r.reasons)
+
+
+def test_the_speed_the_data_need_ignores_isolated_outliers() -> None:
+    from fgdoppler.estimators.judge import needed_speed
+
+    # pair 0: a constant Doppler of 300 m/s, sigma 2; pair 1: 100 m/s with one gross outlier of 900 m/s;
+    # pair 2: two measurements of 1,000 m/s (too few to tell an outlier from a peak: not counted)
+    def recording(z1: np.ndarray) -> fd.Measurements:
+        t = np.arange(8) * 0.5
+        time = np.concatenate([t, t, t[:2]])
+        order = np.argsort(time, kind="stable")
+        pair = np.repeat([0, 1, 2], [8, 8, 2])
+        z = np.concatenate([np.full(8, -300.0), z1, [1000.0, 1000.0]])
+        return fd.Measurements(time=time[order], pair=pair[order], doppler=z[order], sigma=np.full(18, 2.0))
+
+    z1 = np.full(8, 100.0)
+    z1[4] = 900.0
+    assert needed_speed(recording(z1)) == 0.5 * (300.0 - 5 * 2.0)
+    # two outliers in a row are a peak, not an isolated outlier: the bound rises to theirs
+    z1[5] = 900.0
+    assert needed_speed(recording(z1)) == 0.5 * (900.0 - 5 * 2.0)
