@@ -239,11 +239,29 @@ def grid_states(x: ArrayLike, y: float, speed: float, heading_deg: ArrayLike) ->
     return np.stack([X_, np.full_like(X_, y), speed * np.sin(H_), speed * np.cos(H_)], axis=-1)
 
 
-def speed_lower_bound(doppler: ArrayLike, sigma: ArrayLike, n_sigma: float = 5.0) -> float:
-    r"""Lower bound on the target speed from Doppler data: :math:`\tfrac12\max(0, \max_j |Z_j| - n\sigma_j)`."""
+def speed_lower_bound(doppler: ArrayLike, sigma: ArrayLike, n_sigma: float = 5.0, *,
+                      pair: ArrayLike | None = None, time: ArrayLike | None = None) -> float:
+    r"""Lower bound on the target speed from Doppler data: :math:`\tfrac12\max(0, \max_j |Z_j| - n\sigma_j)`.
+
+    A bistatic Doppler (range rate) is at most twice the speed: each of its
+    two range rates is at most the speed.  With ``pair`` and ``time`` the
+    bound is robust to isolated outliers: each pair's values
+    :math:`|Z_j| - n\sigma_j` enter as the median of three consecutive ones
+    (time order), so one gross outlier cannot raise it, and a true peak
+    lowers it at most to its neighbours' (a weaker bound, never a false one);
+    a pair with fewer than three measurements does not count.
+    """
     z = np.abs(np.asarray(doppler, dtype=float))
-    s = np.broadcast_to(np.asarray(sigma, dtype=float), z.shape)
-    return 0.5 * max(0.0, float(np.max(z - n_sigma * s))) if z.size else 0.0
+    a = z - n_sigma * np.broadcast_to(np.asarray(sigma, dtype=float), z.shape)
+    if pair is None or time is None:
+        return 0.5 * max(0.0, float(np.max(a))) if z.size else 0.0
+    pairs, times = np.asarray(pair).reshape(-1), np.asarray(time, dtype=float).reshape(-1)
+    best = 0.0
+    for p in np.unique(pairs):
+        mine = a[pairs == p][np.argsort(times[pairs == p], kind="stable")]
+        if mine.size >= 3:
+            best = max(best, float(np.max(np.median(np.stack([mine[:-2], mine[1:-1], mine[2:]]), axis=0))))
+    return 0.5 * best
 
 
 def _states_from_axes(zone: Zone, us: FloatArray, vs: FloatArray, ws: FloatArray, speeds: FloatArray,

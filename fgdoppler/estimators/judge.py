@@ -69,6 +69,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.stats import chi2
 
+from fgdoppler.estimators.grid import speed_lower_bound
 from fgdoppler.estimators.initiation import OUTLIER_CUT
 from fgdoppler.estimators.linearized import MotionBlocks
 from fgdoppler.estimators.results import Estimates, TrackResult
@@ -143,24 +144,10 @@ def _zone_reasons(result: TrackResult, model: TrackingModel) -> list[Reason]:
 
 
 def needed_speed(measurements: Measurements, n_sigma: float = 5.0) -> float:
-    r"""The speed the data need at least (m/s): :math:`\tfrac12\max_j(|Z_j| - n\sigma_j)`, robust to isolated
-    outliers.
-
-    A bistatic Doppler (range rate) is at most twice the speed: each of its
-    two range rates is at most the speed.  Each pair's values
-    :math:`|Z_j| - n\sigma_j` enter as the median of three consecutive ones
-    (time order), so one gross outlier cannot raise the bound, and a true
-    peak lowers it at most to its neighbours' (a weaker bound, never a false
-    one); a pair with fewer than three measurements does not count.
-    """
-    best = 0.0
-    for p in np.unique(measurements.pair):
-        sel = measurements.pair == p
-        order = np.argsort(measurements.time[sel], kind="stable")
-        a = (np.abs(measurements.doppler[sel]) - n_sigma * measurements.sigma[sel])[order]
-        if a.size >= 3:
-            best = max(best, float(np.max(np.median(np.stack([a[:-2], a[1:-1], a[2:]]), axis=0))))
-    return 0.5 * best
+    """The speed the data need at least (m/s), robust to isolated outliers
+    (:func:`~fgdoppler.estimators.grid.speed_lower_bound` with each pair's time order)."""
+    return speed_lower_bound(measurements.doppler, measurements.sigma, n_sigma, pair=measurements.pair,
+                             time=measurements.time)
 
 
 def _speed_reasons(measurements: Measurements, model: TrackingModel) -> list[Reason]:
