@@ -387,8 +387,12 @@ class SmootherSettings(TrackerSettings):
         that explains the data about as well (``competing``); and where the
         zone wall holds the track, search beyond it as well (the window's and
         the whole recording's initiation over the zone widened where the
-        wall holds) before the ``boundary`` test.  3-D always searches its
-        altitude levels and the whole recording.
+        wall holds) before the ``boundary`` test; and where the wall does
+        not hold but the track fits the data poorly (Gaussian loss, cost
+        above the 95 % χ² level), search outside the zone on every side (a
+        ``zone`` finding when a track starting outside fits better by more
+        than χ²₁ at 95 %).  3-D always searches its altitude levels and the
+        whole recording.
     mode_candidates : int, default 20
         Grid candidates the whole-recording searches of ``mode_search``
         refine by Levenberg–Marquardt (the initiation's ``k_best``, 5 by

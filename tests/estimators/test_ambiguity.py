@@ -53,6 +53,7 @@ def test_the_smoothers_of_the_hypotheses_search_the_recording_once(monkeypatch: 
     track, its covariances, cost, findings and events are the same to the bit.
     """
     import fgdoppler.estimators.initiation as initiation
+    from benchmarks.bench_mode_search import same_findings
     from fgdoppler.estimators.registry import ESTIMATORS, hypotheses_of
 
     m, model, init = _case(2, 1)
@@ -77,8 +78,7 @@ def test_the_smoothers_of_the_hypotheses_search_the_recording_once(monkeypatch: 
     np.testing.assert_array_equal(a.states, b.states)
     np.testing.assert_array_equal(a.covariances, b.covariances)
     assert shared.cost == alone.cost
-    assert [(r.code, r.status, r.message) for r in shared.reasons if r.code != "chi2"] == \
-        [(r.code, r.status, r.message) for r in alone.reasons]
+    assert same_findings(shared, alone)
     assert [e.message for e in shared.events] == [e.message for e in alone.events]
 
 
