@@ -886,6 +886,24 @@ def _rival_reason(found: list[SmootherSolution], best: SmootherSolution, zone: Z
         "reported covariance, about one of them, understates the error"))
 
 
+def _outside_findings(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
+                      sol: SmootherSolution, init: Initiation, reasons: list[Reason], progress: Progress | None,
+                      memo: SearchMemo | None) -> list[Reason]:
+    """``reasons`` after the 2-D searches outside the zone: beyond a wall that holds the track (its
+    ``boundary`` finding replaced, :func:`_beyond_wall_2d`), else where the track fits poorly (a ``zone``
+    finding added, :func:`_outside_zone_2d`)."""
+    window = measurements.between(init.t_start, init.t_end)
+    beyond = _beyond_wall_2d(measurements, model, settings, sol, window, progress, half_plane=init.half_plane,
+                             memo=memo)
+    if beyond is not None:
+        return [beyond if r.code == "boundary" else r for r in reasons]
+    if any(r.code == "boundary" for r in reasons):
+        return reasons
+    outside = _outside_zone_2d(measurements, model, settings, sol, window, progress, half_plane=init.half_plane,
+                               memo=memo)
+    return reasons if outside is None else [*reasons, outside]
+
+
 @in_computation_frame
 def run_smoother(
     measurements: Measurements,
@@ -944,15 +962,7 @@ def run_smoother(
     notes += more_notes
     reasons = list(sol.reasons) + mode_reasons
     if settings.mode_search:
-        window = measurements.between(init.t_start, init.t_end)
-        beyond = _beyond_wall_2d(measurements, model, settings, sol, window, progress, half_plane=init.half_plane,
-                                 memo=memo)
-        if beyond is not None:
-            reasons = [beyond if r.code == "boundary" else r for r in reasons]
-        elif not any(r.code == "boundary" for r in reasons):
-            outside = _outside_zone_2d(measurements, model, settings, sol, window, progress,
-                                       half_plane=init.half_plane, memo=memo)
-            reasons += [] if outside is None else [outside]
+        reasons = _outside_findings(measurements, model, settings, sol, init, reasons, progress, memo)
     states = list(sol.states)
     covs = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
     if settings.sampled_covariance and sol.covariances is not None and np.all(np.isfinite(sol.covariances[0])):
