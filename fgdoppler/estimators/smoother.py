@@ -536,8 +536,7 @@ def _outside_zone_2d(measurements: Measurements, model: TrackingModel, settings:
     d = zone.dim
     return Reason(code="zone", status="doubtful", message=(
         f"the track fits the data poorly (cost {sol.cost:.1f} above the {OUTSIDE_LEVEL:.0%} chi-square level "
-        f"{threshold:.1f})"
-        f"and a track starting outside the zone fits them better{searched}: cost {best.cost:.2f} instead of "
+        f"{threshold:.1f}) and a track starting outside the zone fits them better{searched}: cost {best.cost:.2f} instead of "
         f"{inside:.2f}, lower by {gain:.1f} > {limit:.2f}, starting "
         f"{np.linalg.norm(best.states[0, :d] - sol.states[0, :d]) / 1e3:.1f} km away at "
         f"{np.linalg.norm(best.states[0, d:]):.0f} m/s (excess along, across, speed: "
