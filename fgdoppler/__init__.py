@@ -35,6 +35,7 @@ from fgdoppler.estimators import (
     TrackResult,
     initiate,
     run_estimator,
+    run_estimators,
     track,
 )
 from fgdoppler.estimators.grid import GridSpec, HalfPlane
@@ -130,6 +131,7 @@ __all__ = [
     "paper_scenarios",
     "resolve_geometry",
     "run_estimator",
+    "run_estimators",
     "simulate",
     "track",
 ]

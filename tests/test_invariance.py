@@ -73,7 +73,7 @@ def originals() -> dict[str, tuple[fd.Simulation, fd.Initiation, dict[str, fd.Tr
     for key, (scen, seed) in SCENARIOS.items():
         sim = fd.simulate(scen, np.random.default_rng(seed))
         init = fd.initiate(sim.measurements.first_per_pair(10), scen.geometry)
-        out[key] = (sim, init, {n: fd.run_estimator(n, sim.measurements, scen.geometry, init) for n in fd.ESTIMATORS})
+        out[key] = (sim, init, fd.run_estimators(fd.ESTIMATORS, sim.measurements, scen.geometry, init))
     return out
 
 
@@ -87,8 +87,9 @@ def test_every_estimator_moves_with_the_problem(originals: dict, scenario: str, 
     init1 = fd.initiate(sim.measurements.first_per_pair(10), g1)
     _assert_moved(init0.x_start, init1.x_start, init0.P_start, init1.P_start, R, t, "initiation")
     assert init1.status == init0.status and len(init1.alternatives) == len(init0.alternatives)
+    results1 = fd.run_estimators(fd.ESTIMATORS, sim.measurements, g1, init1)
     for name, r0 in results0.items():
-        r1 = fd.run_estimator(name, sim.measurements, g1, init1)
+        r1 = results1[name]
         for e0 in r0.estimates:
             e1 = r1.estimate(e0.kind)
             np.testing.assert_array_equal(e1.times, e0.times)
@@ -226,8 +227,9 @@ def test_renumbering_the_pairs_after_the_first_changes_no_answer() -> None:
     scale = np.maximum(np.abs(i0.x_start), 1.0)
     assert np.max(np.abs(i1.x_start - i0.x_start) / scale) <= 1e-6
     assert i1.status == i0.status and len(i1.alternatives) == len(i0.alternatives)
+    results0, results1 = fd.run_estimators(fd.ESTIMATORS, m0, g0, i0), fd.run_estimators(fd.ESTIMATORS, m1, g1, i1)
     for name in fd.ESTIMATORS:
-        r0, r1 = fd.run_estimator(name, m0, g0, i0), fd.run_estimator(name, m1, g1, i1)
+        r0, r1 = results0[name], results1[name]
         np.testing.assert_array_equal(r1.primary.times, r0.primary.times)
         limit = 1e-4 if name == "isam2" else 1e-5
         assert np.max(_mahalanobis(r0.primary, r1.primary)) <= limit, name

@@ -168,9 +168,10 @@ def test_rigid_motions_in_space_move_every_answer_with_them(axis: tuple[float, .
         return np.concatenate([x[..., :3] @ R.T + t, x[..., 3:] @ R.T], axis=-1)
 
     assert np.allclose(i1.x_start, expect(i0.x_start), rtol=1e-9, atol=1e-6)
-    for est in ("ekf", "smoother"):
-        a = fd.run_estimator(est, sim.measurements, HILL, i0).primary
-        b = fd.run_estimator(est, sim.measurements, moved, i1).primary
+    names = ("ekf", "smoother")
+    r0, r1 = fd.run_estimators(names, sim.measurements, HILL, i0), fd.run_estimators(names, sim.measurements, moved, i1)
+    for est in names:
+        a, b = r0[est].primary, r1[est].primary
         scale = np.maximum(np.abs(expect(a.states)).max(axis=0), 1.0)
         assert np.max(np.abs(b.states - expect(a.states)) / scale) <= 1e-9, est
         ok = a.cov_ok & b.cov_ok

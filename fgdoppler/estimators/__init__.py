@@ -12,6 +12,7 @@ from fgdoppler.estimators.registry import (
     EstimatorInfo,
     estimator_info,
     run_estimator,
+    run_estimators,
     track,
 )
 from fgdoppler.estimators.results import Estimates, TrackResult
@@ -54,5 +55,6 @@ __all__ = [
     "estimator_info",
     "initiate",
     "run_estimator",
+    "run_estimators",
     "track",
 ]

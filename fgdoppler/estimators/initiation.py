@@ -87,8 +87,8 @@ from fgdoppler.models.doppler import StackedTimes, cv_doppler, cv_doppler_jacobi
 from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
 
-__all__ = ["EVIDENCE_DRAWS", "METHODS", "Candidate", "Initiation", "InitiationSettings", "initiate", "lm_params",
-           "residual_landscape", "window_grid", "window_log_evidence"]
+__all__ = ["EVIDENCE_DRAWS", "METHODS", "Candidate", "Initiation", "InitiationSettings", "initiate", "inlier_statistic",
+           "lm_params", "residual_landscape", "window_grid", "window_log_evidence"]
 
 FloatArray = NDArray[np.float64]
 Method = Literal["grid", "ils", "lm"]
@@ -102,6 +102,30 @@ VERDICT_LEVEL = 0.999
 #: quantile of |N(0, 1)|, where the trackers' default gate rejects.
 OUTLIER_CUT = float(np.sqrt(chi2.ppf(0.9999, 1)))
 
+
+def inlier_statistic(model: TrackingModel, measurements: Measurements, states: FloatArray,
+                     times: FloatArray) -> tuple[float, int]:
+    r"""χ² statistic of a track over the inliers, and the outlier count.
+
+    .. math:: T = \sum_{|r_i| \le c} r_i^2 + \sum_k \lVert m_k \rVert^2,
+              \qquad r_i = (z_i - h(x_{k(i)})) / \sigma_i,
+
+    with :math:`c` = :data:`OUTLIER_CUT` and :math:`m_k` the whitened
+    motion residuals between consecutive scans.  Without outliers
+    :math:`T` is the Gaussian cost; with them it is the misfit a robust
+    (Huber) cost hides, compared with :math:`\chi^2` on
+    :math:`n_{inliers} - n_x` degrees of freedom (conservative: the cut
+    removes the tail).  ``states`` holds one state per scan of
+    ``measurements`` (at ``times``).
+    """
+    from fgdoppler.estimators.linearized import MotionBlocks
+
+    scans = measurements.scans()
+    r = (measurements.doppler - model.observation.predict(states[scans.scan_of], measurements.pair)) \
+        / measurements.sigma
+    inlier = np.abs(r) <= OUTLIER_CUT
+    motion = MotionBlocks(model.motion).residuals(states, times)
+    return float(r[inlier] @ r[inlier] + np.sum(motion**2)), int(np.sum(~inlier))
 
 @dataclass(frozen=True, kw_only=True)
 class InitiationSettings:
@@ -433,18 +457,9 @@ class _Window:
         return cv_information(x0, self.geometry, self.times, self.sigma)
 
     def inlier_cost(self, model: TrackingModel, states: FloatArray) -> tuple[float, int]:
-        """χ² statistic over the inliers (|r| <= :data:`OUTLIER_CUT`) plus the motion terms, and the outlier count.
-
-        ``states`` holds one state per scan (a constant-velocity window passes
-        its propagated start, whose motion terms are zero).
-        """
-        from fgdoppler.estimators.linearized import MotionBlocks
-
-        scans = self.meas.scans()
-        r = (self.meas.doppler - model.observation.predict(states[scans.scan_of], self.meas.pair)) / self.meas.sigma
-        inlier = np.abs(r) <= OUTLIER_CUT
-        motion = MotionBlocks(model.motion).residuals(states, self.scan_times)
-        return float(r[inlier] @ r[inlier] + np.sum(motion**2)), int(np.sum(~inlier))
+        """:func:`inlier_statistic` of the window's measurements (a constant-velocity window passes its
+        propagated start, whose motion terms are zero)."""
+        return inlier_statistic(model, self.meas, states, self.scan_times)
 
 
 @dataclass(frozen=True, kw_only=True)

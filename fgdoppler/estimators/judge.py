@@ -70,8 +70,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from fgdoppler.estimators.grid import speed_lower_bound
-from fgdoppler.estimators.initiation import OUTLIER_CUT
-from fgdoppler.estimators.linearized import MotionBlocks
+from fgdoppler.estimators.initiation import OUTLIER_CUT, inlier_statistic
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import TrackerSettings
 from fgdoppler.estimators.verdict import Reason, message_of, status_of
@@ -226,15 +225,11 @@ def _residual(result: TrackResult, measurements: Measurements, model: TrackingMo
               ) -> tuple[int, float, int, int, int | None]:
     """(inliers, χ² statistic, dof, measurements, None) from the smoothed track's residuals."""
     est = result.primary
-    scans = measurements.scans()
-    if len(est) != len(scans):  # not a state per scan: nothing to test
+    if len(est) != len(measurements.scans()):  # not a state per scan: nothing to test
         return 0, 0.0, 0, 0, None
-    h = model.observation.predict(est.states[scans.scan_of], measurements.pair)
-    r = (measurements.doppler - h) / measurements.sigma
-    inlier = np.abs(r) <= OUTLIER_CUT
-    motion = MotionBlocks(model.motion).residuals(est.states, est.times)
-    statistic = float(r[inlier] @ r[inlier] + np.sum(motion**2))
-    return int(inlier.sum()), statistic, max(int(inlier.sum()) - model.n, 1), len(r), None
+    statistic, outliers = inlier_statistic(model, measurements, est.states, est.times)
+    inlier = len(measurements) - outliers
+    return inlier, statistic, max(inlier - model.n, 1), len(measurements), None
 
 
 def _fit_reasons(statistic: float, dof: int, n: int, rejected: int, lost: int | None, robust: bool) -> list[Reason]:

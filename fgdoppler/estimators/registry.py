@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import functools
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
 from types import MappingProxyType
 
@@ -52,7 +52,8 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
 from fgdoppler.progress import Progress, prefixed
 
-__all__ = ["ALIASES", "ESTIMATORS", "EstimatorInfo", "estimator_info", "hypotheses_of", "run_estimator", "track"]
+__all__ = ["ALIASES", "ESTIMATORS", "EstimatorInfo", "estimator_info", "hypotheses_of", "run_estimator", "run_estimators",
+           "track"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -189,6 +190,66 @@ def run_estimator(
         judged = _with_sampled_covariances(judged, measurements, model, settings)
     return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
 
+
+def run_estimators(
+    names: Iterable[str],
+    measurements: Measurements,
+    model: TrackingModel | Geometry,
+    init: Initiation,
+    settings: Mapping[str, TrackerSettings] | None = None,
+    *,
+    resolve_ambiguity: bool = True,
+    verify: bool = True,
+    progress: Progress | None = None,
+) -> dict[str, TrackResult]:
+    """Run several estimators on the same data and initiation, each as :func:`run_estimator` would.
+
+    The filters' ``reference`` check needs the offline smoother with the
+    filter's gate and loss (``SmootherSettings(gate_probability=...,
+    huber_k=...)``); :func:`run_estimator` runs it once per filter.  Here it
+    runs once per distinct gate and loss and is shared — the smoother's own
+    result where its settings are those — so comparing every estimator costs
+    one smoother run, not one per filter, with the same results.
+    ``settings`` maps a name to its settings (default: the estimator's
+    defaults); ``names`` may be aliases, and the result is keyed by the
+    canonical names, in the order given.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name, or a key of ``settings`` not among ``names``.
+    TypeError
+        If a name's settings belong to another estimator.
+    """
+    infos = [estimator_info(n) for n in names]
+    given = {estimator_info(k).name: v for k, v in (settings or {}).items()}
+    if set(given) - {i.name for i in infos}:
+        raise ValueError(f"settings for {sorted(set(given) - {i.name for i in infos})}, which are not run")
+    chosen = {i.name: given.get(i.name, i.settings()) for i in infos}
+    model = as_tracking_model(model)
+    references: dict[SmootherSettings, TrackResult] = {}
+
+    def reference(s: TrackerSettings) -> TrackResult:
+        key = SmootherSettings(gate_probability=s.gate_probability, huber_k=s.huber_k)
+        if key not in references:
+            references[key] = run_estimator("smoother", measurements, model, init, key,
+                                            resolve_ambiguity=resolve_ambiguity,
+                                            progress=prefixed(progress, "reference"))
+        return references[key]
+
+    out: dict[str, TrackResult] = {}
+    if "smoother" in chosen:  # first: it may be the filters' reference
+        out["smoother"] = run_estimator("smoother", measurements, model, init, chosen["smoother"],
+                                        resolve_ambiguity=resolve_ambiguity, verify=verify, progress=progress)
+        own = chosen["smoother"]
+        if own == SmootherSettings(gate_probability=own.gate_probability, huber_k=own.huber_k):
+            references[own] = out["smoother"]
+    for name, s in chosen.items():
+        if name not in out:  # a filter: its primary estimate is not the smoothed one
+            ref = reference(s) if verify else None
+            out[name] = run_estimator(name, measurements, model, init, s, resolve_ambiguity=resolve_ambiguity,
+                                      verify=verify, reference=ref, progress=progress)
+    return {n: out[n] for n in chosen}
 
 def hypotheses_of(name: str, measurements: Measurements, model: TrackingModel, init: Initiation,
                   settings: TrackerSettings) -> tuple[list[Initiation], NDArray[np.float64] | None]:

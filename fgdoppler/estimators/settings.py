@@ -388,10 +388,10 @@ class SmootherSettings(TrackerSettings):
         zone wall holds the track, search beyond it as well (the window's and
         the whole recording's initiation over the zone widened where the
         wall holds) before the ``boundary`` test; and where the wall does
-        not hold but the track fits the data poorly (Gaussian loss, cost
-        above the 95 % χ² level), search outside the zone on every side (a
-        ``zone`` finding when a track starting outside fits better by more
-        than χ²₁ at 95 %).  3-D always searches its altitude levels and the
+        not hold but the track fits the data poorly (cost, or under the
+        Huber loss the inliers' χ² statistic, above the 90 % χ² level),
+        search outside the zone on every side (a ``zone`` finding when a
+        track starting outside fits better by more than χ²₁ at 99.9 %).  3-D always searches its altitude levels and the
         whole recording.
     mode_candidates : int, default 20
         Grid candidates the whole-recording searches of ``mode_search``

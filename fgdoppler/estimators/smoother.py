@@ -45,7 +45,7 @@ from scipy.stats import chi2
 
 from fgdoppler._text import first_line
 from fgdoppler.estimators.ekf import run_ekf
-from fgdoppler.estimators.initiation import Initiation
+from fgdoppler.estimators.initiation import Initiation, inlier_statistic
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
 from fgdoppler.estimators.local import in_computation_frame
 from fgdoppler.estimators.marginals import chain_solve, check_covariances
@@ -79,7 +79,10 @@ MODES_PER_PAIR = 16
 WIDEN = 1.5
 #: χ² level of the track's cost above which the 2-D smoother also searches outside the zone
 #: (:func:`_outside_zone_2d`).
-OUTSIDE_LEVEL = 0.95
+OUTSIDE_LEVEL = 0.90
+#: How much lower the cost of a track starting outside the zone must be for the ``zone`` finding of
+#: :func:`_outside_zone_2d`: χ²₁ at 99.9 %, the verdict's level.
+OUTSIDE_GAIN = float(chi2.ppf(0.999, 1))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -508,20 +511,35 @@ def _outside_zone_2d(measurements: Measurements, model: TrackingModel, settings:
     inside the zone found nothing better: ``ok``.  Started from the truth
     without the wall the smoother reaches a cost of 112.8.  On that layout
     over 8 seeds the wrong mode's cost lies at χ² p-values of 0.05 to
-    1e-5: a 99.9 % level would have searched in 5 of them, 95 %
-    (:data:`OUTSIDE_LEVEL`) searches in all but one, at the level's edge.
-    So where the cost exceeds that level (Gaussian loss only: under the
-    Huber loss the cost is not a χ² statistic), both initiations are run again
+    1e-5: a 99.9 % level would have searched in 5 of them, 95 % in all but
+    one (p = 0.0500), 90 % (:data:`OUTSIDE_LEVEL`) in all.  With 5 % gross
+    outliers and the Huber loss the same layout gave a wrong ``ok`` in 6 of
+    8 seeds; the robust cost is not a χ² statistic, so there the misfit is
+    the inliers' (:func:`~fgdoppler.estimators.initiation.inlier_statistic`,
+    on as many fewer degrees of freedom as outliers left out), above the
+    level in all 8.  So where the misfit exceeds that level, both
+    initiations are run again
     over the zone widened on every side and in speed (:func:`_widened`) and
     the smoother without the wall from each of their solutions, as in
     :func:`_beyond_wall_2d`; a track starting outside the zone whose cost
-    is lower than the track's by more than :math:`\chi^2_{1,0.95}` is a
-    ``zone`` finding, ``doubtful``.  The track itself stays: the zone is the
-    user's, and the finding tells them to widen it.
+    is lower than the track's by more than :data:`OUTSIDE_GAIN`
+    (:math:`\chi^2_{1,0.999}` = 10.8) is a ``zone`` finding, ``doubtful``.
+    Not :math:`\chi^2_{1,0.95}` as behind a wall: a track inside the zone
+    is the user's assumption, not a sign of trouble, and on the accuracy
+    benchmark's recordings (1,200, both seeds) the 90 % level searched in
+    three well-observed runs (a-45, b-5) whose answers are right (73–96 m)
+    and found a mode starting 7 km outside the zone lower by 4.8–6.8; on
+    draw 231 the found mode is lower by 31–72 (16 runs, both losses).
+    The track itself stays: the zone is the user's, and the finding tells
+    them to widen it.
     """
     zone = model.zone
-    threshold = float(chi2.ppf(OUTSIDE_LEVEL, max(len(measurements) - model.n, 1)))
-    if zone is None or settings.huber_k is not None or sol.cost <= threshold or not _searchable_2d(model, sol):
+    if zone is None or not _searchable_2d(model, sol):
+        return None
+    misfit, outliers = (sol.cost, 0) if settings.huber_k is None else \
+        inlier_statistic(model, measurements, sol.states, sol.times)
+    threshold = float(chi2.ppf(OUTSIDE_LEVEL, max(len(measurements) - outliers - model.n, 1)))
+    if misfit <= threshold:
         return None
     found = _best_outside_2d(measurements, model, settings, sol, window, _widened(zone, None), progress,
                              half_plane=half_plane, memo=memo)
@@ -530,14 +548,13 @@ def _outside_zone_2d(measurements: Measurements, model: TrackingModel, settings:
     best, inside, searched = found
     excess, _ = zone.excess(best.states[0])
     gain = inside - best.cost
-    limit = float(chi2.ppf(0.95, 1))
-    if gain <= limit or not np.any(excess != 0.0):
+    if gain <= OUTSIDE_GAIN or not np.any(excess != 0.0):
         return None
     d = zone.dim
     return Reason(code="zone", status="doubtful", message=(
-        f"the track fits the data poorly (cost {sol.cost:.1f} above the {OUTSIDE_LEVEL:.0%} chi-square level "
-        f"{threshold:.1f}) and a track starting outside the zone fits them better{searched}: cost {best.cost:.2f} instead of "
-        f"{inside:.2f}, lower by {gain:.1f} > {limit:.2f}, starting "
+        f"the track fits the data poorly ({'cost' if settings.huber_k is None else 'inlier chi-square'} "
+        f"{misfit:.1f} above the {OUTSIDE_LEVEL:.0%} chi-square level {threshold:.1f}) and a track starting outside the zone fits them better{searched}: cost {best.cost:.2f} instead of "
+        f"{inside:.2f}, lower by {gain:.1f} > {OUTSIDE_GAIN:.2f}, starting "
         f"{np.linalg.norm(best.states[0, :d] - sol.states[0, :d]) / 1e3:.1f} km away at "
         f"{np.linalg.norm(best.states[0, d:]):.0f} m/s (excess along, across, speed: "
         + ", ".join(f"{v:.3g}" for v in excess) + "): the target may be outside the zone; widen it (--zone, "
@@ -925,8 +942,9 @@ def run_smoother(
     the track, and one that explains the data about as well is a
     ``competing`` finding; where the zone wall holds the track, the
     ``boundary`` test also looks beyond the wall (:func:`_beyond_wall_2d`),
-    and where it does not but the track fits poorly (Gaussian loss, cost
-    above the :data:`OUTSIDE_LEVEL` χ² level), the smoother looks outside
+    and where it does not but the track fits poorly (cost, or under the
+    Huber loss the inliers' χ² statistic, above the :data:`OUTSIDE_LEVEL`
+    χ² level), the smoother looks outside
     the zone on every side (:func:`_outside_zone_2d`, a ``zone`` finding).
     In 3-D the altitude levels and the whole recording are searched
     (:func:`_restarts_3d`).  The runs from the hypotheses of an ambiguous

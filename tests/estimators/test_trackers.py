@@ -324,9 +324,10 @@ def test_gap_in_the_data_is_bridged() -> None:
     _, sim, model, init = _setup("a", 45e3)
     m = sim.measurements
     gapped = m.subset((m.time <= 10.0) | (m.time >= 20.0))
+    gapped_results, full_results = (fd.run_estimators(fd.ESTIMATORS, d, model, init) for d in (gapped, m))
     for name in fd.ESTIMATORS:
-        r = run_estimator(name, gapped, model, init)
-        full = run_estimator(name, m, model, init).primary
+        r = gapped_results[name]
+        full = full_results[name].primary
         e = r.primary
         assert np.all(np.isfinite(e.states)) and np.all(e.cov_ok), name
         assert not any("failed" in ev.message for ev in r.events), name
@@ -362,8 +363,7 @@ def test_ill_conditioned_steps_do_not_crash() -> None:
     sim = fd.simulate(sc, np.random.default_rng(0))
     model = fd.TrackingModel.of(g)
     init = initiate(sim.measurements.first_per_pair(10), model)
-    for name in fd.ESTIMATORS:
-        r = run_estimator(name, sim.measurements, model, init)
+    for name, r in fd.run_estimators(fd.ESTIMATORS, sim.measurements, model, init).items():
         assert np.all(np.isfinite(r.primary.states)), name
         # indeterminate covariances are flagged, never NaN
         assert np.all(np.isfinite(r.primary.covariances)), name

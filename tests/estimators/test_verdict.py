@@ -88,8 +88,9 @@ def test_degenerate_cases_are_never_wrong_and_ok(case: str) -> None:
                              covariances=init.P_end[None], cov_ok=np.array([True]))
             if _wrong(e, truth.at([init.t_end])[0]):
                 failures.append(f"seed {seed} initiation")
-        for name, info in fd.ESTIMATORS.items():
-            r = fd.run_estimator(name, meas, geometry, init, info.settings(huber_k=huber))
+        results = fd.run_estimators(fd.ESTIMATORS, meas, geometry, init,
+                                    {n: info.settings(huber_k=huber) for n, info in fd.ESTIMATORS.items()})
+        for name, r in results.items():
             if r.status == "ok" and _wrong(r.primary, truth.at(r.primary.times[-1:])[0]):
                 failures.append(f"seed {seed} {name}")
     assert not failures, failures
@@ -116,13 +117,37 @@ def test_consistent_well_observed_runs_are_ok(case: str, x: float) -> None:
     assert all(n >= 0.95 * runs for n in ok.values()), ok
 
 
-def test_the_shared_reference_is_the_one_a_filter_would_run() -> None:
+def test_the_shared_reference_is_the_one_a_filter_would_run(monkeypatch: pytest.MonkeyPatch) -> None:
+    # run_estimators runs the reference smoother once for all filters; each answer is run_estimator's own
+    import fgdoppler.estimators.registry as registry
+
     sim = fd.simulate(fd.paper_scenario("a", 5e3), np.random.default_rng(3))
-    init = fd.initiate(sim.measurements.first_per_pair(10), sim.scenario.geometry)
-    ref = fd.run_estimator("smoother", sim.measurements, sim.scenario.geometry, init)
-    alone = fd.run_estimator("ekf", sim.measurements, sim.scenario.geometry, init)
-    shared = fd.run_estimator("ekf", sim.measurements, sim.scenario.geometry, init, reference=ref)
-    assert alone.reasons == shared.reasons
+    m, g = sim.measurements, sim.scenario.geometry
+    init = fd.initiate(m.first_per_pair(10), g)
+    calls: list[str] = []
+    run = registry.run_estimator
+
+    def counted(name: str, *args, **kwargs) -> fd.TrackResult:
+        calls.append(name)
+        return run(name, *args, **kwargs)
+
+    monkeypatch.setattr(registry, "run_estimator", counted)
+    alone = {n: registry.run_estimator(n, m, g, init) for n in fd.ESTIMATORS}
+    smoother_runs_alone = calls.count("smoother")
+    calls.clear()
+    shared = fd.run_estimators(fd.ESTIMATORS, m, g, init)
+    assert list(shared) == list(fd.ESTIMATORS)
+    for n in fd.ESTIMATORS:
+        assert shared[n].reasons == alone[n].reasons and shared[n].status == alone[n].status, n
+        for a, b in zip(alone[n].estimates, shared[n].estimates, strict=True):
+            np.testing.assert_array_equal(a.states, b.states)
+    assert smoother_runs_alone == len(fd.ESTIMATORS) * calls.count("smoother")
+    # a smoother with settings of its own is not the filters' reference: the default one runs as well
+    calls.clear()
+    other = fd.run_estimators(["smoother", "ekf"], m, g, init, {"smoother": fd.SmootherSettings(mode_search=False)})
+    assert calls.count("smoother") == 2 and other["ekf"].reasons == alone["ekf"].reasons
+    with pytest.raises(ValueError, match="not run"):
+        fd.run_estimators(["ekf"], m, g, init, {"smoother": fd.SmootherSettings()})
 
 
 def test_judge_findings_on_constructed_results() -> None:
