@@ -16,11 +16,12 @@ from benchmarks import (
     bench_montecarlo,
     bench_particle,
     bench_scaling,
+    bench_shared_reference,
 )
 
 BENCHES = {"grid": bench_grid, "ekf": bench_ekf, "scaling": bench_scaling, "montecarlo": bench_montecarlo,
            "long": bench_long, "particle": bench_particle, "modes": bench_mode_search,
-           "accuracy": bench_accuracy}
+           "shared": bench_shared_reference, "accuracy": bench_accuracy}
 
 
 def main() -> None:
