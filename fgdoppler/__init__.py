@@ -65,6 +65,7 @@ from fgdoppler.models import (
 )
 from fgdoppler.progress import Progress, TqdmProgress
 from fgdoppler.simulation import (
+    Manoeuvre,
     Scenario,
     Simulation,
     Trajectory,
@@ -97,6 +98,7 @@ __all__ = [
     "ISAM2Settings",
     "Initiation",
     "InitiationSettings",
+    "Manoeuvre",
     "MapSettings",
     "MeasurementError",
     "MeasurementModel",

@@ -28,6 +28,7 @@ from fgdoppler.models.motion import ConstantVelocity
 __all__ = [
     "PAPER_CASE_B_OFFSET",
     "PAPER_START_X",
+    "Manoeuvre",
     "Scenario",
     "Simulation",
     "Trajectory",
@@ -135,6 +136,118 @@ class Trajectory:
 
 
 @dataclass(frozen=True, kw_only=True)
+class Manoeuvre:
+    r"""A deterministic manoeuvre of the simulated target: from ``onset`` on it turns and changes speed.
+
+    Before ``onset`` the target moves at constant velocity; from it on, with
+    :math:`\tau = t - t_{on}`, its (horizontal) speed and heading are
+
+    .. math:: v(\tau) = v_0 + a\tau, \qquad h(\tau) = h_0 + \omega\tau,
+
+    heading clockwise from +y as everywhere (:math:`\dot x = v \sin h`,
+    :math:`\dot y = v \cos h`), so a positive ``turn_rate_deg`` turns right
+    seen from above.  The position is the integral in closed form: with
+    :math:`\theta = \omega\tau`,
+
+    .. math:: \begin{aligned}
+              x(\tau) - x_0 &= v_0\tau\,(g_0 \sin h_0 + g_1 \cos h_0)
+                             + a\tau^2 (f_1 \sin h_0 + f_2 \cos h_0),\\
+              y(\tau) - y_0 &= v_0\tau\,(g_0 \cos h_0 - g_1 \sin h_0)
+                             + a\tau^2 (f_1 \cos h_0 - f_2 \sin h_0),
+              \end{aligned}
+
+    where :math:`g_0 = \sin\theta/\theta`, :math:`g_1 = (1 - \cos\theta)/\theta`,
+    :math:`f_1 = (\theta\sin\theta + \cos\theta - 1)/\theta^2` and
+    :math:`f_2 = (\sin\theta - \theta\cos\theta)/\theta^2` (the integrals of
+    :math:`\cos\omega u`, :math:`\sin\omega u`, :math:`u\cos\omega u`,
+    :math:`u\sin\omega u` over :math:`[0, \tau]`, scaled); below
+    :math:`|\theta| = 10^{-2}` their Taylor series replace them, so a
+    straight line (:math:`\omega = 0`: :math:`g_0 = 1`, :math:`f_1 = 1/2`,
+    :math:`g_1 = f_2 = 0`) and a barely turning target agree without
+    cancellation.  In 3-D the horizontal velocity turns and changes speed;
+    the vertical velocity stays.
+
+    Parameters
+    ----------
+    onset
+        When the manoeuvre starts (s).
+    turn_rate_deg
+        Turn rate (degrees per second, positive clockwise seen from above).
+    acceleration
+        Rate of change of the horizontal speed (m/s²; negative slows down).
+    """
+
+    onset: float = 0.0
+    turn_rate_deg: float = 0.0
+    acceleration: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("onset", "turn_rate_deg", "acceleration"):
+            v = float(getattr(self, name))
+            if not np.isfinite(v):
+                raise ValueError(f"Manoeuvre.{name} must be finite, got {v}")
+            object.__setattr__(self, name, v)
+        if self.onset < 0:
+            raise ValueError(f"Manoeuvre.onset must be >= 0 (s after the start), got {self.onset}")
+
+    def states(self, x0: ArrayLike, times: ArrayLike) -> NDArray[np.float64]:
+        """True states ``(n, 2d)`` at ``times`` from the start state ``x0`` at time 0.
+
+        Raises
+        ------
+        ValueError
+            If the target is stopped at the onset while it should turn or
+            change speed, or its speed would fall to zero before the last
+            time (a negative ``acceleration`` too strong for the duration).
+        """
+        x = np.asarray(x0, dtype=float).reshape(-1)
+        t = np.asarray(times, dtype=float).reshape(-1)
+        d = x.size // 2
+        out = np.concatenate([x[:d] + t[:, None] * x[d:], np.broadcast_to(x[d:], (t.size, d))], axis=1)
+        tau = t - self.onset
+        on = tau > 0
+        if not np.any(on) or (self.turn_rate_deg == 0.0 and self.acceleration == 0.0):
+            return out
+        p0 = x[:2] + self.onset * x[d:d + 2]
+        v0 = float(np.hypot(x[d], x[d + 1]))
+        if v0 == 0.0:
+            raise ValueError("a stopped target cannot turn or change speed along its heading")
+        h0 = float(np.arctan2(x[d], x[d + 1]))
+        tau = tau[on]
+        v = v0 + self.acceleration * tau
+        if np.any(v <= 0.0):
+            raise ValueError(f"the manoeuvre's acceleration {self.acceleration:g} m/s^2 stops the target "
+                             f"{v0 / -self.acceleration:g} s after its onset, before the last time")
+        w = np.deg2rad(self.turn_rate_deg)
+        h = h0 + w * tau
+        g0, g1, f1, f2 = _turn_integrals(w * tau)
+        sin0, cos0 = np.sin(h0), np.cos(h0)
+        a = self.acceleration
+        pos = np.column_stack([
+            p0[0] + v0 * tau * (g0 * sin0 + g1 * cos0) + a * tau**2 * (f1 * sin0 + f2 * cos0),
+            p0[1] + v0 * tau * (g0 * cos0 - g1 * sin0) + a * tau**2 * (f1 * cos0 - f2 * sin0)])
+        out[on, 0:2] = pos
+        out[on, d:d + 2] = np.column_stack([v * np.sin(h), v * np.cos(h)])
+        if d == 3:
+            out[on, 2] = x[2] + t[on] * x[5]
+        return out
+
+
+def _turn_integrals(theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+    """:math:`g_0, g_1, f_1, f_2` of :class:`Manoeuvre` at ``theta``, by their Taylor series where it is small."""
+    th = np.asarray(theta, dtype=float)
+    small = np.abs(th) < 1e-2
+    t = np.where(small, 1.0, th)  # the closed forms only where they do not cancel
+    s, c = np.sin(t), np.cos(t)
+    t2 = th * th
+    g0 = np.where(small, 1.0 - t2 / 6.0 + t2 * t2 / 120.0, s / t)
+    g1 = np.where(small, th * (0.5 - t2 / 24.0 + t2 * t2 / 720.0), (1.0 - c) / t)
+    f1 = np.where(small, 0.5 - t2 / 8.0 + t2 * t2 / 144.0, (t * s + c - 1.0) / (t * t))
+    f2 = np.where(small, th * (1.0 / 3.0 - t2 / 30.0 + t2 * t2 / 840.0), (s - t * c) / (t * t))
+    return g0, g1, f1, f2
+
+
+@dataclass(frozen=True, kw_only=True)
 class Scenario:
     """A simulated encounter: geometry, initial truth, sampling and noise.
 
@@ -154,6 +267,9 @@ class Scenario:
     process_noise
         If given, the truth follows this NCV model with random accelerations;
         otherwise it moves at exactly constant velocity (the paper's truth).
+    manoeuvre
+        If given, the truth turns and changes speed from its onset on
+        (:class:`Manoeuvre`; not together with ``process_noise``).
     name
         Label used in reports.
     """
@@ -165,6 +281,7 @@ class Scenario:
     sigma: float | tuple[float, ...] = 1.0
     time_offsets: tuple[float, ...] | None = None
     process_noise: ConstantVelocity | None = None
+    manoeuvre: Manoeuvre | None = None
     name: str = ""
     _sigmas: NDArray[np.float64] = field(init=False, repr=False, compare=False)
     _offsets: NDArray[np.float64] = field(init=False, repr=False, compare=False)
@@ -193,6 +310,10 @@ class Scenario:
         off = np.zeros(n) if self.time_offsets is None else np.asarray(self.time_offsets, dtype=float)
         if off.shape != (n,) or not np.all(np.isfinite(off)) or np.any(off < 0):
             raise ValueError(f"time_offsets must be {n} finite non-negative numbers, got {self.time_offsets}")
+        if self.manoeuvre is not None and self.process_noise is not None and self.process_noise.q > 0:
+            raise ValueError("a scenario takes a manoeuvre or process noise, not both")
+        if self.manoeuvre is not None:
+            self.manoeuvre.states(x0, [self.duration])  # a deceleration that stops the target: said now
         object.__setattr__(self, "_sigmas", sig)
         object.__setattr__(self, "_offsets", off)
 
@@ -242,7 +363,9 @@ def simulate(scenario: Scenario, rng: np.random.Generator) -> Simulation:
     times = scenario.truth_times()
     x0 = np.asarray(scenario.x0)
     d = x0.size // 2
-    if scenario.process_noise is None or scenario.process_noise.q == 0:
+    if scenario.manoeuvre is not None:
+        states = scenario.manoeuvre.states(x0, times)
+    elif scenario.process_noise is None or scenario.process_noise.q == 0:
         states = np.concatenate([x0[:d] + times[:, None] * x0[d:], np.broadcast_to(x0[d:], (times.size, d))], axis=1)
     else:
         noise = replace(scenario.process_noise, dim=d)

@@ -370,3 +370,26 @@ def test_track_prints_the_closing_event_even_past_the_limit(capsys: pytest.Captu
     assert "5 more event(s)" in lines[9] and lines[10].endswith("closing") and len(lines) == 11
     _print_events(events[:10])
     assert len(capsys.readouterr().out.splitlines()) == 10  # at the limit: all of them, nothing left out
+
+
+def test_a_manoeuvring_target_is_simulated_and_its_track_reported_doubtful(tmp_path: Path,
+                                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--start-x", "45000", "--turn-rate", "2", "--acceleration", "0.5",
+                 "--manoeuvre-onset", "10", "--out", str(sim)]) == 0
+    truth = fd.Trajectory.from_csv(sim / "truth.csv")
+    speed = np.hypot(truth.states[:, 2], truth.states[:, 3])
+    heading = np.degrees(np.unwrap(np.arctan2(truth.states[:, 2], truth.states[:, 3])))
+    np.testing.assert_allclose(speed[-1] - speed[0], 0.5 * 20.0, rtol=1e-9)  # 0.5 m/s^2 for the last 20 s
+    np.testing.assert_allclose(heading[-1] - heading[0], 2.0 * 20.0, rtol=1e-9)  # 2 deg/s clockwise
+    capsys.readouterr()
+    assert main(["track", str(sim / "measurements.csv"), "--estimator", "smoother", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["status"] == "doubtful"
+    assert any(r["code"] == "manoeuvre" and r["status"] == "doubtful" for r in result["reasons"])
+    # values a manoeuvre cannot have are refused naming the option, and nothing is written
+    for bad, option in ((["--turn-rate", "nan"], "--turn-rate"), (["--manoeuvre-onset", "-1"], "--manoeuvre-onset"), (["--acceleration", "-10"], "stops the target"),
+                        (["--acceleration", "1", "--process-noise", "0.5"], "--process-noise")):
+        out = tmp_path / "bad"
+        assert main(["simulate", *bad, "--out", str(out)]) == 2
+        assert option in capsys.readouterr().err and not out.exists()

@@ -116,6 +116,14 @@ def add_scenario_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
                    help="Doppler noise std in m/s, one value or one per pair (default 1)")
     g.add_argument("--process-noise", type=float, default=0.0, metavar="Q",
                    help="truth process noise PSD in m^2/s^3 (default 0: constant velocity)")
+    g.add_argument("--turn-rate", type=float, default=0.0, metavar="DEG/S",
+                   help="the target turns at this rate from --manoeuvre-onset on (degrees per second, positive "
+                   "clockwise seen from above; default 0)")
+    g.add_argument("--acceleration", type=float, default=0.0, metavar="M/S2",
+                   help="the target's speed changes at this rate from --manoeuvre-onset on (m/s^2, negative "
+                   "slows it; default 0)")
+    g.add_argument("--manoeuvre-onset", type=float, default=0.0, metavar="S",
+                   help="when the manoeuvre of --turn-rate and --acceleration starts (s; default 0)")
     return g
 
 
@@ -130,7 +138,7 @@ def scenario(args: argparse.Namespace, geometry: Any, start: tuple[float, ...], 
     refused with a message naming the missing option.
     """
     from fgdoppler.models.motion import ConstantVelocity
-    from fgdoppler.simulation import PAPER_CASE_B_OFFSET, Scenario
+    from fgdoppler.simulation import PAPER_CASE_B_OFFSET, Manoeuvre, Scenario
 
     if not (args.dt > 0 and args.duration >= 0) or not all(map(_finite, (args.dt, args.duration))):
         raise CLIError(f"--dt must be > 0 and --duration >= 0, got {args.dt} and {args.duration}")
@@ -157,12 +165,24 @@ def scenario(args: argparse.Namespace, geometry: Any, start: tuple[float, ...], 
     else:
         offsets = (0.0, PAPER_CASE_B_OFFSET) if geometry.name == "b" else (0.0,) * geometry.n_pairs
     sigma = args.sigma[0] if len(args.sigma) == 1 else tuple(args.sigma)
+    manoeuvring = args.turn_rate != 0.0 or args.acceleration != 0.0
     try:
+        manoeuvre = Manoeuvre(onset=args.manoeuvre_onset, turn_rate_deg=args.turn_rate,
+                              acceleration=args.acceleration)  # checked even where it does nothing
         return Scenario(geometry=geometry, x0=(*start, *velocity), duration=args.duration, dt=args.dt,
                         sigma=sigma, time_offsets=offsets, name=name,
+                        manoeuvre=manoeuvre if manoeuvring else None,
                         process_noise=ConstantVelocity(q=args.process_noise) if args.process_noise > 0 else None)
     except ValueError as exc:
-        raise CLIError(str(exc)) from None
+        msg = str(exc).replace("a scenario takes a manoeuvre or process noise, not both",
+                               "--turn-rate/--acceleration and --process-noise cannot be combined")
+        for field, option in _MANOEUVRE_OPTIONS.items():
+            msg = msg.replace(f"Manoeuvre.{field}", option)
+        raise CLIError(msg) from None
+
+
+#: The command-line option of each :class:`~fgdoppler.simulation.Manoeuvre` field, for its error messages.
+_MANOEUVRE_OPTIONS = {"onset": "--manoeuvre-onset", "turn_rate_deg": "--turn-rate", "acceleration": "--acceleration"}
 
 
 def _finite(v: float) -> bool:

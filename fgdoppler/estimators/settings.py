@@ -403,6 +403,15 @@ class SmootherSettings(TrackerSettings):
         first found with 10 and with 20 (the second beyond the zone wall).
         Measured: 0.05-0.13 s more per smoother run on the paper's recordings
         with 20 than with 5 (``python -m benchmarks --only modes``).
+    motion_check : bool, default True
+        Test whether the target moves as the motion model says: the
+        recording split at a third, half and two thirds of its span, each
+        part fitted on its own, and a ``manoeuvre`` finding (``doubtful``)
+        where the parts explain the data better than one track by more than
+        the 99.9 % χ² level (:mod:`fgdoppler.estimators.manoeuvre`).  A
+        manoeuvring target can leave a constant-velocity track kilometres
+        off while its residuals pass the χ² test.  Seven Levenberg–Marquardt
+        fits from the smoother's own track.
     """
 
     max_iterations: int = 100
@@ -414,6 +423,7 @@ class SmootherSettings(TrackerSettings):
     posterior_mean: bool = True
     mode_search: bool = True
     mode_candidates: int = 20
+    motion_check: bool = True
 
     def __post_init__(self) -> None:
         super().__post_init__()

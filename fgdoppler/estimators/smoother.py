@@ -27,8 +27,9 @@ samples' covariance (:mod:`fgdoppler.estimators.spread`, "Skewed valleys";
 the maximum a posteriori track either way.
 
 Verdict reasons: ``not-converged`` (LM hit its iteration cap or found no
-step that reduces the cost), ``covariance`` (indeterminate marginals), each
-``"doubtful"``; the χ² test of the solution is the judge's
+step that reduces the cost), ``covariance`` (indeterminate marginals),
+``manoeuvre`` (the recording's parts disagree about the track:
+:mod:`fgdoppler.estimators.manoeuvre`), each ``"doubtful"``; the χ² test of the solution is the judge's
 (:mod:`fgdoppler.estimators.judge`).
 """
 
@@ -48,6 +49,7 @@ from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.initiation import Initiation, inlier_statistic
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
 from fgdoppler.estimators.local import in_computation_frame
+from fgdoppler.estimators.manoeuvre import manoeuvre_reason
 from fgdoppler.estimators.marginals import chain_solve, check_covariances
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.search_memo import SearchMemo
@@ -920,6 +922,21 @@ def _outside_findings(measurements: Measurements, model: TrackingModel, settings
     return reasons if outside is None else [*reasons, outside]
 
 
+def _final_findings(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
+                    sol: SmootherSolution, init: Initiation, reasons: list[Reason], progress: Progress | None,
+                    memo: SearchMemo | None) -> list[Reason]:
+    """``reasons`` with what the searches outside the zone (2-D, ``mode_search``: :func:`_outside_findings`) and
+    the split test of the motion model (``motion_check``: :mod:`fgdoppler.estimators.manoeuvre`) find about the
+    final solution."""
+    if settings.mode_search:
+        reasons = _outside_findings(measurements, model, settings, sol, init, reasons, progress, memo)
+    if settings.motion_check:
+        manoeuvre = manoeuvre_reason(measurements, model, sol.times, sol.states, settings)
+        if manoeuvre is not None:
+            reasons = [*reasons, manoeuvre]
+    return reasons
+
+
 @in_computation_frame
 def run_smoother(
     measurements: Measurements,
@@ -946,7 +963,9 @@ def run_smoother(
     Huber loss the inliers' χ² statistic, above the :data:`OUTSIDE_LEVEL`
     χ² level), the smoother looks outside
     the zone on every side (:func:`_outside_zone_2d`, a ``zone`` finding).
-    In 3-D the altitude levels and the whole recording are searched
+    With ``settings.motion_check`` the recording's parts are fitted on
+    their own and compared with the track (a ``manoeuvre`` finding where
+    they disagree: :mod:`fgdoppler.estimators.manoeuvre`).  In 3-D the altitude levels and the whole recording are searched
     (:func:`_restarts_3d`).  The runs from the hypotheses of an ambiguous
     initiation share a ``memo`` (:class:`~fgdoppler.estimators.search_memo.SearchMemo`,
     made by :func:`~fgdoppler.estimators.registry.run_estimator`): each of
@@ -977,9 +996,8 @@ def run_smoother(
     else:
         more_notes, mode_reasons = [], []
     notes += more_notes
-    reasons = list(sol.reasons) + mode_reasons
-    if settings.mode_search:
-        reasons = _outside_findings(measurements, model, settings, sol, init, reasons, progress, memo)
+    reasons = _final_findings(measurements, model, settings, sol, init, list(sol.reasons) + mode_reasons, progress,
+                              memo)
     states = list(sol.states)
     covs = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
     if settings.sampled_covariance and sol.covariances is not None and np.all(np.isfinite(sol.covariances[0])):
