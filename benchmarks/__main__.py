@@ -14,6 +14,7 @@ from benchmarks import (
     bench_long,
     bench_mode_search,
     bench_montecarlo,
+    bench_motion_check,
     bench_particle,
     bench_scaling,
     bench_shared_reference,
@@ -21,7 +22,7 @@ from benchmarks import (
 
 BENCHES = {"grid": bench_grid, "ekf": bench_ekf, "scaling": bench_scaling, "montecarlo": bench_montecarlo,
            "long": bench_long, "particle": bench_particle, "modes": bench_mode_search,
-           "shared": bench_shared_reference, "accuracy": bench_accuracy}
+           "motion": bench_motion_check, "shared": bench_shared_reference, "accuracy": bench_accuracy}
 
 
 def main() -> None:

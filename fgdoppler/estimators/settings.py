@@ -405,13 +405,13 @@ class SmootherSettings(TrackerSettings):
         with 20 than with 5 (``python -m benchmarks --only modes``).
     motion_check : bool, default True
         Test whether the target moves as the motion model says: the
-        recording split at a third, half and two thirds of its span, each
-        part fitted on its own, and a ``manoeuvre`` finding (``doubtful``)
-        where the parts explain the data better than one track by more than
-        the 99.9 % χ² level (:mod:`fgdoppler.estimators.manoeuvre`).  A
-        manoeuvring target can leave a constant-velocity track kilometres
-        off while its residuals pass the χ² test.  Seven Levenberg–Marquardt
-        fits from the smoother's own track.
+        recording split at the middle of its span, each half fitted on its
+        own, and a ``manoeuvre`` finding (``doubtful``) where the halves
+        explain the data better than one track by more than the 99.9 % χ²
+        level (:mod:`fgdoppler.estimators.manoeuvre`).  A manoeuvring target
+        can leave a constant-velocity track kilometres off while its
+        residuals pass the χ² test.  Three Levenberg–Marquardt fits from the
+        smoother's own track.
     """
 
     max_iterations: int = 100
