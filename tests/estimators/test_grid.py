@@ -185,6 +185,10 @@ def test_speed_bound_above_the_zone_names_the_option() -> None:
     ("b", 40, 1e-5, {"huber_k": 1.5}),  # a first batch of a few candidates: the batches must double, often
     ("a", 12, 1e-4, {"half_plane": HalfPlane(normal=(0.0, -1.0))}),
     ("3d", 8, 1e-4, {}),
+    # gross outliers under the Huber loss: the first part's bound is weak, the bounds must be tightened part by
+    # part (and a tightened bound is still a bound)
+    ("outliers", 5, None, {"huber_k": 1.345}),
+    ("outliers", 30, 1e-4, {"huber_k": 1.345}),
 ])
 def test_pruned_search_is_the_exhaustive_search(monkeypatch: pytest.MonkeyPatch, case: str, k_best: int,
                                                 first_share: float | None, options: dict) -> None:
@@ -199,15 +203,29 @@ def test_pruned_search_is_the_exhaustive_search(monkeypatch: pytest.MonkeyPatch,
         w = sim.measurements.spread(8)
         zone, spec = sc.geometry.zone, GridSpec(position_step=2e3)
     else:
-        sim = fd.simulate(fd.paper_scenario(case, 5e3 if case == "b" else 25e3), np.random.default_rng(2))
+        sim = fd.simulate(fd.paper_scenario("a" if case == "outliers" else case, 5e3 if case == "b" else 25e3),
+                          np.random.default_rng(2))
         w = sim.measurements.spread(16)
         zone, spec = PAPER_ZONE, GridSpec()
+        if case == "outliers":  # one measurement in eight off by 100 sigma, spread over the parts
+            z = w.doppler.copy()
+            z[3::8] += 100.0 * w.sigma[3::8] * np.where(np.arange(z.size)[3::8] % 16 == 3, 1.0, -1.0)
+            w = fd.Measurements(time=w.time, pair=w.pair, doppler=z, sigma=w.sigma)
     o = w.stacked_order()
     bt = fd.StackedTimes(pair=w.pair[o], t=w.time[o] - w.time[0])
     geo = sim.scenario.geometry
     if first_share is not None:
         monkeypatch.setattr(grid, "PRUNE_FIRST_SHARE", first_share)
+    tightened: list[bool] = []
+    tighten = grid._tighten
+
+    def counted(*args: object) -> bool:
+        tightened.append(tighten(*args))  # type: ignore[arg-type]
+        return tightened[-1]
+
+    monkeypatch.setattr(grid, "_tighten", counted)
     pruned = grid_search(geo, bt, w.doppler[o], w.sigma[o], zone, spec, k_best=k_best, **options)
+    assert any(tightened) or case != "outliers"
     monkeypatch.setattr(grid, "PRUNE_STRIDE", 10**9)
     whole = grid_search(geo, bt, w.doppler[o], w.sigma[o], zone, spec, k_best=k_best, **options)
     assert pruned.costs.size == k_best
