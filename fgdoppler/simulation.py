@@ -270,6 +270,12 @@ class Scenario:
     manoeuvre
         If given, the truth turns and changes speed from its onset on
         (:class:`Manoeuvre`; not together with ``process_noise``).
+    bias
+        Constant offset (m/s) added to every measurement of a pair — an
+        uncalibrated frequency offset — one value or one per pair; the
+        declared ``sigma`` does not include it (default 0: none).  The
+        smoother's ``SmootherSettings(bias_sigma=...)`` accounts for offsets
+        of unknown size.
     name
         Label used in reports.
     """
@@ -282,8 +288,10 @@ class Scenario:
     time_offsets: tuple[float, ...] | None = None
     process_noise: ConstantVelocity | None = None
     manoeuvre: Manoeuvre | None = None
+    bias: float | tuple[float, ...] = 0.0
     name: str = ""
     _sigmas: NDArray[np.float64] = field(init=False, repr=False, compare=False)
+    _biases: NDArray[np.float64] = field(init=False, repr=False, compare=False)
     _offsets: NDArray[np.float64] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -310,6 +318,10 @@ class Scenario:
         off = np.zeros(n) if self.time_offsets is None else np.asarray(self.time_offsets, dtype=float)
         if off.shape != (n,) or not np.all(np.isfinite(off)) or np.any(off < 0):
             raise ValueError(f"time_offsets must be {n} finite non-negative numbers, got {self.time_offsets}")
+        bias = np.asarray(self.bias, dtype=float).reshape(-1)
+        if bias.size not in (1, n) or not np.all(np.isfinite(bias)):
+            raise ValueError(f"bias must be one finite value or one per pair ({n}) in m/s, got {self.bias}")
+        object.__setattr__(self, "_biases", np.broadcast_to(bias, (n,)).copy())
         if self.manoeuvre is not None and self.process_noise is not None and self.process_noise.q > 0:
             raise ValueError("a scenario takes a manoeuvre or process noise, not both")
         if self.manoeuvre is not None:
@@ -321,6 +333,11 @@ class Scenario:
     def sigmas(self) -> NDArray[np.float64]:
         """Noise standard deviation per pair, shape ``(n_pairs,)``."""
         return self._sigmas.copy()
+
+    @property
+    def biases(self) -> NDArray[np.float64]:
+        """Constant Doppler offset per pair (m/s), shape ``(n_pairs,)``."""
+        return self._biases.copy()
 
     def measurement_times(self) -> list[NDArray[np.float64]]:
         """Measurement times of each pair."""
@@ -357,8 +374,9 @@ def simulate(scenario: Scenario, rng: np.random.Generator) -> Simulation:
     Returns
     -------
     Simulation
-        Measurements ``z = h(x(t)) + w``, ``w ~ N(0, sigma_i^2)``, and the truth
-        at every measurement time.
+        Measurements ``z = h(x(t)) + b_i + w``, ``w ~ N(0, sigma_i^2)`` (``b_i``
+        the scenario's ``bias`` of pair ``i``), and the truth at every
+        measurement time.
     """
     times = scenario.truth_times()
     x0 = np.asarray(scenario.x0)
@@ -387,7 +405,7 @@ def simulate(scenario: Scenario, rng: np.random.Generator) -> Simulation:
     idx = np.searchsorted(times, t_all)
     clean = bistatic_doppler(states[idx], scenario.geometry)[np.arange(t_all.size), p_all]
     sig = scenario.sigmas[p_all]
-    z = clean + sig * rng.standard_normal(t_all.size)
+    z = clean + sig * rng.standard_normal(t_all.size) + scenario.biases[p_all]
     meas = Measurements(time=t_all, pair=p_all, doppler=z, sigma=sig)
     return Simulation(scenario=scenario, measurements=meas, truth=truth)
 

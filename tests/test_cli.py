@@ -393,3 +393,32 @@ def test_a_manoeuvring_target_is_simulated_and_its_track_reported_doubtful(tmp_p
         out = tmp_path / "bad"
         assert main(["simulate", *bad, "--out", str(out)]) == 2
         assert option in capsys.readouterr().err and not out.exists()
+
+
+def test_offsets_are_simulated_and_the_smoother_told_of_them(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # simulate --bias offsets each pair's measurements; track --bias-sigma widens the smoother's covariances by
+    # what such offsets do (the track itself unchanged), and is refused where it does not apply
+    plain, biased = tmp_path / "plain", tmp_path / "biased"
+    assert main(["simulate", "--start-x", "45000", "--seed", "4", "--out", str(plain)]) == 0
+    assert main(["simulate", "--start-x", "45000", "--seed", "4", "--bias", "0.5", "-1", "--out", str(biased)]) == 0
+    a = fd.Measurements.from_csv(plain / "measurements.csv")
+    b = fd.Measurements.from_csv(biased / "measurements.csv")
+    np.testing.assert_allclose(b.doppler - a.doppler, np.where(a.pair == 0, 0.5, -1.0), rtol=0, atol=1e-9)
+    capsys.readouterr()
+    runs = {}
+    for extra in ([], ["--bias-sigma", "1"]):
+        assert main(["track", str(biased / "measurements.csv"), "--estimator", "smoother", "--json", *extra]) == 0
+        runs[bool(extra)] = json.loads(capsys.readouterr().out)
+    assert runs[True]["states"] == runs[False]["states"]
+    assert runs[True]["settings"]["bias_sigma"] == 1.0
+    last = [np.array(runs[k]["covariances"][-1]) for k in (False, True)]
+    assert np.all(np.linalg.eigvalsh(last[1] - last[0]) > -1e-9) and np.trace(last[1]) > 10 * np.trace(last[0])
+    m = str(biased / "measurements.csv")
+    for bad, said in ((["--estimator", "ekf", "--bias-sigma", "1"], "applies to the smoother"),
+                      (["--estimator", "init", "--bias-sigma", "1"], "applies to the smoother"),
+                      (["--estimator", "smoother", "--bias-sigma", "1", "1", "1"], "one per pair (2)"),
+                      (["--estimator", "smoother", "--bias-sigma", "-1"], "--bias-sigma")):
+        assert main(["track", m, *bad]) == 2
+        assert said in capsys.readouterr().err
+    assert main(["simulate", "--bias", "1", "2", "3", "--out", str(tmp_path / "bad")]) == 2
+    assert "--bias must be" in capsys.readouterr().err and not (tmp_path / "bad").exists()

@@ -124,6 +124,9 @@ def add_scenario_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
                    "slows it; default 0)")
     g.add_argument("--manoeuvre-onset", type=float, default=0.0, metavar="S",
                    help="when the manoeuvre of --turn-rate and --acceleration starts (s; default 0)")
+    g.add_argument("--bias", type=float, nargs="+", default=[0.0], metavar="M/S",
+                   help="constant Doppler offset in m/s added to every measurement of a pair (an uncalibrated "
+                   "frequency offset), one value or one per pair (default 0)")
     return g
 
 
@@ -165,17 +168,19 @@ def scenario(args: argparse.Namespace, geometry: Any, start: tuple[float, ...], 
     else:
         offsets = (0.0, PAPER_CASE_B_OFFSET) if geometry.name == "b" else (0.0,) * geometry.n_pairs
     sigma = args.sigma[0] if len(args.sigma) == 1 else tuple(args.sigma)
+    bias = args.bias[0] if len(args.bias) == 1 else tuple(args.bias)
     manoeuvring = args.turn_rate != 0.0 or args.acceleration != 0.0
     try:
         manoeuvre = Manoeuvre(onset=args.manoeuvre_onset, turn_rate_deg=args.turn_rate,
                               acceleration=args.acceleration)  # checked even where it does nothing
         return Scenario(geometry=geometry, x0=(*start, *velocity), duration=args.duration, dt=args.dt,
-                        sigma=sigma, time_offsets=offsets, name=name,
+                        sigma=sigma, time_offsets=offsets, name=name, bias=bias,
                         manoeuvre=manoeuvre if manoeuvring else None,
                         process_noise=ConstantVelocity(q=args.process_noise) if args.process_noise > 0 else None)
     except ValueError as exc:
         msg = str(exc).replace("a scenario takes a manoeuvre or process noise, not both",
                                "--turn-rate/--acceleration and --process-noise cannot be combined")
+        msg = msg.replace("bias must be", "--bias must be")
         for field, option in _MANOEUVRE_OPTIONS.items():
             msg = msg.replace(f"Manoeuvre.{field}", option)
         raise CLIError(msg) from None

@@ -67,6 +67,10 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mode-candidates", type=int, default=None, metavar="N",
                    help="smoother: grid candidates its whole-recording mode search refines (default 20; 0 turns "
                         "the search off: faster, but a track in a wrong mode of the likelihood can be reported ok)")
+    p.add_argument("--bias-sigma", type=float, nargs="+", default=None, metavar="M/S",
+                   help="smoother: each pair's Doppler calibration uncertainty in m/s (1 sigma; one value or one "
+                        "per pair): the reported covariances include what constant offsets of that size would do "
+                        "to the track (default 0)")
     add_huber_option(p)
     p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy) for --plot and errors")
     p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
@@ -142,8 +146,9 @@ def _run(args: argparse.Namespace) -> int:
         tracker = _tracker_settings(args, ALIASES.get(args.estimator, args.estimator))
     elif args.particles is not None or args.particle_seed is not None:
         raise CLIError("--particles and --particle-seed apply to --estimator particle or map, not to init")
-    elif args.mode_candidates is not None or args.most_likely:
-        option = "--mode-candidates" if args.mode_candidates is not None else "--most-likely"
+    elif args.mode_candidates is not None or args.most_likely or args.bias_sigma is not None:
+        option = ("--mode-candidates" if args.mode_candidates is not None
+                  else "--most-likely" if args.most_likely else "--bias-sigma")
         raise CLIError(f"{option} applies to the smoother, not to init")
     if args.init_per_pair < 3:
         raise CLIError("--init-per-pair must be >= 3")
@@ -161,6 +166,8 @@ def _run(args: argparse.Namespace) -> int:
             raise CLIError(f"{args.truth}: the truth is {truth.dim}-D but the problem is {geom.dim}-D: {hint}")
         truth.check_covers(meas.scans().times, str(args.truth))
     model = _model(args, geom)
+    if args.bias_sigma is not None and len(args.bias_sigma) not in (1, geom.n_pairs):
+        raise CLIError(f"--bias-sigma takes one value or one per pair ({geom.n_pairs}), got {len(args.bias_sigma)}")
     settings = _initiation_settings(args)
     window = meas.initiation_window(args.init_per_pair, args.init_seconds)
     try:
@@ -290,7 +297,8 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
         raise CLIError(f"--particles and --particle-seed apply to the particle estimators "
                        f"({', '.join(n for n, i in ESTIMATORS.items() if issubclass(i.settings, ParticleSettings))}), "
                        f"not to {name}")
-    for given, option in ((args.most_likely, "--most-likely"), (args.mode_candidates is not None, "--mode-candidates")):
+    for given, option in ((args.most_likely, "--most-likely"), (args.mode_candidates is not None, "--mode-candidates"),
+                          (args.bias_sigma is not None, "--bias-sigma")):
         if given and name != "smoother":
             raise CLIError(f"{option} applies to the smoother, not to {name}")
     if name == "smoother":
@@ -299,7 +307,12 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
             if args.mode_candidates < 0:
                 raise CLIError(f"--mode-candidates must be >= 0 (0: no mode search), got {args.mode_candidates}")
             modes = {"mode_search": False} if args.mode_candidates == 0 else {"mode_candidates": args.mode_candidates}
-        return SmootherSettings(huber_k=k, posterior_mean=not args.most_likely, **modes)
+        if args.bias_sigma is not None:
+            modes["bias_sigma"] = args.bias_sigma[0] if len(args.bias_sigma) == 1 else tuple(args.bias_sigma)
+        try:
+            return SmootherSettings(huber_k=k, posterior_mean=not args.most_likely, **modes)
+        except ValueError as exc:
+            raise CLIError(f"--bias-sigma: {exc}") from None
     try:
         return (FixedLagSettings(lag=args.lag, huber_k=k) if name == "fixed-lag"
                 else ESTIMATORS[name].settings(huber_k=k, **particle))

@@ -45,6 +45,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.stats import chi2
 
 from fgdoppler._text import first_line
+from fgdoppler.estimators.calibration import bias_sigmas, with_bias_uncertainty
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.initiation import Initiation, inlier_statistic
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
@@ -937,6 +938,27 @@ def _final_findings(measurements: Measurements, model: TrackingModel, settings: 
     return reasons
 
 
+def _reported(measurements: Measurements, model: TrackingModel, settings: SmootherSettings, sol: SmootherSolution,
+              reasons: list[Reason]) -> tuple[list[FloatArray], list[FloatArray | None]]:
+    """The states and covariances to report: the sampled spread where the posterior is skewed (its reason joins
+    ``reasons``), with the calibration offsets' share (``settings.bias_sigma``,
+    :func:`~fgdoppler.estimators.calibration.with_bias_uncertainty`) added."""
+    states = list(sol.states)
+    covs: list[FloatArray | None] = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
+    if sol.covariances is None or not np.all(np.isfinite(sol.covariances[0])):
+        return states, covs
+    if settings.sampled_covariance:
+        sampled = posterior_spread(measurements, model, sol.times, sol.states, sol.covariances,
+                                   huber_k=settings.huber_k, mean=settings.posterior_mean)
+        if sampled is not None:
+            states, covs = list(sampled.states), list(sampled.covariances)
+            reasons.append(sampled.reason)
+    if np.any(bias_sigmas(settings.bias_sigma, model.observation.n_channels) > 0):
+        covs = list(with_bias_uncertainty(measurements, model, sol.times, sol.states, np.array(covs),
+                                          settings.bias_sigma, settings))
+    return states, covs
+
+
 @in_computation_frame
 def run_smoother(
     measurements: Measurements,
@@ -973,6 +995,7 @@ def run_smoother(
     results.
     """
     settings = settings or SmootherSettings()
+    bias_sigmas(settings.bias_sigma, model.observation.n_channels)  # a wrong count is said before any work
     t_begin = time.perf_counter()
     progress = prefixed(progress, "smoother")
     x_init = initial_trajectory(measurements, model, init, settings, progress)
@@ -998,14 +1021,7 @@ def run_smoother(
     notes += more_notes
     reasons = _final_findings(measurements, model, settings, sol, init, list(sol.reasons) + mode_reasons, progress,
                               memo)
-    states = list(sol.states)
-    covs = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
-    if settings.sampled_covariance and sol.covariances is not None and np.all(np.isfinite(sol.covariances[0])):
-        sampled = posterior_spread(measurements, model, sol.times, sol.states, sol.covariances,
-                                   huber_k=settings.huber_k, mean=settings.posterior_mean)
-        if sampled is not None:
-            states, covs = list(sampled.states), list(sampled.covariances)
-            reasons.append(sampled.reason)
+    states, covs = _reported(measurements, model, settings, sol, reasons)
     t_last = float(sol.times[-1])
     return TrackResult(
         estimator="smoother",
