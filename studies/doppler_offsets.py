@@ -69,7 +69,7 @@ def main() -> None:
             ne = [x[label]["nees"] for x in rs]
             row[label] = {"mean_nees": float(np.mean(ne)), "median_nees": float(np.median(ne)),
                           "ok": sum(x[label]["ok"] for x in rs), "cpu": float(np.median([x[label]["cpu"] for x in rs])),
-                          "ok_beyond": sum(x[label]["ok"] and x[label]["nees"] > limit for x in rs)}
+                          "ok_beyond": int(sum(x[label]["ok"] and x[label]["nees"] > limit for x in rs))}
         rows.append(row)
         w, d = row["without"], row["with"]
         lines.append(f"| {scen.name} | {row['rmse']:,.0f} | {w['mean_nees']:.3g} / {d['mean_nees']:.3g} | "

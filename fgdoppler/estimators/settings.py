@@ -430,10 +430,11 @@ class SmootherSettings(TrackerSettings):
         offset on all of a pair's measurements, which the data cannot tell
         from a shift of the track.  The reported covariances then include
         what such offsets would do to the answer (a *consider* covariance,
-        :func:`~fgdoppler.estimators.smoother.with_bias_uncertainty`); the
-        track itself does not change.  In the paper's well-observed case a
-        45 km an offset of 1 σ on one pair moves the smoother's answer by
-        some 6 of its own σ while its residuals stay as good.
+        :func:`~fgdoppler.estimators.calibration.with_bias_uncertainty`;
+        four Levenberg–Marquardt solves per pair); the track itself does not
+        change.  In the paper's well-observed case a 45 km an offset of 1 σ
+        of the noise on one pair moves the smoother's answer by 6–8 of its
+        own σ while its residuals stay as good.
     """
 
     max_iterations: int = 100
