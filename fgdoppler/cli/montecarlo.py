@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from fgdoppler.analysis.montecarlo import DEFAULT_ESTIMATORS
@@ -40,6 +41,10 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
                    help="start height in m: 3-D targets (the geometry must be 3-D: --altitude or sensors with z)")
     p.add_argument("--q", type=float, default=None, help="estimators' process noise PSD in m^2/s^3 (default 1e-3)")
     add_huber_option(p)
+    p.add_argument("--bias-sigma", type=float, nargs="+", default=None, metavar="M/S",
+                   help="the smoother's Doppler calibration uncertainty per pair in m/s (1 sigma; one value or one per "
+                        "pair): its covariances include what constant offsets of that size would do (default 0; "
+                        "simulate offsets with --bias)")
     p.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS),
                    help=f"estimators (default: {' '.join(DEFAULT_ESTIMATORS)}; also lag:SECONDS)")
     p.add_argument("--runs", type=int, default=100, help="runs per scenario (default 100)")
@@ -76,10 +81,20 @@ def _run(args: argparse.Namespace) -> int:
     from fgdoppler.estimators.registry import ESTIMATORS
 
     k = huber(args)
+    settings = {n: e.settings(huber_k=k) for n, e in ESTIMATORS.items()}
+    if args.bias_sigma is not None:
+        wrong = [sc for sc in scen if len(args.bias_sigma) not in (1, sc.geometry.n_pairs)]
+        if wrong:
+            raise CLIError(f"--bias-sigma takes one value or one per pair ({wrong[0].geometry.n_pairs} in "
+                           f"{wrong[0].name}), got {len(args.bias_sigma)}")
+        try:
+            settings["smoother"] = replace(settings["smoother"], bias_sigma=tuple(args.bias_sigma)
+                                           if len(args.bias_sigma) > 1 else args.bias_sigma[0])
+        except ValueError as exc:
+            raise CLIError(f"--bias-sigma: {exc}") from None
     try:
         spec = MonteCarloSpec(scenarios=tuple(scen), estimators=tuple(args.estimators), runs=args.runs, seed=args.seed,
-                              initiation=InitiationSettings(grid=grid_spec(args), huber_k=k),
-                              settings={n: e.settings(huber_k=k) for n, e in ESTIMATORS.items()},
+                              initiation=InitiationSettings(grid=grid_spec(args), huber_k=k), settings=settings,
                               motion=ConstantVelocity(q=1e-3 if args.q is None else args.q))
     except ValueError as exc:
         raise CLIError(str(exc)) from exc
