@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 from pathlib import Path
 
 from fgdoppler.analysis.montecarlo import DEFAULT_ESTIMATORS
@@ -62,6 +61,7 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
 def _run(args: argparse.Namespace) -> int:
     from fgdoppler.analysis.montecarlo import MonteCarloSpec, run_monte_carlo
     from fgdoppler.estimators.initiation import InitiationSettings
+    from fgdoppler.estimators.settings import SmootherSettings
     from fgdoppler.models.motion import ConstantVelocity
     from fgdoppler.simulation import PAPER_START_X
 
@@ -88,8 +88,8 @@ def _run(args: argparse.Namespace) -> int:
             raise CLIError(f"--bias-sigma takes one value or one per pair ({wrong[0].geometry.n_pairs} in "
                            f"{wrong[0].name}), got {len(args.bias_sigma)}")
         try:
-            settings["smoother"] = replace(settings["smoother"], bias_sigma=tuple(args.bias_sigma)
-                                           if len(args.bias_sigma) > 1 else args.bias_sigma[0])
+            settings["smoother"] = SmootherSettings(huber_k=k, bias_sigma=tuple(args.bias_sigma)
+                                                    if len(args.bias_sigma) > 1 else args.bias_sigma[0])
         except ValueError as exc:
             raise CLIError(f"--bias-sigma: {exc}") from None
     try:
