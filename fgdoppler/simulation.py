@@ -381,10 +381,9 @@ def simulate(scenario: Scenario, rng: np.random.Generator) -> Simulation:
     times = scenario.truth_times()
     x0 = np.asarray(scenario.x0)
     d = x0.size // 2
-    if scenario.manoeuvre is not None:
-        states = scenario.manoeuvre.states(x0, times)
-    elif scenario.process_noise is None or scenario.process_noise.q == 0:
-        states = np.concatenate([x0[:d] + times[:, None] * x0[d:], np.broadcast_to(x0[d:], (times.size, d))], axis=1)
+    if scenario.process_noise is None or scenario.process_noise.q == 0:
+        # constant velocity is the manoeuvre that never turns or changes speed
+        states = (scenario.manoeuvre or Manoeuvre()).states(x0, times)
     else:
         noise = replace(scenario.process_noise, dim=d)
         states = np.empty((times.size, 2 * d))

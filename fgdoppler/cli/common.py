@@ -190,6 +190,13 @@ def scenario(args: argparse.Namespace, geometry: Any, start: tuple[float, ...], 
 _MANOEUVRE_OPTIONS = {"onset": "--manoeuvre-onset", "turn_rate_deg": "--turn-rate", "acceleration": "--acceleration"}
 
 
+def per_pair(values: list[float], n_pairs: int, option: str, where: str = "") -> float | tuple[float, ...]:
+    """An option's values as one number or a tuple of one per pair (a CLIError for another count)."""
+    if len(values) not in (1, n_pairs):
+        raise CLIError(f"{option} takes one value or one per pair ({n_pairs}{where}), got {len(values)}")
+    return values[0] if len(values) == 1 else tuple(values)
+
+
 def _finite(v: float) -> bool:
     import math
 

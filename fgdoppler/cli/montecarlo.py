@@ -16,6 +16,7 @@ from fgdoppler.cli.common import (
     geometry_with_zone,
     grid_spec,
     huber,
+    per_pair,
     scenario,
 )
 
@@ -83,13 +84,10 @@ def _run(args: argparse.Namespace) -> int:
     k = huber(args)
     settings = {n: e.settings(huber_k=k) for n, e in ESTIMATORS.items()}
     if args.bias_sigma is not None:
-        wrong = [sc for sc in scen if len(args.bias_sigma) not in (1, sc.geometry.n_pairs)]
-        if wrong:
-            raise CLIError(f"--bias-sigma takes one value or one per pair ({wrong[0].geometry.n_pairs} in "
-                           f"{wrong[0].name}), got {len(args.bias_sigma)}")
+        for sc in scen:  # every geometry of the study must take the count given
+            bias_sigma = per_pair(args.bias_sigma, sc.geometry.n_pairs, "--bias-sigma", f" in {sc.name}")
         try:
-            settings["smoother"] = SmootherSettings(huber_k=k, bias_sigma=tuple(args.bias_sigma)
-                                                    if len(args.bias_sigma) > 1 else args.bias_sigma[0])
+            settings["smoother"] = SmootherSettings(huber_k=k, bias_sigma=bias_sigma)
         except ValueError as exc:
             raise CLIError(f"--bias-sigma: {exc}") from None
     try:

@@ -18,6 +18,7 @@ from fgdoppler.cli.common import (
     geometry_with_zone,
     grid_spec,
     huber,
+    per_pair,
 )
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
@@ -166,8 +167,8 @@ def _run(args: argparse.Namespace) -> int:
             raise CLIError(f"{args.truth}: the truth is {truth.dim}-D but the problem is {geom.dim}-D: {hint}")
         truth.check_covers(meas.scans().times, str(args.truth))
     model = _model(args, geom)
-    if args.bias_sigma is not None and len(args.bias_sigma) not in (1, geom.n_pairs):
-        raise CLIError(f"--bias-sigma takes one value or one per pair ({geom.n_pairs}), got {len(args.bias_sigma)}")
+    if args.bias_sigma is not None:
+        per_pair(args.bias_sigma, geom.n_pairs, "--bias-sigma")
     settings = _initiation_settings(args)
     window = meas.initiation_window(args.init_per_pair, args.init_seconds)
     try:

@@ -457,6 +457,7 @@ class SmootherSettings(TrackerSettings):
         _flag(self.sampled_covariance, "sampled_covariance")
         _flag(self.posterior_mean, "posterior_mean")
         _flag(self.mode_search, "mode_search")
+        _flag(self.motion_check, "motion_check")
         if not (len(self.wall_sigma) == 2 and all(v > 0 for v in self.wall_sigma)):
             raise ValueError(f"wall_sigma must be two positive numbers, got {self.wall_sigma}")
 

@@ -106,3 +106,11 @@ def test_too_short_a_recording_is_not_split_and_bad_input_is_refused() -> None:
     assert manoeuvre_reason(short, model, times, sim.truth.at(times)) is None
     with pytest.raises(ValueError, match="states for"):
         split_statistics(sim.measurements, model, times, sim.truth.at(times))
+
+
+def test_the_switch_takes_only_true_or_false() -> None:
+    # like every other switch of the settings: a string or a number is refused, not read as truthy
+    for bad in ("no", 0, None):
+        with pytest.raises(ValueError, match="motion_check must be True or False"):
+            fd.SmootherSettings(motion_check=bad)  # type: ignore[arg-type]
+    assert fd.SmootherSettings(motion_check=False).motion_check is False
