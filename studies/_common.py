@@ -51,11 +51,12 @@ def paper_run(s: int, r: int, seed: int) -> tuple[Any, Any, Any]:
     return sim, model, fd.initiate(sim.measurements.first_per_pair(10), model)
 
 
-def each_run(one_run: Callable[[tuple[int, int, int]], Any], prog: str, out: str, *,
-             chunksize: int = 4) -> tuple[argparse.Namespace, list[Any]]:
+def each_run(one_run: Callable[..., Any], prog: str, out: str, *, chunksize: int = 4,
+             options: dict[str, dict[str, Any]] | None = None) -> tuple[argparse.Namespace, list[Any]]:
     """Parse ``--runs --seed --workers --out`` and map ``one_run`` over every ``(scenario, run, seed)``.
 
-    Returns the parsed options and ``one_run``'s results in task order.
+    ``options`` adds the study's own (flag: ``add_argument`` keywords); their values reach ``one_run`` as
+    keywords.  Returns the parsed options and ``one_run``'s results in task order.
     """
     import fgdoppler as fd
 
@@ -64,10 +65,14 @@ def each_run(one_run: Callable[[tuple[int, int, int]], Any], prog: str, out: str
     p.add_argument("--seed", type=int, default=2026)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--out", type=Path, default=Path("output") / out)
+    for flag, keywords in (options or {}).items():
+        p.add_argument(flag, **keywords)
     args = p.parse_args()
+    own = {f.lstrip("-").replace("-", "_") for f in options or {}}
+    run = partial(one_run, **{k: getattr(args, k) for k in own}) if own else one_run
     tasks = [(s, r, args.seed) for s in range(len(fd.paper_scenarios())) for r in range(args.runs)]
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        return args, list(pool.map(one_run, tasks, chunksize=chunksize))
+        return args, list(pool.map(run, tasks, chunksize=chunksize))
 
 
 def each_count(one: Callable[..., Any], description: str, name: str, default: int,

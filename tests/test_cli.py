@@ -395,8 +395,8 @@ def test_a_manoeuvring_target_is_simulated_and_its_track_reported_doubtful(tmp_p
         assert option in capsys.readouterr().err and not out.exists()
 
 
-def test_offsets_are_simulated_and_the_smoother_told_of_them(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    # simulate --bias offsets each pair's measurements; track --bias-sigma widens the smoother's covariances by
+def test_offsets_are_simulated_and_the_trackers_told_of_them(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # simulate --bias offsets each pair's measurements; track --bias-sigma widens a tracker's covariances by
     # what such offsets do (the track itself unchanged), and is refused where it does not apply
     plain, biased = tmp_path / "plain", tmp_path / "biased"
     assert main(["simulate", "--start-x", "45000", "--seed", "4", "--out", str(plain)]) == 0
@@ -405,26 +405,28 @@ def test_offsets_are_simulated_and_the_smoother_told_of_them(tmp_path: Path, cap
     b = fd.Measurements.from_csv(biased / "measurements.csv")
     np.testing.assert_allclose(b.doppler - a.doppler, np.where(a.pair == 0, 0.5, -1.0), rtol=0, atol=1e-9)
     capsys.readouterr()
-    runs = {}
-    for extra in ([], ["--bias-sigma", "1"]):
-        assert main(["track", str(biased / "measurements.csv"), "--estimator", "smoother", "--json", *extra]) == 0
-        runs[bool(extra)] = json.loads(capsys.readouterr().out)
-    assert runs[True]["states"] == runs[False]["states"]
-    assert runs[True]["settings"]["bias_sigma"] == 1.0
-    last = [np.array(runs[k]["covariances"][-1]) for k in (False, True)]
-    assert np.all(np.linalg.eigvalsh(last[1] - last[0]) > -1e-9) and np.trace(last[1]) > 10 * np.trace(last[0])
+    for estimator in ("smoother", "ekf"):
+        runs = {}
+        for extra in ([], ["--bias-sigma", "1"]):
+            assert main(["track", str(biased / "measurements.csv"), "--estimator", estimator, "--json", *extra]) == 0
+            runs[bool(extra)] = json.loads(capsys.readouterr().out)
+        assert runs[True]["states"] == runs[False]["states"] and runs[True]["status"] == runs[False]["status"]
+        assert runs[True]["settings"]["bias_sigma"] == 1.0
+        last = [np.array(runs[k]["covariances"][-1]) for k in (False, True)]
+        assert np.all(np.linalg.eigvalsh(last[1] - last[0]) > -1e-9) and np.trace(last[1]) > 10 * np.trace(last[0])
     m = str(biased / "measurements.csv")
-    for bad, said in ((["--estimator", "ekf", "--bias-sigma", "1"], "applies to the smoother"),
-                      (["--estimator", "init", "--bias-sigma", "1"], "applies to the smoother"),
+    for bad, said in ((["--estimator", "particle", "--bias-sigma", "1"], "applies to ekf, isam2, fixed-lag, smoother"),
+                      (["--estimator", "init", "--bias-sigma", "1"], "not to init"),
                       (["--estimator", "smoother", "--bias-sigma", "1", "1", "1"], "one per pair (2)"),
-                      (["--estimator", "smoother", "--bias-sigma", "-1"], "--bias-sigma")):
+                      (["--estimator", "ekf", "--bias-sigma", "1", "1", "1"], "one per pair (2)"),
+                      (["--estimator", "fixed-lag", "--bias-sigma", "-1"], "--bias-sigma")):
         assert main(["track", m, *bad]) == 2
         assert said in capsys.readouterr().err
     assert main(["simulate", "--bias", "1", "2", "3", "--out", str(tmp_path / "bad")]) == 2
     assert "--bias must be" in capsys.readouterr().err and not (tmp_path / "bad").exists()
 
 
-def test_a_monte_carlo_study_with_offsets_declared_to_the_smoother(tmp_path: Path,
+def test_a_monte_carlo_study_with_offsets_declared_to_the_trackers(tmp_path: Path,
                                                                    capsys: pytest.CaptureFixture[str]) -> None:
     # the same recordings (seed) with the offsets simulated, the smoother told of them or not: identical errors
     # (the track does not change), a NEES no larger with them declared, in every run and at every time
@@ -432,12 +434,13 @@ def test_a_monte_carlo_study_with_offsets_declared_to_the_smoother(tmp_path: Pat
     for extra in ([], ["--bias-sigma", "1"]):
         stem = tmp_path / ("with" if extra else "without")
         assert main(["montecarlo", "--case", "a", "--start-x", "45000", "--runs", "2", "--workers", "1",
-                     "--estimators", "smoother", "--bias", "1", "-1", "--out", str(stem), *extra]) == 0
+                     "--estimators", "smoother", "ekf", "--bias", "1", "-1", "--out", str(stem), *extra]) == 0
         out[bool(extra)] = np.load(stem.with_suffix(".npz"))
-    np.testing.assert_array_equal(out[True]["pos_0_smoother"], out[False]["pos_0_smoother"])
-    with_, without = out[True]["nees_0_smoother"], out[False]["nees_0_smoother"]
-    finite = np.isfinite(without)
-    assert np.all(with_[finite] <= without[finite] + 1e-9) and np.nanmean(with_) < np.nanmean(without) / 5
+    for name in ("smoother", "ekf"):
+        np.testing.assert_array_equal(out[True][f"pos_0_{name}"], out[False][f"pos_0_{name}"])
+        with_, without = out[True][f"nees_0_{name}"], out[False][f"nees_0_{name}"]
+        finite = np.isfinite(without)
+        assert np.all(with_[finite] <= without[finite] + 1e-9) and np.nanmean(with_) < np.nanmean(without) / 5, name
     capsys.readouterr()
     assert main(["montecarlo", "--case", "a", "--runs", "1", "--bias-sigma", "1", "1", "1",
                  "--out", str(tmp_path / "bad")]) == 2

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from fgdoppler.analysis.montecarlo import DEFAULT_ESTIMATORS
@@ -42,9 +43,9 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--q", type=float, default=None, help="estimators' process noise PSD in m^2/s^3 (default 1e-3)")
     add_huber_option(p)
     p.add_argument("--bias-sigma", type=float, nargs="+", default=None, metavar="M/S",
-                   help="the smoother's Doppler calibration uncertainty per pair in m/s (1 sigma; one value or one per "
-                        "pair): its covariances include what constant offsets of that size would do (default 0; "
-                        "simulate offsets with --bias)")
+                   help="Doppler calibration uncertainty per pair in m/s (1 sigma; one value or one per pair): the "
+                        "covariances of the smoother, ekf, isam2 and fixed-lag include what constant offsets of that "
+                        "size would do (default 0; simulate offsets with --bias)")
     p.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS),
                    help=f"estimators (default: {' '.join(DEFAULT_ESTIMATORS)}; also lag:SECONDS)")
     p.add_argument("--runs", type=int, default=100, help="runs per scenario (default 100)")
@@ -62,7 +63,7 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
 def _run(args: argparse.Namespace) -> int:
     from fgdoppler.analysis.montecarlo import MonteCarloSpec, run_monte_carlo
     from fgdoppler.estimators.initiation import InitiationSettings
-    from fgdoppler.estimators.settings import SmootherSettings
+    from fgdoppler.estimators.settings import SampledCovarianceSettings, SmootherSettings
     from fgdoppler.models.motion import ConstantVelocity
     from fgdoppler.simulation import PAPER_START_X
 
@@ -87,7 +88,8 @@ def _run(args: argparse.Namespace) -> int:
         for sc in scen:  # every geometry of the study must take the count given
             bias_sigma = per_pair(args.bias_sigma, sc.geometry.n_pairs, "--bias-sigma", f" in {sc.name}")
         try:
-            settings["smoother"] = SmootherSettings(huber_k=k, bias_sigma=bias_sigma)
+            settings = {n: replace(s, bias_sigma=bias_sigma) if isinstance(s, (SmootherSettings, SampledCovarianceSettings))
+                        else s for n, s in settings.items()}
         except ValueError as exc:
             raise CLIError(f"--bias-sigma: {exc}") from None
     try:

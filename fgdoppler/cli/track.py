@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -69,9 +70,9 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    help="smoother: grid candidates its whole-recording mode search refines (default 20; 0 turns "
                         "the search off: faster, but a track in a wrong mode of the likelihood can be reported ok)")
     p.add_argument("--bias-sigma", type=float, nargs="+", default=None, metavar="M/S",
-                   help="smoother: each pair's Doppler calibration uncertainty in m/s (1 sigma; one value or one "
-                        "per pair): the reported covariances include what constant offsets of that size would do "
-                        "to the track (default 0)")
+                   help="smoother, ekf, isam2, fixed-lag: each pair's Doppler calibration uncertainty in m/s "
+                        "(1 sigma; one value or one per pair): the reported covariances include what constant "
+                        "offsets of that size would do to the track (default 0)")
     add_huber_option(p)
     p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy) for --plot and errors")
     p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
@@ -150,7 +151,8 @@ def _run(args: argparse.Namespace) -> int:
     elif args.mode_candidates is not None or args.most_likely or args.bias_sigma is not None:
         option = ("--mode-candidates" if args.mode_candidates is not None
                   else "--most-likely" if args.most_likely else "--bias-sigma")
-        raise CLIError(f"{option} applies to the smoother, not to init")
+        raise CLIError(f"--bias-sigma applies to {', '.join(_calibrated())}, not to init" if option == "--bias-sigma"
+                       else f"{option} applies to the smoother, not to init")
     if args.init_per_pair < 3:
         raise CLIError("--init-per-pair must be >= 3")
     if not (math.isfinite(args.init_seconds) and args.init_seconds >= 0):
@@ -288,6 +290,11 @@ def _plot_landscape(args: argparse.Namespace, init: Any, window: Any, geom: Any,
     return plotting.figure_bytes(ax, args.plot.suffix.lower().lstrip("."))
 
 
+def _calibrated() -> list[str]:
+    """The estimators that take a calibration uncertainty (``bias_sigma``)."""
+    return [n for n, i in ESTIMATORS.items() if "bias_sigma" in {f.name for f in fields(i.settings)}]
+
+
 def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
     """The settings of tracker ``name`` from the options (a CLIError for values it rejects)."""
     from fgdoppler.estimators.settings import FixedLagSettings, ParticleSettings, SmootherSettings
@@ -298,25 +305,28 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
         raise CLIError(f"--particles and --particle-seed apply to the particle estimators "
                        f"({', '.join(n for n, i in ESTIMATORS.items() if issubclass(i.settings, ParticleSettings))}), "
                        f"not to {name}")
-    for given, option in ((args.most_likely, "--most-likely"), (args.mode_candidates is not None, "--mode-candidates"),
-                          (args.bias_sigma is not None, "--bias-sigma")):
+    for given, option in ((args.most_likely, "--most-likely"), (args.mode_candidates is not None, "--mode-candidates")):
         if given and name != "smoother":
             raise CLIError(f"{option} applies to the smoother, not to {name}")
+    if args.bias_sigma is not None and name not in _calibrated():
+        raise CLIError(f"--bias-sigma applies to {', '.join(_calibrated())}, not to {name}")
+    offsets: dict[str, Any] = {}
+    if args.bias_sigma is not None:
+        offsets["bias_sigma"] = args.bias_sigma[0] if len(args.bias_sigma) == 1 else tuple(args.bias_sigma)
+    try:
+        ESTIMATORS[name].settings(**offsets)
+    except ValueError as exc:
+        raise CLIError(f"--bias-sigma: {exc}") from None
     if name == "smoother":
         modes: dict[str, Any] = {}
         if args.mode_candidates is not None:
             if args.mode_candidates < 0:
                 raise CLIError(f"--mode-candidates must be >= 0 (0: no mode search), got {args.mode_candidates}")
             modes = {"mode_search": False} if args.mode_candidates == 0 else {"mode_candidates": args.mode_candidates}
-        if args.bias_sigma is not None:
-            modes["bias_sigma"] = args.bias_sigma[0] if len(args.bias_sigma) == 1 else tuple(args.bias_sigma)
-        try:
-            return SmootherSettings(huber_k=k, posterior_mean=not args.most_likely, **modes)
-        except ValueError as exc:
-            raise CLIError(f"--bias-sigma: {exc}") from None
+        return SmootherSettings(huber_k=k, posterior_mean=not args.most_likely, **modes, **offsets)
     try:
-        return (FixedLagSettings(lag=args.lag, huber_k=k) if name == "fixed-lag"
-                else ESTIMATORS[name].settings(huber_k=k, **particle))
+        return (FixedLagSettings(lag=args.lag, huber_k=k, **offsets) if name == "fixed-lag"
+                else ESTIMATORS[name].settings(huber_k=k, **particle, **offsets))
     except ValueError as exc:
         raise CLIError(f"--{'lag' if name == 'fixed-lag' else 'particles/--particle-seed'}: {exc}") from None
 

@@ -42,17 +42,19 @@ and their effects added (no cross terms).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import numpy as np
 from numpy.polynomial.hermite_e import hermegauss
 from numpy.typing import ArrayLike, NDArray
 
+from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["QUADRATURE", "bias_sigmas", "with_bias_uncertainty"]
+__all__ = ["QUADRATURE", "bias_sigmas", "moved_starts", "offset_shares", "shifted", "with_bias_uncertainty"]
 
 FloatArray = NDArray[np.float64]
 
@@ -83,10 +85,61 @@ def bias_sigmas(bias_sigma: float | tuple[float, ...], n_pairs: int) -> FloatArr
     return np.broadcast_to(sb, (n_pairs,)).copy()
 
 
+def shifted(measurements: Measurements, pair: int, offset: float) -> Measurements:
+    """``measurements`` with every Doppler value of ``pair`` shifted by ``offset`` (m/s)."""
+    return replace(measurements, doppler=measurements.doppler + np.where(measurements.pair == pair, offset, 0.0))
+
+
+def offset_shares(measurements: Measurements, bias_sigma: ArrayLike, baseline: Sequence[ArrayLike],
+                  respond: Callable[[Measurements], Sequence[ArrayLike]]) -> list[FloatArray]:
+    r"""The calibration offsets' share of the covariances of tracks that respond to the data by ``respond``.
+
+    :math:`\sum_p \sum_i w_i\,\mathbf f_p(u_i\sigma_{b,p})\,\mathbf f_p(u_i\sigma_{b,p})^\top`
+    for each track, with :math:`\mathbf f_p(b)` = ``respond(data with pair p shifted by b)`` less
+    ``baseline`` (the module docstring; :data:`QUADRATURE`).
+
+    Parameters
+    ----------
+    measurements
+        The recording.
+    bias_sigma
+        One :math:`\sigma_{b,p}` per pair (m/s), as :func:`bias_sigmas` gives it.
+    baseline
+        The tracks ``respond`` gives on ``measurements`` itself: state arrays ``(n_k, 2d)``.
+    respond
+        The estimator, as a function of the data: one state array per track, shaped as ``baseline``'s.
+
+    Returns
+    -------
+    list of ndarray
+        One ``(n_k, 2d, 2d)`` share per track.
+
+    Raises
+    ------
+    ValueError
+        If ``respond`` returns tracks shaped unlike ``baseline``.
+    """
+    base = [np.asarray(b, dtype=float) for b in baseline]
+    shares = [np.zeros((*b.shape, b.shape[-1])) for b in base]
+    sb = np.asarray(bias_sigma, dtype=float).reshape(-1)
+    for p in np.flatnonzero(sb > 0):
+        if not np.any(measurements.pair == p):
+            continue
+        for step, weight in QUADRATURE:
+            moved = [np.asarray(m, dtype=float) for m in respond(shifted(measurements, int(p), step * sb[p]))]
+            if [m.shape for m in moved] != [b.shape for b in base]:
+                raise ValueError(f"the tracks of the shifted data are shaped {[m.shape for m in moved]}, "
+                                 f"not as the recording's {[b.shape for b in base]}")
+            for share, m, b in zip(shares, moved, base, strict=True):
+                f = m - b
+                share += weight * np.einsum("ki,kj->kij", f, f)
+    return shares
+
+
 def with_bias_uncertainty(measurements: Measurements, model: TrackingModel, times: ArrayLike, states: ArrayLike,
                           covariances: ArrayLike, bias_sigma: float | tuple[float, ...],
                           settings: SmootherSettings | None = None) -> FloatArray:
-    r"""The covariances ``(n, 2d, 2d)`` with the calibration offsets' share added (module docstring).
+    r"""The smoothed track's covariances ``(n, 2d, 2d)`` with the calibration offsets' share added (module docstring).
 
     Parameters
     ----------
@@ -112,14 +165,50 @@ def with_bias_uncertainty(measurements: Measurements, model: TrackingModel, time
 
     sb = bias_sigmas(bias_sigma, model.observation.n_channels)
     x = np.asarray(states, dtype=float)
-    P = np.array(covariances, dtype=float)
     solve = replace(settings or SmootherSettings(), covariances=False)
-    for p in np.flatnonzero(sb > 0):
-        on = measurements.pair == p
-        if not np.any(on):
-            continue
-        for step, weight in QUADRATURE:
-            shifted = replace(measurements, doppler=measurements.doppler + np.where(on, step * sb[p], 0.0))
-            f = solve_smoother(shifted, model, x, solve, prior=model.prior(), times=times).states - x
-            P += weight * np.einsum("ki,kj->kij", f, f)
-    return P
+
+    def respond(data: Measurements) -> list[FloatArray]:
+        return [solve_smoother(data, model, x, solve, prior=model.prior(), times=times).states]
+
+    return np.asarray(covariances, dtype=float) + offset_shares(measurements, sb, [x], respond)[0]
+
+
+def moved_starts(hyps: Sequence[Initiation], measurements: Measurements, model: TrackingModel, *,
+                 huber_k: float | None = None) -> Callable[[Measurements], list[Initiation]]:
+    r"""The trackers' starts as they move with the data of the initiation window.
+
+    A tracker starts from an initiation of the window's data; shift the data
+    and the start moves too.  For each hypothesis the window's
+    :func:`~fgdoppler.estimators.window.window_start` solution is found once
+    for ``measurements``; the function returned re-solves the window of
+    other data from it and moves the hypothesis's ``x_start`` and ``x_end``
+    by the solution's change (carried from the window's first and last scan
+    to ``t_start`` and ``t_end`` by the motion model; no change where either
+    solve fails or the window is empty).  The covariances stay.
+    """
+    from fgdoppler.estimators.window import solve_window, split_window, window_start
+
+    solved = []
+    for h in hyps:
+        window, _ = split_window(measurements, h.t_end)
+        times = window.scans().times
+        s0, note = window_start(model, window, h, huber_k=huber_k) if times.size else (None, "empty")
+        solved.append((times, None if note else s0))
+
+    def moved(data: Measurements) -> list[Initiation]:
+        out = []
+        for h, (times, s0) in zip(hyps, solved, strict=True):
+            if s0 is None:
+                out.append(h)
+                continue
+            window, _ = split_window(data, h.t_end)
+            s1, note = solve_window(model, window, s0, prior=model.prior(), huber_k=huber_k)
+            if note:
+                out.append(h)
+                continue
+            d0 = model.motion.F(h.t_start - times[0]) @ (s1[0] - s0[0])
+            d1 = model.motion.F(h.t_end - times[-1]) @ (s1[-1] - s0[-1])
+            out.append(replace(h, x_start=h.x_start + d0, x_end=h.x_end + d1))
+        return out
+
+    return moved

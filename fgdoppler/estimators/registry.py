@@ -25,6 +25,7 @@ from fgdoppler.estimators.ambiguity import (
     posterior_hypotheses,
     resolve,
 )
+from fgdoppler.estimators.calibration import bias_sigmas, moved_starts, offset_shares
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.fixed_lag import run_fixed_lag
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate
@@ -171,8 +172,10 @@ def run_estimator(
                               settings, resolve_ambiguity=resolve_ambiguity, verify=verify, reference=local_ref,
                               progress=progress)
         return local.transformed(frame, to_world=True)
+    if isinstance(settings, SampledCovarianceSettings):  # a wrong count is said before any work
+        bias_sigmas(settings.bias_sigma, model.observation.n_channels)
     hyps, weights = _hypotheses(info, measurements, model, init, settings) if resolve_ambiguity else ([init], None)
-    result = _solve(info, measurements, model, hyps, settings, progress, weights)
+    result = base = _solve(info, measurements, model, hyps, settings, progress, weights)
     if resolve_ambiguity and info.resolution == "likelihood" and getattr(settings, "restarts", False) \
             and model.zone is not None:
         def again(new: Initiation) -> TrackResult:
@@ -188,6 +191,8 @@ def run_estimator(
     judged = judge(result, measurements, model, settings, reference, half_plane=init.half_plane is not None)
     if isinstance(settings, SampledCovarianceSettings) and settings.sampled_covariance:
         judged = _with_sampled_covariances(judged, measurements, model, settings)
+    if isinstance(settings, SampledCovarianceSettings) and np.any(np.asarray(settings.bias_sigma) > 0):
+        judged = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings)
     return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
 
 
@@ -322,6 +327,37 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
         return result
     primary = replace(e, covariances=widened[0])
     return replace(result, estimates=(primary, *result.estimates[1:]), reasons=(*result.reasons, widened[1]))
+
+
+def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, measurements: Measurements,
+                  model: TrackingModel, hyps: list[Initiation], weights: NDArray[np.float64] | None,
+                  settings: SampledCovarianceSettings) -> TrackResult:
+    """Every estimate's covariances with the calibration offsets' share added (``settings.bias_sigma``).
+
+    The share is what the offsets do to ``base`` — the tracker's run from
+    ``hyps`` before any restart — run again on the data with one pair
+    shifted at a time, from starts moved as the window's solution moves
+    (:func:`~fgdoppler.estimators.calibration.moved_starts`,
+    :func:`~fgdoppler.estimators.calibration.offset_shares`); it is added at
+    the reported estimates' times, which a restart does not change.
+    """
+    kinds = [e.kind for e in base.estimates]
+    moved = moved_starts(hyps, measurements, model, huber_k=settings.huber_k)
+
+    def respond(data: Measurements) -> list[NDArray[np.float64]]:
+        again = _solve(info, data, model, moved(data), settings, None, weights)
+        return [again.estimate(k).states for k in kinds]
+
+    shares = dict(zip(kinds, offset_shares(measurements, bias_sigmas(settings.bias_sigma, model.observation.n_channels),
+                                           [e.states for e in base.estimates], respond), strict=True))
+    estimates = []
+    for e in result.estimates:
+        if e.kind in shares:
+            if not np.array_equal(e.times, base.estimate(e.kind).times):  # a restart keeps the scans' times
+                raise RuntimeError(f"{info.name}: the {e.kind} estimates' times changed after the first run")
+            e = replace(e, covariances=e.covariances + shares[e.kind])
+        estimates.append(e)
+    return replace(result, estimates=tuple(estimates))
 
 
 #: Initiation findings about its covariance only, which an offline smoother does not use: informational there.

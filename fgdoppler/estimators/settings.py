@@ -186,13 +186,26 @@ class SampledCovarianceSettings(GaussianSumSettings):
         nothing (up to 8 times), and never less than a tenth of the time
         since the first measurement, so a long recording costs a bounded
         number of samples per measurement.
+    bias_sigma : float or tuple of float, default 0.0
+        Each pair's Doppler calibration uncertainty (m/s, one standard
+        deviation; one value for every pair or one per pair), as for
+        :class:`SmootherSettings`: the reported covariances of every
+        estimate then include what constant offsets of that size would do
+        to the answer — the tracker run again, from its start moved as the
+        initiation window's solution moves, on the data with one pair
+        shifted at a time (:func:`~fgdoppler.estimators.calibration.offset_shares`;
+        applied by :func:`~fgdoppler.estimators.registry.run_estimator`
+        last, after the verdict and the sampled covariances).  The track
+        and the verdict do not change.
     """
 
     sampled_covariance: bool = True
     sampling_interval: float = 5.0
+    bias_sigma: float | tuple[float, ...] = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        object.__setattr__(self, "bias_sigma", _bias_sigma(self.bias_sigma))
         _positive(self.sampling_interval, "sampling_interval")
         _flag(self.sampled_covariance, "sampled_covariance")
 
@@ -216,7 +229,7 @@ class EKFSettings(SampledCovarianceSettings):
         :class:`TrackerSettings`).
     components : int, default 8
         Gaussian-sum terms (see :class:`GaussianSumSettings`).
-    sampled_covariance, sampling_interval
+    sampled_covariance, sampling_interval, bias_sigma
         See :class:`SampledCovarianceSettings`.
     update : {"sequential", "scan"}, default "sequential"
         ``"sequential"``: one scalar update per measurement, relinearising
@@ -277,7 +290,7 @@ class ISAM2Settings(StreamingSettings, SampledCovarianceSettings):
         (:meth:`~fgdoppler.estimators.isam2.ISAM2Tracker.finish`).
     smoothed_covariances : bool, default True
         Compute the marginal covariance of every smoothed state at the end.
-    sampled_covariance, sampling_interval
+    sampled_covariance, sampling_interval, bias_sigma
         See :class:`SampledCovarianceSettings`.
     """
 
@@ -324,7 +337,7 @@ class FixedLagSettings(StreamingSettings, SampledCovarianceSettings):
         a stream from the prior, and the warm-up did not improve it
         (docs/concepts.md, "Feeding a tracker yourself").  Switch it on to feed the
         tracker without a guess of the first state.
-    sampled_covariance, sampling_interval
+    sampled_covariance, sampling_interval, bias_sigma
         See :class:`SampledCovarianceSettings`: the lagged covariances are
         checked against posterior samples of the data up to ``lag``
         seconds after their time (measured on the paper's six scenarios,
