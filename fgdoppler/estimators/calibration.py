@@ -1,4 +1,4 @@
-r"""Doppler calibration offsets: what a constant offset per pair does to the smoothed track.
+r"""Doppler calibration offsets: what a constant offset per pair does to a track.
 
 A pair whose transmitter and receiver oscillators are not locked, or whose
 processing assumes a slightly wrong carrier, measures every Doppler value
@@ -38,6 +38,13 @@ three-point rule left 24 of 240 answers of case a 5 and 25 km and case b
 five-point rule 17 (``python studies/doppler_offsets.py``, seed 2026, 60
 runs per scenario).  Offsets of different pairs are taken one at a time
 and their effects added (no cross terms).
+
+The filters (EKF, iSAM2, fixed-lag; ``bias_sigma`` of their settings)
+take the same share of what the offsets do to them, by
+:func:`offset_shares` with the tracker itself as the response: run again
+on the shifted data from starts moved as the initiation window's solution
+moves (:func:`moved_starts`), by
+:func:`~fgdoppler.estimators.registry.run_estimator`.
 """
 
 from __future__ import annotations
