@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 import fgdoppler as fd
+from fgdoppler.estimators.settings import SampledCovarianceSettings
 from fgdoppler.models.robust import huber_residuals, huber_rho, huber_weights
 
 
@@ -48,6 +51,13 @@ def _outliers(m: fd.Measurements, rng: np.random.Generator) -> fd.Measurements:
     return fd.Measurements(time=m.time, pair=m.pair, doppler=z, sigma=m.sigma)
 
 
+def _states_only(settings: fd.TrackerSettings) -> fd.TrackerSettings:
+    """``settings`` without a filter's sampled covariances, which change no state (only covariances, unused here)."""
+    if isinstance(settings, SampledCovarianceSettings):
+        return dataclasses.replace(settings, sampled_covariance=False)
+    return settings
+
+
 # case b is a second 60 s study (run with -m slow): the default run stays inside the CI budget
 @pytest.mark.parametrize(("case", "x"), [("a", 45e3), pytest.param("b", 5e3, marks=pytest.mark.slow)])
 def test_five_percent_gross_outliers_cost_at_most_half_the_clean_accuracy(case: str, x: float) -> None:
@@ -62,7 +72,8 @@ def test_five_percent_gross_outliers_cost_at_most_half_the_clean_accuracy(case: 
         for label, meas, k in (("clean", sim.measurements, None), ("robust", _outliers(sim.measurements, rng), 1.345)):
             init = fd.initiate(meas.first_per_pair(10), scen.geometry, fd.InitiationSettings(huber_k=k))
             for name, info in fd.ESTIMATORS.items():
-                r = fd.run_estimator(name, meas, scen.geometry, init, info.settings(huber_k=k), verify=False)
+                r = fd.run_estimator(name, meas, scen.geometry, init, _states_only(info.settings(huber_k=k)),
+                                     verify=False)
                 e = r.primary.states - sim.truth.at(r.primary.times)
                 se.setdefault((name, label), []).append(float(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2)))
     ratios = {n: np.sqrt(np.mean(se[(n, "robust")]) / np.mean(se[(n, "clean")])) for n in fd.ESTIMATORS}
