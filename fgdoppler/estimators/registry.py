@@ -150,8 +150,12 @@ def run_estimator(
     With ``verify`` (default) a filter's final state is checked against the
     offline smoother's, which costs a smoother run unless ``reference`` — the
     result of ``run_estimator("smoother", ...)`` on the same data and
-    initiation — is given.  ``progress`` (:mod:`fgdoppler.progress`) is told
-    of every task: each hypothesis's run, the reference smoother's.
+    initiation — is given.  With ``settings.bias_sigma`` a filter's
+    covariances include what calibration offsets of that size would do to
+    it (:func:`~fgdoppler.estimators.calibration.offset_shares`, added last;
+    the smoother adds its own).
+    ``progress`` (:mod:`fgdoppler.progress`) is told of every task: each
+    hypothesis's run, the reference smoother's, the runs on offset data.
 
     Raises
     ------
@@ -192,7 +196,8 @@ def run_estimator(
     if isinstance(settings, SampledCovarianceSettings) and settings.sampled_covariance:
         judged = _with_sampled_covariances(judged, measurements, model, settings)
     if isinstance(settings, SampledCovarianceSettings) and np.any(np.asarray(settings.bias_sigma) > 0):
-        judged = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings)
+        judged = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings,
+                               prefixed(progress, "calibration offsets"))
     return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
 
 
@@ -331,7 +336,7 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
 
 def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, measurements: Measurements,
                   model: TrackingModel, hyps: list[Initiation], weights: NDArray[np.float64] | None,
-                  settings: SampledCovarianceSettings) -> TrackResult:
+                  settings: SampledCovarianceSettings, progress: Progress | None = None) -> TrackResult:
     """Every estimate's covariances with the calibration offsets' share added (``settings.bias_sigma``).
 
     The share is what the offsets do to ``base`` — the tracker's run from
@@ -345,7 +350,7 @@ def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, m
     moved = moved_starts(hyps, measurements, model, huber_k=settings.huber_k)
 
     def respond(data: Measurements) -> list[NDArray[np.float64]]:
-        again = _solve(info, data, model, moved(data), settings, None, weights)
+        again = _solve(info, data, model, moved(data), settings, progress, weights)
         return [again.estimate(k).states for k in kinds]
 
     shares = dict(zip(kinds, offset_shares(measurements, bias_sigmas(settings.bias_sigma, model.observation.n_channels),
