@@ -274,8 +274,8 @@ class Scenario:
         Constant offset (m/s) added to every measurement of a pair — an
         uncalibrated frequency offset — one value or one per pair; the
         declared ``sigma`` does not include it (default 0: none).  The
-        smoother's ``SmootherSettings(bias_sigma=...)`` accounts for offsets
-        of unknown size.
+        ``bias_sigma`` of the smoother's, the EKF's, iSAM2's and the
+        fixed-lag smoother's settings accounts for offsets of unknown size.
     name
         Label used in reports.
     """

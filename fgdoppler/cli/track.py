@@ -148,11 +148,11 @@ def _run(args: argparse.Namespace) -> int:
         tracker = _tracker_settings(args, ALIASES.get(args.estimator, args.estimator))
     elif args.particles is not None or args.particle_seed is not None:
         raise CLIError("--particles and --particle-seed apply to --estimator particle or map, not to init")
-    elif args.mode_candidates is not None or args.most_likely or args.bias_sigma is not None:
-        option = ("--mode-candidates" if args.mode_candidates is not None
-                  else "--most-likely" if args.most_likely else "--bias-sigma")
-        raise CLIError(f"--bias-sigma applies to {', '.join(_calibrated())}, not to init" if option == "--bias-sigma"
-                       else f"{option} applies to the smoother, not to init")
+    elif args.mode_candidates is not None or args.most_likely:
+        option = "--mode-candidates" if args.mode_candidates is not None else "--most-likely"
+        raise CLIError(f"{option} applies to the smoother, not to init")
+    elif args.bias_sigma is not None:
+        raise CLIError(f"--bias-sigma applies to {', '.join(_calibrated())}, not to init")
     if args.init_per_pair < 3:
         raise CLIError("--init-per-pair must be >= 3")
     if not (math.isfinite(args.init_seconds) and args.init_seconds >= 0):

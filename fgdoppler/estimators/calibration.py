@@ -66,7 +66,6 @@ __all__ = ["QUADRATURE", "bias_sigmas", "moved_starts", "offset_shares", "shifte
 FloatArray = NDArray[np.float64]
 
 
-
 def _rule(points: int) -> tuple[tuple[float, float], ...]:
     """The ``points``-point Gauss–Hermite rule for N(0, 1) as (offset in sigma, weight), without the point 0."""
     u, w = hermegauss(points)

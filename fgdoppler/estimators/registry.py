@@ -176,8 +176,9 @@ def run_estimator(
                               settings, resolve_ambiguity=resolve_ambiguity, verify=verify, reference=local_ref,
                               progress=progress)
         return local.transformed(frame, to_world=True)
-    if isinstance(settings, SampledCovarianceSettings):  # a wrong count is said before any work
-        bias_sigmas(settings.bias_sigma, model.observation.n_channels)
+    # a filter's calibration uncertainty per pair (the smoother takes its own); a wrong count is said before any work
+    offsets = bias_sigmas(settings.bias_sigma, model.observation.n_channels) \
+        if isinstance(settings, SampledCovarianceSettings) else None
     hyps, weights = _hypotheses(info, measurements, model, init, settings) if resolve_ambiguity else ([init], None)
     result = base = _solve(info, measurements, model, hyps, settings, progress, weights)
     if resolve_ambiguity and info.resolution == "likelihood" and getattr(settings, "restarts", False) \
@@ -195,8 +196,8 @@ def run_estimator(
     judged = judge(result, measurements, model, settings, reference, half_plane=init.half_plane is not None)
     if isinstance(settings, SampledCovarianceSettings) and settings.sampled_covariance:
         judged = _with_sampled_covariances(judged, measurements, model, settings)
-    if isinstance(settings, SampledCovarianceSettings) and np.any(np.asarray(settings.bias_sigma) > 0):
-        judged = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings,
+    if offsets is not None and np.any(offsets > 0):
+        judged = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings, offsets,
                                prefixed(progress, "calibration offsets"))
     return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
 
@@ -336,8 +337,9 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
 
 def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, measurements: Measurements,
                   model: TrackingModel, hyps: list[Initiation], weights: NDArray[np.float64] | None,
-                  settings: SampledCovarianceSettings, progress: Progress | None = None) -> TrackResult:
-    """Every estimate's covariances with the calibration offsets' share added (``settings.bias_sigma``).
+                  settings: TrackerSettings, offsets: NDArray[np.float64],
+                  progress: Progress | None = None) -> TrackResult:
+    """Every estimate's covariances with the calibration offsets' share added (``offsets``: σ per pair, m/s).
 
     The share is what the offsets do to ``base`` — the tracker's run from
     ``hyps`` before any restart — run again on the data with one pair
@@ -353,8 +355,8 @@ def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, m
         again = _solve(info, data, model, moved(data), settings, progress, weights)
         return [again.estimate(k).states for k in kinds]
 
-    shares = dict(zip(kinds, offset_shares(measurements, bias_sigmas(settings.bias_sigma, model.observation.n_channels),
-                                           [e.states for e in base.estimates], respond), strict=True))
+    shares = dict(zip(kinds, offset_shares(measurements, offsets, [e.states for e in base.estimates], respond),
+                      strict=True))
     estimates = []
     for e in result.estimates:
         if e.kind in shares:
