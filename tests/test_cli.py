@@ -396,8 +396,9 @@ def test_a_manoeuvring_target_is_simulated_and_its_track_reported_doubtful(tmp_p
 
 
 def test_offsets_are_simulated_and_the_trackers_told_of_them(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    # simulate --bias offsets each pair's measurements; track --bias-sigma widens a tracker's covariances by
-    # what such offsets do (the track itself unchanged), and is refused where it does not apply
+    # simulate --bias offsets each pair's measurements; track --bias-sigma widens a Gaussian tracker's covariances
+    # by what such offsets do (the track itself unchanged), changes the particle estimators' model, and is
+    # refused where it does not apply
     plain, biased = tmp_path / "plain", tmp_path / "biased"
     assert main(["simulate", "--start-x", "45000", "--seed", "4", "--out", str(plain)]) == 0
     assert main(["simulate", "--start-x", "45000", "--seed", "4", "--bias", "0.5", "-1", "--out", str(biased)]) == 0
@@ -415,8 +416,15 @@ def test_offsets_are_simulated_and_the_trackers_told_of_them(tmp_path: Path, cap
         last = [np.array(runs[k]["covariances"][-1]) for k in (False, True)]
         assert np.all(np.linalg.eigvalsh(last[1] - last[0]) > -1e-9) and np.trace(last[1]) > 10 * np.trace(last[0])
     m = str(biased / "measurements.csv")
-    for bad, said in ((["--estimator", "particle", "--bias-sigma", "1"], "applies to ekf, isam2, fixed-lag, smoother"),
-                      (["--estimator", "init", "--bias-sigma", "1"], "not to init"),
+    # the particle estimators integrate the offsets out: the same particles and seed, another model, another track
+    runs = {}
+    for extra in ([], ["--bias-sigma", "1"]):
+        assert main(["track", m, "--estimator", "particle", "--json", *extra]) == 0
+        runs[bool(extra)] = json.loads(capsys.readouterr().out)
+    assert runs[True]["settings"]["bias_sigma"] == 1.0 and runs[True]["states"] != runs[False]["states"]
+    for bad, said in ((["--estimator", "particle", "--bias-sigma", "1", "--huber"], "(no --huber)"),
+                      (["--estimator", "init", "--bias-sigma", "1"],
+                       "applies to ekf, isam2, fixed-lag, smoother, particle, map, not to init"),
                       (["--estimator", "smoother", "--bias-sigma", "1", "1", "1"], "one per pair (2)"),
                       (["--estimator", "ekf", "--bias-sigma", "1", "1", "1"], "one per pair (2)"),
                       (["--estimator", "fixed-lag", "--bias-sigma", "-1"], "--bias-sigma")):
@@ -445,3 +453,7 @@ def test_a_monte_carlo_study_with_offsets_declared_to_the_trackers(tmp_path: Pat
     assert main(["montecarlo", "--case", "a", "--runs", "1", "--bias-sigma", "1", "1", "1",
                  "--out", str(tmp_path / "bad")]) == 2
     assert "--bias-sigma takes one value or one per pair (2 in case a" in capsys.readouterr().err
+    # the particle estimators cannot integrate offsets out of a Huber likelihood: refused before any work
+    assert main(["montecarlo", "--case", "a", "--runs", "1", "--estimators", "particle", "--huber",
+                 "--bias-sigma", "1", "--out", str(tmp_path / "huber")]) == 2
+    assert "(no --huber)" in capsys.readouterr().err and not (tmp_path / "huber.npz").exists()

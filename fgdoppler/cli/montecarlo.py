@@ -45,7 +45,8 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bias-sigma", type=float, nargs="+", default=None, metavar="M/S",
                    help="Doppler calibration uncertainty per pair in m/s (1 sigma; one value or one per pair): the "
                         "covariances of the smoother, ekf, isam2 and fixed-lag include what constant offsets of that "
-                        "size would do (default 0; simulate offsets with --bias)")
+                        "size would do; particle and map integrate such offsets out (default 0; simulate offsets "
+                        "with --bias)")
     p.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS),
                    help=f"estimators (default: {' '.join(DEFAULT_ESTIMATORS)}; also lag:SECONDS)")
     p.add_argument("--runs", type=int, default=100, help="runs per scenario (default 100)")
@@ -63,7 +64,11 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
 def _run(args: argparse.Namespace) -> int:
     from fgdoppler.analysis.montecarlo import MonteCarloSpec, run_monte_carlo
     from fgdoppler.estimators.initiation import InitiationSettings
-    from fgdoppler.estimators.settings import SampledCovarianceSettings, SmootherSettings
+    from fgdoppler.estimators.settings import (
+        ParticleSettings,
+        SampledCovarianceSettings,
+        SmootherSettings,
+    )
     from fgdoppler.models.motion import ConstantVelocity
     from fgdoppler.simulation import PAPER_START_X
 
@@ -87,11 +92,14 @@ def _run(args: argparse.Namespace) -> int:
     if args.bias_sigma is not None:
         for sc in scen:  # every geometry of the study must take the count given
             bias_sigma = per_pair(args.bias_sigma, sc.geometry.n_pairs, "--bias-sigma", f" in {sc.name}")
+        takes = (SmootherSettings, SampledCovarianceSettings, ParticleSettings)
+        # the study's estimators only (lag:S is the fixed-lag smoother): another's refusal must not stop it
+        chosen = {"fixed-lag" if e.startswith("lag:") else e for e in args.estimators}
         try:
-            settings = {n: replace(s, bias_sigma=bias_sigma) if isinstance(s, (SmootherSettings, SampledCovarianceSettings))
-                        else s for n, s in settings.items()}
+            settings = {n: replace(s, bias_sigma=bias_sigma) if isinstance(s, takes) and n in chosen else s
+                        for n, s in settings.items()}
         except ValueError as exc:
-            raise CLIError(f"--bias-sigma: {exc}") from None
+            raise CLIError(f"--bias-sigma: {str(exc).replace('(huber_k=None)', '(no --huber)')}") from None
     try:
         spec = MonteCarloSpec(scenarios=tuple(scen), estimators=tuple(args.estimators), runs=args.runs, seed=args.seed,
                               initiation=InitiationSettings(grid=grid_spec(args), huber_k=k), settings=settings,

@@ -70,9 +70,10 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    help="smoother: grid candidates its whole-recording mode search refines (default 20; 0 turns "
                         "the search off: faster, but a track in a wrong mode of the likelihood can be reported ok)")
     p.add_argument("--bias-sigma", type=float, nargs="+", default=None, metavar="M/S",
-                   help="smoother, ekf, isam2, fixed-lag: each pair's Doppler calibration uncertainty in m/s "
-                        "(1 sigma; one value or one per pair): the reported covariances include what constant "
-                        "offsets of that size would do to the track (default 0)")
+                   help="each pair's Doppler calibration uncertainty in m/s (1 sigma; one value or one per pair): "
+                        "the smoother's, ekf's, isam2's and fixed-lag's covariances include what constant offsets "
+                        "of that size would do to the track; particle and map integrate such offsets out of their "
+                        "likelihood (default 0)")
     add_huber_option(p)
     p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy) for --plot and errors")
     p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
@@ -314,9 +315,9 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
     if args.bias_sigma is not None:
         offsets["bias_sigma"] = args.bias_sigma[0] if len(args.bias_sigma) == 1 else tuple(args.bias_sigma)
     try:
-        ESTIMATORS[name].settings(**offsets)
+        ESTIMATORS[name].settings(huber_k=k, **offsets)
     except ValueError as exc:
-        raise CLIError(f"--bias-sigma: {exc}") from None
+        raise CLIError(f"--bias-sigma: {str(exc).replace('(huber_k=None)', '(no --huber)')}") from None
     if name == "smoother":
         modes: dict[str, Any] = {}
         if args.mode_candidates is not None:

@@ -60,6 +60,15 @@ a recording this long is close to one), and each resampling is followed by
 one Metropolis step instead of ``move_steps``.  The run's closing event
 counts the re-anchorings.
 
+With ``settings.bias_sigma`` each pair's constant Doppler offset,
+prior :math:`N(0, \sigma_{b,p}^2)`, is part of the model and integrated
+out of every particle's likelihood in closed form
+(:mod:`fgdoppler.estimators.offset_posterior`): each particle carries the
+per-pair sums :math:`s_p` of its whitened residuals, the gate predicts with
+the offsets' conditional mean and variance, the mode's climb solves for
+the state and the offsets together, and a re-anchoring summarises the
+offsets jointly with the state.
+
 Random numbers come from ``numpy.random.default_rng(settings.seed)``: the
 same input and settings give the same track.
 """
@@ -78,6 +87,7 @@ from fgdoppler.estimators.gating import NISGate
 from fgdoppler.estimators.grid import HalfPlane
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.local import in_computation_frame
+from fgdoppler.estimators.offset_posterior import OffsetPrior
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import MapSettings, ParticleSettings
 from fgdoppler.estimators.verdict import Event
@@ -141,6 +151,18 @@ class _Posterior:
         self.logw = np.empty(0)
         self.logpost = np.empty(0)
         self.label = np.empty(0, dtype=np.intp)
+        # calibration offsets integrated out (None: calibrated): each particle's per-pair statistics s and the
+        # data's information a since the anchor (:mod:`fgdoppler.estimators.offset_posterior`)
+        self.offsets = OffsetPrior.independent(settings.bias_sigma, model.observation.n_channels, model.n)
+        n_off = 0 if self.offsets is None else self.offsets.size
+        self.s = np.empty((0, n_off))
+        self.a = np.zeros(n_off) if self.offsets is None else self._info(data.pair, data.sigma)
+
+    def _info(self, pair: NDArray[np.intp], sigma: FloatArray) -> FloatArray:
+        """The offsets' information :math:`a_p` of the given measurements."""
+        assert self.offsets is not None
+        E = self.offsets.incidence(pair, sigma)
+        return np.asarray(np.sum(E * E, axis=0), dtype=float)
 
     # -- target -------------------------------------------------------------------------
     def log_prior(self, x: FloatArray) -> FloatArray:
@@ -180,14 +202,42 @@ class _Posterior:
             out[a:a + step] = np.where(np.isfinite(ll), ll, -np.inf)
         return out
 
+    def offset_stats(self, x: FloatArray, t: FloatArray, pair: NDArray[np.intp], z: FloatArray,
+                     sigma: FloatArray) -> tuple[FloatArray, FloatArray]:
+        r""":math:`-\tfrac12\sum_j r_j^2` and the offsets' statistics :math:`\mathbf s` ``(N, P)`` for every row of ``x``.
+
+        ``-inf`` where the track passes through a sensor; for the squared loss only (the settings refuse
+        ``bias_sigma`` with a Huber loss).
+        """
+        assert self.offsets is not None
+        E = self.offsets.incidence(pair, sigma)
+        ll = np.empty(x.shape[0])
+        s = np.zeros((x.shape[0], self.offsets.size))
+        step = max(1, CHUNK_ROWS // max(t.size, 1))
+        for a in range(0, x.shape[0], step):
+            r = (z - predict_along(self.model.observation, x[a:a + step], t, pair)) / sigma
+            with np.errstate(invalid="ignore"):
+                ll[a:a + step] = -0.5 * np.sum(r * r, axis=1)
+            s[a:a + step] = np.where(np.isfinite(r), r, 0.0) @ E
+        return np.where(np.isfinite(ll), ll, -np.inf), s
+
     def log_target(self, x: FloatArray) -> FloatArray:
+        return self.log_target_and_stats(x)[0]
+
+    def log_target_and_stats(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        r"""The log target of every row of ``x`` and, with offsets, their statistics :math:`\mathbf s` ``(N, P)``."""
         lp = self.log_prior(x)
         ok = np.isfinite(lp)
         out = np.full(x.shape[0], -np.inf)
+        s = np.zeros((x.shape[0], self.s.shape[1]))
         if np.any(ok):
             d = self.data
-            out[ok] = lp[ok] + self.loglik(x[ok], d.t, d.pair, d.z, d.sigma)
-        return out
+            if self.offsets is None:
+                out[ok] = lp[ok] + self.loglik(x[ok], d.t, d.pair, d.z, d.sigma)
+            else:
+                ll, s[ok] = self.offset_stats(x[ok], d.t, d.pair, d.z, d.sigma)
+                out[ok] = lp[ok] + ll + self.offsets.extra(x[ok], s[ok], self.a)
+        return out, s
 
     # -- particle operations -------------------------------------------------------------
     def sample_from(self, comps: list[tuple[FloatArray, FloatArray]], n: int, moves: int,
@@ -230,10 +280,10 @@ class _Posterior:
 
         label = rng.integers(0, k, n)
         x = means[label] + np.einsum("nij,nj->ni", chols[label], rng.standard_normal((n, means.shape[1])))
-        logpost = self.log_target(x)
+        logpost, s = self.log_target_and_stats(x)
         if not np.any(np.isfinite(logpost)):
             return None
-        self.x, self.label, self.logpost = x, label, logpost
+        self.x, self.label, self.logpost, self.s = x, label, logpost, s
         if not tempered:
             self.logw = logpost - log_q(x)
             self.resample(rng)
@@ -264,7 +314,7 @@ class _Posterior:
         c = np.cumsum(self.weights())
         c[-1] = 1.0
         idx = np.searchsorted(c, (rng.random() + np.arange(n)) / n)
-        self.x, self.logpost, self.label = self.x[idx], self.logpost[idx], self.label[idx]
+        self.x, self.logpost, self.label, self.s = self.x[idx], self.logpost[idx], self.label[idx], self.s[idx]
         self.logw = np.zeros(n)
         return idx
 
@@ -284,7 +334,7 @@ class _Posterior:
         for _ in range(steps):
             eps = rng.standard_normal(self.x.shape)
             prop = self.x + np.sqrt(scale) * np.einsum("nij,nj->ni", chol[self.label], eps)
-            lt = self.log_target(prop)
+            lt, s_prop = self.log_target_and_stats(prop)
             if tempering is None:
                 ratio = lt - self.logpost
             else:
@@ -293,7 +343,7 @@ class _Posterior:
                 with np.errstate(invalid="ignore"):  # -inf - -inf where both lie off the support
                     ratio = beta * (lt - self.logpost) + (1.0 - beta) * (lq_prop - lq)
             accept = np.log(rng.random(self.x.shape[0])) < ratio
-            self.x[accept], self.logpost[accept] = prop[accept], lt[accept]
+            self.x[accept], self.logpost[accept], self.s[accept] = prop[accept], lt[accept], s_prop[accept]
             if tempering is not None:
                 lq[accept] = lq_prop[accept]
             rate = float(np.mean(accept))
@@ -404,11 +454,14 @@ class _Posterior:
         except ValueError:  # the track passes through a sensor
             return -np.inf, *empty
         r = (h - d.z) / d.sigma
+        Jw = J / d.sigma[:, None]
+        if self.offsets is not None:  # the joint problem in (x, b) at the offsets' conditional mode
+            r, Jw = self.offsets.profile(x, r, Jw, self.offsets.incidence(d.pair, d.sigma))
         value = -0.5 * float(np.sum(huber_rho(r, self.settings.huber_k)))
         if quad is not None:
             e = quad[1] @ (x - quad[0])
             value -= 0.5 * float(e @ e)
-        return (value if np.isfinite(value) else -np.inf), r, J / d.sigma[:, None]
+        return (value if np.isfinite(value) else -np.inf), r, Jw
 
     def _climb(self, x: FloatArray) -> tuple[FloatArray, float]:
         # each trial is scored by the evaluation that also linearises there: one model call per step
@@ -423,13 +476,15 @@ class _Posterior:
             g = Jw.T @ (wr * r)
             if quad is not None:
                 m, Li = quad
-                A = A + Li.T @ Li
-                g = g + Li.T @ (Li @ (x - m))
+                n = x.size  # with offsets the offsets' columns follow the state's
+                A[:n, :n] += Li.T @ Li
+                g[:n] += Li.T @ (Li @ (x - m))
             D = np.diag(np.maximum(np.diag(A), 1e-12 * max(float(np.max(np.diag(A))), 1e-300)))
             gain = 0.0
             for _ in range(MODE_DAMPING_TRIES):
                 try:
-                    trial = x - np.linalg.solve(A + lam * D, g)
+                    # with offsets only the state's step is taken: the trial re-profiles the offsets
+                    trial = x - np.linalg.solve(A + lam * D, g)[:x.size]
                 except np.linalg.LinAlgError:
                     lam *= 4.0
                     continue
@@ -449,13 +504,19 @@ class _Posterior:
         m = self.model.motion
         dt = t - self.t_anchor
         L = np.linalg.cholesky(m.Q(dt))
+        x_old = self.x
         self.x = m.propagate(self.x, dt) + rng.standard_normal(self.x.shape) @ L.T
         w = self.weights()
         mean = w @ self.x
         cov = _weighted_cov(self.x, w)
         self.gauss = (mean, np.asarray(np.linalg.inv(_safe_cholesky(cov, cov)), dtype=float))
+        if self.offsets is not None:  # the offsets' joint Gaussian with the new anchor states, conditioned on them
+            self.offsets = self.offsets.reanchored(x_old, self.x, self.s, self.a, w)
+            self.s = np.zeros_like(self.s)
+            self.a = np.zeros_like(self.a)
         self.t_anchor = t
         self.data = _Data(t=np.empty(0), pair=np.empty(0, dtype=np.intp), z=np.empty(0), sigma=np.empty(0))
+        # no data since the anchor: the offsets add nothing (OffsetPrior.extra is 0 at s = a = 0)
         self.logpost = self.log_prior(self.x)
 
 
@@ -861,23 +922,40 @@ def _update(post: _Posterior, gate: NISGate, t: float, pair: NDArray[np.intp], z
     """Gate and apply one scan; returns the log predictive likelihood of the accepted measurements."""
     tr = np.full(pair.size, t - post.t_anchor)
     h = predict_along(post.model.observation, post.x, tr, pair)
+    off = post.offsets
+    if off is not None:  # each particle predicts with its offsets' conditional mean, and their variance adds
+        b, b_cov = off.posterior(post.x, post.s, post.a)
+        col = off.channel[pair]
+        known = col >= 0
+        h_pred = h + np.where(known, b[:, np.maximum(col, 0)], 0.0)
+        var_b: FloatArray | float = np.where(known, np.diag(b_cov)[np.maximum(col, 0)], 0.0)
+    else:
+        h_pred, var_b = h, 0.0
     w = post.weights()
     ok = np.all(np.isfinite(h), axis=1)
     wk = np.where(ok, w, 0.0)
     wk = wk / max(float(np.sum(wk)), 1e-300)
-    hm = wk @ np.where(ok[:, None], h, 0.0)
-    hv = wk @ (np.where(ok[:, None], h, hm) - hm) ** 2
-    nis = (z - hm) ** 2 / (hv + sigma**2)
+    hm = wk @ np.where(ok[:, None], h_pred, 0.0)
+    hv = wk @ (np.where(ok[:, None], h_pred, hm) - hm) ** 2
+    nis = (z - hm) ** 2 / (hv + var_b + sigma**2)
     keep = np.array([gate.accept(t, int(c), float(v)) for c, v in zip(pair, nis, strict=True)], dtype=bool)
     if not np.any(keep):
         return 0.0
     r = (z[keep] - h[:, keep]) / sigma[keep]
     with np.errstate(invalid="ignore"):
         ll = -0.5 * huber_rho(r, post.settings.huber_k).sum(axis=1)
+    norm = float(np.sum(np.log(sigma[keep] * np.sqrt(2 * np.pi))))
+    if off is not None:  # the offsets' terms before and after these measurements
+        E = off.incidence(pair[keep], sigma[keep])
+        s_new = post.s + np.where(np.isfinite(r), r, 0.0) @ E
+        a_new = post.a + np.sum(E * E, axis=0)
+        with np.errstate(invalid="ignore"):
+            ll = ll + off.extra(post.x, s_new, a_new) - off.extra(post.x, post.s, post.a)
+        norm -= off.log_det(a_new) - off.log_det(post.a)
+        post.s, post.a = s_new, a_new
     ll = np.where(np.isfinite(ll), ll, -np.inf)
     before = logsumexp(post.logw)
     post.logw = post.logw + ll
     post.logpost = post.logpost + ll
     post.data.add(tr[keep], pair[keep], z[keep], sigma[keep])
-    norm = float(np.sum(np.log(sigma[keep] * np.sqrt(2 * np.pi))))
     return float(logsumexp(post.logw) - before) - norm

@@ -153,7 +153,8 @@ def run_estimator(
     initiation — is given.  With ``settings.bias_sigma`` a filter's
     covariances include what calibration offsets of that size would do to
     it (:func:`~fgdoppler.estimators.calibration.offset_shares`, added last;
-    the smoother adds its own).
+    the smoother adds its own; the particle estimators integrate the
+    offsets out of their likelihood, :mod:`~fgdoppler.estimators.offset_posterior`).
     ``progress`` (:mod:`fgdoppler.progress`) is told of every task: each
     hypothesis's run, the reference smoother's, the runs on offset data.
 
@@ -179,6 +180,8 @@ def run_estimator(
     # a filter's calibration uncertainty per pair (the smoother takes its own); a wrong count is said before any work
     offsets = bias_sigmas(settings.bias_sigma, model.observation.n_channels) \
         if isinstance(settings, SampledCovarianceSettings) else None
+    if isinstance(settings, ParticleSettings):  # integrated out by the particles themselves: only the count here
+        bias_sigmas(settings.bias_sigma, model.observation.n_channels)
     hyps, weights = _hypotheses(info, measurements, model, init, settings) if resolve_ambiguity else ([init], None)
     result = base = _solve(info, measurements, model, hyps, settings, progress, weights)
     if resolve_ambiguity and info.resolution == "likelihood" and getattr(settings, "restarts", False) \

@@ -510,6 +510,19 @@ class ParticleSettings(TrackerSettings):
         ``start_move_steps`` moves (faster; its sample stays near the
         proposal's centres, under-dispersed, and can give one of two
         mirror modes all the mass).
+    bias_sigma : float or tuple of float, default 0.0
+        Each pair's Doppler calibration uncertainty (m/s, one standard
+        deviation; one value for every pair or one per pair).  Where the
+        Gaussian trackers add the offsets' effect to their covariances
+        (:class:`SmootherSettings`, :class:`SampledCovarianceSettings`),
+        the particle estimators change the model they sample: each pair's
+        constant offset, prior :math:`N(0, \\sigma_b^2)`, is integrated out
+        of every particle's likelihood exactly
+        (:mod:`~fgdoppler.estimators.offset_posterior`), so the track is the
+        posterior's mean (or mode) under offsets of that size, and its
+        covariance is that posterior's.  Needs the squared loss
+        (``huber_k=None``): with a Huber loss the offsets do not integrate
+        out in closed form.
     """
 
     n_particles: int = 4096
@@ -519,9 +532,15 @@ class ParticleSettings(TrackerSettings):
     start_move_steps: int = 20
     max_span: float = 300.0
     tempered_start: bool = True
+    bias_sigma: float | tuple[float, ...] = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        object.__setattr__(self, "bias_sigma", _bias_sigma(self.bias_sigma))
+        declared = self.bias_sigma if isinstance(self.bias_sigma, tuple) else (self.bias_sigma,)
+        if self.huber_k is not None and max(declared) > 0:
+            raise ValueError("bias_sigma > 0 needs the squared loss in the particle estimators (huber_k=None): "
+                             "with a Huber loss the offsets do not integrate out of the likelihood")
         _count(self.n_particles, "n_particles")
         if self.n_particles < 64:
             raise ValueError(f"n_particles must be >= 64, got {self.n_particles}")
