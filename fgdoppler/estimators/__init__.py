@@ -15,7 +15,7 @@ from fgdoppler.estimators.registry import (
     run_estimators,
     track,
 )
-from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.results import Estimates, OffsetEstimate, TrackResult
 from fgdoppler.estimators.settings import (
     EKFSettings,
     FixedLagSettings,
@@ -45,6 +45,7 @@ __all__ = [
     "Initiation",
     "InitiationSettings",
     "MapSettings",
+    "OffsetEstimate",
     "ParticleSettings",
     "Reason",
     "SampledCovarianceSettings",

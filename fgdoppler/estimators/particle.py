@@ -88,7 +88,7 @@ from fgdoppler.estimators.grid import HalfPlane
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.local import in_computation_frame
 from fgdoppler.estimators.offset_posterior import OffsetPrior
-from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.results import Estimates, OffsetEstimate, TrackResult
 from fgdoppler.estimators.settings import MapSettings, ParticleSettings
 from fgdoppler.estimators.verdict import Event
 from fgdoppler.estimators.window import split_window
@@ -891,6 +891,12 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         loglik.append(total)
         advance(progress)
     events.append(Event(time=times[-1], message=_summary(settings, rates, n_resample, n_reanchor, mode, jumps)))
+    offsets = None
+    if post.offsets is not None:
+        offsets = _offsets_at_end(post, last_mode[1] if mode and last_mode is not None else None)
+        events.append(Event(time=times[-1], message="calibration offsets at the end: " + ", ".join(
+            f"pair {p} {v:+.2f} +- {sd:.2f} m/s" for p, v, sd in
+            zip(offsets.pairs, offsets.values, np.sqrt(np.diag(offsets.covariance)), strict=True))))
     return TrackResult(
         estimator=name,
         settings=settings,
@@ -901,7 +907,30 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         log_likelihood=np.array(loglik),
         iterations=n_resample,
         wall_time=time.perf_counter() - t_begin,
+        offsets=offsets,
     )
+
+
+def _offsets_at_end(post: _Posterior, x_mode: FloatArray | None) -> OffsetEstimate:
+    r"""The offsets' posterior after the last scan: mean and covariance, or their value at the mode and the second moment.
+
+    Given each particle's state the offsets are :math:`N(\hat{\mathbf b}_i, \boldsymbol\Lambda^{-1})`, so over
+    the particles their mean is :math:`\sum_i w_i\hat{\mathbf b}_i` and their second moment about a centre
+    :math:`\mathbf c` is :math:`\boldsymbol\Lambda^{-1} + \sum_i w_i(\hat{\mathbf b}_i - \mathbf c)(\cdot)^\top`.
+    With ``x_mode`` (the filtered MAP's anchor state) the centre is :math:`\hat{\mathbf b}` at the mode.
+    """
+    off = post.offsets
+    assert off is not None
+    b, cov = off.posterior(post.x, post.s, post.a)
+    w = post.weights()
+    if x_mode is None:
+        centre = w @ b
+    else:
+        d = post.data
+        _, s_mode = post.offset_stats(x_mode[None], d.t, d.pair, d.z, d.sigma)
+        centre = off.posterior(x_mode[None], s_mode, post.a)[0][0]
+    return OffsetEstimate(pairs=np.flatnonzero(off.channel >= 0).astype(np.int64), values=np.asarray(centre, dtype=float),
+                          covariance=cov + _weighted_cov(b, w, centre=centre))
 
 
 def _summary(settings: ParticleSettings, rates: list[float], n_resample: int, n_reanchor: int, mode: bool,

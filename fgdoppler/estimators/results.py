@@ -35,7 +35,7 @@ from fgdoppler.estimators.settings import TrackerSettings
 from fgdoppler.estimators.verdict import Event, Judged, Reason
 from fgdoppler.frames import Frame
 
-__all__ = ["KINDS", "Estimates", "TrackResult", "json_dumps", "states_csv"]
+__all__ = ["KINDS", "Estimates", "OffsetEstimate", "TrackResult", "json_dumps", "states_csv"]
 
 FloatArray = NDArray[np.float64]
 Kind = Literal["filtered", "lagged", "smoothed"]
@@ -168,6 +168,36 @@ class Estimates:
 
 
 @dataclass(frozen=True, kw_only=True)
+class OffsetEstimate:
+    """What the data say of each uncertain pair's calibration offset at the end of the recording (m/s).
+
+    Given by the particle estimators when ``bias_sigma`` is declared
+    (:mod:`~fgdoppler.estimators.offset_posterior`): ``particle`` the
+    offsets' posterior mean and covariance, ``map`` their most probable
+    values given the reported state and the second moment about them.
+    Offsets are scalars per pair, the same in every frame.
+
+    Attributes
+    ----------
+    pairs
+        The pairs (channels) declared uncertain, ``(P,)``.
+    values
+        Their offsets ``(P,)``.
+    covariance
+        ``(P, P)``.
+    """
+
+    pairs: NDArray[np.int64]
+    values: FloatArray
+    covariance: FloatArray
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: ``pairs``, ``values``, ``sigmas`` and ``covariance``."""
+        return {"pairs": self.pairs.tolist(), "values": self.values.tolist(),
+                "sigmas": np.sqrt(np.diag(self.covariance)).tolist(), "covariance": self.covariance.tolist()}
+
+
+@dataclass(frozen=True, kw_only=True)
 class TrackResult(Judged):
     """Output of any tracker.
 
@@ -201,6 +231,10 @@ class TrackResult(Judged):
         (all zero unless the initiation was ambiguous).
     wall_time
         Seconds.
+    offsets
+        The calibration offsets the data imply (:class:`OffsetEstimate`),
+        where the estimator estimates them (the particle estimators with
+        ``bias_sigma``); ``None`` otherwise.
     """
 
     estimator: str
@@ -215,6 +249,7 @@ class TrackResult(Judged):
     cost: float | None = None
     hypothesis: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     wall_time: float = 0.0
+    offsets: OffsetEstimate | None = None
 
     def __post_init__(self) -> None:
         if not self.estimates:
@@ -276,6 +311,8 @@ class TrackResult(Judged):
         if self.cost is not None:
             d["cost"] = self.cost
         d["wall_time"] = self.wall_time
+        if self.offsets is not None:
+            d["offsets"] = self.offsets.to_dict()
         return d
 
     def csv_text(self, *, header: Sequence[str] = ()) -> str:
