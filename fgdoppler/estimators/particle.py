@@ -214,11 +214,11 @@ class _Posterior:
         ll = np.empty(x.shape[0])
         s = np.zeros((x.shape[0], self.offsets.size))
         step = max(1, CHUNK_ROWS // max(t.size, 1))
-        for a in range(0, x.shape[0], step):
-            r = (z - predict_along(self.model.observation, x[a:a + step], t, pair)) / sigma
+        for lo in range(0, x.shape[0], step):
+            r = (z - predict_along(self.model.observation, x[lo:lo + step], t, pair)) / sigma
             with np.errstate(invalid="ignore"):
-                ll[a:a + step] = -0.5 * np.sum(r * r, axis=1)
-            s[a:a + step] = np.where(np.isfinite(r), r, 0.0) @ E
+                ll[lo:lo + step] = -0.5 * np.sum(r * r, axis=1)
+            s[lo:lo + step] = np.where(np.isfinite(r), r, 0.0) @ E
         return np.where(np.isfinite(ll), ll, -np.inf), s
 
     def log_target(self, x: FloatArray) -> FloatArray:
@@ -955,9 +955,9 @@ def _update(post: _Posterior, gate: NISGate, t: float, pair: NDArray[np.intp], z
     if off is not None:  # each particle predicts with its offsets' conditional mean, and their variance adds
         b, b_cov = off.posterior(post.x, post.s, post.a)
         col = off.channel[pair]
-        known = col >= 0
-        h_pred = h + np.where(known, b[:, np.maximum(col, 0)], 0.0)
-        var_b: FloatArray | float = np.where(known, np.diag(b_cov)[np.maximum(col, 0)], 0.0)
+        uncertain = col >= 0  # a calibrated pair (-1) has no offset
+        h_pred = h + np.where(uncertain, b[:, np.maximum(col, 0)], 0.0)
+        var_b: FloatArray | float = np.where(uncertain, np.diag(b_cov)[np.maximum(col, 0)], 0.0)
     else:
         h_pred, var_b = h, 0.0
     w = post.weights()
