@@ -275,7 +275,9 @@ class Scenario:
         uncalibrated frequency offset — one value or one per pair; the
         declared ``sigma`` does not include it (default 0: none).  The
         ``bias_sigma`` of the smoother's, the EKF's, iSAM2's and the
-        fixed-lag smoother's settings accounts for offsets of unknown size.
+        fixed-lag smoother's settings accounts for offsets of unknown size
+        in their covariances; that of the particle estimators' integrates
+        them out of their likelihood.
     name
         Label used in reports.
     """
