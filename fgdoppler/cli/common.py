@@ -197,6 +197,11 @@ def per_pair(values: list[float], n_pairs: int, option: str, where: str = "") ->
     return values[0] if len(values) == 1 else tuple(values)
 
 
+def bias_sigma_error(exc: ValueError) -> CLIError:
+    """A tracker settings' refusal of ``bias_sigma``, in the command line's words."""
+    return CLIError(f"--bias-sigma: {str(exc).replace('(huber_k=None)', '(no --huber)')}")
+
+
 def _finite(v: float) -> bool:
     import math
 

@@ -12,6 +12,7 @@ from fgdoppler.cli.common import (
     add_huber_option,
     add_scenario_options,
     add_zone_options,
+    bias_sigma_error,
     emit_json,
     executor,
     geometry_with_zone,
@@ -99,7 +100,7 @@ def _run(args: argparse.Namespace) -> int:
             settings = {n: replace(s, bias_sigma=bias_sigma) if isinstance(s, takes) and n in chosen else s
                         for n, s in settings.items()}
         except ValueError as exc:
-            raise CLIError(f"--bias-sigma: {str(exc).replace('(huber_k=None)', '(no --huber)')}") from None
+            raise bias_sigma_error(exc) from None
     try:
         spec = MonteCarloSpec(scenarios=tuple(scen), estimators=tuple(args.estimators), runs=args.runs, seed=args.seed,
                               initiation=InitiationSettings(grid=grid_spec(args), huber_k=k), settings=settings,

@@ -192,7 +192,18 @@ class _Posterior:
     def loglik(self, x: FloatArray, t: FloatArray, pair: NDArray[np.intp], z: FloatArray,
                sigma: FloatArray) -> FloatArray:
         """:math:`-\\tfrac12\\sum\\rho` of the given measurements for every row of ``x`` (``-inf`` if undefined)."""
+        return self.loglik_and_sums(x, t, pair, z, sigma)[0]
+
+    def loglik_and_sums(self, x: FloatArray, t: FloatArray, pair: NDArray[np.intp], z: FloatArray,
+                        sigma: FloatArray) -> tuple[FloatArray, FloatArray]:
+        r""":meth:`loglik`, and with offsets their statistics :math:`\mathbf s` ``(N, P)`` for every row of ``x``.
+
+        :math:`s_p = \sum_{j\in p}(z_j - h_j)/\sigma_j^2` (:mod:`fgdoppler.estimators.offset_posterior`;
+        ``(N, 0)`` without offsets).  The offsets' own terms are not added here.
+        """
         out = np.empty(x.shape[0])
+        E = None if self.offsets is None else self.offsets.incidence(pair, sigma)
+        sums = np.zeros((x.shape[0], 0 if E is None else E.shape[1]))
         step = max(1, CHUNK_ROWS // max(t.size, 1))
         for a in range(0, x.shape[0], step):
             h = predict_along(self.model.observation, x[a:a + step], t, pair)
@@ -200,26 +211,9 @@ class _Posterior:
             with np.errstate(invalid="ignore"):
                 ll = -0.5 * huber_rho(r, self.settings.huber_k).sum(axis=1)
             out[a:a + step] = np.where(np.isfinite(ll), ll, -np.inf)
-        return out
-
-    def offset_stats(self, x: FloatArray, t: FloatArray, pair: NDArray[np.intp], z: FloatArray,
-                     sigma: FloatArray) -> tuple[FloatArray, FloatArray]:
-        r""":math:`-\tfrac12\sum_j r_j^2` and the offsets' statistics :math:`\mathbf s` ``(N, P)`` for every row of ``x``.
-
-        ``-inf`` where the track passes through a sensor; for the squared loss only (the settings refuse
-        ``bias_sigma`` with a Huber loss).
-        """
-        assert self.offsets is not None
-        E = self.offsets.incidence(pair, sigma)
-        ll = np.empty(x.shape[0])
-        s = np.zeros((x.shape[0], self.offsets.size))
-        step = max(1, CHUNK_ROWS // max(t.size, 1))
-        for lo in range(0, x.shape[0], step):
-            r = (z - predict_along(self.model.observation, x[lo:lo + step], t, pair)) / sigma
-            with np.errstate(invalid="ignore"):
-                ll[lo:lo + step] = -0.5 * np.sum(r * r, axis=1)
-            s[lo:lo + step] = np.where(np.isfinite(r), r, 0.0) @ E
-        return np.where(np.isfinite(ll), ll, -np.inf), s
+            if E is not None:
+                sums[a:a + step] = np.where(np.isfinite(r), r, 0.0) @ E
+        return out, sums
 
     def log_target(self, x: FloatArray) -> FloatArray:
         return self.log_target_and_stats(x)[0]
@@ -232,11 +226,10 @@ class _Posterior:
         s = np.zeros((x.shape[0], self.s.shape[1]))
         if np.any(ok):
             d = self.data
-            if self.offsets is None:
-                out[ok] = lp[ok] + self.loglik(x[ok], d.t, d.pair, d.z, d.sigma)
-            else:
-                ll, s[ok] = self.offset_stats(x[ok], d.t, d.pair, d.z, d.sigma)
-                out[ok] = lp[ok] + ll + self.offsets.extra(x[ok], s[ok], self.a)
+            ll, s[ok] = self.loglik_and_sums(x[ok], d.t, d.pair, d.z, d.sigma)
+            out[ok] = lp[ok] + ll
+            if self.offsets is not None:
+                out[ok] += self.offsets.extra(x[ok], s[ok], self.a)
         return out, s
 
     # -- particle operations -------------------------------------------------------------
@@ -927,7 +920,7 @@ def _offsets_at_end(post: _Posterior, x_mode: FloatArray | None) -> OffsetEstima
         centre = w @ b
     else:
         d = post.data
-        _, s_mode = post.offset_stats(x_mode[None], d.t, d.pair, d.z, d.sigma)
+        _, s_mode = post.loglik_and_sums(x_mode[None], d.t, d.pair, d.z, d.sigma)
         centre = off.posterior(x_mode[None], s_mode, post.a)[0][0]
     return OffsetEstimate(pairs=np.flatnonzero(off.channel >= 0).astype(np.int64), values=np.asarray(centre, dtype=float),
                           covariance=cov + _weighted_cov(b, w, centre=centre))

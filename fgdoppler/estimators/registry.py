@@ -177,11 +177,11 @@ def run_estimator(
                               settings, resolve_ambiguity=resolve_ambiguity, verify=verify, reference=local_ref,
                               progress=progress)
         return local.transformed(frame, to_world=True)
-    # a filter's calibration uncertainty per pair (the smoother takes its own); a wrong count is said before any work
-    offsets = bias_sigmas(settings.bias_sigma, model.observation.n_channels) \
-        if isinstance(settings, SampledCovarianceSettings) else None
-    if isinstance(settings, ParticleSettings):  # integrated out by the particles themselves: only the count here
-        bias_sigmas(settings.bias_sigma, model.observation.n_channels)
+    # the calibration uncertainty per pair, its count said before any work; the registry adds a filter's share,
+    # the smoother and the particle estimators account for it themselves
+    declared = getattr(settings, "bias_sigma", None)
+    per_pair = None if declared is None else bias_sigmas(declared, model.observation.n_channels)
+    offsets = per_pair if isinstance(settings, SampledCovarianceSettings) else None
     hyps, weights = _hypotheses(info, measurements, model, init, settings) if resolve_ambiguity else ([init], None)
     result = base = _solve(info, measurements, model, hyps, settings, progress, weights)
     if resolve_ambiguity and info.resolution == "likelihood" and getattr(settings, "restarts", False) \
