@@ -48,6 +48,8 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
                         "covariances of the smoother, ekf, isam2 and fixed-lag include what constant offsets of that "
                         "size would do; particle and map integrate such offsets out (default 0; simulate offsets "
                         "with --bias)")
+    p.add_argument("--estimate-offsets", action="store_true",
+                   help="with --bias-sigma: the smoother estimates each pair's offset with the track instead")
     p.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS),
                    help=f"estimators (default: {' '.join(DEFAULT_ESTIMATORS)}; also lag:SECONDS)")
     p.add_argument("--runs", type=int, default=100, help="runs per scenario (default 100)")
@@ -90,6 +92,10 @@ def _run(args: argparse.Namespace) -> int:
 
     k = huber(args)
     settings = {n: e.settings(huber_k=k) for n, e in ESTIMATORS.items()}
+    if args.estimate_offsets and args.bias_sigma is None:
+        raise CLIError("--estimate-offsets needs --bias-sigma (each pair's offset prior)")
+    if args.estimate_offsets and "smoother" not in args.estimators:
+        raise CLIError("--estimate-offsets applies to the smoother, which is not among --estimators")
     if args.bias_sigma is not None:
         for sc in scen:  # every geometry of the study must take the count given
             bias_sigma = per_pair(args.bias_sigma, sc.geometry.n_pairs, "--bias-sigma", f" in {sc.name}")
@@ -99,6 +105,9 @@ def _run(args: argparse.Namespace) -> int:
         try:
             settings = {n: replace(s, bias_sigma=bias_sigma) if isinstance(s, takes) and n in chosen else s
                         for n, s in settings.items()}
+            smoother = settings["smoother"]
+            if args.estimate_offsets and isinstance(smoother, SmootherSettings):
+                settings["smoother"] = replace(smoother, estimate_offsets=True)
         except ValueError as exc:
             raise bias_sigma_error(exc) from None
     try:

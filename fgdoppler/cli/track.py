@@ -75,6 +75,9 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                         "the smoother's, ekf's, isam2's and fixed-lag's covariances include what constant offsets "
                         "of that size would do to the track; particle and map integrate such offsets out of their "
                         "likelihood (default 0)")
+    p.add_argument("--estimate-offsets", action="store_true",
+                   help="smoother, with --bias-sigma: estimate each pair's offset with the track (the track moves, "
+                        "the offsets are reported) instead of only widening the covariances")
     add_huber_option(p)
     p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy) for --plot and errors")
     p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
@@ -150,8 +153,9 @@ def _run(args: argparse.Namespace) -> int:
         tracker = _tracker_settings(args, ALIASES.get(args.estimator, args.estimator))
     elif args.particles is not None or args.particle_seed is not None:
         raise CLIError("--particles and --particle-seed apply to --estimator particle or map, not to init")
-    elif args.mode_candidates is not None or args.most_likely:
-        option = "--mode-candidates" if args.mode_candidates is not None else "--most-likely"
+    elif args.mode_candidates is not None or args.most_likely or args.estimate_offsets:
+        option = ("--mode-candidates" if args.mode_candidates is not None else
+                  "--most-likely" if args.most_likely else "--estimate-offsets")
         raise CLIError(f"{option} applies to the smoother, not to init")
     elif args.bias_sigma is not None:
         raise CLIError(f"--bias-sigma applies to {', '.join(_calibrated())}, not to init")
@@ -307,9 +311,12 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
         raise CLIError(f"--particles and --particle-seed apply to the particle estimators "
                        f"({', '.join(n for n, i in ESTIMATORS.items() if issubclass(i.settings, ParticleSettings))}), "
                        f"not to {name}")
-    for given, option in ((args.most_likely, "--most-likely"), (args.mode_candidates is not None, "--mode-candidates")):
+    for given, option in ((args.most_likely, "--most-likely"), (args.mode_candidates is not None, "--mode-candidates"),
+                          (args.estimate_offsets, "--estimate-offsets")):
         if given and name != "smoother":
             raise CLIError(f"{option} applies to the smoother, not to {name}")
+    if args.estimate_offsets and args.bias_sigma is None:
+        raise CLIError("--estimate-offsets needs --bias-sigma (each pair's offset prior)")
     if args.bias_sigma is not None and name not in _calibrated():
         raise CLIError(f"--bias-sigma applies to {', '.join(_calibrated())}, not to {name}")
     offsets: dict[str, Any] = {}
@@ -325,7 +332,11 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
             if args.mode_candidates < 0:
                 raise CLIError(f"--mode-candidates must be >= 0 (0: no mode search), got {args.mode_candidates}")
             modes = {"mode_search": False} if args.mode_candidates == 0 else {"mode_candidates": args.mode_candidates}
-        return SmootherSettings(huber_k=k, posterior_mean=not args.most_likely, **modes, **offsets)
+        try:
+            return SmootherSettings(huber_k=k, posterior_mean=not args.most_likely, estimate_offsets=args.estimate_offsets,
+                                    **modes, **offsets)
+        except ValueError as exc:  # offsets to estimate where every pair's bias_sigma is 0
+            raise CLIError(f"--estimate-offsets: {exc}") from None
     try:
         return (FixedLagSettings(lag=args.lag, huber_k=k, **offsets) if name == "fixed-lag"
                 else ESTIMATORS[name].settings(huber_k=k, **particle, **offsets))

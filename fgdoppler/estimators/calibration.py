@@ -61,7 +61,8 @@ from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["QUADRATURE", "bias_sigmas", "moved_starts", "offset_shares", "shifted", "with_bias_uncertainty"]
+__all__ = ["QUADRATURE", "bias_sigmas", "moved_starts", "offset_shares", "shifted", "shifted_by",
+           "with_bias_uncertainty"]
 
 FloatArray = NDArray[np.float64]
 
@@ -96,24 +97,37 @@ def shifted(measurements: Measurements, pair: int, offset: float) -> Measurement
     return replace(measurements, doppler=measurements.doppler + np.where(measurements.pair == pair, offset, 0.0))
 
 
+def shifted_by(measurements: Measurements, offsets: ArrayLike) -> Measurements:
+    """``measurements`` with every pair's Doppler values shifted by its own offset (``offsets``: one per pair, m/s)."""
+    return replace(measurements, doppler=measurements.doppler + np.asarray(offsets, dtype=float)[measurements.pair])
+
+
 def offset_shares(measurements: Measurements, bias_sigma: ArrayLike, baseline: Sequence[ArrayLike],
-                  respond: Callable[[Measurements], Sequence[ArrayLike]]) -> list[FloatArray]:
+                  respond: Callable[[Measurements], Sequence[ArrayLike]], *,
+                  directions: ArrayLike | None = None) -> list[FloatArray]:
     r"""The calibration offsets' share of the covariances of tracks that respond to the data by ``respond``.
 
     :math:`\sum_p \sum_i w_i\,\mathbf f_p(u_i\sigma_{b,p})\,\mathbf f_p(u_i\sigma_{b,p})^\top`
     for each track, with :math:`\mathbf f_p(b)` = ``respond(data with pair p shifted by b)`` less
-    ``baseline`` (the module docstring; :data:`QUADRATURE`).
+    ``baseline`` (the module docstring; :data:`QUADRATURE`).  With ``directions`` (rows
+    :math:`\mathbf d_j`, one offset per pair each) the data are shifted along each row instead,
+    :math:`\mathbf f_j(u) = ` ``respond(data shifted by u d_j)`` less ``baseline``: the share of offsets
+    :math:`\sum_j \xi_j\mathbf d_j`, :math:`\xi_j \sim N(0, 1)` independent (the rows of a square
+    root of their covariance).
 
     Parameters
     ----------
     measurements
         The recording.
     bias_sigma
-        One :math:`\sigma_{b,p}` per pair (m/s), as :func:`bias_sigmas` gives it.
+        One :math:`\sigma_{b,p}` per pair (m/s), as :func:`bias_sigmas` gives it (unused with ``directions``).
     baseline
         The tracks ``respond`` gives on ``measurements`` itself: state arrays ``(n_k, 2d)``.
     respond
         The estimator, as a function of the data: one state array per track, shaped as ``baseline``'s.
+    directions
+        ``(n_directions, n_pairs)`` offset vectors (m/s) to shift the data along, or ``None``: each pair by its
+        own :math:`\sigma_{b,p}`.
 
     Returns
     -------
@@ -127,12 +141,15 @@ def offset_shares(measurements: Measurements, bias_sigma: ArrayLike, baseline: S
     """
     base = [np.asarray(b, dtype=float) for b in baseline]
     shares = [np.zeros((*b.shape, b.shape[-1])) for b in base]
-    sb = np.asarray(bias_sigma, dtype=float).reshape(-1)
-    for p in np.flatnonzero(sb > 0):
-        if not np.any(measurements.pair == p):
-            continue
+    if directions is None:
+        sb = np.asarray(bias_sigma, dtype=float).reshape(-1)
+        rows = [np.where(np.arange(sb.size) == p, sb[p], 0.0) for p in np.flatnonzero(sb > 0)
+                if np.any(measurements.pair == p)]
+    else:
+        rows = list(np.atleast_2d(np.asarray(directions, dtype=float)))
+    for d in rows:
         for step, weight in QUADRATURE:
-            moved = [np.asarray(m, dtype=float) for m in respond(shifted(measurements, int(p), step * sb[p]))]
+            moved = [np.asarray(m, dtype=float) for m in respond(shifted_by(measurements, step * d))]
             if [m.shape for m in moved] != [b.shape for b in base]:
                 raise ValueError(f"the tracks of the shifted data are shaped {[m.shape for m in moved]}, "
                                  f"not as the recording's {[b.shape for b in base]}")
@@ -144,7 +161,8 @@ def offset_shares(measurements: Measurements, bias_sigma: ArrayLike, baseline: S
 
 def with_bias_uncertainty(measurements: Measurements, model: TrackingModel, times: ArrayLike, states: ArrayLike,
                           covariances: ArrayLike, bias_sigma: float | tuple[float, ...],
-                          settings: SmootherSettings | None = None) -> FloatArray:
+                          settings: SmootherSettings | None = None, *, directions: ArrayLike | None = None
+                          ) -> FloatArray:
     r"""The smoothed track's covariances ``(n, 2d, 2d)`` with the calibration offsets' share added (module docstring).
 
     Parameters
@@ -161,6 +179,9 @@ def with_bias_uncertainty(measurements: Measurements, model: TrackingModel, time
     settings
         The smoother's (its loss, iteration cap and zone wall are used for
         the shifted solves).
+    directions
+        Offset vectors to shift the data along instead of each pair by its
+        ``bias_sigma`` (:func:`offset_shares`).
 
     Raises
     ------
@@ -176,7 +197,7 @@ def with_bias_uncertainty(measurements: Measurements, model: TrackingModel, time
     def respond(data: Measurements) -> list[FloatArray]:
         return [solve_smoother(data, model, x, solve, prior=model.prior(), times=times).states]
 
-    return np.asarray(covariances, dtype=float) + offset_shares(measurements, sb, [x], respond)[0]
+    return np.asarray(covariances, dtype=float) + offset_shares(measurements, sb, [x], respond, directions=directions)[0]
 
 
 def moved_starts(hyps: Sequence[Initiation], measurements: Measurements, model: TrackingModel, *,

@@ -69,6 +69,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.stats import chi2
 
+from fgdoppler.estimators.calibration import shifted_by
 from fgdoppler.estimators.grid import speed_lower_bound
 from fgdoppler.estimators.initiation import OUTLIER_CUT, inlier_statistic
 from fgdoppler.estimators.results import Estimates, TrackResult
@@ -223,13 +224,18 @@ def _predictive(result: TrackResult, settings: TrackerSettings) -> tuple[int, fl
 
 def _residual(result: TrackResult, measurements: Measurements, model: TrackingModel
               ) -> tuple[int, float, int, int, int | None]:
-    """(inliers, χ² statistic, dof, measurements, None) from the smoothed track's residuals."""
+    """(inliers, χ² statistic, dof, measurements, None) from the smoothed track's residuals (less the
+    calibration offsets it estimated with the track, which take one degree of freedom each)."""
     est = result.primary
     if len(est) != len(measurements.scans()):  # not a state per scan: nothing to test
         return 0, 0.0, 0, 0, None
+    fitted = 0
+    if result.offsets is not None:
+        measurements = shifted_by(measurements, -result.offsets.full(model.observation.n_channels))
+        fitted = result.offsets.pairs.size
     statistic, outliers = inlier_statistic(model, measurements, est.states, est.times)
     inlier = len(measurements) - outliers
-    return inlier, statistic, max(inlier - model.n, 1), len(measurements), None
+    return inlier, statistic, max(inlier - model.n - fitted, 1), len(measurements), None
 
 
 def _fit_reasons(statistic: float, dof: int, n: int, rejected: int, lost: int | None, robust: bool) -> list[Reason]:

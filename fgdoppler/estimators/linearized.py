@@ -24,7 +24,7 @@ from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.observation import MeasurementModel
 from fgdoppler.models.robust import huber_weights
 
-__all__ = ["MotionBlocks", "linearize_rows"]
+__all__ = ["LinearRows", "MotionBlocks", "linearize_rows"]
 
 FloatArray = NDArray[np.float64]
 
@@ -35,6 +35,7 @@ class LinearRows:
 
     A: FloatArray  # (m, n)
     b: FloatArray  # (m,) whitened residual z - h at the point (Huber weighted)
+    scale: FloatArray  # (m,) each row's whitening sqrt(w_j) / sigma_j: the rows of anything added to h
 
 
 def linearize_rows(
@@ -49,7 +50,7 @@ def linearize_rows(
     h, H = model.predict_and_jacobian(states, channels)
     r = (z - h) / sigma
     s = np.sqrt(huber_weights(r, huber_k)) / sigma
-    return LinearRows(A=H * s[:, None], b=(z - h) * s)
+    return LinearRows(A=H * s[:, None], b=(z - h) * s, scale=s)
 
 
 class MotionBlocks:

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from fgdoppler._text import first_line
 
-__all__ = ["MarginalResult", "chain_solve", "marginal_covariances"]
+__all__ = ["BorderedChain", "MarginalResult", "bordered_chain_solve", "chain_solve", "marginal_covariances"]
 
 Status = Literal["ok", "indeterminate"]
 
@@ -143,7 +143,6 @@ def chain_solve(
     ValueError
         If the graph is not a chain in the order of ``keys``.
     """
-    from scipy.linalg import solve_triangular
 
     ordering = gtsam.Ordering()
     for k in keys:
@@ -156,14 +155,10 @@ def chain_solve(
     n = len(keys)
     d = sol.shape[1]
     covs = np.empty((n, d, d))
-    eye = np.eye(d)
     for i in range(n - 1, -1, -1):
         c = bn.at(i)
         ck = list(c.keys())
-        R = np.asarray(c.R())
-        if np.any(np.abs(np.diag(R)) <= 1e-300 * max(1.0, np.abs(R).max())):
-            raise RuntimeError(f"singular conditional for key {ck[0]}: indeterminate system")
-        Ri = solve_triangular(R, eye)
+        Ri = _inverse_r(c)
         covs[i] = Ri @ Ri.T
         if i < n - 1:
             if ck[1:] != [int(keys[i + 1])]:
@@ -173,3 +168,124 @@ def chain_solve(
         elif len(ck) > 1:
             raise ValueError("chain_solve: the last key must have no parents")
     return sol, covs
+
+
+@dataclass(frozen=True, kw_only=True)
+class BorderedChain:
+    """Solution and covariances of a chain of states that all share one more variable (the border).
+
+    Attributes
+    ----------
+    states
+        The chain's solution ``(n, d)``.
+    border
+        The border's solution ``(p,)``.
+    covariances
+        Each state's marginal covariance, the border's uncertainty included ``(n, d, d)``.
+    conditional
+        Each state's covariance given the border ``(n, d, d)``: ``covariances - conditional`` is the border's
+        share (positive semi-definite).
+    border_covariance
+        ``(p, p)``.
+
+    The three covariances are ``None`` when not asked for.
+    """
+
+    states: NDArray[np.float64]
+    border: NDArray[np.float64]
+    covariances: NDArray[np.float64] | None = None
+    conditional: NDArray[np.float64] | None = None
+    border_covariance: NDArray[np.float64] | None = None
+
+
+def _inverse_r(c: gtsam.GaussianConditional) -> NDArray[np.float64]:
+    """The inverse of a QR conditional's R, by a triangular solve.
+
+    Raises
+    ------
+    RuntimeError
+        If a diagonal element of R vanishes (an indeterminate system).
+    """
+    from scipy.linalg import solve_triangular
+
+    R = np.asarray(c.R())
+    if np.any(np.abs(np.diag(R)) <= 1e-300 * max(1.0, np.abs(R).max())):
+        raise RuntimeError(f"singular conditional for key {next(iter(c.keys()))}: indeterminate system")
+    return np.asarray(solve_triangular(R, np.eye(R.shape[0])))
+
+
+def bordered_chain_solve(gfg: gtsam.GaussianFactorGraph, keys: Sequence[int], border: int, *,
+                         covariances: bool = True) -> BorderedChain:
+    r"""Solve a chain-structured linear graph whose factors may also involve one shared ``border`` variable.
+
+    Eliminated by QR in the order ``keys``, then ``border`` (the border's
+    column is the only fill-in), giving
+    :math:`\mathbf R_k\mathbf x_k + \mathbf S_k\mathbf x_{k+1} + \mathbf G_k\mathbf b = \mathbf d_k` and
+    :math:`\mathbf R_b\mathbf b = \mathbf d_b`.  With
+    :math:`\mathbf T_k = \mathbf R_k^{-1}\mathbf S_k`, :math:`\mathbf U_k = \mathbf R_k^{-1}\mathbf G_k`,
+    :math:`\boldsymbol\Sigma_b = \mathbf R_b^{-1}\mathbf R_b^{-\top}` and
+    :math:`\mathbf C_k = \mathrm{cov}(\mathbf x_k, \mathbf b)`, the backward recursion
+
+    .. math:: \boldsymbol\Sigma_k = \mathbf R_k^{-1}\mathbf R_k^{-\top}
+              + [\mathbf T_k\ \mathbf U_k]
+              \begin{bmatrix}\boldsymbol\Sigma_{k+1} & \mathbf C_{k+1}\\
+              \mathbf C_{k+1}^\top & \boldsymbol\Sigma_b\end{bmatrix}
+              [\mathbf T_k\ \mathbf U_k]^\top,\qquad
+              \mathbf C_k = -(\mathbf T_k\mathbf C_{k+1} + \mathbf U_k\boldsymbol\Sigma_b)
+
+    gives every marginal; with :math:`\boldsymbol\Sigma_b = 0` the same recursion gives the covariances
+    given the border.  As :func:`chain_solve`: triangular solves only.
+
+    Raises
+    ------
+    RuntimeError
+        If elimination fails or a diagonal block of R is singular.
+    ValueError
+        If the graph is not a chain in the order of ``keys`` with ``border`` beside it.
+    """
+
+    ordering = gtsam.Ordering()
+    for k in (*keys, border):
+        ordering.push_back(int(k))
+    bn = gfg.eliminateSequential(ordering, gtsam.EliminateQR)
+    vv = bn.optimize()
+    sol = np.array([vv.at(int(k)) for k in keys])
+    b = np.asarray(vv.at(int(border)), dtype=float)
+    if not covariances:
+        return BorderedChain(states=sol, border=b)
+    n, d, p = len(keys), sol.shape[1], b.size
+    Rb_inv = _inverse_r(bn.at(n))
+    cov_b = Rb_inv @ Rb_inv.T
+    covs = np.empty((n, d, d))
+    cond = np.empty((n, d, d))
+    cross = np.zeros((d, p))
+    for i in range(n - 1, -1, -1):
+        c = bn.at(i)
+        parents = [int(k) for k in list(c.keys())[1:]]
+        nxt = int(keys[i + 1]) if i < n - 1 else None
+        if any(k not in (nxt, int(border)) for k in parents) or (nxt is not None and nxt not in parents):
+            raise ValueError("bordered_chain_solve needs a chain beside one border: each state may depend only on "
+                             "the next one and the border")
+        Ri = _inverse_r(c)
+        S = np.asarray(c.S())
+        T = np.zeros((d, d))
+        U = np.zeros((d, p))
+        col = 0
+        for k in parents:  # S stacks the parents' blocks in the conditional's key order
+            width = p if k == int(border) else d
+            blk = Ri @ S[:, col:col + width]
+            if k == int(border):
+                U = blk
+            else:
+                T = blk
+            col += width
+        base = Ri @ Ri.T
+        if i < n - 1:
+            covs[i] = base + T @ covs[i + 1] @ T.T + T @ cross @ U.T + U @ cross.T @ T.T + U @ cov_b @ U.T
+            cond[i] = base + T @ cond[i + 1] @ T.T
+            cross = -(T @ cross + U @ cov_b)
+        else:
+            covs[i] = base + U @ cov_b @ U.T
+            cond[i] = base
+            cross = -U @ cov_b
+    return BorderedChain(states=sol, border=b, covariances=covs, conditional=cond, border_covariance=cov_b)

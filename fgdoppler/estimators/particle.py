@@ -887,9 +887,7 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
     offsets = None
     if post.offsets is not None:
         offsets = _offsets_at_end(post, last_mode[1] if mode and last_mode is not None else None)
-        events.append(Event(time=times[-1], message="calibration offsets at the end: " + ", ".join(
-            f"pair {p} {v:+.2f} +- {sd:.2f} m/s" for p, v, sd in
-            zip(offsets.pairs, offsets.values, np.sqrt(np.diag(offsets.covariance)), strict=True))))
+        events.append(Event(time=times[-1], message="calibration offsets at the end: " + offsets.describe()))
     return TrackResult(
         estimator=name,
         settings=settings,

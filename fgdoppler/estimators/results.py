@@ -174,7 +174,10 @@ class OffsetEstimate:
     Given by the particle estimators when ``bias_sigma`` is declared
     (:mod:`~fgdoppler.estimators.offset_posterior`): ``particle`` the
     offsets' posterior mean and covariance, ``map`` their most probable
-    values given the reported state and the second moment about them.
+    values given the reported state and the second moment about them; and
+    by the smoother with ``estimate_offsets``: their values at the joint mode
+    of track and offsets and the Laplace covariance there
+    (:mod:`~fgdoppler.estimators.smoother_offsets`).
     Offsets are scalars per pair, the same in every frame.
 
     Attributes
@@ -190,6 +193,25 @@ class OffsetEstimate:
     pairs: NDArray[np.int64]
     values: FloatArray
     covariance: FloatArray
+
+    def full(self, n_pairs: int) -> FloatArray:
+        """The offsets as one value per pair of ``n_pairs``, 0 for the pairs not declared uncertain."""
+        out = np.zeros(n_pairs)
+        out[self.pairs] = self.values
+        return out
+
+    def square_root(self, n_pairs: int) -> FloatArray:
+        r"""Rows :math:`\sqrt{\lambda_j}\mathbf v_j` over ``n_pairs`` pairs, one per eigenpair of :attr:`covariance`:
+        the offsets' uncertainty as :math:`\sum_j \xi_j\mathbf d_j` with :math:`\xi_j \sim N(0, 1)` independent."""
+        lam, vec = np.linalg.eigh(self.covariance)
+        out = np.zeros((self.pairs.size, n_pairs))
+        out[:, self.pairs] = (vec * np.sqrt(np.maximum(lam, 0.0))).T
+        return out
+
+    def describe(self) -> str:
+        """One line: each pair's offset and standard deviation."""
+        return ", ".join(f"pair {p} {v:+.2f} +- {sd:.2f} m/s" for p, v, sd in
+                         zip(self.pairs, self.values, np.sqrt(np.diag(self.covariance)), strict=True))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: ``pairs``, ``values``, ``sigmas`` and ``covariance``."""
@@ -234,7 +256,8 @@ class TrackResult(Judged):
     offsets
         The calibration offsets the data imply (:class:`OffsetEstimate`),
         where the estimator estimates them (the particle estimators with
-        ``bias_sigma``); ``None`` otherwise.
+        ``bias_sigma``, the smoother with ``estimate_offsets``); ``None``
+        otherwise.
     """
 
     estimator: str

@@ -445,9 +445,24 @@ class SmootherSettings(TrackerSettings):
         what such offsets would do to the answer (a *consider* covariance,
         :func:`~fgdoppler.estimators.calibration.with_bias_uncertainty`;
         four Levenberg–Marquardt solves per pair); the track itself does not
-        change.  In the paper's well-observed case a 45 km an offset of 1 σ
-        of the noise on one pair moves the smoother's answer by 6–8 of its
-        own σ while its residuals stay as good.
+        change (unless ``estimate_offsets``).  In the paper's well-observed
+        case a 45 km an offset of 1 σ of the noise on one pair moves the
+        smoother's answer by 6–8 of its own σ while its residuals stay as
+        good.
+    estimate_offsets : bool, default False
+        With ``bias_sigma``: estimate each uncertain pair's offset together
+        with the track (one variable per pair, prior N(0, σ²) with σ its
+        ``bias_sigma``)
+        instead of only considering them: the track moves by the joint
+        mode's shift, its covariance widens by what the offsets' remaining
+        uncertainty does to it (the consider covariance's rule about the
+        estimated offsets), and the offsets are reported
+        (:attr:`~fgdoppler.estimators.results.TrackResult.offsets`;
+        :mod:`fgdoppler.estimators.smoother_offsets`).  One
+        Levenberg–Marquardt solve of track and offsets from the chosen
+        track, then four solves per pair; the searches and tests keep the
+        model without offsets (the fit test reads the residuals less the
+        estimated offsets).
     """
 
     max_iterations: int = 100
@@ -461,10 +476,15 @@ class SmootherSettings(TrackerSettings):
     mode_candidates: int = 20
     motion_check: bool = True
     bias_sigma: float | tuple[float, ...] = 0.0
+    estimate_offsets: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "bias_sigma", _bias_sigma(self.bias_sigma))
+        _flag(self.estimate_offsets, "estimate_offsets")
+        sigmas = self.bias_sigma if isinstance(self.bias_sigma, tuple) else (self.bias_sigma,)
+        if self.estimate_offsets and max(sigmas) == 0.0:
+            raise ValueError("estimate_offsets needs bias_sigma > 0 for at least one pair (the offsets' prior)")
         _count(self.max_iterations, "max_iterations")
         _count(self.mode_candidates, "mode_candidates")
         _flag(self.sampled_covariance, "sampled_covariance")

@@ -45,14 +45,14 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.stats import chi2
 
 from fgdoppler._text import first_line
-from fgdoppler.estimators.calibration import bias_sigmas, with_bias_uncertainty
+from fgdoppler.estimators.calibration import bias_sigmas, shifted_by, with_bias_uncertainty
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.initiation import Initiation, inlier_statistic
-from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
+from fgdoppler.estimators.linearized import LinearRows, MotionBlocks, linearize_rows
 from fgdoppler.estimators.local import in_computation_frame
 from fgdoppler.estimators.manoeuvre import manoeuvre_reason
 from fgdoppler.estimators.marginals import chain_solve, check_covariances
-from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.results import Estimates, OffsetEstimate, TrackResult
 from fgdoppler.estimators.search_memo import SearchMemo
 from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.estimators.spread import MAX_SPAN, posterior_spread
@@ -169,8 +169,12 @@ class _Problem:
 
     def data_cost(self, states: FloatArray) -> float:
         """The objective without the zone wall."""
+        return self._data_cost(states, self.meas.doppler)
+
+    def _data_cost(self, states: FloatArray, doppler: FloatArray) -> float:
+        """:meth:`data_cost` for the Doppler values ``doppler``."""
         h = self.model.predict(states[self.scan_of], self.meas.pair)
-        rho = huber_rho((self.meas.doppler - h) / self.meas.sigma, self.huber_k)
+        rho = huber_rho((doppler - h) / self.meas.sigma, self.huber_k)
         c = float(np.sum(rho)) + float(np.sum(self.motion.residuals(states, self.times) ** 2))
         if self.prior is not None:
             e = self.prior[0] @ states[0] - self.prior[1]
@@ -200,11 +204,17 @@ class _Problem:
         block where the wall is active (``wall``; the covariances leave them
         out: the wall bounds the solution, it does not measure it).
         """
+        return self._factors(*self._blocks(states, lam, wall, self.meas.doppler)[:5])
+
+    def _blocks(self, states: FloatArray, lam: float, wall: bool, doppler: FloatArray
+                ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, LinearRows]:
+        """The scans' damped blocks ``(A_prev, A_next, b, first-state rows, their right-hand side)`` of
+        :meth:`system` for the Doppler values ``doppler``, and the measurement rows they hold."""
         nx = self.nx
         e_wall, J_wall = self.wall_rows(states) if wall else (np.zeros(nx // 2 + 1), np.zeros((nx // 2 + 1, nx)))
         active = bool(np.any(e_wall != 0.0))
         n, m = self.n, self.m_max
-        lin = linearize_rows(self.model, states[self.scan_of], self.meas.pair, self.meas.doppler,
+        lin = linearize_rows(self.model, states[self.scan_of], self.meas.pair, doppler,
                              self.meas.sigma, self.huber_k)
         # Marquardt scaling: the diagonal of J'J per state
         diag = np.zeros((n, nx))
@@ -229,9 +239,6 @@ class _Problem:
             A_next[1:, :nx] = self.An
             A_prev[1:, :nx] = self.Ap
             b[1:, :nx] = -self.motion.residuals(states, self.times)
-        gfg = gtsam.GaussianFactorGraph()
-        keys = self.keys
-        unit = self.unit
         first_rows = [A_next[0, nx:]]
         first_b = [b[0, nx:]]
         if self.prior is not None:
@@ -240,9 +247,16 @@ class _Problem:
         if active:
             first_rows.append(J_wall)
             first_b.append(-e_wall)
-        A0 = np.vstack(first_rows)
-        gfg.add(gtsam.JacobianFactor(keys[0], A0, np.concatenate(first_b), gtsam.noiseModel.Unit.Create(A0.shape[0])))
-        for k in range(1, n):
+        return A_prev, A_next, b, np.vstack(first_rows), np.concatenate(first_b), lin
+
+    def _factors(self, A_prev: FloatArray, A_next: FloatArray, b: FloatArray, A0: FloatArray, b0: FloatArray
+                 ) -> gtsam.GaussianFactorGraph:
+        """One JacobianFactor per scan from :meth:`_blocks`' arrays."""
+        gfg = gtsam.GaussianFactorGraph()
+        keys = self.keys
+        unit = self.unit
+        gfg.add(gtsam.JacobianFactor(keys[0], A0, b0, gtsam.noiseModel.Unit.Create(A0.shape[0])))
+        for k in range(1, self.n):
             gfg.add(gtsam.JacobianFactor(keys[k - 1], A_prev[k], keys[k], A_next[k], b[k], unit))
         return gfg
 
@@ -939,24 +953,40 @@ def _final_findings(measurements: Measurements, model: TrackingModel, settings: 
 
 
 def _reported(measurements: Measurements, model: TrackingModel, settings: SmootherSettings, sol: SmootherSolution,
-              reasons: list[Reason]) -> tuple[list[FloatArray], list[FloatArray | None]]:
+              reasons: list[Reason], notes: list[str]
+              ) -> tuple[list[FloatArray], list[FloatArray | None], OffsetEstimate | None]:
     """The states and covariances to report: the sampled spread where the posterior is skewed (its reason joins
-    ``reasons``), with the calibration offsets' share (``settings.bias_sigma``,
-    :func:`~fgdoppler.estimators.calibration.with_bias_uncertainty`) added."""
+    ``reasons``), with the calibration offsets' share (``settings.bias_sigma``) added — a consider covariance
+    (:func:`~fgdoppler.estimators.calibration.with_bias_uncertainty`) or, with ``settings.estimate_offsets``, the
+    joint solution's shift and share (:mod:`~fgdoppler.estimators.smoother_offsets`; its offsets are returned,
+    what happened joins ``notes``)."""
     states = list(sol.states)
     covs: list[FloatArray | None] = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
     if sol.covariances is None or not np.all(np.isfinite(sol.covariances[0])):
-        return states, covs
+        return states, covs, None
     if settings.sampled_covariance:
         sampled = posterior_spread(measurements, model, sol.times, sol.states, sol.covariances,
                                    huber_k=settings.huber_k, mean=settings.posterior_mean)
         if sampled is not None:
             states, covs = list(sampled.states), list(sampled.covariances)
             reasons.append(sampled.reason)
-    if np.any(np.asarray(settings.bias_sigma) > 0):  # its count was checked when the run began
-        covs = list(with_bias_uncertainty(measurements, model, sol.times, sol.states, np.array(covs),
-                                          settings.bias_sigma, settings))
-    return states, covs
+    if not np.any(np.asarray(settings.bias_sigma) > 0):  # its count was checked when the run began
+        return states, covs, None
+    if settings.estimate_offsets:
+        from fgdoppler.estimators.smoother_offsets import solve_with_offsets
+
+        joint = solve_with_offsets(measurements, model, settings, sol.times, sol.states)
+        if not isinstance(joint, str):
+            notes += [*joint.notes, "calibration offsets estimated with the track: " + joint.offsets.describe()]
+            off = joint.offsets
+            covs = list(with_bias_uncertainty(shifted_by(measurements, -off.full(model.observation.n_channels)),
+                                              model, sol.times, joint.states, np.array(covs), settings.bias_sigma,
+                                              settings, directions=off.square_root(model.observation.n_channels)))
+            return list(np.array(states) + joint.states - sol.states), covs, off
+        notes.append(f"{joint}: the offsets' consider covariance instead")
+    covs = list(with_bias_uncertainty(measurements, model, sol.times, sol.states, np.array(covs),
+                                      settings.bias_sigma, settings))
+    return states, covs, None
 
 
 @in_computation_frame
@@ -1021,7 +1051,7 @@ def run_smoother(
     notes += more_notes
     reasons = _final_findings(measurements, model, settings, sol, init, list(sol.reasons) + mode_reasons, progress,
                               memo)
-    states, covs = _reported(measurements, model, settings, sol, reasons)
+    states, covs, offsets = _reported(measurements, model, settings, sol, reasons, notes)
     t_last = float(sol.times[-1])
     return TrackResult(
         estimator="smoother",
@@ -1032,4 +1062,5 @@ def run_smoother(
         iterations=sol.iterations,
         cost=sol.cost,
         wall_time=time.perf_counter() - t_begin,
+        offsets=offsets,
     )
