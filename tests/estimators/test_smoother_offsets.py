@@ -224,3 +224,23 @@ def test_at_the_last_time_the_smoother_and_the_filtered_mode_read_the_same_joint
     apart = float(np.hypot(*(smoother.primary.states[-1, :2] - mode.primary.states[-1, :2])))
     assert apart < 0.05 * lead, (apart, lead)
     assert 0.7 < lead / np.sqrt(np.linalg.eigvalsh(Q)[-1]) < 1.0
+
+
+def test_a_monte_carlo_study_estimates_the_offsets_in_the_smoother(tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    # the same recordings with the offsets only considered or estimated: the EKF's track is the same, the
+    # smoother's moves; refused without their prior or without the smoother, before any work
+    out = {}
+    for extra in ([], ["--estimate-offsets"]):
+        stem = tmp_path / ("estimated" if extra else "considered")
+        assert main(["montecarlo", "--case", "a", "--start-x", "45000", "--runs", "1", "--workers", "1",
+                     "--estimators", "smoother", "ekf", "--bias", "1", "-1", "--bias-sigma", "1", "--out", str(stem),
+                     *extra]) == 0
+        out[bool(extra)] = np.load(stem.with_suffix(".npz"))
+    np.testing.assert_array_equal(out[True]["pos_0_ekf"], out[False]["pos_0_ekf"])
+    assert not np.array_equal(out[True]["pos_0_smoother"], out[False]["pos_0_smoother"])
+    capsys.readouterr()
+    for args, message in ((["--estimate-offsets"], "needs --bias-sigma"),
+                          (["--estimators", "ekf", "--bias-sigma", "1", "--estimate-offsets"], "applies to the smoother")):
+        assert main(["montecarlo", "--case", "a", "--runs", "1", *args, "--out", str(tmp_path / "bad")]) == 2
+        assert message in capsys.readouterr().err and not (tmp_path / "bad.npz").exists()
