@@ -962,9 +962,9 @@ def _reported(measurements: Measurements, model: TrackingModel, settings: Smooth
     what happened joins ``notes``)."""
     states = list(sol.states)
     covs: list[FloatArray | None] = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
-    if sol.covariances is None or not np.all(np.isfinite(sol.covariances[0])):
-        return states, covs, None
-    if settings.sampled_covariance:
+    has_covs = sol.covariances is not None and bool(np.all(np.isfinite(sol.covariances[0])))
+    if has_covs and settings.sampled_covariance:
+        assert sol.covariances is not None
         sampled = posterior_spread(measurements, model, sol.times, sol.states, sol.covariances,
                                    huber_k=settings.huber_k, mean=settings.posterior_mean)
         if sampled is not None:
@@ -972,6 +972,7 @@ def _reported(measurements: Measurements, model: TrackingModel, settings: Smooth
             reasons.append(sampled.reason)
     if not np.any(np.asarray(settings.bias_sigma) > 0):  # its count was checked when the run began
         return states, covs, None
+    n_pairs = model.observation.n_channels
     if settings.estimate_offsets:
         from fgdoppler.estimators.smoother_offsets import solve_with_offsets
 
@@ -979,13 +980,15 @@ def _reported(measurements: Measurements, model: TrackingModel, settings: Smooth
         if not isinstance(joint, str):
             notes += [*joint.notes, "calibration offsets estimated with the track: " + joint.offsets.describe()]
             off = joint.offsets
-            covs = list(with_bias_uncertainty(shifted_by(measurements, -off.full(model.observation.n_channels)),
-                                              model, sol.times, joint.states, np.array(covs), settings.bias_sigma,
-                                              settings, directions=off.square_root(model.observation.n_channels)))
+            if has_covs:
+                covs = list(with_bias_uncertainty(shifted_by(measurements, -off.full(n_pairs)), model, sol.times,
+                                                  joint.states, np.array(covs), settings.bias_sigma, settings,
+                                                  directions=off.square_root(n_pairs)))
             return list(np.array(states) + joint.states - sol.states), covs, off
         notes.append(f"{joint}: the offsets' consider covariance instead")
-    covs = list(with_bias_uncertainty(measurements, model, sol.times, sol.states, np.array(covs),
-                                      settings.bias_sigma, settings))
+    if has_covs:
+        covs = list(with_bias_uncertainty(measurements, model, sol.times, sol.states, np.array(covs),
+                                          settings.bias_sigma, settings))
     return states, covs, None
 
 

@@ -244,3 +244,21 @@ def test_a_monte_carlo_study_estimates_the_offsets_in_the_smoother(tmp_path: Pat
                           (["--estimators", "ekf", "--bias-sigma", "1", "--estimate-offsets"], "applies to the smoother")):
         assert main(["montecarlo", "--case", "a", "--runs", "1", *args, "--out", str(tmp_path / "bad")]) == 2
         assert message in capsys.readouterr().err and not (tmp_path / "bad.npz").exists()
+
+
+def test_without_covariances_the_offsets_are_still_estimated() -> None:
+    # covariances=False asks for the track alone: the joint solution still moves it, exactly as with covariances
+    # (the sampled posterior mean, which needs them, off in both), and the offsets are reported
+    _, model, sim = _recording((0.7, -0.4), seed=1)
+    m = sim.measurements
+    init = fd.initiate(m.first_per_pair(10), model)
+    runs = {cov: fd.run_estimator("smoother", m, model, init,
+                                  fd.SmootherSettings(bias_sigma=1.0, estimate_offsets=True, covariances=cov,
+                                                      sampled_covariance=False), verify=False)
+            for cov in (False, True)}
+    assert not np.any(runs[False].primary.cov_ok) and np.all(runs[True].primary.cov_ok)
+    np.testing.assert_allclose(runs[False].primary.states, runs[True].primary.states, rtol=0, atol=1e-6)
+    assert runs[False].offsets is not None
+    plain = fd.run_estimator("smoother", m, model, init, fd.SmootherSettings(covariances=False,
+                                                                             sampled_covariance=False), verify=False)
+    assert np.hypot(*(plain.primary.states[-1, :2] - runs[False].primary.states[-1, :2])) > 10.0
