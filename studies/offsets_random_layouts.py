@@ -14,7 +14,7 @@ covariance's major axis, as in ``studies/random_layouts.py``), and for the
 estimated offsets their NEES per pair against the drawn ones.
 docs/concepts.md ("Calibration offsets") quotes it.
 
-Run: ``python studies/offsets_random_layouts.py [--draws 120] [--out DIR]`` (about 18 minutes per 120 draws on
+Run: ``python studies/offsets_random_layouts.py [--draws 120] [--out DIR]`` (about 6 minutes per 120 draws on
 2 cores).
 """
 
