@@ -134,14 +134,18 @@ def split_statistics(measurements: Measurements, model: TrackingModel, times: Fl
 
 
 def manoeuvre_reason(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
-                     settings: SmootherSettings | None = None) -> Reason | None:
+                     settings: SmootherSettings | None = None, *,
+                     stats: list[tuple[float, float]] | None = None) -> Reason | None:
     """The ``manoeuvre`` finding (``doubtful``) when the largest :func:`split_statistics` exceeds its level.
 
     ``None`` when the recording's parts agree with one track (or cannot be
     tested).  ``states`` should be the most likely track (the smoother's
-    optimum), not a posterior mean: the fits start there.
+    optimum), not a posterior mean: the fits start there.  ``stats``: the
+    statistics already computed another way (with calibration offsets in the
+    model: :func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`).
     """
-    stats = split_statistics(measurements, model, times, states, settings)
+    if stats is None:
+        stats = split_statistics(measurements, model, times, states, settings)
     if not stats:
         return None
     tc, d = max(stats, key=lambda s: s[1])

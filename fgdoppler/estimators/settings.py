@@ -460,9 +460,10 @@ class SmootherSettings(TrackerSettings):
         (:attr:`~fgdoppler.estimators.results.TrackResult.offsets`;
         :mod:`fgdoppler.estimators.smoother_offsets`).  One
         Levenberg–Marquardt solve of track and offsets from the chosen
-        track, then four solves per pair; the searches and tests keep the
-        model without offsets (the fit test reads the residuals less the
-        estimated offsets).
+        track, then four solves per pair; the mode searches keep the model
+        without offsets, the fit test reads the residuals less the
+        estimated offsets, and the split test of the motion model re-fits
+        them with each part's track (two more solves).
     """
 
     max_iterations: int = 100

@@ -68,6 +68,7 @@ from fgdoppler.zone import Zone
 
 if TYPE_CHECKING:
     from fgdoppler.estimators.grid import HalfPlane
+    from fgdoppler.estimators.smoother_offsets import JointSolution
 
 __all__ = ["SmootherSolution", "initial_trajectory", "rts_smooth", "run_smoother", "solve_smoother"]
 
@@ -939,27 +940,45 @@ def _outside_findings(measurements: Measurements, model: TrackingModel, settings
 
 def _final_findings(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
                     sol: SmootherSolution, init: Initiation, reasons: list[Reason], progress: Progress | None,
-                    memo: SearchMemo | None) -> list[Reason]:
+                    memo: SearchMemo | None, joint: JointSolution | str | None = None) -> list[Reason]:
     """``reasons`` with what the searches outside the zone (2-D, ``mode_search``: :func:`_outside_findings`) and
     the split test of the motion model (``motion_check``: :mod:`fgdoppler.estimators.manoeuvre`) find about the
-    final solution."""
+    final solution — with the offsets in the model where they were estimated with the track (``joint``,
+    :func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`)."""
     if settings.mode_search:
         reasons = _outside_findings(measurements, model, settings, sol, init, reasons, progress, memo)
     if settings.motion_check:
-        manoeuvre = manoeuvre_reason(measurements, model, sol.times, sol.states, settings)
+        stats = None
+        if joint is not None and not isinstance(joint, str):
+            from fgdoppler.estimators.smoother_offsets import joint_split_statistics
+
+            stats = joint_split_statistics(measurements, model, settings, joint)
+        manoeuvre = manoeuvre_reason(measurements, model, sol.times, sol.states, settings, stats=stats)
         if manoeuvre is not None:
             reasons = [*reasons, manoeuvre]
     return reasons
 
 
+def _joint(measurements: Measurements, model: TrackingModel, settings: SmootherSettings, sol: SmootherSolution
+           ) -> JointSolution | str | None:
+    """With ``settings.estimate_offsets`` the joint solution of track and offsets from ``sol``
+    (:func:`~fgdoppler.estimators.smoother_offsets.solve_with_offsets`; a string says why there is none), else
+    ``None``."""
+    if not (settings.estimate_offsets and np.any(np.asarray(settings.bias_sigma) > 0)):
+        return None
+    from fgdoppler.estimators.smoother_offsets import solve_with_offsets
+
+    return solve_with_offsets(measurements, model, settings, sol.times, sol.states)
+
+
 def _reported(measurements: Measurements, model: TrackingModel, settings: SmootherSettings, sol: SmootherSolution,
-              reasons: list[Reason], notes: list[str]
+              reasons: list[Reason], notes: list[str], joint: JointSolution | str | None = None
               ) -> tuple[list[FloatArray], list[FloatArray | None], OffsetEstimate | None]:
     """The states and covariances to report: the sampled spread where the posterior is skewed (its reason joins
     ``reasons``), with the calibration offsets' share (``settings.bias_sigma``) added — a consider covariance
     (:func:`~fgdoppler.estimators.calibration.with_bias_uncertainty`) or, with ``settings.estimate_offsets``, the
-    joint solution's shift and share (:mod:`~fgdoppler.estimators.smoother_offsets`; its offsets are returned,
-    what happened joins ``notes``)."""
+    joint solution's (``joint``, :func:`_joint`) shift and share (:mod:`~fgdoppler.estimators.smoother_offsets`;
+    its offsets are returned, what happened joins ``notes``)."""
     states = list(sol.states)
     covs: list[FloatArray | None] = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
     has_covs = sol.covariances is not None and bool(np.all(np.isfinite(sol.covariances[0])))
@@ -973,10 +992,7 @@ def _reported(measurements: Measurements, model: TrackingModel, settings: Smooth
     if not np.any(np.asarray(settings.bias_sigma) > 0):  # its count was checked when the run began
         return states, covs, None
     n_pairs = model.observation.n_channels
-    if settings.estimate_offsets:
-        from fgdoppler.estimators.smoother_offsets import solve_with_offsets
-
-        joint = solve_with_offsets(measurements, model, settings, sol.times, sol.states)
+    if joint is not None:
         if not isinstance(joint, str):
             notes += [*joint.notes, "calibration offsets estimated with the track: " + joint.offsets.describe()]
             off = joint.offsets
@@ -1052,9 +1068,10 @@ def run_smoother(
     else:
         more_notes, mode_reasons = [], []
     notes += more_notes
+    joint = _joint(measurements, model, settings, sol)
     reasons = _final_findings(measurements, model, settings, sol, init, list(sol.reasons) + mode_reasons, progress,
-                              memo)
-    states, covs, offsets = _reported(measurements, model, settings, sol, reasons, notes)
+                              memo, joint)
+    states, covs, offsets = _reported(measurements, model, settings, sol, reasons, notes, joint)
     t_last = float(sol.times[-1])
     return TrackResult(
         estimator="smoother",

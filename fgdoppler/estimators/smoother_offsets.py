@@ -14,9 +14,13 @@ costs :math:`O(N(d+P)^3)`, and the marginals, with and without the
 offsets' uncertainty, follow from one backward recursion
 (:func:`~fgdoppler.estimators.marginals.bordered_chain_solve`).  Levenberg–
 Marquardt runs over the states and the offsets together, from the track the
-smoother chose without offsets (its searches, tests and mode choice stay
+smoother chose without offsets (its mode searches and mode choice stay
 those of the model without offsets: the offsets refine an answer, they do
-not choose one).
+not choose one).  The verdict's tests take the offsets in: the fit test
+reads the residuals less the estimated offsets
+(:mod:`fgdoppler.estimators.judge`), and the split test of the motion model
+compares one track and the offsets with two tracks that share them
+(:func:`joint_split_statistics`).
 
 What the smoother reports is that track moved by the joint solution's shift,
 :math:`\hat{\mathbf x}_k + (\tilde{\mathbf x}_k - \hat{\mathbf x}_k)` with
@@ -46,7 +50,7 @@ of each).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import gtsam
 import numpy as np
@@ -62,7 +66,7 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.zone import Zone
 
-__all__ = ["JointSolution", "solve_with_offsets"]
+__all__ = ["JointSolution", "joint_split_statistics", "solve_with_offsets"]
 
 FloatArray = NDArray[np.float64]
 
@@ -76,6 +80,8 @@ class JointSolution:
 
     Attributes
     ----------
+    times
+        The states' times ``(n,)``.
     states
         The track at the joint mode ``(n, 2d)``.
     offsets
@@ -90,6 +96,7 @@ class JointSolution:
         What happened (a Levenberg–Marquardt stop short of convergence, failed linear solves).
     """
 
+    times: FloatArray
     states: FloatArray
     offsets: OffsetEstimate
     covariances: FloatArray
@@ -102,13 +109,23 @@ class _JointProblem(_Problem):
     """:class:`~fgdoppler.estimators.smoother._Problem` over the packed point ``[states.ravel(), offsets]``."""
 
     def __init__(self, model: TrackingModel, meas: Measurements, settings: SmootherSettings,
-                 times: FloatArray, sigmas: FloatArray) -> None:
-        prior = model.prior()
+                 times: FloatArray, sigmas: FloatArray, *, bare: bool = False, cut: int | None = None) -> None:
+        """``bare``: without the zone's weak prior and wall (the cost the split test compares); ``cut``: without
+        the motion link from state ``cut`` to the next (two tracks that share the offsets)."""
+        prior = None if bare else model.prior()
         wall: tuple[Zone, FloatArray] | None = None
-        if settings.region_bound and model.zone is not None:
+        if settings.region_bound and model.zone is not None and not bare:
             sp, sv = settings.wall_sigma
             wall = (model.zone, np.array([sp] * model.zone.dim + [sv]))
         super().__init__(model, meas, settings.huber_k, prior, times, wall)
+        self.cut = cut
+        self._link = (np.zeros((self.nx, self.nx)), np.zeros((self.nx, self.nx)))
+        if cut is not None:
+            if not 0 <= cut < self.n - 1:
+                raise ValueError(f"cut must name a state before the last (0..{self.n - 2}), got {cut}")
+            self._link = (self.Ap[cut].copy(), self.An[cut].copy())
+            self.Ap[cut] = 0.0
+            self.An[cut] = 0.0
         self.pairs = np.flatnonzero(sigmas > 0).astype(np.int64)
         column = np.full(sigmas.size, -1, dtype=np.intp)
         column[self.pairs] = np.arange(self.pairs.size)
@@ -128,7 +145,11 @@ class _JointProblem(_Problem):
 
     def data_cost(self, states: FloatArray) -> float:  # the packed point, named as the base class's
         x, b = self.split(states)
-        return self._data_cost(x, self.doppler(b)) + float(np.sum((b * self.inv_sb) ** 2))
+        cost = self._data_cost(x, self.doppler(b)) + float(np.sum((b * self.inv_sb) ** 2))
+        if self.cut is not None:  # the removed link's motion term
+            r = self._link[0] @ x[self.cut] + self._link[1] @ x[self.cut + 1]
+            cost -= float(r @ r)
+        return cost
 
     def wall_cost(self, states: FloatArray) -> float:
         return super().wall_cost(self.split(states)[0])
@@ -138,6 +159,8 @@ class _JointProblem(_Problem):
         x, b = self.split(states)
         A_prev, A_next, rhs, A0, b0, lin = self._blocks(x, lam, wall, self.doppler(b))
         nx, p = self.nx, self.p
+        if self.cut is not None:  # its rows are zero (Ap, An), and so their right-hand side
+            rhs[self.cut + 1, :nx] = 0.0
         A_b = np.zeros((self.n, A_next.shape[1], p))
         rows = np.flatnonzero(self.uncertain)
         A_b[self.scan_of[rows], nx + self.row_in_scan[rows], self.column[rows]] = lin.scale[rows]
@@ -206,6 +229,53 @@ def solve_with_offsets(measurements: Measurements, model: TrackingModel, setting
         if problem:
             return f"the joint covariance of track and offsets: {problem}"
     x, b = prob.split(z)
-    return JointSolution(states=x.copy(), offsets=OffsetEstimate(pairs=prob.pairs, values=b.copy(),
+    return JointSolution(times=prob.times, states=x.copy(), offsets=OffsetEstimate(pairs=prob.pairs, values=b.copy(),
                                                                  covariance=sol.border_covariance),
                          covariances=sol.covariances, conditional=sol.conditional, cost=cost, notes=tuple(notes))
+
+
+def joint_split_statistics(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
+                           joint: JointSolution) -> list[tuple[float, float]]:
+    r"""The split test of the motion model (:mod:`fgdoppler.estimators.manoeuvre`) with the offsets in the model.
+
+    :math:`D(t_c) = C - C_{12}`: :math:`C` the least cost of one track and the offsets, :math:`C_{12}` that of
+    two tracks — the data up to :math:`t_c` and after it, the motion link across :math:`t_c` removed — that
+    share the offsets, both re-fitted (without the zone's prior and wall, as there).  Under the model
+    :math:`D \sim \chi^2_n` as without offsets; a test that fixed the offsets at the one-track values would
+    be biased toward silence (the offsets can absorb part of a manoeuvre), and one without them fires on
+    offsets alone (docs/concepts.md, "Calibration offsets").  ``joint`` (its track and offsets) starts every
+    fit; the split times and the parts' minimum size are the module's.
+
+    Returns
+    -------
+    list of (float, float)
+        As :func:`~fgdoppler.estimators.manoeuvre.split_statistics`: split time and statistic, for each split
+        whose parts hold enough measurements and whose fits succeed.
+    """
+    from fgdoppler.estimators.manoeuvre import MIN_PART, SPLITS
+
+    sigmas = bias_sigmas(settings.bias_sigma, model.observation.n_channels)
+    times = joint.times
+    bare = replace(settings, covariances=False)
+    z = np.concatenate([joint.states.ravel(), joint.offsets.values])
+    try:
+        whole = _JointProblem(model, measurements, bare, times, sigmas, bare=True)
+        z, c_whole, *_ = _levenberg_marquardt(whole, z, settings.max_iterations)
+    except (RuntimeError, ValueError, np.linalg.LinAlgError):
+        return []
+    t0, t1 = float(times[0]), float(times[-1])
+    need = MIN_PART * model.n
+    out: list[tuple[float, float]] = []
+    for f in SPLITS:
+        k = int(np.searchsorted(times, t0 + f * (t1 - t0), side="right")) - 1
+        tc = float(times[max(k, 0)])
+        first = measurements.time <= tc
+        if k >= times.size - 1 or min(int(first.sum()), int((~first).sum())) < need or (out and out[-1][0] == tc):
+            continue
+        try:
+            parts = _JointProblem(model, measurements, bare, times, sigmas, bare=True, cut=k)
+            _, c_parts, *_ = _levenberg_marquardt(parts, z, settings.max_iterations)
+        except (RuntimeError, ValueError, np.linalg.LinAlgError):
+            continue
+        out.append((tc, max(c_whole - c_parts, 0.0)))
+    return out
