@@ -61,7 +61,7 @@ from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["QUADRATURE", "bias_sigmas", "moved_starts", "offset_shares", "shifted", "shifted_by",
+__all__ = ["QUADRATURE", "bias_sigmas", "moved_starts", "offset_shares", "shifted_by",
            "with_bias_uncertainty"]
 
 FloatArray = NDArray[np.float64]
@@ -90,11 +90,6 @@ def bias_sigmas(bias_sigma: float | tuple[float, ...], n_pairs: int) -> FloatArr
     if sb.size not in (1, n_pairs) or not np.all(np.isfinite(sb) & (sb >= 0)):
         raise ValueError(f"bias_sigma must be one value >= 0 (m/s) or one per pair ({n_pairs}), got {bias_sigma}")
     return np.broadcast_to(sb, (n_pairs,)).copy()
-
-
-def shifted(measurements: Measurements, pair: int, offset: float) -> Measurements:
-    """``measurements`` with every Doppler value of ``pair`` shifted by ``offset`` (m/s)."""
-    return replace(measurements, doppler=measurements.doppler + np.where(measurements.pair == pair, offset, 0.0))
 
 
 def shifted_by(measurements: Measurements, offsets: ArrayLike) -> Measurements:
