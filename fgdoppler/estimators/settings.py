@@ -463,7 +463,10 @@ class SmootherSettings(TrackerSettings):
         track, then four solves per pair; the mode searches keep the model
         without offsets, the fit test reads the residuals less the
         estimated offsets, and the split test of the motion model re-fits
-        them with each part's track (two more solves).
+        them with each part's track (two more solves).  In 2-D (with
+        ``mode_search``, no half plane) one more solve from the track's
+        mirror image across the sensors' line: free offsets can make that
+        mode as likely, and then the verdict has a ``competing`` finding.
     """
 
     max_iterations: int = 100

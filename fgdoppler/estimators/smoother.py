@@ -36,8 +36,9 @@ step that reduces the cost), ``covariance`` (indeterminate marginals),
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import gtsam
 import numpy as np
@@ -87,6 +88,19 @@ OUTSIDE_LEVEL = 0.90
 #: How much lower the cost of a track starting outside the zone must be for the ``zone`` finding of
 #: :func:`_outside_zone_2d`: χ²₁ at 99.9 %, the verdict's level.
 OUTSIDE_GAIN = float(chi2.ppf(0.999, 1))
+
+
+class _Mode(Protocol):
+    """A solution the mode rules compare: a smoother's, or a joint one of track and offsets."""
+
+    @property
+    def states(self) -> FloatArray: ...
+
+    @property
+    def covariances(self) -> FloatArray | None: ...
+
+    @property
+    def cost(self) -> float: ...
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -788,7 +802,7 @@ def _best_and_rival(found: list[SmootherSolution], sol: SmootherSolution, zone: 
     return best, notes, reasons
 
 
-def _apart(a: SmootherSolution, b: SmootherSolution) -> bool:
+def _apart(a: _Mode, b: _Mode) -> bool:
     """``b`` ends farther from ``a`` than 50 m and three of ``a``'s standard deviations in that direction."""
     k = a.states.shape[1] // 2
     d_vec = b.states[-1, :k] - a.states[-1, :k]
@@ -857,7 +871,7 @@ def _restart_solutions(measurements: Measurements, model: TrackingModel, setting
     return found
 
 
-def _sigma_along(sol: SmootherSolution, u: FloatArray) -> float:
+def _sigma_along(sol: _Mode, u: FloatArray) -> float:
     """Standard deviation of the solution's end position along the unit vector ``u`` (0 without a covariance)."""
     if sol.covariances is None or not np.all(np.isfinite(sol.covariances[-1])):
         return 0.0
@@ -879,7 +893,7 @@ def _floor_reason(best: SmootherSolution, zone: Zone) -> Reason | None:
         "do not fix the height"))
 
 
-def _rival_reason(found: list[SmootherSolution], best: SmootherSolution, zone: Zone) -> Reason | None:
+def _rival_reason(found: Sequence[_Mode], best: _Mode, zone: Zone) -> Reason | None:
     """A ``competing`` finding for the rival with the largest share of the mean-square error (rule: :func:`_restarts_3d`).
 
     In 3-D a rival that sinks below the altitude band's floor is not one
@@ -947,6 +961,10 @@ def _final_findings(measurements: Measurements, model: TrackingModel, settings: 
     :func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`)."""
     if settings.mode_search:
         reasons = _outside_findings(measurements, model, settings, sol, init, reasons, progress, memo)
+    if settings.mode_search and joint is not None and not isinstance(joint, str) and init.half_plane is None:
+        mirror = _mirror_reason(measurements, model, settings, joint)
+        if mirror is not None:
+            reasons = [*reasons, mirror]
     if settings.motion_check:
         stats = None
         if joint is not None and not isinstance(joint, str):
@@ -957,6 +975,26 @@ def _final_findings(measurements: Measurements, model: TrackingModel, settings: 
         if manoeuvre is not None:
             reasons = [*reasons, manoeuvre]
     return reasons
+
+
+def _mirror_reason(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
+                   joint: JointSolution) -> Reason | None:
+    """A ``competing`` finding when the joint mode from the mirror image of the track is a rival by the rule of
+    :func:`_restarts_3d` (:func:`~fgdoppler.estimators.smoother_offsets.mirror_solution`; 2-D, with the offsets
+    estimated).  The reported track stays: the finding says what the other mode is."""
+    from fgdoppler.estimators.smoother_offsets import mirror_solution
+
+    if model.zone is None or not isinstance(model.observation, DopplerModel):
+        return None
+    mirror = mirror_solution(measurements, model, settings, joint)
+    if mirror is None:
+        return None
+    found = _rival_reason([joint, mirror], joint, model.zone)
+    if found is None:
+        return None
+    return replace(found, message=(
+        f"{found.message} — the mirror image of the track across the sensors' line, with the offsets "
+        f"{mirror.offsets.describe()} (the reported track's: {joint.offsets.describe()})"))
 
 
 def _joint(measurements: Measurements, model: TrackingModel, settings: SmootherSettings, sol: SmootherSolution
