@@ -45,7 +45,7 @@ from fgdoppler.estimators.settings import (
     SmootherSettings,
     TrackerSettings,
 )
-from fgdoppler.estimators.smoother import run_smoother
+from fgdoppler.estimators.smoother import run_smoother, with_offset_findings
 from fgdoppler.estimators.spread import filtered_spread
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.geometry import Geometry
@@ -196,6 +196,9 @@ def run_estimator(
                                   resolve_ambiguity=resolve_ambiguity, progress=prefixed(progress, "reference"))
     if result.primary.kind == "smoothed" or not verify:
         reference = None
+    if reference is not None and per_pair is not None:  # the smoother's findings with the declared offsets
+        reference = with_offset_findings(reference, measurements, model, tuple(float(v) for v in per_pair),
+                                         half_plane=init.half_plane is not None)
     judged = judge(result, measurements, model, settings, reference, half_plane=init.half_plane is not None)
     if isinstance(settings, SampledCovarianceSettings) and settings.sampled_covariance:
         judged = _with_sampled_covariances(judged, measurements, model, settings)

@@ -196,7 +196,10 @@ class SampledCovarianceSettings(GaussianSumSettings):
         shifted at a time (:func:`~fgdoppler.estimators.calibration.offset_shares`;
         applied by :func:`~fgdoppler.estimators.registry.run_estimator`
         last, after the verdict and the sampled covariances).  The track
-        and the verdict do not change.
+        does not change; the verdict's reference smoother reads its own
+        findings with the offsets in the model
+        (:func:`~fgdoppler.estimators.smoother.with_offset_findings`), so
+        that offsets do not pass for a manoeuvre.
     """
 
     sampled_covariance: bool = True
