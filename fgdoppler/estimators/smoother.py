@@ -1011,7 +1011,8 @@ def with_offset_findings(reference: TrackResult, measurements: Measurements, mod
     (seed 2026), 5 of 30 EKF runs told of them were `doubtful` for the smoother's ``manoeuvre`` finding,
     three of them consistent.  (Referring the tracker to a smoother that considers or estimates the offsets
     itself, covariances included, was tried: the tracker, its covariance with its own share, was then
-    called over-confident in 6–16 of 30 consistent runs of case a 5 km and case b 45 km.)  ``reference``
+    called over-confident in up to 8 and 11 of 30 consistent runs of case a 5 km and case b 45 km, against
+    1 and 2 this way.)  ``reference``
     unchanged where no offset is declared or the joint solve fails.
     """
     from fgdoppler.estimators.smoother_offsets import joint_split_statistics, solve_with_offsets
