@@ -190,15 +190,10 @@ def run_estimator(
             h, w = _hypotheses(info, measurements, model, new, settings)
             return _solve(info, measurements, model, h, settings, prefixed(progress, "restart"), w)
         result = with_restarts(measurements, model, init, settings, result, again)
-    if verify and reference is None and result.primary.kind != "smoothed":
-        ref_settings = SmootherSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k)
-        reference = run_estimator("smoother", measurements, model, init, ref_settings,
-                                  resolve_ambiguity=resolve_ambiguity, progress=prefixed(progress, "reference"))
-    if result.primary.kind == "smoothed" or not verify:
+    if verify and result.primary.kind != "smoothed":
+        reference = _reference(measurements, model, init, settings, reference, per_pair, resolve_ambiguity, progress)
+    else:
         reference = None
-    if reference is not None and per_pair is not None:  # the smoother's findings with the declared offsets
-        reference = with_offset_findings(reference, measurements, model, tuple(float(v) for v in per_pair),
-                                         half_plane=init.half_plane is not None)
     judged = judge(result, measurements, model, settings, reference, half_plane=init.half_plane is not None)
     if isinstance(settings, SampledCovarianceSettings) and settings.sampled_covariance:
         judged = _with_sampled_covariances(judged, measurements, model, settings)
@@ -206,6 +201,23 @@ def run_estimator(
         judged = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings, offsets,
                                prefixed(progress, "calibration offsets"))
     return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
+
+
+def _reference(measurements: Measurements, model: TrackingModel, init: Initiation, settings: TrackerSettings,
+               given: TrackResult | None, per_pair: NDArray[np.float64] | None, resolve_ambiguity: bool,
+               progress: Progress | None) -> TrackResult:
+    """The offline smoother a tracker is held against: ``given``, or run here with the tracker's gate and loss;
+    with calibration offsets declared (``per_pair``), its findings read with them in the model
+    (:func:`~fgdoppler.estimators.smoother.with_offset_findings`)."""
+    reference = given
+    if reference is None:
+        ref_settings = SmootherSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k)
+        reference = run_estimator("smoother", measurements, model, init, ref_settings,
+                                  resolve_ambiguity=resolve_ambiguity, progress=prefixed(progress, "reference"))
+    if per_pair is None:
+        return reference
+    return with_offset_findings(reference, measurements, model, tuple(float(v) for v in per_pair),
+                                half_plane=init.half_plane is not None)
 
 
 def run_estimators(
