@@ -451,7 +451,11 @@ class SmootherSettings(TrackerSettings):
         change (unless ``estimate_offsets``).  In the paper's well-observed
         case a 45 km an offset of 1 σ of the noise on one pair moves the
         smoother's answer by 6–8 of its own σ while its residuals stay as
-        good.
+        good.  The verdict tests the model with the offsets in it either
+        way: the split test of the motion model re-fits them, and in 2-D a
+        mirror image of the track that free offsets make about as likely is
+        a ``competing`` finding (one more joint solve of track and offsets,
+        :mod:`fgdoppler.estimators.smoother_offsets`).
     estimate_offsets : bool, default False
         With ``bias_sigma``: estimate each uncertain pair's offset together
         with the track (one variable per pair, prior N(0, σ²) with σ its
@@ -469,7 +473,8 @@ class SmootherSettings(TrackerSettings):
         them with each part's track (two more solves).  In 2-D (with
         ``mode_search``, no half plane) one more solve from the track's
         mirror image across the sensors' line: free offsets can make that
-        mode as likely, and then the verdict has a ``competing`` finding.
+        mode as likely, and then the verdict has a ``competing`` finding
+        (as with the offsets only considered).
     """
 
     max_iterations: int = 100

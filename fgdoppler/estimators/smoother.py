@@ -1038,10 +1038,11 @@ def with_offset_findings(reference: TrackResult, measurements: Measurements, mod
 
 def _joint(measurements: Measurements, model: TrackingModel, settings: SmootherSettings, sol: SmootherSolution
            ) -> JointSolution | str | None:
-    """With ``settings.estimate_offsets`` the joint solution of track and offsets from ``sol``
-    (:func:`~fgdoppler.estimators.smoother_offsets.solve_with_offsets`; a string says why there is none), else
-    ``None``."""
-    if not (settings.estimate_offsets and np.any(np.asarray(settings.bias_sigma) > 0)):
+    """With calibration offsets declared (``settings.bias_sigma``) the joint solution of track and offsets from
+    ``sol`` (:func:`~fgdoppler.estimators.smoother_offsets.solve_with_offsets`; a string says why there is none),
+    else ``None``.  The verdict's split test and mirror-image search use it whenever offsets are declared (they
+    test the model the user declared); the report only with ``settings.estimate_offsets``."""
+    if not np.any(np.asarray(settings.bias_sigma) > 0):
         return None
     from fgdoppler.estimators.smoother_offsets import solve_with_offsets
 
@@ -1148,7 +1149,8 @@ def run_smoother(
     joint = _joint(measurements, model, settings, sol)
     reasons = _final_findings(measurements, model, settings, sol, init, list(sol.reasons) + mode_reasons, progress,
                               memo, joint)
-    states, covs, offsets = _reported(measurements, model, settings, sol, reasons, notes, joint)
+    states, covs, offsets = _reported(measurements, model, settings, sol, reasons, notes,
+                                      joint if settings.estimate_offsets else None)
     t_last = float(sol.times[-1])
     return TrackResult(
         estimator="smoother",

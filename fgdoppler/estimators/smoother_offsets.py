@@ -23,7 +23,9 @@ compares one track and the offsets with two tracks that share them
 (:func:`joint_split_statistics`), and in 2-D the joint mode found from the
 track's mirror image across the sensors' line, which free offsets can make
 as likely as the reported one, is a ``competing`` finding where it is a
-rival (:func:`mirror_solution`).
+rival (:func:`mirror_solution`).  Those two tests of the model run with the
+offsets only considered too (``bias_sigma`` without ``estimate_offsets``):
+the joint solution is then found for the verdict alone.
 
 What the smoother reports is that track moved by the joint solution's shift,
 :math:`\hat{\mathbf x}_k + (\tilde{\mathbf x}_k - \hat{\mathbf x}_k)` with

@@ -296,8 +296,9 @@ def test_the_split_test_with_pinned_offsets_is_the_split_test_without(case: str,
 
 def test_estimated_offsets_do_not_pass_for_a_manoeuvre_and_a_real_one_is_still_found() -> None:
     # Case b 45 km with offsets drawn as studies/doppler_offsets.py draws them (seed 2026, run 5): the split test
-    # without offsets finds a "manoeuvre" the target did not make; with the offsets estimated and re-fitted
-    # with each part's track it does not (measured D = 2.47 against 18.5).  Case a 45 km with offsets and a
+    # without offsets finds a "manoeuvre" the target did not make; with the offsets declared (estimated, or
+    # only considered) and re-fitted with each part's track it does not (measured D = 2.47 against 18.5).
+    # Case a 45 km with offsets and a
     # real turn of 1.5 deg/s from 10 s: found either way (measured D = 39.5 with the offsets).
     base = fd.paper_scenarios()[5]
     rng = np.random.default_rng(np.random.SeedSequence([2026, 5, 5]))
@@ -312,8 +313,9 @@ def test_estimated_offsets_do_not_pass_for_a_manoeuvre_and_a_real_one_is_still_f
         return {reason.code for reason in r.reasons if reason.status != "ok"}
 
     estimated = fd.SmootherSettings(bias_sigma=1.0, estimate_offsets=True)
-    assert "manoeuvre" in codes(fd.SmootherSettings(bias_sigma=1.0), m, init)
+    assert "manoeuvre" in codes(fd.SmootherSettings(), m, init)
     assert "manoeuvre" not in codes(estimated, m, init)
+    assert "manoeuvre" not in codes(fd.SmootherSettings(bias_sigma=1.0), m, init)  # considered: the same test
     turning = dataclasses.replace(fd.paper_scenario("a", 45e3), bias=(0.7, -0.5),
                                   manoeuvre=fd.Manoeuvre(turn_rate_deg=1.5, acceleration=0.0, onset=10.0))
     m2 = fd.simulate(turning, np.random.default_rng(0)).measurements
@@ -363,8 +365,9 @@ def test_with_the_offsets_free_the_mirror_image_is_a_rival_and_the_verdict_says_
     # the mirror image of the truth's track explain the data about as well.  From the mirror image of the
     # reported track the joint solve finds the truth's mode (measured: cost 112.99 against 111.32, ends 10 m
     # across from the truth, offsets +1.23 / -1.23 m/s): the verdict names that rival and is `doubtful`.
-    # Considered only, the offsets do not free the mirror, so no mirror finding; nor with a half plane
-    # given to the initiation (the user said which side).
+    # With the offsets only considered the verdict tests the same model, so the same finding (the track is the
+    # one without offsets); told nothing, none; nor with a half plane given to the initiation (the user said
+    # which side).
     model, sim, _ = _case_b_45_with_offsets(30)
     m = sim.measurements
     init = fd.initiate(m.first_per_pair(10), model)
@@ -382,7 +385,9 @@ def test_with_the_offsets_free_the_mirror_image_is_a_rival_and_the_verdict_says_
     assert end_error[1] < 0.25 * end_error[0] and end_error[0] > 1e3, end_error
     assert np.sign(rival.offsets.values[0] - rival.offsets.values[1]) == np.sign(2.10 + 0.77)
     considered = fd.run_estimator("smoother", m, model, init, fd.SmootherSettings(bias_sigma=1.0), verify=False)
-    assert not any("mirror image" in x.message for x in considered.reasons)
+    assert any("mirror image" in x.message for x in considered.reasons) and considered.offsets is None
+    told_nothing = fd.run_estimator("smoother", m, model, init, fd.SmootherSettings(), verify=False)
+    assert not any("mirror image" in x.message for x in told_nothing.reasons)
     north = fd.initiate(m.first_per_pair(10), model, fd.InitiationSettings(
         half_plane=fd.HalfPlane(point=(0.0, 0.0), normal=(0.0, 1.0))))
     sided = fd.run_estimator("smoother", m, model, north, joint, verify=False)
