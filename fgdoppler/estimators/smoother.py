@@ -980,8 +980,8 @@ def _final_findings(measurements: Measurements, model: TrackingModel, settings: 
 def _mirror_reason(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
                    joint: JointSolution) -> Reason | None:
     """A ``competing`` finding when the joint mode from the mirror image of the track is a rival by the rule of
-    :func:`_restarts_3d` (:func:`~fgdoppler.estimators.smoother_offsets.mirror_solution`; 2-D, with the offsets
-    estimated).  The reported track stays: the finding says what the other mode is."""
+    :func:`_restarts_3d` (:func:`~fgdoppler.estimators.smoother_offsets.mirror_solution`; 2-D, with offsets
+    declared).  The reported track stays: the finding says what the other mode is."""
     from fgdoppler.estimators.smoother_offsets import mirror_solution
 
     if model.zone is None or not isinstance(model.observation, DopplerModel):
@@ -1012,8 +1012,7 @@ def with_offset_findings(reference: TrackResult, measurements: Measurements, mod
     three of them consistent.  (Referring the tracker to a smoother that considers or estimates the offsets
     itself, covariances included, was tried: the tracker, its covariance with its own share, was then
     called over-confident in up to 8 and 11 of 30 consistent runs of case a 5 km and case b 45 km, against
-    1 and 2 this way.)  ``reference``
-    unchanged where no offset is declared or the joint solve fails.
+    1 and 2 this way.)  ``reference`` itself where no offset is declared or the joint solve fails.
     """
     from fgdoppler.estimators.smoother_offsets import joint_split_statistics, solve_with_offsets
 
