@@ -25,6 +25,7 @@ __all__ = [
     "bistatic_range",
     "ellipse_tangent",
     "paper_geometry",
+    "principal_line",
 ]
 
 #: Distance (m) below which a point counts as being at a sensor.
@@ -52,6 +53,15 @@ def _point(value: ArrayLike, name: str) -> tuple[float, ...]:
 def _padded(point: tuple[float, ...], d: int) -> tuple[float, ...]:
     return point + (0.0,) * (d - len(point))
 
+
+def principal_line(points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    r"""The least-squares line through ``points`` ``(m, d)``: their centroid :math:`\mathbf c`, the unit direction
+    of largest spread and the singular values of :math:`\mathbf p_i - \mathbf c` (the second one 0 when every
+    point lies on the line)."""
+    p = np.asarray(points, dtype=float)
+    c = p.mean(axis=0)
+    _, s, vt = np.linalg.svd(p - c)
+    return c, vt[0], s
 
 @dataclass(frozen=True)
 class BistaticPair:

@@ -75,6 +75,7 @@ from fgdoppler.estimators.initiation import OUTLIER_CUT, inlier_statistic
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import TrackerSettings
 from fgdoppler.estimators.verdict import Reason, message_of, status_of
+from fgdoppler.geometry import principal_line
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import DopplerModel
 from fgdoppler.models.tracking import TrackingModel
@@ -171,9 +172,7 @@ def _data_reasons(measurements: Measurements, model: TrackingModel, half_plane: 
     if isinstance(model.observation, DopplerModel) and not half_plane:
         g = model.observation.geometry
         used = np.unique(measurements.pair)
-        pts = np.vstack([g.tx[used], g.rx[used]])
-        centred = pts - pts.mean(axis=0)
-        spread = np.linalg.svd(centred, compute_uv=False)
+        _, _, spread = principal_line(np.vstack([g.tx[used], g.rx[used]]))
         if spread.size < 2 or spread[1] <= 1e-9 * max(spread[0], 1.0):
             out.append(Reason(code="data", status="doubtful", message=(
                 f"the sensors of the pairs that reported ({', '.join(str(int(k)) for k in used)}) lie on one "

@@ -961,20 +961,28 @@ def _final_findings(measurements: Measurements, model: TrackingModel, settings: 
     :func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`)."""
     if settings.mode_search:
         reasons = _outside_findings(measurements, model, settings, sol, init, reasons, progress, memo)
-    if settings.mode_search and joint is not None and not isinstance(joint, str) and init.half_plane is None:
-        mirror = _mirror_reason(measurements, model, settings, joint)
-        if mirror is not None:
-            reasons = [*reasons, mirror]
-    if settings.motion_check:
-        stats = None
-        if joint is not None and not isinstance(joint, str):
-            from fgdoppler.estimators.smoother_offsets import joint_split_statistics
+    return [*reasons, *_model_findings(measurements, model, settings, sol.times, sol.states, joint,
+                                       half_plane=init.half_plane is not None)]
 
-            stats = joint_split_statistics(measurements, model, settings, joint)
-        manoeuvre = manoeuvre_reason(measurements, model, sol.times, sol.states, settings, stats=stats)
-        if manoeuvre is not None:
-            reasons = [*reasons, manoeuvre]
-    return reasons
+
+def _model_findings(measurements: Measurements, model: TrackingModel, settings: SmootherSettings, times: FloatArray,
+                    states: FloatArray, joint: JointSolution | str | None, *, half_plane: bool) -> list[Reason]:
+    """The findings about the model of the track ``states``: the mirror image that free offsets can make a rival
+    (``mode_search``, a ``joint`` solution, no ``half_plane``: :func:`_mirror_reason`) and the split test of the
+    motion model (``motion_check``), re-fitting the offsets where there is a joint solution
+    (:func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`)."""
+    from fgdoppler.estimators.smoother_offsets import JointSolution, joint_split_statistics
+
+    solved = joint if isinstance(joint, JointSolution) else None
+    out: list[Reason] = []
+    if settings.mode_search and solved is not None and not half_plane:
+        mirror = _mirror_reason(measurements, model, settings, solved)
+        out += [mirror] if mirror is not None else []
+    if settings.motion_check:
+        stats = None if solved is None else joint_split_statistics(measurements, model, settings, solved)
+        manoeuvre = manoeuvre_reason(measurements, model, times, states, settings, stats=stats)
+        out += [manoeuvre] if manoeuvre is not None else []
+    return out
 
 
 def _mirror_reason(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
@@ -1014,7 +1022,7 @@ def with_offset_findings(reference: TrackResult, measurements: Measurements, mod
     called over-confident in up to 8 and 11 of 30 consistent runs of case a 5 km and case b 45 km, against
     1 and 2 this way.)  ``reference`` itself where no offset is declared or the joint solve fails.
     """
-    from fgdoppler.estimators.smoother_offsets import joint_split_statistics, solve_with_offsets
+    from fgdoppler.estimators.smoother_offsets import solve_with_offsets
 
     if not np.any(np.asarray(bias_sigma) > 0):
         return reference
@@ -1025,13 +1033,7 @@ def with_offset_findings(reference: TrackResult, measurements: Measurements, mod
     if isinstance(joint, str):
         return reference
     reasons = [r for r in reference.reasons if r.code != "manoeuvre"]
-    if settings.motion_check:
-        stats = joint_split_statistics(measurements, model, settings, joint)
-        manoeuvre = manoeuvre_reason(measurements, model, e.times, e.states, settings, stats=stats)
-        reasons += [manoeuvre] if manoeuvre is not None else []
-    if settings.mode_search and not half_plane:
-        mirror = _mirror_reason(measurements, model, settings, joint)
-        reasons += [mirror] if mirror is not None else []
+    reasons += _model_findings(measurements, model, settings, e.times, e.states, joint, half_plane=half_plane)
     return replace(reference, reasons=tuple(reasons))
 
 

@@ -67,7 +67,7 @@ from fgdoppler.estimators.marginals import bordered_chain_solve, check_covarianc
 from fgdoppler.estimators.results import OffsetEstimate
 from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.estimators.smoother import _levenberg_marquardt, _Problem
-from fgdoppler.geometry import Geometry
+from fgdoppler.geometry import Geometry, principal_line
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.zone import Zone
@@ -256,9 +256,7 @@ def mirrored(states: FloatArray, geometry: Geometry) -> FloatArray:
     x = np.asarray(states, dtype=float)
     if x.ndim != 2 or x.shape[1] != 4:
         raise ValueError(f"mirrored takes 2-D states (n, 4), got {x.shape}")
-    pts = np.vstack([geometry.tx, geometry.rx])[:, :2]
-    c = pts.mean(axis=0)
-    u = np.linalg.svd(pts - c)[2][0]
+    c, u, _ = principal_line(np.vstack([geometry.tx, geometry.rx])[:, :2])
     m = np.eye(2) - 2.0 * np.outer([-u[1], u[0]], [-u[1], u[0]])
     return np.column_stack([c + (x[:, :2] - c) @ m, x[:, 2:] @ m])
 
