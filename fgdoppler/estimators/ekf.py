@@ -16,7 +16,10 @@ need nothing special; simultaneous ones in the sensors' own order,
     \quad\text{(Joseph form)}.
 
 The normalised innovation :math:`\mathrm{NIS} = (z - h)^2/S` is recorded for
-every measurement; above the gate the measurement is rejected and reported.
+every measurement; above the gate the measurement is rejected and reported —
+unless the filter's position Gaussian fits its posterior there (sag ratio
+below :data:`~fgdoppler.estimators.gating.SAG_LIMIT`), where the wider
+``gaussian_gate_probability`` applies (:mod:`fgdoppler.estimators.gating`).
 With a Huber threshold :math:`k` a measurement with :math:`|r| = \sqrt{\mathrm{NIS}} > k`
 updates with weight :math:`w = k/|r|`: its variance grows until
 :math:`S_w = S/w` (an M-estimate of the update, which bounds any one
@@ -47,12 +50,13 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from itertools import pairwise
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.estimators.gating import NISGate
+from fgdoppler.estimators.gating import NISGate, sag_ratio
 from fgdoppler.estimators.initiation import OUTLIER_CUT, Initiation
 from fgdoppler.estimators.local import in_computation_frame
 from fgdoppler.estimators.results import Estimates, TrackResult
@@ -132,7 +136,11 @@ class ExtendedKalmanFilter:
         self._rank: list[int] | None = None if rank is None else [int(r) for r in rank]
         self._Q: dict[float, list[list[float]]] = {}
         self.events: list[Event] = []
-        self.gate = NISGate(self.settings.gate_probability, self.events)
+        self.gate = NISGate(self.settings.gate_probability, self.events, self.settings.gaussian_gate_probability)
+        # the sensors of each pair, for the wider gate's sag ratio (None: a model without a geometry, one gate)
+        geometry = getattr(self.model, "geometry", None)
+        self._sensors: list[FloatArray] | None = None if geometry is None else [
+            np.vstack([geometry.tx[k], geometry.rx[k]]) for k in range(geometry.n_pairs)]
         self._huber = self.settings.huber_k
         #: Cumulative predictive log-likelihood of all measurements (gated ones
         #: included), sum of -0.5 (log(2 pi S) + NIS); with a Huber threshold each
@@ -257,8 +265,8 @@ class ExtendedKalmanFilter:
             joint = min(joint, OUTLIER_CUT2 * ch.size)
         self.log_likelihood -= 0.5 * (ch.size * math.log(2 * math.pi) + 2.0 * float(np.sum(np.log(np.diag(L))))
                                       + joint)
-        keep = np.array([self.gate.accept(self.t, int(c), float(v)) for c, v in zip(ch, nis, strict=True)],
-                        dtype=bool)
+        keep = np.array([self.gate.accept(self.t, int(c), float(v), self._sag(int(c), x, P))
+                         for c, v in zip(ch, nis, strict=True)], dtype=bool)
         if not np.any(keep):
             return nis
         k = self._huber
@@ -277,6 +285,18 @@ class ExtendedKalmanFilter:
             return nis
         self._x, self._P = xn.tolist(), Pn.tolist()
         return nis
+
+    def _sag(self, channel: int, x: ArrayLike, P: ArrayLike) -> Callable[[], float] | None:
+        """The sag ratio of the prediction ``x, P`` for pair ``channel``, as a call the gate makes only if it needs it."""
+        sensors = self._sensors
+        if sensors is None:
+            return None
+        d = self.n // 2
+
+        def ratio() -> float:
+            xs, Ps = np.asarray(x, dtype=float), np.asarray(P, dtype=float)
+            return sag_ratio(xs[:d], Ps[:d, :d], sensors[channel])
+        return ratio
 
     def update(self, t: float, channel: int, z: float, sigma: float) -> float:
         """Predict to ``t`` and apply one scalar measurement; returns its NIS (``nan`` if skipped)."""
@@ -308,7 +328,8 @@ class ExtendedKalmanFilter:
         # outlier cut, so that a gross outlier costs every hypothesis the same.
         self.log_likelihood -= 0.5 * (math.log(2 * math.pi * S) + (nis if self._huber is None else
                                                                    min(nis, OUTLIER_CUT2)))
-        if not self.gate.accept(self.t, int(channel), nis):
+        sag = self._sag(int(channel), self._x, P) if nis > self.gate.threshold else None
+        if not self.gate.accept(self.t, int(channel), nis, sag):
             return nis
         k = self._huber
         if k is not None and nis > k * k:

@@ -392,7 +392,7 @@ class GaussianSumTracker:
         hyps, prior_w = hypotheses_of(self.estimator, window, model, init, st)
         logw0 = np.log(prior_w) if prior_w is not None else -0.5 * np.array([h.cost for h in hyps])
         ekf_settings = st if isinstance(st, EKFSettings) else EKFSettings(
-            gate_probability=st.gate_probability, huber_k=st.huber_k)
+            gate_probability=st.gate_probability, huber_k=st.huber_k, gaussian_gate_probability=None)
         fallback = model.zone.prior()[1] if model.zone is not None else None
         out = []
         for h, lw in zip(hyps, logw0, strict=True):

@@ -277,7 +277,9 @@ def test_isam2_settings_reject_bad_values(bad: dict) -> None:
 
 
 @pytest.mark.parametrize("bad", [{"sampling_interval": -1.0}, {"sampling_interval": float("nan")},
-                                 {"sampled_covariance": "yes"}, {"update": "iterated"}])
+                                 {"sampled_covariance": "yes"}, {"update": "iterated"},
+                                 {"gaussian_gate_probability": 1.0}, {"gaussian_gate_probability": True},
+                                 {"gaussian_gate_probability": 0.99}])  # the last: narrower than the gate
 def test_ekf_settings_reject_bad_values(bad: dict) -> None:
     with pytest.raises(ValueError, match=next(iter(bad))):
         EKFSettings(**bad)
