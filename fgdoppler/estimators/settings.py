@@ -249,8 +249,8 @@ class EKFSettings(SampledCovarianceSettings):
         only loses data; a gross outlier (beyond 4.9 σ at the default) is
         still rejected.  ``None``: ``gate_probability`` everywhere (before
         2026-11-26).  Measured (100 runs per scenario, seeds 2026 and 7,
-        docs/concepts.md): case a 45 km with seed 7 −1.7 m, case b 5 km
-        −0.05 m, every other scenario within ±0.3 m.
+        paired, docs/concepts.md): case a 45 km with seed 7 −1.7 m, case a
+        25 km with seed 2026 −1.8 m, every other cell −0.2 to +0.23 m.
     """
 
     update: Literal["sequential", "scan"] = "sequential"
