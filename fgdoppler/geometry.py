@@ -63,6 +63,7 @@ def principal_line(points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.f
     _, s, vt = np.linalg.svd(p - c)
     return c, vt[0], s
 
+
 @dataclass(frozen=True)
 class BistaticPair:
     """One transmitter–receiver pair.

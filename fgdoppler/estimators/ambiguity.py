@@ -194,9 +194,7 @@ def _resolve_ranked(run: Runner, measurements: Measurements, model: TrackingMode
     forward by the motion model (covariance marked indeterminate).
     """
     n = len(hyps)
-    # the ranking EKFs gate as the tracker they rank does: one gate everywhere
-    ekf_settings = EKFSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k,
-                               gaussian_gate_probability=None)
+    ekf_settings = EKFSettings.gating_as(settings)
     ekfs = [run_ekf(measurements, model, h, ekf_settings, progress=prefixed(progress, f"ranking {i + 1}/{n}"))
             for i, h in enumerate(hyps)]
     mix = _Weights.of(hyps, ekfs, weights)

@@ -265,7 +265,8 @@ class ExtendedKalmanFilter:
             joint = min(joint, OUTLIER_CUT2 * ch.size)
         self.log_likelihood -= 0.5 * (ch.size * math.log(2 * math.pi) + 2.0 * float(np.sum(np.log(np.diag(L))))
                                       + joint)
-        keep = np.array([self.gate.accept(self.t, int(c), float(v), self._sag(int(c), x, P))
+        narrow = self.gate.threshold  # the sag ratio is asked only beyond it
+        keep = np.array([self.gate.accept(self.t, int(c), float(v), self._sag(int(c), x, P) if v > narrow else None)
                          for c, v in zip(ch, nis, strict=True)], dtype=bool)
         if not np.any(keep):
             return nis

@@ -391,8 +391,7 @@ class GaussianSumTracker:
         model, st = self.tracking_model, self.settings
         hyps, prior_w = hypotheses_of(self.estimator, window, model, init, st)
         logw0 = np.log(prior_w) if prior_w is not None else -0.5 * np.array([h.cost for h in hyps])
-        ekf_settings = st if isinstance(st, EKFSettings) else EKFSettings(
-            gate_probability=st.gate_probability, huber_k=st.huber_k, gaussian_gate_probability=None)
+        ekf_settings = st if isinstance(st, EKFSettings) else EKFSettings.gating_as(st)
         fallback = model.zone.prior()[1] if model.zone is not None else None
         out = []
         for h, lw in zip(hyps, logw0, strict=True):

@@ -267,6 +267,13 @@ class EKFSettings(SampledCovarianceSettings):
             raise ValueError(f"gaussian_gate_probability ({g}) must not be below gate_probability ({p}): "
                              "it is the wider gate, where the filter's Gaussian fits its posterior")
 
+    @classmethod
+    def gating_as(cls, settings: TrackerSettings) -> EKFSettings:
+        """An EKF that gates and weighs residuals as ``settings`` do — one gate, as every other tracker has —
+        for the EKFs inside other estimators (the smoother's start, rankings, Gaussian-sum weights)."""
+        return cls(gate_probability=settings.gate_probability, huber_k=settings.huber_k,
+                   gaussian_gate_probability=None)
+
 
 @dataclass(frozen=True, kw_only=True)
 class ISAM2Settings(StreamingSettings, SampledCovarianceSettings):
@@ -526,8 +533,7 @@ class SmootherSettings(TrackerSettings):
 
     def start(self) -> EKFSettings:
         """Settings of the EKF pass that starts the smoother (its gate: this one, everywhere)."""
-        return EKFSettings(gate_probability=self.gate_probability, huber_k=self.huber_k,
-                           gaussian_gate_probability=None)
+        return EKFSettings.gating_as(self)
 
 
 @dataclass(frozen=True, kw_only=True)
