@@ -137,10 +137,7 @@ class ExtendedKalmanFilter:
         self._Q: dict[float, list[list[float]]] = {}
         self.events: list[Event] = []
         self.gate = NISGate(self.settings.gate_probability, self.events, self.settings.gaussian_gate_probability)
-        # the sensors of each pair, for the wider gate's sag ratio (None: a model without a geometry, one gate)
-        geometry = getattr(self.model, "geometry", None)
-        self._sensors: list[FloatArray] | None = None if geometry is None else [
-            np.vstack([geometry.tx[k], geometry.rx[k]]) for k in range(geometry.n_pairs)]
+        self._sensors = self._pair_sensors(n // 2)
         self._huber = self.settings.huber_k
         #: Cumulative predictive log-likelihood of all measurements (gated ones
         #: included), sum of -0.5 (log(2 pi S) + NIS); with a Huber threshold each
@@ -286,6 +283,20 @@ class ExtendedKalmanFilter:
             return nis
         self._x, self._P = xn.tolist(), Pn.tolist()
         return nis
+
+    def _pair_sensors(self, d: int) -> list[FloatArray] | None:
+        """Each pair's Tx and Rx with the states' ``d`` coordinates, for the wider gate's sag ratio.
+
+        ``None`` (one gate) for a model without a geometry, or one whose sensors its states cannot place.
+        """
+        geometry = getattr(self.model, "geometry", None)
+        if geometry is None:
+            return None
+        try:
+            tx, rx = geometry.positions(d)
+        except ValueError:
+            return None
+        return [np.vstack([a, b]) for a, b in zip(tx, rx, strict=True)]
 
     def _sag(self, channel: int, x: ArrayLike, P: ArrayLike) -> Callable[[], float] | None:
         """The sag ratio of the prediction ``x, P`` for pair ``channel``, as a call the gate makes only if it needs it."""
