@@ -28,7 +28,9 @@ trackers (EKF, iSAM2, fixed-lag) therefore start from several hypotheses
   of all the data for smoothed and lagged ones; a ``competing`` finding
   is doubtful when the mixture holds separate modes;
 * smoother ("cost"): the hypothesis with the lowest final cost, with a
-  ``competing`` finding when another explains the data about as well.
+  ``competing`` finding when another explains the data about as well;
+  :func:`resolve_staged` finishes only that hypothesis's run (its final
+  findings and reported covariances, :class:`CostStages`).
 
 iSAM2 and fixed-lag are ranked by an EKF per hypothesis *before* they run,
 and a hypothesis whose filtered weight stays below :data:`NEGLIGIBLE` from
@@ -47,8 +49,8 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import replace
-from typing import Literal
+from dataclasses import dataclass, replace
+from typing import Generic, Literal, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -58,6 +60,7 @@ from scipy.stats import chi2
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.search_memo import SearchMemo
 from fgdoppler.estimators.settings import EKFSettings, TrackerSettings
 from fgdoppler.estimators.verdict import Event, Reason
 from fgdoppler.measurements import Measurements
@@ -65,7 +68,8 @@ from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.progress import Progress, prefixed
 
-__all__ = ["NEGLIGIBLE", "Resolution", "hypotheses", "hypothesis_weights", "posterior_hypotheses", "resolve"]
+__all__ = ["NEGLIGIBLE", "CostStages", "Draft", "Resolution", "hypotheses", "hypothesis_weights", "posterior_hypotheses",
+           "resolve", "resolve_staged"]
 
 Resolution = Literal["likelihood", "cost", "native"]
 Runner = Callable[..., TrackResult]
@@ -164,21 +168,93 @@ def resolve(run: Runner, resolution: Resolution, measurements: Measurements, mod
     """
     t_begin = time.perf_counter()
     n = len(hyps)
-    note = f"ambiguous initiation: {len(hyps)} hypotheses run"
+    note = _ran(n)
     if resolution == "likelihood" and run is not run_ekf:
         return _resolve_ranked(run, measurements, model, hyps, settings, progress, weights, note, t_begin)
     results = [run(measurements, model, h, settings, progress=prefixed(progress, f"hypothesis {i + 1}/{n}"))
                for i, h in enumerate(hyps)]
     if resolution == "cost":
-        costs = np.array([np.inf if r.cost is None else r.cost for r in results])
-        best = int(np.argmin(costs))
-        r = results[best]
-        event = Event(time=float(r.primary.times[-1]), message=f"{note}; hypothesis {best} has the lowest cost")
-        return replace(r, hypothesis=np.full(len(r.primary), best), events=(*r.events, event),
-                       reasons=(*r.reasons, *_competing(costs, results, best)),
-                       wall_time=time.perf_counter() - t_begin)
+        costs = _costs([r.cost for r in results])
+        return _lowest_cost(results, costs, int(np.argmin(costs)), t_begin)
     # the EKF reports its own predictive likelihood: it is ranked by it
     return _mixed(results, _Weights.of(hyps, results, weights), note, t_begin)
+
+
+class Draft(Protocol):
+    """The first stage of a run resolved by cost: its solution's cost, and the solution as a track."""
+
+    @property
+    def cost(self) -> float: ...
+
+    def result(self) -> TrackResult: ...
+
+
+_D = TypeVar("_D", bound=Draft)
+
+
+@dataclass(frozen=True, kw_only=True)
+class CostStages(Generic[_D]):
+    """A run resolved by cost (:func:`resolve_staged`) in two stages.
+
+    Attributes
+    ----------
+    draft
+        ``draft(measurements, model, init, settings, *, progress=None, memo=None) -> Draft``: the solution
+        from one hypothesis.
+    finish
+        ``finish(measurements, model, draft, *, progress=None, memo=None) -> TrackResult``: the draft's
+        reported track with every finding; the same as one run from its hypothesis.
+    """
+
+    draft: Callable[..., _D]
+    finish: Callable[..., TrackResult]
+
+
+def resolve_staged(stages: CostStages[_D], measurements: Measurements, model: TrackingModel, hyps: list[Initiation],
+                   settings: TrackerSettings, progress: Progress | None = None, memo: SearchMemo | None = None
+                   ) -> TrackResult:
+    """:func:`resolve` by cost, finishing only the hypothesis of lowest cost.
+
+    Every hypothesis is drafted (with one ``memo`` for the recording); the
+    one of lowest cost is finished and reported as :func:`resolve` would
+    report its full run.  The others enter only the ``competing`` finding,
+    by their cost and the end of their maximum a posteriori track — what
+    their full runs would give too, but where a full run reports the
+    posterior mean (a skewed posterior,
+    :mod:`fgdoppler.estimators.spread`): there the draft's end is the
+    mode's, which the cost compared is the cost of.
+    """
+    t_begin = time.perf_counter()
+    n = len(hyps)
+    drafts = [stages.draft(measurements, model, h, settings, progress=prefixed(progress, f"hypothesis {i + 1}/{n}"),
+                           memo=memo)
+              for i, h in enumerate(hyps)]
+    costs = _costs([d.cost for d in drafts])
+    best = int(np.argmin(costs))
+    results = [d.result() if i != best else
+               stages.finish(measurements, model, d, progress=prefixed(progress, f"hypothesis {i + 1}/{n}"), memo=memo)
+               for i, d in enumerate(drafts)]
+    return _lowest_cost(results, costs, best, t_begin)
+
+
+def _ran(n: int) -> str:
+    """The event's words for ``n`` hypotheses run."""
+    return f"ambiguous initiation: {n} hypotheses run"
+
+
+def _costs(costs: list[float | None]) -> NDArray[np.float64]:
+    """The hypotheses' costs, a missing one as infinite."""
+    return np.array([np.inf if c is None else c for c in costs], dtype=float)
+
+
+def _lowest_cost(results: list[TrackResult], costs: NDArray[np.float64], best: int, t_begin: float) -> TrackResult:
+    """``results[best]`` reported as the resolution by cost: the hypothesis it came from, an event, the
+    ``competing`` finding."""
+    r = results[best]
+    event = Event(time=float(r.primary.times[-1]), message=f"{_ran(len(results))}; hypothesis {best} has the lowest cost")
+    return replace(r, hypothesis=np.full(len(r.primary), best), events=(*r.events, event),
+                   reasons=(*r.reasons, *_competing(costs, results, best)),
+                   wall_time=time.perf_counter() - t_begin)
 
 
 def _resolve_ranked(run: Runner, measurements: Measurements, model: TrackingModel, hyps: list[Initiation],

@@ -14,16 +14,19 @@ import warnings
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from fgdoppler.estimators.ambiguity import (
+    CostStages,
     Resolution,
     hypotheses,
     hypothesis_weights,
     posterior_hypotheses,
     resolve,
+    resolve_staged,
 )
 from fgdoppler.estimators.calibration import bias_sigmas, moved_starts, offset_shares
 from fgdoppler.estimators.ekf import run_ekf
@@ -45,7 +48,12 @@ from fgdoppler.estimators.settings import (
     SmootherSettings,
     TrackerSettings,
 )
-from fgdoppler.estimators.smoother import run_smoother, with_offset_findings
+from fgdoppler.estimators.smoother import (
+    draft_smoother,
+    finish_smoother,
+    run_smoother,
+    with_offset_findings,
+)
 from fgdoppler.estimators.spread import filtered_spread
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.geometry import Geometry
@@ -77,6 +85,11 @@ class EstimatorInfo:
         True if its primary estimate at a time uses only the data up to then.
     summary
         One line for help texts.
+    stages
+        For resolution ``"cost"``: ``run`` in two stages, so that only the
+        hypothesis of lowest cost is finished
+        (:func:`~fgdoppler.estimators.ambiguity.resolve_staged`); ``None``:
+        every hypothesis runs whole.
     """
 
     name: str
@@ -85,6 +98,7 @@ class EstimatorInfo:
     resolution: Resolution
     online: bool
     summary: str
+    stages: CostStages[Any] | None = None
 
 
 ESTIMATORS: Mapping[str, EstimatorInfo] = MappingProxyType({
@@ -96,7 +110,8 @@ ESTIMATORS: Mapping[str, EstimatorInfo] = MappingProxyType({
                                resolution="likelihood", online=False,
                                summary="fixed-lag smoother: each state estimated lag seconds after its time"),
     "smoother": EstimatorInfo(name="smoother", run=run_smoother, settings=SmootherSettings, resolution="cost",
-                              online=False, summary="offline smoother: the whole recording by Levenberg-Marquardt"),
+                              online=False, summary="offline smoother: the whole recording by Levenberg-Marquardt",
+                              stages=CostStages(draft=draft_smoother, finish=finish_smoother)),
     "particle": EstimatorInfo(name="particle", run=run_particle, settings=ParticleSettings, resolution="native",
                               online=True,
                               summary="particle filter: the posterior by sequential Monte Carlo (resample-move)"),
@@ -317,7 +332,10 @@ def _solve(info: EstimatorInfo, measurements: Measurements, model: TrackingModel
         return info.run(measurements, model, hyps[0], settings, progress=progress)
     run = info.run
     if info.resolution == "cost":  # the smoother: its whole-recording searches are the same for every hypothesis
-        run = functools.partial(run, memo=SearchMemo(measurements))
+        memo = SearchMemo(measurements)
+        if info.stages is not None:
+            return resolve_staged(info.stages, measurements, model, hyps, settings, progress, memo)
+        run = functools.partial(run, memo=memo)
     return resolve(run, info.resolution, measurements, model, hyps, settings, progress, weights)
 
 

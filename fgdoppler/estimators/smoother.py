@@ -71,7 +71,8 @@ if TYPE_CHECKING:
     from fgdoppler.estimators.grid import HalfPlane
     from fgdoppler.estimators.smoother_offsets import JointSolution
 
-__all__ = ["SmootherSolution", "initial_trajectory", "rts_smooth", "run_smoother", "solve_smoother"]
+__all__ = ["SmootherDraft", "SmootherSolution", "draft_smoother", "finish_smoother", "initial_trajectory", "rts_smooth",
+           "run_smoother", "solve_smoother"]
 
 FloatArray = NDArray[np.float64]
 
@@ -1087,6 +1088,134 @@ def _reported(measurements: Measurements, model: TrackingModel, settings: Smooth
     return states, covs, None
 
 
+@dataclass(frozen=True, kw_only=True)
+class SmootherDraft:
+    """The smoother's solution from one initiation before its final findings and reported covariances.
+
+    :func:`draft_smoother` makes it, :func:`finish_smoother` completes it;
+    :func:`run_smoother` does both.  The two stages let the runs from the
+    hypotheses of an ambiguous initiation (resolution ``"cost"``,
+    :func:`~fgdoppler.estimators.ambiguity.resolve_staged`) finish only the
+    one of lowest cost: the findings about the final solution — the
+    searches outside the zone, the split test of the motion model — and the
+    posterior samples of the reported covariances are about the track
+    reported, and cost as much as the solve itself.
+
+    Attributes
+    ----------
+    init
+        The initiation it started from.
+    settings
+        The smoother's settings.
+    solution
+        The maximum a posteriori track after the re-initiation and the
+        whole-recording searches.
+    notes
+        What happened so far.
+    reasons
+        The findings so far (the solve's and the searches').
+    started
+        ``time.perf_counter()`` when the run began.
+    """
+
+    init: Initiation
+    settings: SmootherSettings
+    solution: SmootherSolution
+    notes: tuple[str, ...]
+    reasons: tuple[Reason, ...]
+    started: float
+
+    @property
+    def cost(self) -> float:
+        """The solution's cost (:attr:`SmootherSolution.cost`)."""
+        return self.solution.cost
+
+    def result(self) -> TrackResult:
+        """The draft as a track: the maximum a posteriori states, their Laplace covariances, the findings so far."""
+        sol = self.solution
+        covs: list[FloatArray | None] = (list(sol.covariances) if sol.covariances is not None
+                                         else [None] * sol.times.size)
+        return _track(self, list(sol.states), covs, self.reasons, self.notes, None)
+
+
+def _track(draft: SmootherDraft, states: list[FloatArray], covs: list[FloatArray | None], reasons: Sequence[Reason],
+           notes: Sequence[str], offsets: OffsetEstimate | None) -> TrackResult:
+    """The track result of ``draft``'s solution reporting ``states`` and ``covs``."""
+    sol = draft.solution
+    t_last = float(sol.times[-1])
+    return TrackResult(
+        estimator="smoother",
+        settings=draft.settings,
+        estimates=(Estimates.from_lists("smoothed", list(sol.times), states, covs),),
+        reasons=tuple(reasons),
+        events=tuple(Event(time=t_last, message=n) for n in notes),
+        iterations=sol.iterations,
+        cost=sol.cost,
+        wall_time=time.perf_counter() - draft.started,
+        offsets=offsets,
+    )
+
+
+def draft_smoother(
+    measurements: Measurements,
+    model: TrackingModel,
+    init: Initiation,
+    settings: SmootherSettings | None = None,
+    *,
+    progress: Progress | None = None,
+    memo: SearchMemo | None = None,
+) -> SmootherDraft:
+    """The first stage of :func:`run_smoother`: initiation → EKF start → LM, the re-initiation and the searches.
+
+    Computes in ``model``'s coordinates as given (:func:`run_smoother` moves
+    the problem into its computation frame first); ``progress`` and ``memo``
+    as there.
+    """
+    settings = settings or SmootherSettings()
+    bias_sigmas(settings.bias_sigma, model.observation.n_channels)  # a wrong count is said before any work
+    t_begin = time.perf_counter()
+    progress = prefixed(progress, "smoother")
+    x_init = initial_trajectory(measurements, model, init, settings, progress)
+    sol = solve_smoother(measurements, model, x_init, settings, prior=model.prior(), progress=progress)
+    notes = list(sol.notes)
+    threshold = float(chi2.ppf(0.999, max(len(measurements) - model.n, 1)))
+    if sol.cost > threshold and settings.reinitiate and isinstance(model.observation, DopplerModel):
+        # The solution cannot explain the data (a wrong basin inherited from the window):
+        # offline, every measurement is available, so initiate again from all of them.
+        notes.append(f"cost {sol.cost:.1f} fails the 99.9 % chi-square check ({threshold:.1f}): "
+                     "re-initiated from the whole recording")
+        again = _reinitiate(measurements, model, settings, progress, memo=memo)
+        if again is not None and again.cost < sol.cost:
+            sol = again
+            notes += list(again.notes)
+    if model.dim == 3:
+        sol, more_notes, mode_reasons = _restarts_3d(measurements, model, settings, sol, progress, memo)
+    elif settings.mode_search:
+        sol, more_notes, mode_reasons = _modes_2d(measurements, model, settings, sol, progress,
+                                                  half_plane=init.half_plane, memo=memo)
+    else:
+        more_notes, mode_reasons = [], []
+    return SmootherDraft(init=init, settings=settings, solution=sol, notes=(*notes, *more_notes),
+                         reasons=(*sol.reasons, *mode_reasons), started=t_begin)
+
+
+def finish_smoother(measurements: Measurements, model: TrackingModel, draft: SmootherDraft, *,
+                    progress: Progress | None = None, memo: SearchMemo | None = None) -> TrackResult:
+    """The second stage of :func:`run_smoother`: the final findings and the reported states and covariances.
+
+    ``model`` is the one ``draft`` was made with (:func:`draft_smoother`).
+    """
+    settings, sol = draft.settings, draft.solution
+    progress = prefixed(progress, "smoother")
+    notes = list(draft.notes)
+    joint = _joint(measurements, model, settings, sol)
+    reasons = _final_findings(measurements, model, settings, sol, draft.init, list(draft.reasons), progress,
+                              memo, joint)
+    states, covs, offsets = _reported(measurements, model, settings, sol, reasons, notes,
+                                      joint if settings.estimate_offsets else None)
+    return _track(draft, states, covs, reasons, notes, offsets)
+
+
 @in_computation_frame
 def run_smoother(
     measurements: Measurements,
@@ -1120,47 +1249,7 @@ def run_smoother(
     initiation share a ``memo`` (:class:`~fgdoppler.estimators.search_memo.SearchMemo`,
     made by :func:`~fgdoppler.estimators.registry.run_estimator`): each of
     those searches then runs once, not once per hypothesis, with the same
-    results.
+    results.  The run is :func:`draft_smoother` then :func:`finish_smoother`.
     """
-    settings = settings or SmootherSettings()
-    bias_sigmas(settings.bias_sigma, model.observation.n_channels)  # a wrong count is said before any work
-    t_begin = time.perf_counter()
-    progress = prefixed(progress, "smoother")
-    x_init = initial_trajectory(measurements, model, init, settings, progress)
-    sol = solve_smoother(measurements, model, x_init, settings, prior=model.prior(), progress=progress)
-    notes = list(sol.notes)
-    threshold = float(chi2.ppf(0.999, max(len(measurements) - model.n, 1)))
-    if sol.cost > threshold and settings.reinitiate and isinstance(model.observation, DopplerModel):
-        # The solution cannot explain the data (a wrong basin inherited from the window):
-        # offline, every measurement is available, so initiate again from all of them.
-        notes.append(f"cost {sol.cost:.1f} fails the 99.9 % chi-square check ({threshold:.1f}): "
-                     "re-initiated from the whole recording")
-        again = _reinitiate(measurements, model, settings, progress, memo=memo)
-        if again is not None and again.cost < sol.cost:
-            sol = again
-            notes += list(again.notes)
-    if model.dim == 3:
-        sol, more_notes, mode_reasons = _restarts_3d(measurements, model, settings, sol, progress, memo)
-    elif settings.mode_search:
-        sol, more_notes, mode_reasons = _modes_2d(measurements, model, settings, sol, progress,
-                                                  half_plane=init.half_plane, memo=memo)
-    else:
-        more_notes, mode_reasons = [], []
-    notes += more_notes
-    joint = _joint(measurements, model, settings, sol)
-    reasons = _final_findings(measurements, model, settings, sol, init, list(sol.reasons) + mode_reasons, progress,
-                              memo, joint)
-    states, covs, offsets = _reported(measurements, model, settings, sol, reasons, notes,
-                                      joint if settings.estimate_offsets else None)
-    t_last = float(sol.times[-1])
-    return TrackResult(
-        estimator="smoother",
-        settings=settings,
-        estimates=(Estimates.from_lists("smoothed", list(sol.times), states, covs),),
-        reasons=tuple(reasons),
-        events=tuple(Event(time=t_last, message=n) for n in notes),
-        iterations=sol.iterations,
-        cost=sol.cost,
-        wall_time=time.perf_counter() - t_begin,
-        offsets=offsets,
-    )
+    draft = draft_smoother(measurements, model, init, settings, progress=progress, memo=memo)
+    return finish_smoother(measurements, model, draft, progress=progress, memo=memo)

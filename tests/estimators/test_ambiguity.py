@@ -99,3 +99,42 @@ def test_a_search_memo_serves_one_recording() -> None:
     assert calls == ["first", "other"] and again is first and other[0][0] == 2.0
     with pytest.raises(ValueError, match="one recording"):
         memo.starts(m.first_per_pair(10), "k", list)
+
+
+def test_only_the_hypothesis_of_lowest_cost_is_finished(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Case b 25 km run 0 (two hypotheses, a skewed posterior): the registry finishes one smoother run.
+
+    Through the registry (:func:`~fgdoppler.estimators.ambiguity.resolve_staged`)
+    the posterior samples of the reported covariances are drawn for the
+    hypothesis of lowest cost only; each hypothesis run whole draws them for
+    both.  The track reported, its covariances, cost, findings and events are
+    the same to the bit.
+    """
+    import fgdoppler.estimators.smoother as smoother
+    from benchmarks.bench_mode_search import same_findings
+    from fgdoppler.estimators.registry import ESTIMATORS, hypotheses_of
+
+    m, model, init = _case(4, 0)
+    settings = fd.SmootherSettings()
+    hyps, weights = hypotheses_of("smoother", m, model, init, settings)
+    assert len(hyps) == 2
+    sampled: list[bool] = []
+    drawn = smoother.posterior_spread
+
+    def counting(*args: object, **kwargs: object) -> object:
+        out = drawn(*args, **kwargs)  # type: ignore[arg-type]
+        sampled.append(out is not None)
+        return out
+
+    monkeypatch.setattr(smoother, "posterior_spread", counting)
+    staged = fd.run_estimator("smoother", m, model, init, settings, verify=False)
+    assert sampled == [True]
+    sampled.clear()
+    whole = amb.resolve(ESTIMATORS["smoother"].run, "cost", m, model, hyps, settings, None, weights)
+    assert sampled == [True, True]
+    a, b = staged.primary, whole.primary
+    np.testing.assert_array_equal(a.states, b.states)
+    np.testing.assert_array_equal(a.covariances, b.covariances)
+    assert staged.cost == whole.cost
+    assert same_findings(staged, whole)
+    assert [e.message for e in staged.events] == [e.message for e in whole.events]
