@@ -17,6 +17,18 @@ def _case(s: int, r: int) -> tuple[fd.Measurements, fd.TrackingModel, fd.Initiat
     return sim.measurements, model, fd.initiate(sim.measurements.first_per_pair(10), model)
 
 
+def _assert_same_report(judged: fd.TrackResult, alone: fd.TrackResult) -> None:
+    """``run_estimator``'s smoother and ``alone``, resolved by hand, report the same to the bit."""
+    from benchmarks.bench_mode_search import same_findings
+
+    a, b = judged.primary, alone.primary
+    np.testing.assert_array_equal(a.states, b.states)
+    np.testing.assert_array_equal(a.covariances, b.covariances)
+    assert judged.cost == alone.cost
+    assert same_findings(judged, alone)
+    assert [e.message for e in judged.events] == [e.message for e in alone.events]
+
+
 @pytest.mark.parametrize(("name", "settings"), [("isam2", fd.ISAM2Settings(restarts=False)),
                                                 ("fixed-lag", fd.FixedLagSettings(restarts=False))])
 @pytest.mark.parametrize(("s", "r"), [(2, 1), (5, 4)])
@@ -53,7 +65,6 @@ def test_the_smoothers_of_the_hypotheses_search_the_recording_once(monkeypatch: 
     track, its covariances, cost, findings and events are the same to the bit.
     """
     import fgdoppler.estimators.initiation as initiation
-    from benchmarks.bench_mode_search import same_findings
     from fgdoppler.estimators.registry import ESTIMATORS, hypotheses_of
 
     m, model, init = _case(2, 1)
@@ -74,12 +85,7 @@ def test_the_smoothers_of_the_hypotheses_search_the_recording_once(monkeypatch: 
     alone = amb.resolve(ESTIMATORS["smoother"].run, "cost", m, model, hyps, settings, None, weights)
     assert with_memo and with_memo == sorted(set(grids)) and len(grids) > len(with_memo)
     assert grids.count(2 * MODES_PER_PAIR) == 2  # the mode search's grid, two pairs: once per hypothesis
-    a, b = shared.primary, alone.primary
-    np.testing.assert_array_equal(a.states, b.states)
-    np.testing.assert_array_equal(a.covariances, b.covariances)
-    assert shared.cost == alone.cost
-    assert same_findings(shared, alone)
-    assert [e.message for e in shared.events] == [e.message for e in alone.events]
+    _assert_same_report(shared, alone)
 
 
 def test_a_search_memo_serves_one_recording() -> None:
@@ -111,7 +117,6 @@ def test_only_the_hypothesis_of_lowest_cost_is_finished(monkeypatch: pytest.Monk
     the same to the bit.
     """
     import fgdoppler.estimators.smoother as smoother
-    from benchmarks.bench_mode_search import same_findings
     from fgdoppler.estimators.registry import ESTIMATORS, hypotheses_of
 
     m, model, init = _case(4, 0)
@@ -132,9 +137,4 @@ def test_only_the_hypothesis_of_lowest_cost_is_finished(monkeypatch: pytest.Monk
     sampled.clear()
     whole = amb.resolve(ESTIMATORS["smoother"].run, "cost", m, model, hyps, settings, None, weights)
     assert sampled == [True, True]
-    a, b = staged.primary, whole.primary
-    np.testing.assert_array_equal(a.states, b.states)
-    np.testing.assert_array_equal(a.covariances, b.covariances)
-    assert staged.cost == whole.cost
-    assert same_findings(staged, whole)
-    assert [e.message for e in staged.events] == [e.message for e in whole.events]
+    _assert_same_report(staged, whole)
