@@ -408,7 +408,10 @@ class SmootherSettings(TrackerSettings):
         Compute the marginal covariance of every state.
     reinitiate : bool, default True
         If the solution cannot explain the data (its cost fails a 99.9 % χ²
-        check), initiate again from the whole recording and keep the better.
+        check; with the Huber loss, as in the verdict, its inliers' χ²
+        statistic fails it or more than 10 % of the residuals are beyond the
+        outlier cut), initiate again from the whole recording and keep the
+        better.
     region_bound : bool, default True
         The zone is the support of the track's first state, as in the
         initiation (:class:`~fgdoppler.estimators.initiation.InitiationSettings`):

@@ -49,6 +49,7 @@ from fgdoppler._text import first_line
 from fgdoppler.estimators.calibration import bias_sigmas, shifted_by, with_bias_uncertainty
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.initiation import Initiation, inlier_statistic
+from fgdoppler.estimators.judge import REJECT_ROBUST
 from fgdoppler.estimators.linearized import LinearRows, MotionBlocks, linearize_rows
 from fgdoppler.estimators.local import in_computation_frame
 from fgdoppler.estimators.manoeuvre import manoeuvre_reason
@@ -196,6 +197,30 @@ class _Problem:
             e = self.prior[0] @ states[0] - self.prior[1]
             c += float(e @ e)
         return c
+
+    def model_gap(self, states: FloatArray) -> float:
+        r"""How far the cost exceeds its linear model's value at ``states`` (zero without the Huber loss).
+
+        The measurement rows carry the IRLS weights :math:`w = \min(1, k/|r|)`
+        (:func:`~fgdoppler.estimators.linearized.linearize_rows`), so at the
+        linearisation point the model holds :math:`w r^2 = k|r|` for an
+        outlier where the cost holds :math:`\rho(r) = 2k|r| - k^2`: the
+        model lies :math:`\sum_{|r|>k} k(|r| - k)` below the cost.  The
+        model's predicted decrease is measured from its own value, or every
+        gross outlier adds about :math:`k|r|` to it — 6 outliers of 100 σ
+        make it about 800 where a step gains a few — and the gain ratio
+        falls to nothing, so that Levenberg–Marquardt raises its damping at
+        every step and stops far from the minimum.
+        """
+        return self._model_gap(states, self.meas.doppler)
+
+    def _model_gap(self, states: FloatArray, doppler: FloatArray) -> float:
+        """:meth:`model_gap` for the Doppler values ``doppler``."""
+        if self.huber_k is None:
+            return 0.0
+        h = self.model.predict(states[self.scan_of], self.meas.pair)
+        excess = np.abs((doppler - h) / self.meas.sigma) - self.huber_k
+        return float(self.huber_k * np.sum(excess[excess > 0.0]))
 
     def wall_rows(self, states: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Whitened wall error of the first state and its Jacobian (zero inside the zone)."""
@@ -371,7 +396,7 @@ def _levenberg_marquardt(prob: _Problem, x: FloatArray, max_iterations: int, pro
             nu *= 2.0
             notes.append(f"iteration {it}: linear solve failed ({first_line(exc)}); damping raised")
             continue
-        predicted = cost - prob.model_cost(gfg, dx, lam)
+        predicted = cost - prob.model_gap(x) - prob.model_cost(gfg, dx, lam)
         try:
             new_cost = prob.cost(x + dx)
         except ValueError:  # stepped onto a sensor
@@ -1156,6 +1181,34 @@ def _track(draft: SmootherDraft, states: list[FloatArray], covs: list[FloatArray
     )
 
 
+def _misfit(measurements: Measurements, model: TrackingModel, settings: SmootherSettings, sol: SmootherSolution
+            ) -> str | None:
+    r"""Why ``sol`` cannot explain the data, or ``None``: the judge's ``fit`` and ``rejections`` tests at 99.9 %.
+
+    With the Gaussian loss the cost is a χ² statistic on
+    :math:`n - n_x` degrees of freedom.  The Huber cost is not: every gross
+    outlier adds about :math:`2k|r|` to it, so 5 % outliers of 100 σ fail
+    the χ² check whatever the track.  There, as in the judge
+    (:mod:`fgdoppler.estimators.judge`), the misfit is the inliers' χ²
+    statistic (:func:`~fgdoppler.estimators.initiation.inlier_statistic`)
+    on as many fewer degrees of freedom as outliers, and more than
+    :data:`~fgdoppler.estimators.judge.REJECT_ROBUST` of the measurements
+    beyond the outlier cut is a misfit too: a track from a wrong basin
+    leaves most residuals beyond it.
+    """
+    n = len(measurements)
+    if settings.huber_k is None:
+        threshold = float(chi2.ppf(0.999, max(n - model.n, 1)))
+        return (f"cost {sol.cost:.1f} fails the 99.9 % chi-square check ({threshold:.1f})"
+                if sol.cost > threshold else None)
+    statistic, outliers = inlier_statistic(model, measurements, sol.states, sol.times)
+    if outliers > REJECT_ROBUST * n:
+        return f"{outliers} of {n} residuals are beyond the outlier cut (more than {REJECT_ROBUST:.0%})"
+    threshold = float(chi2.ppf(0.999, max(n - outliers - model.n, 1)))
+    return (f"the inliers' chi-square {statistic:.1f} fails the 99.9 % check ({threshold:.1f}, {outliers} "
+            "outliers left out)" if statistic > threshold else None)
+
+
 def draft_smoother(
     measurements: Measurements,
     model: TrackingModel,
@@ -1178,12 +1231,12 @@ def draft_smoother(
     x_init = initial_trajectory(measurements, model, init, settings, progress)
     sol = solve_smoother(measurements, model, x_init, settings, prior=model.prior(), progress=progress)
     notes = list(sol.notes)
-    threshold = float(chi2.ppf(0.999, max(len(measurements) - model.n, 1)))
-    if sol.cost > threshold and settings.reinitiate and isinstance(model.observation, DopplerModel):
+    searchable = settings.reinitiate and isinstance(model.observation, DopplerModel)
+    misfit = _misfit(measurements, model, settings, sol) if searchable else None
+    if misfit is not None:
         # The solution cannot explain the data (a wrong basin inherited from the window):
         # offline, every measurement is available, so initiate again from all of them.
-        notes.append(f"cost {sol.cost:.1f} fails the 99.9 % chi-square check ({threshold:.1f}): "
-                     "re-initiated from the whole recording")
+        notes.append(f"{misfit}: re-initiated from the whole recording")
         again = _reinitiate(measurements, model, settings, progress, memo=memo)
         if again is not None and again.cost < sol.cost:
             sol = again

@@ -160,6 +160,10 @@ class _JointProblem(_Problem):
     def wall_cost(self, states: FloatArray) -> float:
         return super().wall_cost(self.split(states)[0])
 
+    def model_gap(self, states: FloatArray) -> float:
+        x, b = self.split(states)
+        return self._model_gap(x, self.doppler(b))
+
     def system(self, states: FloatArray, lam: float, *, wall: bool = True) -> gtsam.GaussianFactorGraph:
         """The damped linear system: the scans' blocks with the offsets' columns, and the offsets' prior."""
         x, b = self.split(states)
