@@ -9,7 +9,6 @@ reproduction all read it.  Every runner has the signature
 
 from __future__ import annotations
 
-import functools
 import warnings
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
@@ -330,13 +329,9 @@ def _solve(info: EstimatorInfo, measurements: Measurements, model: TrackingModel
            weights: NDArray[np.float64] | None = None) -> TrackResult:
     if len(hyps) == 1:
         return info.run(measurements, model, hyps[0], settings, progress=progress)
-    run = info.run
-    if info.resolution == "cost":  # the smoother: its whole-recording searches are the same for every hypothesis
-        memo = SearchMemo(measurements)
-        if info.stages is not None:
-            return resolve_staged(info.stages, measurements, model, hyps, settings, progress, memo)
-        run = functools.partial(run, memo=memo)
-    return resolve(run, info.resolution, measurements, model, hyps, settings, progress, weights)
+    if info.stages is not None:  # the smoother: its whole-recording searches are the same for every hypothesis
+        return resolve_staged(info.stages, measurements, model, hyps, settings, progress, SearchMemo(measurements))
+    return resolve(info.run, info.resolution, measurements, model, hyps, settings, progress, weights)
 
 
 def _with_sampled_covariances(result: TrackResult, measurements: Measurements, model: TrackingModel,
