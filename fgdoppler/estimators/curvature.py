@@ -47,7 +47,7 @@ from numpy.typing import NDArray
 
 from fgdoppler.estimators.verdict import Reason
 
-__all__ = ["CURVATURE_LIMIT", "curvature_reason", "probe_rises"]
+__all__ = ["CURVATURE_LIMIT", "curvature_reason", "probe_axis", "probe_rises"]
 
 FloatArray = NDArray[np.float64]
 
@@ -56,6 +56,21 @@ FloatArray = NDArray[np.float64]
 CURVATURE_LIMIT = 10.0
 #: The probe's distance in standard deviations.
 PROBE_SIGMAS = 3.0
+
+
+def probe_axis(P: FloatArray) -> tuple[FloatArray, float]:
+    r"""The probe's unit step :math:`\boldsymbol\delta` (one standard deviation) and the position σ along it.
+
+    :math:`\boldsymbol\delta = \mathbf P_{:,p}\mathbf v / \sqrt{\mathbf v^\top\mathbf P_{pp}\mathbf v}` with
+    :math:`\mathbf v` the major eigenvector of the position block: the other components follow at their
+    conditional means, and :math:`\boldsymbol\delta^\top\mathbf P^{-1}\boldsymbol\delta = 1`.
+    """
+    k = P.shape[0] // 2  # position block (2-D or 3-D)
+    Ppp = P[:k, :k]
+    _, V = np.linalg.eigh(Ppp)
+    v = V[:, -1]
+    sd = float(np.sqrt(v @ Ppp @ v))
+    return P[:, :k] @ v / sd, sd
 
 
 def probe_rises(cost: Callable[[FloatArray], float], x: FloatArray, P: FloatArray,
@@ -71,12 +86,7 @@ def probe_rises(cost: Callable[[FloatArray], float], x: FloatArray, P: FloatArra
     difference), so that only curvature is compared; at an optimum that term
     is zero.
     """
-    k = P.shape[0] // 2  # position block (2-D or 3-D)
-    Ppp = P[:k, :k]
-    _, V = np.linalg.eigh(Ppp)
-    v = V[:, -1]
-    sd = float(np.sqrt(v @ Ppp @ v))
-    d = P[:, :k] @ v / sd
+    d, sd = probe_axis(P)
 
     def at(step: float) -> float:
         try:
