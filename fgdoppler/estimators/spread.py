@@ -293,8 +293,8 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     def cost(x: FloatArray) -> float:
         return float(-2.0 * post.loglik(x[None], data.t, data.pair, data.z, data.sigma)[0])
 
-    axis = probe_axis(P0)[0]
-    if float(axis @ info @ axis) < DETERMINISTIC_MIN * float(axis @ _information(model, data, x0, huber_k, info) @ axis):
+    axis = probe_axis(P0)[0]  # one standard deviation: axis' P0^-1 axis = 1
+    if 1.0 / float(axis @ _information(model, data, x0, huber_k, info) @ axis) < DETERMINISTIC_MIN:
         return None  # the process noise, not the data, sets the uncertainty the samples would map
     lo, hi, quad, _ = probe_rises(cost, x0, P0, info)
     ratio = min(lo, hi) / quad
