@@ -336,9 +336,9 @@ def test_the_process_noise_share_is_the_whitened_eigenvalue() -> None:
         _noise_share(model, -np.eye(4)[None], np.array([1.0]))
 
 
-def _precise() -> tuple[fd.Measurements, fd.TrackingModel, fd.Initiation]:
-    """Case a 45 km with sigma 0.05 m/s, 20 times the paper's precision (one recording)."""
-    scen = replace(fd.paper_scenario("a", 45e3), sigma=0.05)
+def _precise(sigma: float = 0.05) -> tuple[fd.Measurements, fd.TrackingModel, fd.Initiation]:
+    """Case a 45 km with Doppler more precise than the paper's 1 m/s (one recording)."""
+    scen = replace(fd.paper_scenario("a", 45e3), sigma=sigma)
     sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence(11).spawn(1)[0]))
     model = fd.TrackingModel.of(scen.geometry)
     return sim.measurements, model, fd.initiate(sim.measurements.first_per_pair(10), model)
@@ -371,7 +371,8 @@ def test_the_sampled_costs_information_is_its_curvature() -> None:
         assert second == pytest.approx(u @ info @ u, rel=1e-2)
 
 
-def test_precise_doppler_keeps_the_smoothers_laplace_covariance() -> None:
+@pytest.mark.parametrize("sigma", [0.05, 0.1, 0.2])
+def test_precise_doppler_keeps_the_smoothers_laplace_covariance(sigma: float) -> None:
     """Where the process noise, not the data, sets the smoother's spread: no samples.
 
     With sigma 0.05 m/s the process noise since the first measurement (q =
@@ -385,14 +386,25 @@ def test_precise_doppler_keeps_the_smoothers_laplace_covariance() -> None:
     a smoother "14 times less certain".  Now the smoother's last covariance
     is the EKF's — the same posterior in a near-linear problem, by an
     independent method — to 1 % (measured 0.999-1.003).
+
+    With sigma 0.1 and 0.2 m/s the share is 0.32 and 0.81, above the limit,
+    and the process noise's freedom still misled both tests that decide on
+    sampling: measured against the smoother's covariance the constant-
+    velocity cost looked 3 times steeper than quadratic (0.1 m/s: sampled),
+    and the samples' mean, which sits at that cost's own minimum, lay 0.2-0.3
+    standard deviations from the smoother's estimate (0.2 m/s: reported as a
+    skewed posterior's mean); either way the carried samples made the EKF's
+    verdict 'doubtful' (0 and 6 of 20 'ok').  Against the cost's own
+    quadratic model and its own mode both find nothing.
     """
-    m, model, init = _precise()
+    m, model, init = _precise(sigma)
     laplace = fd.run_estimator("smoother", m, model, init, fd.SmootherSettings(sampled_covariance=False),
                                verify=False).primary
     x0, P0 = laplace.states[0], laplace.covariances[0]
     _, data = _posterior(m, model, float(laplace.times[0]), None, 0, 64)
     axis = probe_axis(P0)[0]
-    assert 1.0 / float(axis @ _information(model, data, x0, None, P0) @ axis) < DETERMINISTIC_MIN / 2
+    share = 1.0 / float(axis @ _information(model, data, x0, None, P0) @ axis)
+    assert share < DETERMINISTIC_MIN / 2 if sigma < 0.1 else share > DETERMINISTIC_MIN
     assert posterior_spread(m, model, laplace.times, laplace.states, laplace.covariances) is None
     results = fd.run_estimators(["ekf", "smoother"], m, model, init)
     smoother, ekf = results["smoother"], results["ekf"]
