@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["MAX_LINE_BYTES", "CSVError", "Table", "parse_number", "read_table"]
+__all__ = ["MAX_LINE_BYTES", "CSVError", "Table", "header_names", "parse_number", "read_table"]
 
 #: Longest line accepted (a row of fifteen full-precision numbers takes about 400 bytes).
 MAX_LINE_BYTES = 4096
@@ -88,18 +88,36 @@ def _lines(path: Path, comments: bool) -> list[tuple[int, str]]:
     return out
 
 
+def header_names(path: str | Path, *, comments: bool = False) -> tuple[str, ...]:
+    """The column names of a CSV's header (lower case; ``()`` for an empty file), read as :func:`read_table` reads them.
+
+    Raises
+    ------
+    CSVError
+        The file cannot be read or is not text.
+    """
+    rows = _lines(Path(path), comments)
+    return tuple(h.strip().lower() for h in next(csv.reader([rows[0][1]]))) if rows else ()
+
+
 def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str, ...] = (),
                what: str = "file", comments: bool = False) -> Table:
-    """Read a numeric CSV whose header is ``header`` followed by any prefix of ``optional``.
+    """Read a numeric CSV whose columns are those of ``header`` and any of ``optional``, in any order.
+
+    The columns are matched by name (case-insensitively, surrounding spaces
+    ignored) and returned in the order of ``header`` then ``optional``: a
+    file written by another tool with its columns in another order reads
+    the same.  An unknown or repeated column is an error, not ignored: a
+    misspelt ``sigma`` silently dropped would change every answer.
 
     Parameters
     ----------
     path
         The file.
     header
-        Required column names, in order (matched case-insensitively).
+        Required column names, in the order :attr:`Table.values` has them.
     optional
-        Columns that may follow, in order.
+        Columns that may also be present, in the order they follow the required ones.
     what
         What the file is, for messages ("measurement file").
     comments
@@ -117,11 +135,12 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
     if not rows:
         raise CSVError(f"{path}: empty {what}: expected the header {','.join(header)}")
     line0, text0 = rows[0]
-    names = tuple(h.strip().lower() for h in next(csv.reader([text0])))
-    allowed = [(*header, *optional[:i]) for i in range(len(optional) + 1)]
-    if names not in allowed:
-        expected = ",".join(header) + (f" (then optionally {','.join(optional)})" if optional else "")
-        raise CSVError(f"{path}:{line0}: bad header {','.join(names)!r}: expected {expected}")
+    names = tuple(h.strip().lower() for h in next(csv.reader([text0])))  # as header_names
+    problem = _header_problem(names, header, optional)
+    if problem:
+        expected = ",".join(header) + (f" (and optionally {','.join(optional)})" if optional else "")
+        raise CSVError(f"{path}:{line0}: bad header {','.join(names)!r}: {problem}; expected the columns "
+                       f"{expected}, in any order")
     if len(rows) == 1:
         raise CSVError(f"{path}: no data rows after the header")
     values = np.empty((len(rows) - 1, len(names)))
@@ -133,4 +152,21 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
             raise CSVError(f"{where}: expected {len(names)} fields, got {len(fields)}")
         values[j] = [parse_number(f, where, n) for f, n in zip(fields, names, strict=True)]
         lines[j] = line
-    return Table(path=path, header=names, values=values, lines=lines)
+    columns = tuple(c for c in (*header, *optional) if c in names)
+    order = [names.index(c) for c in columns]
+    return Table(path=path, header=columns, values=values[:, order], lines=lines)
+
+
+def _header_problem(names: tuple[str, ...], header: tuple[str, ...], optional: tuple[str, ...]) -> str:
+    """What is wrong with a header (``""``: nothing): missing, unknown or repeated columns."""
+    problems = []
+    missing = [c for c in header if c not in names]
+    if missing:
+        problems.append("no column " + ", ".join(repr(c) for c in missing))
+    unknown = [c for c in dict.fromkeys(names) if c not in header and c not in optional]
+    if unknown:
+        problems.append("unknown column " + ", ".join(repr(c) for c in unknown))
+    repeated = [c for c in dict.fromkeys(names) if names.count(c) > 1]
+    if repeated:
+        problems.append("repeated column " + ", ".join(repr(c) for c in repeated))
+    return "; ".join(problems)

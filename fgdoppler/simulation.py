@@ -95,29 +95,23 @@ class Trajectory:
 
     @classmethod
     def from_csv(cls, path: str | Path) -> Trajectory:
-        """Read a truth CSV ``time,x,y,vx,vy`` or ``time,x,y,z,vx,vy,vz`` (strict: :mod:`fgdoppler.csvfile`);
-        times strictly increasing.
+        """Read a truth CSV ``time,x,y,vx,vy`` or ``time,x,y,z,vx,vy,vz``, columns in any order (strict:
+        :mod:`fgdoppler.csvfile`); times strictly increasing.
 
         Raises
         ------
         MeasurementError
             Naming the file and the line.
         """
-        from fgdoppler.csvfile import CSVError, read_table
+        from fgdoppler.csvfile import CSVError, header_names, read_table
 
+        dim = 2
         try:
-            table = read_table(path, header=TRUTH_HEADERS[2], what="truth file")
+            dim = 3 if {"z", "vz"} & set(header_names(path)) else 2  # the form the file's columns ask for
+            table = read_table(path, header=TRUTH_HEADERS[dim], what="truth file")
         except CSVError as exc:
-            if "bad header" not in str(exc):
-                raise MeasurementError(str(exc)) from None
-            try:
-                table = read_table(path, header=TRUTH_HEADERS[3], what="truth file")
-            except CSVError as exc3:
-                msg = str(exc3)
-                if "bad header" in msg:
-                    msg = msg.replace("expected time,x,y,z,vx,vy,vz", "expected time,x,y,vx,vy (2-D) or "
-                                      "time,x,y,z,vx,vy,vz (3-D)")
-                raise MeasurementError(msg) from None
+            other = f" (a {5 - dim}-D truth has {','.join(TRUTH_HEADERS[5 - dim])})" if "bad header" in str(exc) else ""
+            raise MeasurementError(f"{exc}{other}") from None
         t = table.values[:, 0]
         back = np.flatnonzero(np.diff(t) <= 0)
         if back.size:

@@ -42,6 +42,27 @@ def test_reads_good_file_and_default_sigma(tmp_path: Path) -> None:
         fd.Measurements.from_csv(no_sigma)
 
 
+def test_columns_are_matched_by_name_in_any_order(tmp_path: Path) -> None:
+    """Every order of the four columns (and of the three without sigma) reads as the canonical file does."""
+    import itertools
+
+    rows = list(csv.reader(GOOD.splitlines()))
+    canonical = fd.Measurements.from_csv(_write(tmp_path / "m.csv", GOOD))
+    for k, order in enumerate(itertools.permutations(range(4))):
+        text = "\n".join(",".join(row[i] for i in order) for row in rows) + "\n"
+        m = fd.Measurements.from_csv(_write(tmp_path / f"p{k}.csv", text))
+        for name in ("time", "pair", "doppler", "sigma"):
+            np.testing.assert_array_equal(getattr(m, name), getattr(canonical, name))
+    for k, order in enumerate(itertools.permutations(range(3))):
+        text = "\n".join(",".join(row[i] for i in order) for row in rows) + "\n"
+        m = fd.Measurements.from_csv(_write(tmp_path / f"q{k}.csv", text), default_sigma=0.25)
+        np.testing.assert_array_equal(m.doppler, canonical.doppler)
+        np.testing.assert_array_equal(m.sigma, [0.25] * 3)
+    loose = GOOD.replace("time,pair,doppler,sigma", " Pair ,TIME,Doppler,sigma")
+    loose = "\n".join([loose.splitlines()[0]] + [",".join((r[1], r[0], *r[2:])) for r in rows[1:]]) + "\n"
+    np.testing.assert_array_equal(fd.Measurements.from_csv(_write(tmp_path / "l.csv", loose)).time, canonical.time)
+
+
 @pytest.mark.parametrize(
     ("text", "line", "msg"),
     [
@@ -49,6 +70,12 @@ def test_reads_good_file_and_default_sigma(tmp_path: Path) -> None:
         ("\n\n", None, "empty measurement file"),
         ("time,pair,doppler,sigma\n", None, "no data rows"),
         ("t,p,d,s\n0,0,1,1\n", 1, "bad header"),
+        # columns by name: what is wrong is said, nothing unknown is dropped
+        ("time,pair,dopler,sigma\n0,0,1,1\n", 1, "no column 'doppler'; unknown column 'dopler'"),
+        ("time,pair,doppler,snr\n0,0,1,1\n", 1, "unknown column 'snr'"),
+        ("time,pair,doppler,sigma,sigma\n0,0,1,1,1\n", 1, "repeated column 'sigma'"),
+        ("sigma,doppler,time,pair\n1,abc,0,0\n", 2, "doppler is not a number"),
+        ("pair,time,doppler,sigma\n0,1,1,1\n0,0.5,1,1\n", 3, "time 0.5 is earlier than the previous"),
         ("time,pair,doppler,sigma\n0,0,abc,1\n", 2, "doppler is not a number"),
         ("time,pair,doppler,sigma\n0,0,1,1\n0.5,0,nan,1\n", 3, "doppler is not a number: 'nan'"),
         ("time,pair,doppler,sigma\n0,0,1,1\ninf,0,1,1\n", 3, "time is not a number: 'inf'"),

@@ -63,6 +63,13 @@ def test_truth_round_trip(tmp_path) -> None:
     sim.truth.to_csv(tmp_path / "t.csv")
     back = fd.Trajectory.from_csv(tmp_path / "t.csv")
     np.testing.assert_array_equal(back.states, sim.truth.states)
+    # the columns by name, in another tool's order
+    lines = [row.split(",") for row in (tmp_path / "t.csv").read_text().splitlines()]
+    order = [2, 4, 0, 3, 1]  # y, vy, time, vx, x
+    (tmp_path / "o.csv").write_text("\n".join(",".join(row[i] for i in order) for row in lines) + "\n")
+    other = fd.Trajectory.from_csv(tmp_path / "o.csv")
+    np.testing.assert_array_equal(other.times, sim.truth.times)
+    np.testing.assert_array_equal(other.states, sim.truth.states)
 
 
 # 0.03 deg/s: theta = w tau crosses 1e-2, where the Taylor series hand over to the closed forms
