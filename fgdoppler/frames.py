@@ -29,7 +29,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Frame", "sensor_frame"]
+__all__ = ["SENSOR_EPS", "Frame", "sensor_frame"]
 
 FloatArray = NDArray[np.float64]
 
@@ -37,6 +37,8 @@ FloatArray = NDArray[np.float64]
 #: (relative to their extent): the frame is then right-handed.  Coarse enough
 #: that snapping the sensors to a millimetre lattice cannot flip the side.
 _SIDE_TOL = 1e-6
+#: Distance (m) below which a point counts as being at a sensor (and two sensors at one place).
+SENSOR_EPS = 1e-6
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -184,7 +186,10 @@ def sensor_frame(tx: ArrayLike, rx: ArrayLike) -> Frame:
     r"""The frame of a set of bistatic pairs (the rule every default zone is built in).
 
     * origin: the receiver of the first pair;
-    * first axis :math:`\mathbf e_u`: from that receiver towards its transmitter;
+    * first axis :math:`\mathbf e_u`: from that receiver towards its
+      transmitter — or, where the first pair is monostatic (the two at one
+      place), towards the first sensor elsewhere, in pair order, each pair's
+      transmitter before its receiver;
     * second axis :math:`\mathbf e_v \perp \mathbf e_u`, on the side where the
       distinct sensors lie on average (right-handed when they average on the
       line, e.g. all sensors collinear).
@@ -212,6 +217,11 @@ def sensor_frame(tx: ArrayLike, rx: ArrayLike) -> Frame:
     ----------
     tx, rx
         Transmitter and receiver positions, ``(n_pairs, d)`` with ``d`` 2 or 3.
+
+    Raises
+    ------
+    ValueError
+        If every sensor is at the first receiver's place (no axis).
     """
     tx = np.asarray(tx, dtype=float)
     rx = np.asarray(rx, dtype=float)
@@ -223,8 +233,7 @@ def sensor_frame(tx: ArrayLike, rx: ArrayLike) -> Frame:
             return Frame(origin=(*flat.origin, 0.0), basis=tuple(tuple(b) for b in basis3))
         return _sensor_frame_3d(tx, rx)
     o = rx[0]
-    base = tx[0] - rx[0]
-    e_u = base / np.linalg.norm(base)
+    e_u = _reference_axis(tx, rx)
     e_v = np.array([-e_u[1], e_u[0]])
     basis = [e_u, e_v]
     sensors = np.unique(np.vstack([tx, rx]), axis=0)
@@ -238,8 +247,7 @@ def sensor_frame(tx: ArrayLike, rx: ArrayLike) -> Frame:
 def _sensor_frame_3d(tx: FloatArray, rx: FloatArray) -> Frame:
     """The 3-D rule of :func:`sensor_frame` for sensors not all on the ground."""
     o = rx[0]
-    base = tx[0] - rx[0]
-    e_u = base / np.linalg.norm(base)
+    e_u = _reference_axis(tx, rx)
     sensors = np.unique(np.vstack([tx, rx]), axis=0)
     rel = sensors - o
     across = rel - np.outer(rel @ e_u, e_u)
@@ -254,3 +262,19 @@ def _sensor_frame_3d(tx: FloatArray, rx: FloatArray) -> Frame:
         e_w /= np.linalg.norm(e_w)
         e_v = np.cross(e_w, e_u)
     return Frame(origin=tuple(o), basis=(tuple(e_u), tuple(e_v), tuple(e_w)))
+
+
+def _reference_axis(tx: FloatArray, rx: FloatArray) -> FloatArray:
+    """The unit first axis of :func:`sensor_frame`: from the first receiver to the first sensor elsewhere.
+
+    That is the first pair's transmitter unless the pair is monostatic; the
+    candidates are taken in pair order, each pair's transmitter before its
+    receiver, so renumbering the pairs after the one that supplies the axis
+    leaves the frame alone.
+    """
+    rel = np.stack([tx, rx], axis=1).reshape(-1, tx.shape[-1]) - rx[0]
+    dist = np.linalg.norm(rel, axis=1)
+    far = np.flatnonzero(dist > SENSOR_EPS)
+    if far.size == 0:
+        raise ValueError("every sensor is at one place: no axis for the sensors' frame")
+    return np.asarray(rel[far[0]] / dist[far[0]], dtype=float)

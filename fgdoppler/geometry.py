@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.frames import Frame, sensor_frame
+from fgdoppler.frames import SENSOR_EPS, Frame, sensor_frame
 from fgdoppler.zone import DEFAULT_SPEED_MAX, Zone, ZoneLimits, default_zone
 
 __all__ = [
@@ -28,8 +28,6 @@ __all__ = [
     "principal_line",
 ]
 
-#: Distance (m) below which a point counts as being at a sensor.
-SENSOR_EPS = 1e-6
 #: Lattice (m) the sensors are snapped to in their own frame (:meth:`Geometry.in_frame`).
 SNAP = 1e-3
 
@@ -66,14 +64,16 @@ def principal_line(points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.f
 
 @dataclass(frozen=True)
 class BistaticPair:
-    """One transmitter–receiver pair.
+    r"""One transmitter–receiver pair.
 
     Parameters
     ----------
     tx, rx
         Transmitter and receiver positions ``(x, y)`` or ``(x, y, z)`` in
-        metres (two coordinates mean ``z = 0``: a sensor on the ground).  They
-        must be finite and distinct.
+        metres (two coordinates mean ``z = 0``: a sensor on the ground), finite.
+        They may coincide (within :data:`SENSOR_EPS`): a monostatic radar,
+        whose bistatic range :math:`r_T + r_R = 2r` and range rate
+        :math:`2\dot r` are twice its own.
     """
 
     tx: tuple[float, ...]
@@ -82,11 +82,13 @@ class BistaticPair:
     def __init__(self, tx: ArrayLike, rx: ArrayLike) -> None:
         t = _point(tx, "tx")
         r = _point(rx, "rx")
-        d = max(len(t), len(r))
-        if np.linalg.norm(np.subtract(_padded(t, d), _padded(r, d))) <= SENSOR_EPS:
-            raise ValueError(f"tx and rx of a bistatic pair must differ, both are at {t}")
         object.__setattr__(self, "tx", t)
         object.__setattr__(self, "rx", r)
+
+    @property
+    def monostatic(self) -> bool:
+        """Whether Tx and Rx are at the same place (within :data:`SENSOR_EPS`)."""
+        return self.baseline <= SENSOR_EPS
 
     @property
     def baseline(self) -> float:
@@ -138,6 +140,12 @@ class Geometry:
         rx.setflags(write=False)
         object.__setattr__(self, "_tx", tx)
         object.__setattr__(self, "_rx", rx)
+        spread = np.max(np.linalg.norm(np.vstack([tx, rx]) - rx[0], axis=1))
+        if not spread > SENSOR_EPS:
+            raise ValueError(
+                f"every sensor is at one place, {tuple(float(v) for v in rx[0])}: from one site a Doppler history fixes range and "
+                "speed but not the bearing (any rotation of the track about the site fits the same data); "
+                "give at least two sensor positions")
 
     @property
     def n_pairs(self) -> int:
@@ -422,7 +430,9 @@ def ellipse_tangent(points: ArrayLike, geometry: Geometry) -> NDArray[np.float64
     grad = dt / nt + dr / nr
     gnorm = np.linalg.norm(grad, axis=-1, keepdims=True)
     baseline = rx - tx
-    base_dir = np.broadcast_to(baseline / np.linalg.norm(baseline, axis=-1, keepdims=True), grad.shape)
+    length = np.linalg.norm(baseline, axis=-1, keepdims=True)
+    # a monostatic pair's circle never degenerates off its sensor: its base_dir is never chosen
+    base_dir = np.broadcast_to(baseline / np.where(length > 0.0, length, 1.0), grad.shape)
     tangent = np.stack([-grad[..., 1], grad[..., 0]], axis=-1)
     degenerate = gnorm < 1e-12
     safe = np.where(degenerate, 1.0, gnorm)

@@ -20,11 +20,37 @@ def test_paper_table1_positions() -> None:
 
 @pytest.mark.parametrize(
     ("tx", "rx", "msg"),
-    [((0, 0), (0, 0), "must differ"), ((np.nan, 0), (1, 0), "finite"), ((0, 0, 0, 0), (1, 0), "2- or 3-vector")],
+    [((np.nan, 0), (1, 0), "finite"), ((0, 0, 0, 0), (1, 0), "2- or 3-vector")],
 )
 def test_pair_validation(tx: tuple, rx: tuple, msg: str) -> None:
     with pytest.raises(ValueError, match=msg):
         fd.BistaticPair(tx=tx, rx=rx)
+
+
+def test_a_monostatic_radar_is_a_pair_and_one_site_alone_is_refused() -> None:
+    """Tx and Rx at one place: a monostatic radar, whose bistatic range is twice its range.
+
+    Its Doppler is 2 r' (r the distance to the radar), checked against the
+    closed form at random states; its ellipses are circles about the radar.
+    A geometry whose sensors are all at one place is refused: the data
+    would not change under a rotation of the track about that place.
+    """
+    mono = fd.BistaticPair(tx=(3e3, -2e3), rx=(3e3, -2e3))
+    assert mono.monostatic and mono.baseline == 0.0
+    assert not fd.BistaticPair(tx=(3e3, -2e3), rx=(3e3, -1e3)).monostatic
+    g = fd.Geometry(pairs=(mono, fd.BistaticPair(tx=(40e3, 0.0), rx=(15e3, 25e3))))
+    rng = np.random.default_rng(0)
+    x = np.column_stack([rng.uniform(-40e3, 40e3, (500, 2)), rng.uniform(-200, 200, (500, 2))])
+    rel = x[:, :2] - np.array(mono.tx)
+    np.testing.assert_allclose(fd.bistatic_doppler(x, g)[:, 0],
+                               2.0 * np.einsum("ij,ij->i", rel, x[:, 2:]) / np.linalg.norm(rel, axis=1), rtol=1e-12)
+    np.testing.assert_allclose(fd.bistatic_range(x[:, :2], g)[:, 0], 2.0 * np.linalg.norm(rel, axis=1), rtol=1e-12)
+    tangent = fd.ellipse_tangent(x[:, :2], g)[:, 0]
+    np.testing.assert_allclose(np.einsum("ij,ij->i", tangent, rel), 0.0, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(tangent, axis=1), 1.0)
+    for pairs in [(mono,), (mono, mono), (mono, fd.BistaticPair(tx=(3e3, -2e3, 0.0), rx=(3e3, -2e3)))]:
+        with pytest.raises(ValueError, match="every sensor is at one place"):
+            fd.Geometry(pairs=pairs)
 
 
 def test_geometry_validation() -> None:
@@ -90,7 +116,7 @@ PAIR = "[[pair]]\ntx = [50000.0, 0.0]\nrx = [0.0, 0.0]\n"
         ("not toml [", "not valid TOML", 1),
         ("name = 'x'\n", "one or more", None),
         ("[[pair]]\ntx = [0.0, 0.0]\n", "needs both", None),
-        ("[[pair]]\ntx = [0.0, 0.0]\nrx = [0.0, 0.0]\n", "must differ", 2),
+        ("[[pair]]\ntx = [0.0, 0.0]\nrx = [0.0, 0.0]\n", "every sensor is at one place", None),
         ('[[pair]]\ntx = ["50000", 0.0]\nrx = [0.0, 0.0]\n', "two or three numbers", 2),
         ("[[pair]]\ntx = [true, 0.0]\nrx = [0.0, 0.0]\n", "two or three numbers", 2),
         ("[[pair]]\ntx = [1.0, 0.0, 0.0, 0.0]\nrx = [0.0, 0.0]\n", "2- or 3-vector", 2),

@@ -28,11 +28,14 @@ from fgdoppler.estimators.smoother import run_smoother
 THREE = fd.Geometry(pairs=(fd.BistaticPair(tx=(40e3, 0.0), rx=(0.0, 0.0)),
                            fd.BistaticPair(tx=(40e3, 0.0), rx=(15e3, 25e3)),
                            fd.BistaticPair(tx=(5e3, 30e3), rx=(0.0, 0.0))), name="three")
+# THREE with a monostatic radar first: the frame's axis then comes from the next pair's transmitter
+MONO = fd.Geometry(pairs=(fd.BistaticPair(tx=(0.0, 0.0), rx=(0.0, 0.0)), *THREE.pairs[1:]), name="mono")
 SCENARIOS = {
     "a-45": (fd.paper_scenario("a", 45e3), 1),
     "b-25": (fd.paper_scenario("b", 25e3), 2),
     "three-pair": (fd.Scenario(geometry=THREE, x0=(20e3, 10e3, -60.0, 70.0), duration=30.0, dt=0.5,
                                time_offsets=(0.0, 0.2, 0.35)), 3),
+    "monostatic": (fd.Scenario(geometry=MONO, x0=(20e3, 10e3, -60.0, 70.0), duration=30.0, dt=0.5), 4),
 }
 # angles that are not multiples of the 20 deg heading step; translations up to 1,000 km; one reflection
 MOTIONS = {

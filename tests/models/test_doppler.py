@@ -29,7 +29,10 @@ STEPS = np.array([1e-2, 1e-2, 1e-4, 1e-4])
 
 
 def _geometries(rng: np.random.Generator) -> list[fd.Geometry]:
-    return [fd.paper_geometry("a"), fd.paper_geometry("b")] + [random_geometry(rng) for _ in range(4)]
+    # and a monostatic radar (tx = rx) beside a bistatic pair
+    monostatic = fd.Geometry(pairs=(fd.BistaticPair(tx=(-5e3, 2e3), rx=(-5e3, 2e3)),
+                                    fd.BistaticPair(tx=(40e3, 0.0), rx=(15e3, 25e3))))
+    return [fd.paper_geometry("a"), fd.paper_geometry("b")] + [random_geometry(rng) for _ in range(4)] + [monostatic]
 
 
 def test_single_state_jacobian_matches_central_differences(rng: np.random.Generator) -> None:
