@@ -32,7 +32,7 @@ from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.fixed_lag import run_fixed_lag
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate
 from fgdoppler.estimators.isam2 import run_isam2
-from fgdoppler.estimators.judge import judge
+from fgdoppler.estimators.judge import judge, track_reference
 from fgdoppler.estimators.particle import run_map, run_particle
 from fgdoppler.estimators.restart import with_restarts
 from fgdoppler.estimators.results import TrackResult
@@ -214,6 +214,8 @@ def run_estimator(
     if offsets is not None and np.any(offsets > 0):
         judged = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings, offsets,
                                prefixed(progress, "calibration offsets"))
+    if reference is not None:  # on the covariances reported, after the sampled check and the offsets
+        judged = replace(judged, reasons=(*judged.reasons, *track_reference(judged.primary, reference.primary)))
     return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
 
 

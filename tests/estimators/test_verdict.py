@@ -175,6 +175,61 @@ def test_judge_findings_on_constructed_results() -> None:
     assert lost.status == "failed" and {"rejections", "lost"} <= {r.code for r in lost.reasons}
 
 
+def test_a_track_confidently_elsewhere_for_a_while_is_doubtful_though_it_ends_well() -> None:
+    """The ``reference`` finding over the whole track, not only its last state.
+
+    Constructed: the smoother's track moved by 10 of the EKF's sigmas
+    (Mahalanobis) over the middle third of the times (its last state
+    untouched) makes the EKF doubtful, by the mean of the per-time
+    chi-squares (about 100 x 17 / 52); moved at two times only (about
+    100 x 2 / 52), the mean stays below the chi-square quantile, 18.5.  Real: three pairs
+    around a 40 x 30 km area, seed 4: the EKF ran 10-11 km from the truth
+    with a position sigma of 0.2-0.7 km from 12 to 25 s (truth NEES 1e5),
+    restarted at 25 s and ended 0.24 km from the truth — 'ok' before, as its
+    final state agrees with the smoother's.  The particle estimator, whose
+    whole track is consistent there (truth NEES 1.8), stays 'ok'.
+    """
+    from dataclasses import replace
+
+    from fgdoppler.estimators.judge import judge, track_reference
+
+    sim = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(1))
+    model = fd.TrackingModel.of(sim.scenario.geometry)
+    init = fd.initiate(sim.measurements.first_per_pair(10), model)
+    ekf = fd.run_estimator("ekf", sim.measurements, model, init, verify=False)
+    ref = fd.run_estimator("smoother", sim.measurements, model, init)
+    e = ekf.primary
+    on = np.flatnonzero(np.isin(ref.primary.times, e.times[e.cov_ok]))
+
+    def moved_at(where: np.ndarray) -> fd.TrackResult:
+        # by 10 of the EKF's sigmas in Mahalanobis terms: a chi-square of 100 at each of those times
+        shifted = ref.primary.states.copy()
+        k = np.searchsorted(e.times, ref.primary.times[where])
+        shifted[where] += 10.0 * np.linalg.cholesky(e.covariances[k])[..., 0]
+        return replace(ref, estimates=(replace(ref.primary, states=shifted),))
+
+    third = on[len(on) // 3: 2 * len(on) // 3]
+    assert track_reference(e, ref.primary) == []
+    (found,) = track_reference(e, moved_at(third).primary)
+    assert (found.code, found.status) == ("reference", "doubtful") and "lay on average" in found.message
+    assert track_reference(e, moved_at(third[:2]).primary) == []
+    # the final state is untouched: the end-of-track check alone finds nothing
+    assert judge(ekf, sim.measurements, model, fd.EKFSettings(), moved_at(third)).status == "ok"
+
+    three = fd.Geometry(pairs=(fd.BistaticPair(tx=(40e3, 0.0), rx=(0.0, 0.0)),
+                               fd.BistaticPair(tx=(40e3, 0.0), rx=(15e3, 25e3)),
+                               fd.BistaticPair(tx=(5e3, 30e3), rx=(0.0, 0.0))))
+    sim = fd.simulate(fd.Scenario(geometry=three, x0=(20e3, 10e3, -60.0, 70.0)), np.random.default_rng(4))
+    init = fd.initiate(sim.measurements.first_per_pair(10), three)
+    results = fd.run_estimators(["ekf", "particle"], sim.measurements, three, init)
+    ekf, particle = results["ekf"], results["particle"]
+    error = np.linalg.norm(ekf.primary.states[:, :2] - sim.truth.at(ekf.primary.times)[:, :2], axis=1)
+    assert error[-1] < 500.0 and np.max(error) > 5e3
+    assert ekf.status == "doubtful"
+    assert [r.code for r in ekf.reasons if "lay on average" in r.message] == ["reference"], ekf.message
+    assert particle.status == "ok", particle.message
+
+
 def test_monte_carlo_records_every_verdict(tmp_path) -> None:
     from fgdoppler.analysis.montecarlo import MonteCarloResult, MonteCarloSpec, run_monte_carlo
 
