@@ -173,14 +173,18 @@ def test_the_ekfs_covariances_are_checked_as_isam2s_are() -> None:
     >= 1 at every time), the estimates and the verdict are the filter's,
     the truth's NEES falls below a quarter (measured 226 -> 12.7, the
     benchmark's 100 runs of that scenario 6.28 -> 3.48), and the finding
-    says so.
+    says so.  The whole-track reference finding reads the reported
+    covariances: the plain ones stray from the smoother's track (6.9 sigma
+    on average), the widened ones do not; the other findings are the same.
     """
     sim, plain, wide = _plain_and_widened("ekf", 4, 36)
     a, b = plain.primary, wide.primary
     assert _truth_nees(sim, b) < 0.25 * _truth_nees(sim, a)
     assert [r.code for r in wide.reasons if r.code == "nonlinear" and r.status == "ok"] == ["nonlinear"]
     assert wide.status == plain.status == "doubtful"
-    assert [r for r in wide.reasons if r.code != "nonlinear"] == list(plain.reasons)
+    track = [r for r in plain.reasons if "lay on average" in r.message]
+    assert len(track) == 1 and not any("lay on average" in r.message for r in wide.reasons)
+    assert [r for r in wide.reasons if r.code != "nonlinear"] == [r for r in plain.reasons if r not in track]
 
 
 def test_the_fixed_lag_smoothers_covariances_are_checked_against_the_data_they_have_read() -> None:
