@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -60,9 +61,8 @@ class Table:
         return f"{self.path}:{int(self.lines[row])}"
 
 
-def _lines(path: Path, comments: bool) -> list[tuple[int, str]]:
-    """(line number, text) of the non-blank lines, bounded and checked for text."""
-    out = []
+def _lines(path: Path, comments: bool) -> Iterator[tuple[int, str]]:
+    """(line number, text) of the non-blank lines, one at a time, bounded and checked for text."""
     try:
         fh = open(path, "rb")
     except OSError as exc:
@@ -84,8 +84,12 @@ def _lines(path: Path, comments: bool) -> list[tuple[int, str]]:
                 raise CSVError(f"{path}:{number}: not UTF-8 text") from None
             if not text.strip() or (comments and text.lstrip().startswith("#")):
                 continue
-            out.append((number, text))
-    return out
+            yield number, text
+
+
+def _names(text: str) -> tuple[str, ...]:
+    """The column names of a header line: lower case, surrounding spaces removed."""
+    return tuple(h.strip().lower() for h in next(csv.reader([text])))
 
 
 def header_names(path: str | Path, *, comments: bool = False) -> tuple[str, ...]:
@@ -96,8 +100,8 @@ def header_names(path: str | Path, *, comments: bool = False) -> tuple[str, ...]
     CSVError
         The file cannot be read or is not text.
     """
-    rows = _lines(Path(path), comments)
-    return tuple(h.strip().lower() for h in next(csv.reader([rows[0][1]]))) if rows else ()
+    first = next(_lines(Path(path), comments), None)  # the header alone: the rest of the file is not read
+    return () if first is None else _names(first[1])
 
 
 def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str, ...] = (),
@@ -131,11 +135,11 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
         empty or not an ASCII decimal, no data rows.
     """
     path = Path(path)
-    rows = _lines(path, comments)
+    rows = list(_lines(path, comments))
     if not rows:
         raise CSVError(f"{path}: empty {what}: expected the header {','.join(header)}")
     line0, text0 = rows[0]
-    names = tuple(h.strip().lower() for h in next(csv.reader([text0])))  # as header_names
+    names = _names(text0)
     problem = _header_problem(names, header, optional)
     if problem:
         expected = ",".join(header) + (f" (and optionally {','.join(optional)})" if optional else "")
