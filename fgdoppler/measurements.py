@@ -309,8 +309,16 @@ class Measurements:
             Naming the file, the line and the problem: unreadable or not text,
             missing or bad header, wrong number of fields, an empty or
             non-numeric field, a value outside :data:`LIMITS`, a non-integer
-            or unknown pair index, a time earlier than the previous row's, a
-            duplicated (time, pair), or no data rows.
+            or unknown pair index, a time earlier than the previous row *of the
+            same pair*, a duplicated (time, pair), or no data rows.
+
+        Notes
+        -----
+        Each pair's rows must be in time order, but the pairs may interleave
+        in any way: a file of one receiver's rows after another's, or rows
+        appended as each sensor reports, is read as the same measurements,
+        sorted by (time, pair).  A time that goes back within one pair is a
+        clock jump or two recordings run together, and is refused.
         """
         from fgdoppler.csvfile import CSVError, read_table
 
@@ -329,20 +337,25 @@ class Measurements:
         s = table.values[:, 3] if table.values.shape[1] == 4 else np.full(n, float(default_sigma))  # type: ignore[arg-type]
         p = np.empty(n, dtype=np.intp)
         seen: dict[tuple[float, int], int] = {}
+        last: dict[int, int] = {}  # pair -> its latest row
         for j in range(n):
             where = table.where(j)
             p[j] = _pair(table.values[j, 1], where, geometry)
             for name, value in (("time", t[j]), ("doppler", z[j]), ("sigma", s[j])):
                 _check_value(value, name, where)
-            if j and t[j] < t[j - 1]:
-                raise MeasurementError(f"{where}: time {t[j]} is earlier than the previous row's {t[j - 1]}; "
-                                       "rows must be in time order")
+            prev = last.get(int(p[j]))
+            if prev is not None and t[j] < t[prev]:
+                raise MeasurementError(f"{where}: time {t[j]} is earlier than pair {p[j]}'s previous row's "
+                                       f"{t[prev]} (line {table.lines[prev]}); each pair's rows must be "
+                                       "in time order")
+            last[int(p[j])] = j
             key = (float(t[j]), int(p[j]))
             if key in seen:
                 raise MeasurementError(f"{where}: duplicate measurement for time {t[j]}, pair {p[j]} "
                                        f"(first at line {seen[key]})")
             seen[key] = int(table.lines[j])
-        return cls(time=t.copy(), pair=p, doppler=z.copy(), sigma=s.copy())
+        order = np.lexsort((p, t))
+        return cls(time=t[order], pair=p[order], doppler=z[order], sigma=s[order])
 
 
 #: Physical bounds of every value (inclusive): a time beyond 30,000 years, a bistatic range rate

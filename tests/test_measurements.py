@@ -63,6 +63,35 @@ def test_columns_are_matched_by_name_in_any_order(tmp_path: Path) -> None:
     np.testing.assert_array_equal(fd.Measurements.from_csv(_write(tmp_path / "l.csv", loose)).time, canonical.time)
 
 
+def test_pairs_may_interleave_in_any_order(tmp_path: Path) -> None:
+    """One receiver's rows after another's, or any interleaving that keeps each pair's time order, read as the
+    time-ordered file does; the duplicate check still names both lines."""
+    geom = fd.paper_geometry("a")
+    scen = fd.paper_scenarios()[0]
+    m = fd.simulate(scen, np.random.default_rng(3)).measurements
+    m.to_csv(tmp_path / "m.csv")
+    rows = (tmp_path / "m.csv").read_text().splitlines()
+    header, body = rows[0], rows[1:]
+    by_pair = sorted(body, key=lambda r: int(r.split(",")[1]))  # stable: each pair keeps its time order
+    rng = np.random.default_rng(0)
+    queues = [[r for r in body if int(r.split(",")[1]) == k] for k in range(geom.n_pairs)]
+    shuffled = []
+    while any(queues):  # a random merge of the pairs' streams
+        k = int(rng.choice([i for i, q in enumerate(queues) if q]))
+        shuffled.append(queues[k].pop(0))
+    assert shuffled != body and by_pair != body
+    for name, lines in (("p.csv", by_pair), ("s.csv", shuffled)):
+        back = fd.Measurements.from_csv(_write(tmp_path / name, "\n".join([header, *lines]) + "\n"), geometry=geom)
+        for col in ("time", "pair", "doppler", "sigma"):
+            np.testing.assert_array_equal(getattr(back, col), getattr(m, col))
+    dup = "\n".join([header, *by_pair, by_pair[0]]) + "\n"
+    with pytest.raises(MeasurementError, match=r"earlier than pair 0's previous row's"):
+        fd.Measurements.from_csv(_write(tmp_path / "d.csv", dup))
+    dup = "\n".join([header, *by_pair[:3], by_pair[2]]) + "\n"
+    with pytest.raises(MeasurementError, match=r"d2.csv:5: duplicate measurement .* \(first at line 4\)"):
+        fd.Measurements.from_csv(_write(tmp_path / "d2.csv", dup))
+
+
 @pytest.mark.parametrize(
     ("text", "line", "msg"),
     [
@@ -75,7 +104,7 @@ def test_columns_are_matched_by_name_in_any_order(tmp_path: Path) -> None:
         ("time,pair,doppler,snr\n0,0,1,1\n", 1, "unknown column 'snr'"),
         ("time,pair,doppler,sigma,sigma\n0,0,1,1,1\n", 1, "repeated column 'sigma'"),
         ("sigma,doppler,time,pair\n1,abc,0,0\n", 2, "doppler is not a number"),
-        ("pair,time,doppler,sigma\n0,1,1,1\n0,0.5,1,1\n", 3, "time 0.5 is earlier than the previous"),
+        ("pair,time,doppler,sigma\n0,1,1,1\n0,0.5,1,1\n", 3, "time 0.5 is earlier than pair 0's previous row's 1.0 \\(line 2\\)"),
         ("time,pair,doppler,sigma\n0,0,abc,1\n", 2, "doppler is not a number"),
         ("time,pair,doppler,sigma\n0,0,1,1\n0.5,0,nan,1\n", 3, "doppler is not a number: 'nan'"),
         ("time,pair,doppler,sigma\n0,0,1,1\ninf,0,1,1\n", 3, "time is not a number: 'inf'"),
@@ -99,7 +128,7 @@ def test_columns_are_matched_by_name_in_any_order(tmp_path: Path) -> None:
         ("time,pair,doppler,sigma\n0,0.5,1,1\n", 2, "non-negative integer"),
         ("time,pair,doppler,sigma\n0,-1,1,1\n", 2, "non-negative integer"),
         ("time,pair,doppler,sigma\n0,0,1,1\n0,1,1,1\n0,0,2,1\n", 4, "duplicate measurement"),
-        ("time,pair,doppler,sigma\n1,0,1,1\n0.5,0,1,1\n", 3, "earlier than the previous"),
+        ("time,pair,doppler,sigma\n1,0,1,1\n0.5,1,1,1\n0.5,0,1,1\n", 4, "earlier than pair 0's previous row's"),
         ("time,pair,doppler,sigma\n0,0,1\n", 2, "expected 4 fields"),
     ],
 )
