@@ -29,7 +29,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["SENSOR_EPS", "Frame", "sensor_frame"]
+__all__ = ["AXIS_MIN_SHARE", "SENSOR_EPS", "Frame", "sensor_frame"]
 
 FloatArray = NDArray[np.float64]
 
@@ -39,6 +39,10 @@ FloatArray = NDArray[np.float64]
 _SIDE_TOL = 1e-6
 #: Distance (m) below which a point counts as being at a sensor (and two sensors at one place).
 SENSOR_EPS = 1e-6
+#: A sensor nearer the first receiver than this share of the farthest sensor's distance does not set the
+#: frame's first axis: a quasi-monostatic pair (antennas metres apart in a network kilometres wide) would
+#: otherwise turn the frame, and the default zone with it, with every centimetre of its survey.
+AXIS_MIN_SHARE = 0.01
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -187,9 +191,10 @@ def sensor_frame(tx: ArrayLike, rx: ArrayLike) -> Frame:
 
     * origin: the receiver of the first pair;
     * first axis :math:`\mathbf e_u`: from that receiver towards its
-      transmitter — or, where the first pair is monostatic (the two at one
-      place), towards the first sensor elsewhere, in pair order, each pair's
-      transmitter before its receiver;
+      transmitter — or, where the first pair is monostatic or nearly so
+      (its transmitter nearer than :data:`AXIS_MIN_SHARE` of the farthest
+      sensor's distance), towards the first sensor that is not, in pair
+      order, each pair's transmitter before its receiver;
     * second axis :math:`\mathbf e_v \perp \mathbf e_u`, on the side where the
       distinct sensors lie on average (right-handed when they average on the
       line, e.g. all sensors collinear).
@@ -265,16 +270,19 @@ def _sensor_frame_3d(tx: FloatArray, rx: FloatArray) -> Frame:
 
 
 def _reference_axis(tx: FloatArray, rx: FloatArray) -> FloatArray:
-    """The unit first axis of :func:`sensor_frame`: from the first receiver to the first sensor elsewhere.
+    r"""The unit first axis of :func:`sensor_frame`: from the first receiver to the first sensor well away.
 
-    That is the first pair's transmitter unless the pair is monostatic; the
-    candidates are taken in pair order, each pair's transmitter before its
-    receiver, so renumbering the pairs after the one that supplies the axis
-    leaves the frame alone.
+    "Well away" is :math:`|\mathbf s_k - \mathbf r_0| \ge \max(\epsilon,\ a\,\max_j
+    |\mathbf s_j - \mathbf r_0|)` with :math:`\epsilon` = :data:`SENSOR_EPS` and :math:`a` =
+    :data:`AXIS_MIN_SHARE`.  That is the first pair's transmitter unless the
+    pair is monostatic or nearly so; the candidates are taken in pair order,
+    each pair's transmitter before its receiver, so renumbering the pairs
+    after the one that supplies the axis leaves the frame alone.  Distances
+    scale with the layout, so the rule commutes with a change of units.
     """
     rel = np.stack([tx, rx], axis=1).reshape(-1, tx.shape[-1]) - rx[0]
     dist = np.linalg.norm(rel, axis=1)
-    far = np.flatnonzero(dist > SENSOR_EPS)
+    far = np.flatnonzero(dist >= max(SENSOR_EPS, AXIS_MIN_SHARE * float(dist.max())))
     if far.size == 0:
         raise ValueError("every sensor is at one place: no axis for the sensors' frame")
     return np.asarray(rel[far[0]] / dist[far[0]], dtype=float)

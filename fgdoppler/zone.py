@@ -8,7 +8,8 @@ rigid motion of the sensors moves the zone with them.
 
 Default rule (:func:`default_zone`), with :math:`(u_i, v_i)` the distinct
 sensors in the sensor frame and :math:`D = \max u_i - \min u_i` their extent
-along the first pair's baseline:
+along its first axis (the first pair's baseline, unless that pair is
+monostatic or nearly so: :func:`fgdoppler.frames.sensor_frame`):
 
 .. math::
 

@@ -48,6 +48,37 @@ def test_default_zone_reaches_sensors_off_the_first_baseline() -> None:
     assert z.across == (-5e3, 42e3)
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_quasi_monostatic_first_pair_does_not_turn_the_zone(dim: int) -> None:
+    """Antennas 20 m apart in a 30 km network: which way the 20 m point leaves the zone where it is.
+
+    The frame's axis is taken from the first sensor at least
+    ``AXIS_MIN_SHARE`` of the network's size from the first receiver — here
+    the other receiver, whatever the bearing of the transmitter 20 m away —
+    so the zone's world region moves by no more than the 20 m themselves
+    (the sensors' extent along the axis changes by at most that).  Taken
+    from the 20 m baseline, as for any other first pair, the axis would
+    turn with the antennas and the zone (30 km by 6 km) with it.
+    """
+    from fgdoppler.frames import AXIS_MIN_SHARE
+
+    rx0, rx1 = np.zeros(dim), np.r_[30e3, 5e3, np.zeros(dim - 2)]
+    assert 20.0 < AXIS_MIN_SHARE * np.linalg.norm(rx1) < 30e3
+    corners = []
+    for angle in np.linspace(0.0, 2 * np.pi, 9)[:-1]:
+        tx0 = rx0 + 20.0 * np.r_[np.cos(angle), np.sin(angle), np.zeros(dim - 2)]
+        g = fd.Geometry(pairs=(fd.BistaticPair(tx=tx0, rx=rx0), fd.BistaticPair(tx=tx0, rx=rx1)))
+        np.testing.assert_allclose(g.frame.B[0], rx1 / np.linalg.norm(rx1), atol=1e-12)
+        corners.append(np.sort(g.default_zone().corners()[..., :2].reshape(-1, 2), axis=0))
+    spread = np.ptp(np.array(corners), axis=0)
+    assert float(spread.max()) <= 2 * 20.0
+    # the rule for a true bistatic first pair is unchanged: the paper's zone above, and a 1 km first
+    # baseline (3 % of this network) still sets the axis
+    g = fd.Geometry(pairs=(fd.BistaticPair(tx=np.r_[0.0, 1e3, np.zeros(dim - 2)], rx=rx0),
+                           fd.BistaticPair(tx=np.r_[0.0, 1e3, np.zeros(dim - 2)], rx=rx1)))
+    np.testing.assert_allclose(g.frame.B[0, :2], [0.0, 1.0], atol=1e-12)
+
+
 def _zone(angle: float, reflect: bool) -> fd.Zone:
     R = _rotation(angle, reflect)
     return fd.Zone(frame=Frame(origin=(1e4, -2e4), basis=tuple(map(tuple, R.T))), along=(2e3, 48e3),
