@@ -207,6 +207,40 @@ class Zone:
         out["frame"] = self.frame.to_dict()
         return out
 
+    def reaching(self, state: ArrayLike, margin: float = 0.25) -> Zone:
+        r"""The zone widened just enough to hold the start ``state`` ``(2d,)``, with a margin.
+
+        On each local axis whose interval :math:`[l_i, h_i]` misses the
+        start's coordinate :math:`u_i`, the near bound moves past it by
+        ``margin`` :math:`m` times the start's distance from the far bound
+        (:math:`h_i' = u_i + m(u_i - l_i)` above,
+        :math:`l_i' = u_i - m(h_i - u_i)` below); a speed bound below
+        the start's speed :math:`s` becomes :math:`(1 + m)s`.  Everything
+        the zone held it still holds.
+        """
+        x = self._check_states(state).reshape(-1)
+        d = self.dim
+        u = self.frame.points_to_local(x[:d])
+        bounds = []
+        for ui, (lo, hi) in zip(u, self.intervals, strict=True):
+            if ui > hi:
+                hi = ui + margin * (ui - lo)
+            elif ui < lo:
+                lo = ui - margin * (hi - ui)
+            bounds.append((float(lo), float(hi)))
+        speed = float(np.linalg.norm(x[d:]))
+        return replace(self, along=bounds[0], across=bounds[1], altitude=bounds[2] if d == 3 else None,
+                       speed_max=max(self.speed_max, (1.0 + margin) * speed) if speed > self.speed_max
+                       else self.speed_max)
+
+    def options(self) -> str:
+        """The command-line options that give this zone (``--zone``, ``--altitude``, ``--speed-max``), its
+        bounds rounded outward to the metre and the speed up to the m/s."""
+        def box(iv: tuple[float, float]) -> str:
+            return f"{math.floor(iv[0])} {math.ceil(iv[1])}"
+        alt = "" if self.altitude is None else f" --altitude {box(self.altitude)}"
+        return f"--zone {box(self.along)} {box(self.across)}{alt} --speed-max {math.ceil(self.speed_max)}"
+
     def relative_to(self, frame: Frame) -> Zone:
         """The same zone with its frame expressed in ``frame``'s local coordinates."""
         return replace(self, frame=self.frame.relative_to(frame))

@@ -79,6 +79,26 @@ def test_a_quasi_monostatic_first_pair_does_not_turn_the_zone(dim: int) -> None:
     np.testing.assert_allclose(g.frame.B[0, :2], [0.0, 1.0], atol=1e-12)
 
 
+@pytest.mark.parametrize(("angle", "reflect"), [(0.0, False), (0.9, True)])
+def test_a_zone_reaching_a_start_holds_it_with_its_margin(angle: float, reflect: bool) -> None:
+    """The widened zone of the advice: each missed bound moves past the start by the margin times its distance
+    from the far bound, the speed bound to (1 + margin) times the start's speed; a start inside changes nothing."""
+    z = _zone(angle, reflect)
+    to_world = z.frame.points_to_world
+    x = np.r_[to_world([60e3, -9e3]), 150.0, 200.0]  # 250 m/s
+    w = z.reaching(x, margin=0.25)
+    assert w.along == (2e3, 60e3 + 0.25 * 58e3) and w.across == (-9e3 - 0.25 * 14e3, 5e3)
+    assert w.speed_max == pytest.approx(1.25 * 250.0)
+    assert w.frame == z.frame and bool(w.contains(x)) and not bool(z.contains(x))
+    assert w.options() == "--zone 2000 74500 -12500 5000 --speed-max 313"
+    inside = np.r_[to_world([10e3, 1e3]), 10.0, 0.0]
+    assert z.reaching(inside) == z
+    z3 = fd.Zone(frame=Frame.identity(3), along=(0.0, 1e3), across=(-1e3, 1e3), altitude=(0.0, 500.0))
+    w3 = z3.reaching(np.array([500.0, 0.0, 900.0, 0.0, 0.0, 0.0]))
+    assert w3.altitude == (0.0, 900.0 + 0.25 * 900.0) and w3.along == z3.along
+    assert w3.options() == "--zone 0 1000 -1000 1000 --altitude 0 1125 --speed-max 200"
+
+
 def _zone(angle: float, reflect: bool) -> fd.Zone:
     R = _rotation(angle, reflect)
     return fd.Zone(frame=Frame(origin=(1e4, -2e4), basis=tuple(map(tuple, R.T))), along=(2e3, 48e3),

@@ -90,6 +90,9 @@ OUTSIDE_LEVEL = 0.90
 #: How much lower the cost of a track starting outside the zone must be for the ``zone`` finding of
 #: :func:`_outside_zone_2d`: χ²₁ at 99.9 %, the verdict's level.
 OUTSIDE_GAIN = float(chi2.ppf(0.999, 1))
+#: A start found by the searches outside the zone nearer a bound of the searched box than this share of that
+#: side (or of the speed bound), or past it, is said to lie at the search's edge.
+EDGE_SHARE = 0.01
 
 
 class _Mode(Protocol):
@@ -443,9 +446,10 @@ def _boundary_reasons(prob: _Problem, x: FloatArray, max_iterations: int) -> lis
 
 
 def _wall_reason(zone: Zone, x: FloatArray, inside: float, free: FloatArray, free_cost: float,
-                 searched: str = "") -> Reason:
+                 searched: str = "", advice: str | None = None) -> Reason:
     """The ``boundary`` finding for a track ``x`` held by the wall (data cost ``inside``) and the best track
-    found without it (``free``, cost ``free_cost``; ``searched`` says where it was looked for)."""
+    found without it (``free``, cost ``free_cost``; ``searched`` says where it was looked for, and whether the
+    start found lies at its edge; ``advice`` the zone to try, by default the one that holds ``free``'s start)."""
     excess, _ = zone.excess(x[0])
     gain = inside - free_cost
     limit = float(chi2.ppf(0.95, 1))
@@ -458,7 +462,7 @@ def _wall_reason(zone: Zone, x: FloatArray, inside: float, free: FloatArray, fre
     if gain > limit:
         return Reason(code="boundary", status="doubtful", message=(
             f"{held}: the data prefer a start outside the zone (lower by {gain:.1f} > {limit:.2f}); widen the "
-            "zone (--zone, --speed-max)"))
+            f"zone to hold that start, {advice or 'e.g. ' + zone.reaching(free[0]).options()}"))
     return Reason(code="boundary", status="ok", message=f"{held}: the data do not prefer a start outside it")
 
 
@@ -508,17 +512,17 @@ def _beyond_wall_2d(measurements: Measurements, model: TrackingModel, settings: 
                              half_plane=half_plane, memo=memo)
     if found is None:
         return None
-    best, inside, searched = found
-    return _wall_reason(zone, sol.states, inside, best.states, best.cost, searched)
+    best, inside, searched, advice = found
+    return _wall_reason(zone, sol.states, inside, best.states, best.cost, searched, advice)
 
 
 def _best_outside_2d(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
                      sol: SmootherSolution, window: Measurements, wide_zone: Zone, progress: Progress | None, *,
                      half_plane: HalfPlane | None, memo: SearchMemo | None
-                     ) -> tuple[SmootherSolution, float, str] | None:
+                     ) -> tuple[SmootherSolution, float, str, str] | None:
     """The lowest-cost track without the zone wall from ``sol`` and from both initiations over ``wide_zone``
-    (:func:`_beyond_wall_2d` says which), ``sol``'s own data cost, and where it was searched (``None``: the
-    smoother could start from none of them)."""
+    (:func:`_beyond_wall_2d` says which), ``sol``'s own data cost, where it was searched, and the zone to
+    advise (:func:`_zone_advice`; ``None``: the smoother could start from none of them)."""
     from fgdoppler.estimators.initiation import InitiationSettings, initiate
 
     wide = model.with_zone(wide_zone)
@@ -547,10 +551,70 @@ def _best_outside_2d(measurements: Measurements, model: TrackingModel, settings:
         return None
     best = min(free, key=lambda s: s.cost)
     inside = _Problem(model, measurements, settings.huber_k, model.prior(), sol.times).data_cost(sol.states)
-    searched = (f" (searched to {wide.zone.speed_max:.0f} m/s, along {wide.zone.along[0] / 1e3:.1f} to "
-                f"{wide.zone.along[1] / 1e3:.1f} km, across {wide.zone.across[0] / 1e3:.1f} to "
-                f"{wide.zone.across[1] / 1e3:.1f} km)")
-    return best, inside, searched
+    w = wide.zone
+    # a start on the searched box's edge (or past it) was found only as far as the search reached
+    edge = "; the start found lies at the edge of the search: the target may start farther out still" \
+        if _at_edge(w, best.states[0]) else ""
+    searched = (f" (searched to {w.speed_max:.0f} m/s, along {w.along[0] / 1e3:.1f} to "
+                f"{w.along[1] / 1e3:.1f} km, across {w.across[0] / 1e3:.1f} to {w.across[1] / 1e3:.1f} km{edge})")
+    return best, inside, searched, _zone_advice(measurements, model, settings, best, progress,
+                                                half_plane=half_plane, memo=memo)
+
+
+def _zone_advice(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
+                 best: SmootherSolution, progress: Progress | None, *, half_plane: HalfPlane | None,
+                 memo: SearchMemo | None) -> str:
+    """The zone a search outside it advises: one that holds ``best``'s start — and its mirror image's where that
+    is a mode the data cannot tell from it.
+
+    Sensors near one line give a track and its mirror image across that
+    line nearly the same Doppler.  Measured on a quasi-monostatic radar
+    with a bistatic receiver 30 km away (antennas 20 m apart, the three
+    sensors within 3.3 m of one line; a target 9.4 km off it, outside the
+    default zone; seeds 0–7): the search found the mirror image's start in
+    7 of 8 recordings, and with a zone advised to hold only that start the
+    smoother reported the mirror track, 14–15 km from the truth, ``ok`` in
+    4 of them (the final position's squared Mahalanobis distance
+    1,200–2,800).  With the twin in the advised zone all 8 runs that follow
+    it are ``doubtful`` by the ``competing`` finding, 6 on the truth's
+    track (75–1,213 m from it at the end, within 3 σ), 2 on the mirror's
+    (``python studies/zone_advice.py``, and ``--no-twin 1`` for the
+    advice without it).  So the smoother is run once more,
+    without the wall, from the mirror image of ``best``
+    (:func:`~fgdoppler.estimators.smoother_offsets.mirrored`); a solution
+    apart from ``best`` (:func:`_apart`) costing less than
+    :data:`~fgdoppler.estimators.ambiguity.COMPETING` more is a twin, and
+    the advised zone holds both starts, so that the modes search of the
+    next run sees both and says whether the data tell them apart.  Not
+    where the user's half plane rules the mirror out.
+    """
+    from fgdoppler.estimators.ambiguity import COMPETING
+    from fgdoppler.estimators.smoother_offsets import mirrored
+
+    zone = model.zone
+    assert zone is not None
+    advised = zone.reaching(best.states[0])
+    geometry = getattr(model.observation, "geometry", None)
+    if geometry is None or half_plane is not None:
+        return "e.g. " + advised.options()
+    twins = [s for s in _smooth_from(measurements, model, replace(settings, region_bound=False, covariances=False),
+                                     [mirrored(best.states, geometry)], progress, memo)
+             if _apart(best, s) and s.cost < best.cost + COMPETING]
+    if not twins:
+        return "e.g. " + advised.options()
+    twin = min(twins, key=lambda s: s.cost)
+    return (f"and its mirror image across the sensors' line, whose track fits the data nearly as well (cost "
+            f"{twin.cost:.2f}), e.g. {advised.reaching(twin.states[0]).options()}")
+
+
+def _at_edge(zone: Zone, x0: FloatArray) -> bool:
+    """Whether the start ``x0`` lies within :data:`EDGE_SHARE` of a side (or of the speed bound) of ``zone``'s
+    box from inside, or outside it."""
+    d = zone.dim
+    u = zone.frame.points_to_local(x0[:d])
+    near = [not (lo + EDGE_SHARE * (hi - lo) < ui < hi - EDGE_SHARE * (hi - lo))
+            for ui, (lo, hi) in zip(u, zone.intervals, strict=True)]
+    return any(near) or float(np.linalg.norm(x0[d:])) >= (1.0 - EDGE_SHARE) * zone.speed_max
 
 
 def _outside_zone_2d(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
@@ -603,7 +667,7 @@ def _outside_zone_2d(measurements: Measurements, model: TrackingModel, settings:
                              half_plane=half_plane, memo=memo)
     if found is None:
         return None
-    best, inside, searched = found
+    best, inside, searched, advice = found
     excess, _ = zone.excess(best.states[0])
     gain = inside - best.cost
     if gain <= OUTSIDE_GAIN or not np.any(excess != 0.0):
@@ -615,8 +679,8 @@ def _outside_zone_2d(measurements: Measurements, model: TrackingModel, settings:
         f"{inside:.2f}, lower by {gain:.1f} > {OUTSIDE_GAIN:.2f}, starting "
         f"{np.linalg.norm(best.states[0, :d] - sol.states[0, :d]) / 1e3:.1f} km away at "
         f"{np.linalg.norm(best.states[0, d:]):.0f} m/s (excess along, across, speed: "
-        + ", ".join(f"{v:.3g}" for v in excess) + "): the target may be outside the zone; widen it (--zone, "
-        "--speed-max)"))
+        + ", ".join(f"{v:.3g}" for v in excess) + "): the target may be outside the zone; widen it to hold that "
+        f"start, {advice}"))
 
 
 def _covariances(prob: _Problem, x: FloatArray) -> tuple[FloatArray | None, str]:
