@@ -481,6 +481,9 @@ def test_following_the_zone_advice_never_ends_in_a_confident_mirror_track(
     advice holds the mirror's twin too, so it holds the truth's start, and
     the run that follows it either tracks the truth within its covariance or
     says that another track fits as well — never a confident wrong answer.
+    That other track is the mirror image: the finding says so, and the
+    command prints the ``--half-plane`` options of either side of the
+    sensors' line.
     """
     import re
 
@@ -504,7 +507,8 @@ def test_following_the_zone_advice_never_ends_in_a_confident_mirror_track(
     truth = fd.Trajectory.from_csv(sim / "truth.csv")
     assert bool(advised.contains(truth.states[0]))
     assert main([*args, *options.group(1).split()]) == 0
-    second = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    second = json.loads(captured.out)
     assert not [r for r in second["reasons"] if r["code"] in ("boundary", "zone") and r["status"] != "ok"]
     x, P = np.array(second["states"][-1]), np.array(second["covariances"][-1])
     e = x[:2] - truth.states[-1, :2]
@@ -512,3 +516,16 @@ def test_following_the_zone_advice_never_ends_in_a_confident_mirror_track(
     competing = [r for r in second["reasons"] if r["code"] == "competing" and r["status"] == "doubtful"]
     assert consistent or competing
     assert second["status"] == "doubtful" if competing else second["status"] == "ok"
+    # the rival here is the mirror image: the finding says so, and the hint's two half planes, one per side of
+    # the sensors' line, split the truth from its mirror image
+    from fgdoppler.cli.track import MIRROR_CUE
+    from fgdoppler.estimators.smoother_offsets import mirrored
+
+    assert any(MIRROR_CUE in r["message"] for r in competing)
+    hint = re.search(r"--half-plane (\S+) (\S+) (\S+) (\S+) puts .* --half-plane (\S+) (\S+) (\S+) (\S+) on", captured.err)
+    assert hint is not None
+    planes = np.array(hint.groups(), dtype=float).reshape(2, 4)
+    np.testing.assert_allclose(planes[0, 2:], -planes[1, 2:])
+    for p in (truth.states[0], mirrored(truth.states[:1], geometry)[0]):
+        side = planes[:, 2:] @ (p[:2] - planes[0, :2])
+        assert side[0] * side[1] < 0 and min(abs(side)) > 1e3

@@ -24,6 +24,7 @@ from fgdoppler.cli.common import (
 )
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
+from fgdoppler.geometry import Geometry, principal_line
 
 __all__ = ["add_track"]
 
@@ -215,6 +216,24 @@ def _print_verdict(status: str, reasons: Any) -> None:
         print(f"  {r.status}: {r.message}", file=sys.stderr)
 
 
+#: The words of the smoother's ``competing`` finding when its rival is the reported track's mirror image.
+MIRROR_CUE = "mirror image across the sensors' line: if the target's side of that line is known"
+
+
+def _print_half_plane_hint(reasons: Any, geom: Geometry, args: argparse.Namespace) -> None:
+    """Where a finding says the rival track is the mirror image, the ``--half-plane`` options of either side of
+    the sensors' least-squares line (the line the mirror is taken across), in the user's coordinates."""
+    if args.half_plane is not None or geom.dim != 2 or not any(MIRROR_CUE in r.message for r in reasons):
+        return
+    c, u, _ = principal_line(np.vstack([geom.tx, geom.rx])[:, :2])
+    n = np.array([-u[1], u[0]])
+    side = " ".join(f"{v:.6g}" for v in (*c, *n))
+    other = " ".join(f"{v:.6g}" for v in (*c, *-n))
+    print(f"  hint: the sensors' line passes through ({c[0]:.6g}, {c[1]:.6g}) along ({u[0]:.6g}, {u[1]:.6g}); "
+          f"--half-plane {side} puts the target on one side of it, --half-plane {other} on the other",
+          file=sys.stderr)
+
+
 def _print_events(events: Any, limit: int = 10) -> None:
     """The first events and, when there are more than ``limit``, the last one too: a run's closing summary."""
     events = list(events)
@@ -364,6 +383,7 @@ def _run_tracker(args: argparse.Namespace, settings: Any, init: Any, meas: Any, 
         figure = plotting.figure_bytes(ax, args.plot.suffix.lower().lstrip("."))
     _write(args, result.csv_text(header=_csv_header(where)), result.json_text(extra=where), figure)
     _print_verdict(result.status, result.reasons)
+    _print_half_plane_hint(result.reasons, model.geometry, args)
     if args.json:
         emit_json({**result.to_dict(all_estimates=False), **where})
         return str(result.status)

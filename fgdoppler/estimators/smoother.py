@@ -71,6 +71,7 @@ from fgdoppler.zone import Zone
 if TYPE_CHECKING:
     from fgdoppler.estimators.grid import HalfPlane
     from fgdoppler.estimators.smoother_offsets import JointSolution
+    from fgdoppler.geometry import Geometry
 
 __all__ = ["SmootherDraft", "SmootherSolution", "draft_smoother", "finish_smoother", "initial_trajectory", "rts_smooth",
            "run_smoother", "solve_smoother"]
@@ -862,11 +863,12 @@ def _modes_2d(measurements: Measurements, model: TrackingModel, settings: Smooth
     found = [sol, *_smooth_from(measurements, model, settings, starts, progress, memo)]
     from fgdoppler.estimators.ambiguity import COMPETING
 
-    return _best_and_rival(found, sol, zone, margin=COMPETING)
+    return _best_and_rival(found, sol, zone, margin=COMPETING, geometry=getattr(model.observation, "geometry", None))
 
 
 def _best_and_rival(found: list[SmootherSolution], sol: SmootherSolution, zone: Zone, *,
-                    margin: float | None = None) -> tuple[SmootherSolution, list[str], list[Reason]]:
+                    margin: float | None = None, geometry: Geometry | None = None
+                    ) -> tuple[SmootherSolution, list[str], list[Reason]]:
     """The lowest-cost solution, a note if it moved the track, and its findings (floor and rival).
 
     With a ``margin``, ``sol`` stays unless another *mode* (ending farther
@@ -888,7 +890,7 @@ def _best_and_rival(found: list[SmootherSolution], sol: SmootherSolution, zone: 
         notes.append(f"a restart lowered the cost from {sol.cost:.2f} to {best.cost:.2f} (the track's end moved "
                      f"{moved / 1e3:.1f} km)")
     floor = _floor_reason(best, zone) if zone.altitude is not None and k == 3 else None
-    reasons = [r for r in (floor, _rival_reason(found, best, zone)) if r is not None]
+    reasons = [r for r in (floor, _rival_reason(found, best, zone, geometry)) if r is not None]
     return best, notes, reasons
 
 
@@ -983,11 +985,16 @@ def _floor_reason(best: SmootherSolution, zone: Zone) -> Reason | None:
         "do not fix the height"))
 
 
-def _rival_reason(found: Sequence[_Mode], best: _Mode, zone: Zone) -> Reason | None:
+def _rival_reason(found: Sequence[_Mode], best: _Mode, zone: Zone, geometry: Geometry | None = None
+                  ) -> Reason | None:
     """A ``competing`` finding for the rival with the largest share of the mean-square error (rule: :func:`_restarts_3d`).
 
     In 3-D a rival that sinks below the altitude band's floor is not one
-    (:func:`_floor_reason` speaks of the best track's floor).
+    (:func:`_floor_reason` speaks of the best track's floor).  In 2-D, given
+    the ``geometry``, a rival that ends nearer the mirror image of the
+    reported track's end across the sensors' line than a quarter of the two
+    ends' distance is called the mirror image, and the finding names the
+    option that settles it (``--half-plane``: a side the data cannot tell).
     """
     from fgdoppler.estimators.ambiguity import COMPETING
 
@@ -1019,9 +1026,17 @@ def _rival_reason(found: Sequence[_Mode], best: _Mode, zone: Zone) -> Reason | N
             f"{head} (height {zone.frame.points_to_local(rival.states[-1, :3])[2]:.0f} m vs "
             f"{zone.frame.points_to_local(end)[2]:.0f} m; reported sigma in that direction {sd:.0f} m): the data do "
             "not fix the track in 3-D"))
+    mirror = ""
+    if geometry is not None and k == 2:
+        from fgdoppler.estimators.smoother_offsets import mirrored
+
+        image = mirrored(best.states[-1:], geometry)[0, :2]
+        if float(np.linalg.norm(rival.states[-1, :2] - image)) < 0.25 * apart:
+            mirror = ("; the other track is the reported one's mirror image across the sensors' line: if the "
+                      "target's side of that line is known, give it (--half-plane)")
     return Reason(code="competing", status="doubtful", message=(
         f"{head} (reported sigma in that direction {sd:.0f} m): the data do not tell the two apart, and the "
-        "reported covariance, about one of them, understates the error"))
+        f"reported covariance, about one of them, understates the error{mirror}"))
 
 
 def _outside_findings(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
