@@ -12,7 +12,14 @@ the status is the worst of them, :mod:`fgdoppler.estimators.verdict`).
     solution plus the motion terms, :math:`\sim \chi^2_{n-4}`.  Residuals beyond
     the gate (or the outlier cut, :data:`~fgdoppler.estimators.initiation.OUTLIER_CUT`)
     are left out and counted instead.  ``"doubtful"`` when the statistic
-    exceeds its :data:`LEVEL` quantile.
+    exceeds its :data:`LEVEL` quantile.  Below its :math:`1 -` :data:`LEVEL`
+    quantile (with at least :data:`MIN_FIT_DOF` degrees of freedom) the
+    finding is ``"ok"`` but says that the data scatter less than the stated
+    sigma (or the process noise) allows: the track stands, its covariances
+    are wider than its errors.  Both messages give the residuals' scale
+    against the model's, :math:`\sqrt{\chi^2/\nu}` (for the smoother an
+    estimate of true over stated sigma; for the filters, whose innovations
+    also carry the state's uncertainty, a rough one).
 ``rejections`` — measurements rejected by the gate or counted as outliers.
     ``"doubtful"`` above :data:`REJECT_DOUBTFUL` of them (:data:`REJECT_ROBUST`
     with the Huber loss, which is there to absorb outliers; informational up
@@ -87,7 +94,7 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import DopplerModel
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["COVARIANCE_RATIO", "LEVEL", "LOST", "MIN_MEASUREMENTS", "REJECT_DOUBTFUL", "REJECT_FAILED",
+__all__ = ["COVARIANCE_RATIO", "LEVEL", "LOST", "MIN_FIT_DOF", "MIN_MEASUREMENTS", "REJECT_DOUBTFUL", "REJECT_FAILED",
            "REJECT_ROBUST", "REMOTE_FACTOR", "SPEED_FACTOR", "ZONE_TOLERANCE", "judge", "needed_speed",
            "track_reference"]
 
@@ -108,6 +115,8 @@ REMOTE_FACTOR = 100.0
 #: The smoother more uncertain than a filter by this factor (variance, in some direction) at the last time:
 #: the filter claims less than half the smoother's standard deviation from the same data.
 COVARIANCE_RATIO = 4.0
+#: Degrees of freedom below which the fit test's lower tail (data scattering less than sigma) says nothing.
+MIN_FIT_DOF = 10
 #: Fewer measurements than the paper's initiation window make a track doubtful.
 MIN_MEASUREMENTS = 20
 #: How far (m, m/s) a smoothed track may start outside the zone before it contradicts it.
@@ -123,13 +132,14 @@ def judge(result: TrackResult, measurements: Measurements, model: TrackingModel,
     (for the ``reference`` finding; ``None`` skips it).  ``half_plane`` says
     the initiation was restricted to one side of a line (no mirror ambiguity).
     """
-    if result.nis.size or result.cost is None:
+    predictive = bool(result.nis.size or result.cost is None)
+    if predictive:
         inlier, statistic, dof, n, lost = _predictive(result, settings)
     else:
         inlier, statistic, dof, n, lost = _residual(result, measurements, model)
     reasons = list(result.reasons)
     if n:
-        reasons += _fit_reasons(statistic, dof, n, n - inlier, lost, settings.huber_k is not None)
+        reasons += _fit_reasons(statistic, dof, n, n - inlier, lost, settings.huber_k is not None, predictive)
     if reference is not None:
         reasons += _reference_reasons(result.primary, reference)
     reasons += _data_reasons(measurements, model, half_plane)
@@ -288,7 +298,8 @@ def _residual(result: TrackResult, measurements: Measurements, model: TrackingMo
     return inlier, statistic, max(inlier - model.n - fitted, 1), len(measurements), None
 
 
-def _fit_reasons(statistic: float, dof: int, n: int, rejected: int, lost: int | None, robust: bool) -> list[Reason]:
+def _fit_reasons(statistic: float, dof: int, n: int, rejected: int, lost: int | None, robust: bool,
+                 predictive: bool = False) -> list[Reason]:
     out = []
     fraction = rejected / n
     if fraction > REJECT_FAILED:
@@ -305,11 +316,22 @@ def _fit_reasons(statistic: float, dof: int, n: int, rejected: int, lost: int | 
             f"the filter rejects {lost} of the last {max(n // 4, 8)} measurements: it has lost the target")))
     if dof > 0:
         limit_stat = float(chi2.ppf(LEVEL, dof))
+        scale = float(np.sqrt(statistic / dof))
         if statistic > limit_stat:
             out.append(Reason(code="fit", status="doubtful", message=(
                 f"the track does not fit the data: chi-square {statistic:.1f} > {limit_stat:.1f} "
-                f"({LEVEL:.1%}, {dof} dof; {statistic / dof:.2f} per dof): its covariance is too small "
-                "for its errors, or the model (motion, sigma) does not hold")))
+                f"({LEVEL:.1%}, {dof} dof; {statistic / dof:.2f} per dof, residuals about {scale:.2f} times the "
+                "model's): its covariance is too small for its errors, or the model (motion, sigma) does not "
+                "hold")))
+        low = float(chi2.ppf(1.0 - LEVEL, dof))
+        if dof >= MIN_FIT_DOF and statistic < low:
+            # a filter's innovations also carry its state's uncertainty, which may be the part that is too large
+            what = "the stated sigma, the process noise or the filter's own covariance is" if predictive else \
+                "the stated sigma (or the process noise) is"
+            out.append(Reason(code="fit", status="ok", message=(
+                f"the data scatter less than the model allows: chi-square {statistic:.1f} < {low:.1f} (the "
+                f"{1.0 - LEVEL:.1%} quantile, {dof} dof; residuals about {scale:.2f} times the model's): {what} "
+                "likely too large, and the covariances with it; the track stands")))
     return out
 
 

@@ -242,3 +242,28 @@ def test_monte_carlo_records_every_verdict(tmp_path) -> None:
     res.save(tmp_path / "mc")
     back = MonteCarloResult.load(tmp_path / "mc")
     assert all(np.array_equal(back.verdicts[0][e], res.verdicts[0][e]) for e in res.estimators)
+
+
+@pytest.mark.parametrize("estimator", ["smoother", "ekf", "particle"])
+def test_a_stated_sigma_larger_than_the_datas_is_said_and_measured(estimator: str) -> None:
+    """Noise of 0.3 m/s recorded with sigma 1 m/s: χ² ≈ 0.09 ν, far below the 0.1 % quantile (76 for ν = 118).
+
+    The finding is ``ok`` (the track stands), says the stated sigma is
+    likely too large, and its residual scale √(χ²/ν) estimates the true over
+    the stated sigma, 0.3 (to ±0.05: ν ≈ 100 gives a relative standard
+    error of 7 %).  With the sigma stated right there is no such finding.
+    """
+    import re
+
+    sim = _sim(PAPER, sigma=0.3, seed=4)
+    m = sim.measurements
+    model = fd.TrackingModel.of(A)
+    for stated, expect in ((1.0, True), (0.3, False)):
+        data = fd.Measurements(time=m.time, pair=m.pair, doppler=m.doppler, sigma=np.full(len(m), stated))
+        init = fd.initiate(data.first_per_pair(10), model)
+        r = fd.run_estimator(estimator, data, model, init, verify=False)
+        low = [q for q in r.reasons if q.code == "fit" and "scatter less" in q.message]
+        assert r.status == "ok" and bool(low) == expect
+        if expect:
+            scale = float(re.search(r"residuals about ([\d.]+) times", low[0].message).group(1))  # type: ignore[union-attr]
+            assert low[0].status == "ok" and abs(scale - 0.3) < 0.05
