@@ -44,7 +44,7 @@ def _point(value: ArrayLike, name: str) -> tuple[float, ...]:
     if arr.shape not in ((2,), (3,)):
         raise ValueError(f"{name} must be a 2- or 3-vector (x, y[, z]) in metres, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must have finite coordinates, got {tuple(arr)}")
+        raise ValueError(f"{name} must have finite coordinates, got {tuple(float(v) for v in arr)}")
     return tuple(float(v) for v in arr)
 
 

@@ -104,9 +104,11 @@ def read_geometry(path: str | Path) -> Any:
         raise ValueError(f"{path}: expected one or more [[pair]] tables with tx and rx")
     pairs = []
     for i, item in enumerate(raw):
-        if not isinstance(item, dict) or "tx" not in item or "rx" not in item:
+        if not isinstance(item, dict):
             raise ValueError(f"{path}: pair {i} needs both tx and rx")
-        _check_keys(path, text, item, _PAIR, f"pair {i}", "pair")
+        _check_keys(path, text, item, _PAIR, f"pair {i}", "pair")  # first: a misspelt tx is named as such
+        if "tx" not in item or "rx" not in item:
+            raise ValueError(f"{path}: pair {i} needs both tx and rx")
         try:
             pairs.append(BistaticPair(tx=item["tx"], rx=item["rx"]))
         except (ValueError, TypeError) as exc:
