@@ -36,14 +36,8 @@ from _common import each_count
 
 from fgdoppler.cli import main as cli
 
-GEOMETRY = """name = "quasi-monostatic radar and a bistatic receiver"
-[[pair]]
-tx = [0.0, 0.0]
-rx = [20.0, 0.0]
-[[pair]]
-tx = [0.0, 0.0]
-rx = [30000.0, 5000.0]
-"""
+#: The layout (a file, shared with the test of the advice in ``tests/test_cli.py``).
+GEOMETRY = Path(__file__).resolve().parent / "geometries" / "quasi_monostatic.toml"
 #: The target: start (m), velocity (m/s).
 START = ("15000", "12000")
 VELOCITY = ("80", "-60")
@@ -65,8 +59,7 @@ def one(seed: int, no_twin: float = 0.0) -> dict[str, Any]:
         offsets.mirrored = lambda states, geometry: states  # type: ignore[assignment]
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
-        (d / "geometry.toml").write_text(GEOMETRY)
-        _quiet(["simulate", "--geometry", str(d / "geometry.toml"), "--start-x", START[0], "--start-y", START[1],
+        _quiet(["simulate", "--geometry", str(GEOMETRY), "--start-x", START[0], "--start-y", START[1],
                 "--velocity", *VELOCITY, "--seed", str(seed), "--out", str(d / "sim")])
         truth = np.loadtxt(d / "sim" / "truth.csv", delimiter=",", skiprows=1)[-1, 1:3]
         row: dict[str, Any] = {"seed": seed}
