@@ -9,11 +9,13 @@ draw is a radar: monostatic (transmitter and receiver at one place) or,
 with ``--quasi M``, quasi-monostatic (the transmitter ``M`` metres from
 the receiver in a random direction); one to three bistatic pairs follow
 (baselines longer than 8 km), and with probability one half a second
-radar replaces the last of them.  Only the default smoother (with its
+radar replaces the last of them.  With ``--spread F`` the target starts
+in the zone's box scaled by ``F`` about its centre (``F`` > 1: often
+outside the zone, where a user's target may well be).  Only the default smoother (with its
 whole-recording searches) is run as the reference, so each estimator's
 row is what a user gets.
 
-Run: ``python studies/monostatic_layouts.py [--draws 60] [--first 0] [--quasi 0] [--out DIR]``
+Run: ``python studies/monostatic_layouts.py [--draws 60] [--first 0] [--quasi 0] [--spread 1] [--out DIR]``
 (about 10 minutes per 60 draws on 2 cores).
 """
 
@@ -44,7 +46,13 @@ def _radar(rng: np.random.Generator, quasi: float) -> fd.BistaticPair:
     return fd.BistaticPair(tx=(float(tx[0]), float(tx[1])), rx=(float(rx[0]), float(rx[1])))
 
 
-def draw(i: int, quasi: float = 0.0) -> tuple[fd.Geometry, tuple[float, float, float, float], np.random.Generator]:
+def _scaled(interval: tuple[float, float], factor: float) -> tuple[float, float]:
+    mid, half = (interval[0] + interval[1]) / 2, factor * (interval[1] - interval[0]) / 2
+    return mid - half, mid + half
+
+
+def draw(i: int, quasi: float = 0.0, spread: float = 1.0
+         ) -> tuple[fd.Geometry, tuple[float, float, float, float], np.random.Generator]:
     """Layout, start state and the generator that then simulates draw ``i`` (rule: module docstring)."""
     rng = np.random.default_rng([79, i])
     n = int(rng.integers(1, 4))
@@ -54,7 +62,8 @@ def draw(i: int, quasi: float = 0.0) -> tuple[fd.Geometry, tuple[float, float, f
             pairs[-1] = _radar(rng, quasi)
         g = fd.Geometry(pairs=tuple(pairs), name=f"radar layout {i}")
         z = g.zone
-        p = z.frame.points_to_world(np.array([[rng.uniform(*z.along), rng.uniform(*z.across)]]))[0]
+        p = z.frame.points_to_world(np.array([[rng.uniform(*_scaled(z.along, spread)),
+                                                rng.uniform(*_scaled(z.across, spread))]]))[0]
         sensors = np.array([s for pair in pairs for s in (pair.tx, pair.rx)])
         if np.min(np.hypot(*(sensors - p).T)) < MIN_SENSOR_DISTANCE:
             continue
@@ -63,26 +72,30 @@ def draw(i: int, quasi: float = 0.0) -> tuple[fd.Geometry, tuple[float, float, f
 
 
 @one_blas_thread
-def one(k: int, quasi: float = 0.0, first: float = 0.0) -> dict[str, Any]:
+def one(k: int, quasi: float = 0.0, first: float = 0.0, spread: float = 1.0) -> dict[str, Any]:
     i = k + int(first)
-    g, x0, rng = draw(i, quasi)
+    g, x0, rng = draw(i, quasi, spread)
     out, sim, init = recorded(i, g, x0, rng)
     out["radars"] = sum(p.baseline < 1e3 for p in g.pairs)
+    out["outside"] = not bool(g.zone.contains(np.array(x0)))
     if init is not None:
         out["search"] = every_estimator(sim.measurements, g, init, sim.truth)
     return out
 
 
 def main() -> None:
-    a, all_rows = _common.each_count(one, __doc__.splitlines()[0], "draws", 60, {"quasi": 0.0, "first": 0.0})
-    rows = saved(all_rows, a.out, f"monostatic_layouts_quasi{a.quasi:g}.json", "wrong and ok / ok")
+    a, all_rows = _common.each_count(one, __doc__.splitlines()[0], "draws", 60, {"quasi": 0.0, "first": 0.0,
+                                                                                         "spread": 1.0})
+    rows = saved(all_rows, a.out, f"monostatic_layouts_quasi{a.quasi:g}_spread{a.spread:g}.json", "wrong and ok / ok")
+    print(f"  {sum(r['outside'] for r in rows)} of {len(rows)} targets start outside the zone")
     for name in fd.ESTIMATORS:
         print(f"  {name:10s} {sum(r['search'][name][3] for r in rows)} / "
               f"{sum(r['search'][name][0] == 'ok' for r in rows)}")
     for r in rows:
         bad = [n for n, v in r["search"].items() if v[3]]
         if bad:
-            print(f"  draw {r['draw']} ({r['pairs']} pairs, {r['radars']} radar(s), start {r['x0']}): wrong and ok "
+            print(f"  draw {r['draw']} ({r['pairs']} pairs, {r['radars']} radar(s), start {r['x0']}"
+                  f"{', outside the zone' if r['outside'] else ''}): wrong and ok "
                   + ", ".join(f"{n} {r['search'][n][1]:.0f} m at sigma {r['search'][n][2]:.0f} m" for n in bad))
 
 
