@@ -522,3 +522,15 @@ def test_following_the_zone_advice_never_ends_in_a_confident_mirror_track(
     for p in (truth.states[0], mirrored(truth.states[:1], geometry)[0]):
         side = planes[:, 2:] @ (p[:2] - planes[0, :2])
         assert side[0] * side[1] < 0 and min(abs(side)) > 1e3
+
+
+def test_a_default_zone_is_said_to_be_an_assumption(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The zone line says when the zone is the default rule's (every verdict assumes it), not when it is given."""
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--case", "a", "--start-x", "45000", "--seed", "1", "--out", str(sim)]) == 0
+    args = ["track", str(sim / "measurements.csv"), "--estimator", "init"]
+    capsys.readouterr()
+    assert main(args) == 0
+    assert "(the default rule's; every verdict assumes the target starts in it" in capsys.readouterr().out
+    assert main([*args, "--zone", "2000", "48000", "-5000", "5000"]) == 0
+    assert "default rule" not in capsys.readouterr().out

@@ -188,8 +188,12 @@ def _run(args: argparse.Namespace) -> int:
     if not args.json:
         z = geom.zone
         height = "" if z.altitude is None else f", height {z.altitude[0]:g}..{z.altitude[1]:g} m (3-D)"
+        # the zone is every estimator's prior: a default one is an assumption the user has not made yet
+        rule = " (the default rule's; every verdict assumes the target starts in it: --zone if it may not)" \
+            if geom.zone_limits.empty else ""
         print(f"geometry {spec} ({geom.n_pairs} pair(s)); zone along {z.along[0]:g}..{z.along[1]:g} m, across "
-              f"{z.across[0]:g}..{z.across[1]:g} m{height} in the sensors' frame, speed up to {z.speed_max:g} m/s")
+              f"{z.across[0]:g}..{z.across[1]:g} m{height} in the sensors' frame, speed up to {z.speed_max:g} m/s"
+              f"{rule}")
     if args.estimator == "init":
         status = _report_initiation(args, init, window, geom, truth, where)
     else:
