@@ -11,16 +11,19 @@ the receiver in a random direction); one to three bistatic pairs follow
 (baselines longer than 8 km), and with probability one half a second
 radar replaces the last of them.  With ``--spread F`` the target starts
 in the zone's box scaled by ``F`` about its centre (``F`` > 1: often
-outside the zone, where a user's target may well be).  Only the default smoother (with its
+outside the zone, where a user's target may well be); with ``--zone-scale
+F`` the geometry's zone is its default scaled so (``[zone]`` limits: the
+user who says where the target may be).  Only the default smoother (with its
 whole-recording searches) is run as the reference, so each estimator's
 row is what a user gets.
 
-Run: ``python studies/monostatic_layouts.py [--draws 60] [--first 0] [--quasi 0] [--spread 1] [--out DIR]``
+Run: ``python studies/monostatic_layouts.py [--draws 60] [--first 0] [--quasi 0] [--spread 1] [--zone-scale 1] [--out DIR]``
 (about 10 minutes per 60 draws on 2 cores).
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import _common  # the repository root on the path, and the runner
@@ -37,6 +40,7 @@ from random_layouts import (
 
 import fgdoppler as fd
 from fgdoppler.analysis.workers import one_blas_thread
+from fgdoppler.zone import ZoneLimits
 
 
 def _radar(rng: np.random.Generator, quasi: float) -> fd.BistaticPair:
@@ -51,7 +55,7 @@ def _scaled(interval: tuple[float, float], factor: float) -> tuple[float, float]
     return mid - half, mid + half
 
 
-def draw(i: int, quasi: float = 0.0, spread: float = 1.0
+def draw(i: int, quasi: float = 0.0, spread: float = 1.0, zone_scale: float = 1.0
          ) -> tuple[fd.Geometry, tuple[float, float, float, float], np.random.Generator]:
     """Layout, start state and the generator that then simulates draw ``i`` (rule: module docstring)."""
     rng = np.random.default_rng([79, i])
@@ -62,6 +66,9 @@ def draw(i: int, quasi: float = 0.0, spread: float = 1.0
             pairs[-1] = _radar(rng, quasi)
         g = fd.Geometry(pairs=tuple(pairs), name=f"radar layout {i}")
         z = g.zone
+        if zone_scale != 1.0:
+            g = replace(g, zone_limits=ZoneLimits(along=_scaled(z.along, zone_scale),
+                                                     across=_scaled(z.across, zone_scale)))
         p = z.frame.points_to_world(np.array([[rng.uniform(*_scaled(z.along, spread)),
                                                 rng.uniform(*_scaled(z.across, spread))]]))[0]
         sensors = np.array([s for pair in pairs for s in (pair.tx, pair.rx)])
@@ -72,9 +79,10 @@ def draw(i: int, quasi: float = 0.0, spread: float = 1.0
 
 
 @one_blas_thread
-def one(k: int, quasi: float = 0.0, first: float = 0.0, spread: float = 1.0) -> dict[str, Any]:
+def one(k: int, quasi: float = 0.0, first: float = 0.0, spread: float = 1.0, zone_scale: float = 1.0
+        ) -> dict[str, Any]:
     i = k + int(first)
-    g, x0, rng = draw(i, quasi, spread)
+    g, x0, rng = draw(i, quasi, spread, zone_scale)
     out, sim, init = recorded(i, g, x0, rng)
     out["radars"] = sum(p.baseline < 1e3 for p in g.pairs)
     out["outside"] = not bool(g.zone.contains(np.array(x0)))
@@ -85,8 +93,10 @@ def one(k: int, quasi: float = 0.0, first: float = 0.0, spread: float = 1.0) -> 
 
 def main() -> None:
     a, all_rows = _common.each_count(one, __doc__.splitlines()[0], "draws", 60, {"quasi": 0.0, "first": 0.0,
-                                                                                         "spread": 1.0})
-    rows = saved(all_rows, a.out, f"monostatic_layouts_quasi{a.quasi:g}_spread{a.spread:g}.json", "wrong and ok / ok")
+                                                                                         "spread": 1.0,
+                                                                                         "zone_scale": 1.0})
+    rows = saved(all_rows, a.out, f"monostatic_layouts_quasi{a.quasi:g}_spread{a.spread:g}_zone{a.zone_scale:g}.json",
+                 "wrong and ok / ok")
     print(f"  {sum(r['outside'] for r in rows)} of {len(rows)} targets start outside the zone")
     for name in fd.ESTIMATORS:
         print(f"  {name:10s} {sum(r['search'][name][3] for r in rows)} / "

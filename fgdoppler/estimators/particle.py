@@ -75,6 +75,7 @@ same input and settings give the same track.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -853,7 +854,7 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
             events.append(Event(time=t, message=(
                 f"the mode moved to another peak of the posterior, "
                 f"{float(np.linalg.norm((there - here)[:post.model.dim])):.0f} m away, "
-                f"more probable by a factor {np.exp(gain):.3g} (log density +{gain:.2f})")))
+                f"more probable by a factor {_factor(gain)} (log density +{gain:.2f})")))
         last_mode = (post.t_anchor, x_mode)
         return post.spread_about(x_mode, t)
 
@@ -979,3 +980,11 @@ def _update(post: _Posterior, gate: NISGate, t: float, pair: NDArray[np.intp], z
     post.logpost = post.logpost + ll
     post.data.add(tr[keep], pair[keep], z[keep], sigma[keep])
     return float(logsumexp(post.logw) - before) - norm
+
+
+def _factor(log_gain: float) -> str:
+    """:math:`e^g` as text, also where it overflows a float (a mode switch across a gain of thousands)."""
+    decimal = log_gain / math.log(10.0)
+    if decimal < 300.0:
+        return f"{math.exp(log_gain):.3g}"
+    return f"10^{decimal:.0f}"

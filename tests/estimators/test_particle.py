@@ -373,3 +373,15 @@ def test_reanchoring_keeps_a_gaussian_posterior(case: str, x: float, seed: int) 
         assert d @ np.linalg.solve(a.covariances[-1], d) < 0.5
         ratio = np.linalg.eigvals(np.linalg.solve(a.covariances[-1], b.covariances[-1])).real
         assert 0.5 < ratio.min() and ratio.max() < 2.0
+
+
+def test_a_mode_switchs_factor_is_written_even_where_exp_overflows() -> None:
+    import math
+    import warnings
+
+    from fgdoppler.estimators.particle import _factor
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert _factor(2.0) == f"{math.exp(2.0):.3g}"
+        assert _factor(5000.0) == f"10^{5000.0 / math.log(10.0):.0f}" == "10^2171"
