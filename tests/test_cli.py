@@ -534,3 +534,39 @@ def test_a_default_zone_is_said_to_be_an_assumption(tmp_path: Path, capsys: pyte
     assert "(the default rule's; every verdict assumes the target starts in it" in capsys.readouterr().out
     assert main([*args, "--zone", "2000", "48000", "-5000", "5000"]) == 0
     assert "default rule" not in capsys.readouterr().out
+
+
+def test_one_pairs_mirror_is_settled_by_the_half_plane_the_hint_gives(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """One bistatic pair: a track and its mirror image across the baseline give the same Doppler.
+
+    The ``data`` finding says so and the command prints the two half planes
+    of that line; run with the one that holds the truth, the track is on the
+    truth's side (and the finding is gone).
+    """
+    import re
+
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--case", "a", "--start-x", "25000", "--start-y", "2000", "--seed", "1",
+                 "--out", str(sim)]) == 0
+    text = (sim / "measurements.csv").read_text().splitlines()
+    one = tmp_path / "one.csv"
+    one.write_text("\n".join([text[0], *(r for r in text[1:] if r.split(",")[1] == "0")]) + "\n")
+    args = ["track", str(one), "--geometry", str(sim / "geometry.toml"), "--estimator", "smoother", "--json"]
+    capsys.readouterr()
+    assert main(args) == 0
+    captured = capsys.readouterr()
+    hint = re.search(r"--half-plane (\S+) (\S+) (\S+) (\S+) puts .* --half-plane (\S+) (\S+) (\S+) (\S+) on",
+                     captured.err)
+    assert hint is not None and json.loads(captured.out)["status"] == "doubtful"
+    planes = np.array(hint.groups(), dtype=float).reshape(2, 4)
+    np.testing.assert_allclose(planes[0, 1], 0.0, atol=1e-9)  # the baseline y = 0 of pair 0
+    truth = fd.Trajectory.from_csv(sim / "truth.csv")
+    holds = [k for k in range(2) if planes[k, 2:] @ (truth.states[0, :2] - planes[k, :2]) > 0]
+    assert len(holds) == 1
+    assert main([*args, "--half-plane", *hint.groups()[4 * holds[0]:4 * holds[0] + 4]]) == 0
+    captured = capsys.readouterr()
+    result = json.loads(captured.out)
+    assert "hint" not in captured.err
+    assert not any("lie on one line" in r["message"] for r in result["reasons"])
+    assert np.sign(result["states"][-1][1]) == np.sign(truth.states[-1, 1])

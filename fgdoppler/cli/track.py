@@ -222,17 +222,28 @@ def _print_verdict(status: str, reasons: Any) -> None:
 
 #: The words of the smoother's ``competing`` finding when its rival is the reported track's mirror image.
 MIRROR_CUE = "mirror image across the sensors' line: if the target's side of that line is known"
+#: The words of the ``data`` finding when the sensors of the pairs that reported lie on one line.
+COLLINEAR_CUE = "lie on one line: the mirror image of the track across it fits the data exactly"
 
 
-def _print_half_plane_hint(reasons: Any, geom: Geometry, args: argparse.Namespace) -> None:
-    """Where a finding says the rival track is the mirror image, the ``--half-plane`` options of either side of
-    the sensors' least-squares line (the line the mirror is taken across), in the user's coordinates."""
-    if args.half_plane is not None or geom.dim != 2 or not any(MIRROR_CUE in r.message for r in reasons):
+def _print_half_plane_hint(reasons: Any, geom: Geometry, args: argparse.Namespace, pairs: Any) -> None:
+    """Where a finding says a mirror image fits the data, the ``--half-plane`` options of either side of the
+    line it is taken across, in the user's coordinates: the least-squares line of every sensor (the smoother's
+    mirror rival) or the line the sensors of the reporting ``pairs`` lie on (the ``data`` finding)."""
+    if args.half_plane is not None or geom.dim != 2:
         return
-    c, u, _ = principal_line(np.vstack([geom.tx, geom.rx])[:, :2])
-    n = np.array([-u[1], u[0]])
+    if any(COLLINEAR_CUE in r.message for r in reasons):
+        used = np.unique(np.asarray(pairs, dtype=int))
+        sensors = np.vstack([geom.tx[used], geom.rx[used]])
+    elif any(MIRROR_CUE in r.message for r in reasons):
+        sensors = np.vstack([geom.tx, geom.rx])
+    else:
+        return
+    c, u, _ = principal_line(sensors[:, :2])
+    c, u = c + 0.0, u + 0.0  # no "-0" printed
+    n = np.array([-u[1], u[0]]) + 0.0
     side = " ".join(f"{v:.6g}" for v in (*c, *n))
-    other = " ".join(f"{v:.6g}" for v in (*c, *-n))
+    other = " ".join(f"{v:.6g}" for v in (*c, *(0.0 - n)))
     print(f"  hint: the sensors' line passes through ({c[0]:.6g}, {c[1]:.6g}) along ({u[0]:.6g}, {u[1]:.6g}); "
           f"--half-plane {side} puts the target on one side of it, --half-plane {other} on the other",
           file=sys.stderr)
@@ -271,6 +282,7 @@ def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: A
     figure = _plot_landscape(args, init, window, geom, truth) if args.plot else None
     _write(args, init.csv_text(header=tuple(_csv_header(where))), text, figure)
     _print_verdict(init.status, init.reasons)
+    _print_half_plane_hint(init.reasons, geom, args, window.pair)
     if args.json:
         emit_json(payload)
         return str(init.status)
@@ -387,7 +399,7 @@ def _run_tracker(args: argparse.Namespace, settings: Any, init: Any, meas: Any, 
         figure = plotting.figure_bytes(ax, args.plot.suffix.lower().lstrip("."))
     _write(args, result.csv_text(header=_csv_header(where)), result.json_text(extra=where), figure)
     _print_verdict(result.status, result.reasons)
-    _print_half_plane_hint(result.reasons, model.geometry, args)
+    _print_half_plane_hint(result.reasons, model.geometry, args, meas.pair)
     if args.json:
         emit_json({**result.to_dict(all_estimates=False), **where})
         return str(result.status)
