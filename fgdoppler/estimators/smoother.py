@@ -36,8 +36,9 @@ step that reduces the cost), ``covariance`` (indeterminate marginals),
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import TYPE_CHECKING, Protocol
 
 import gtsam
@@ -447,10 +448,11 @@ def _boundary_reasons(prob: _Problem, x: FloatArray, max_iterations: int) -> lis
 
 
 def _wall_reason(zone: Zone, x: FloatArray, inside: float, free: FloatArray, free_cost: float,
-                 searched: str = "", advice: str | None = None) -> Reason:
+                 searched: str = "", advise: Callable[[], str] | None = None) -> Reason:
     """The ``boundary`` finding for a track ``x`` held by the wall (data cost ``inside``) and the best track
     found without it (``free``, cost ``free_cost``; ``searched`` says where it was looked for, and whether the
-    start found lies at its edge; ``advice`` the zone to try, by default the one that holds ``free``'s start)."""
+    start found lies at its edge; ``advise`` gives the zone to try, asked only when the finding is
+    ``doubtful`` — by default the one that holds ``free``'s start)."""
     excess, _ = zone.excess(x[0])
     gain = inside - free_cost
     limit = float(chi2.ppf(0.95, 1))
@@ -463,7 +465,7 @@ def _wall_reason(zone: Zone, x: FloatArray, inside: float, free: FloatArray, fre
     if gain > limit:
         return Reason(code="boundary", status="doubtful", message=(
             f"{held}: the data prefer a start outside the zone (lower by {gain:.1f} > {limit:.2f}); widen the "
-            f"zone to hold that start, {advice or 'e.g. ' + zone.reaching(free[0]).options()}"))
+            f"zone to hold that start, {advise() if advise else 'e.g. ' + zone.reaching(free[0]).options()}"))
     return Reason(code="boundary", status="ok", message=f"{held}: the data do not prefer a start outside it")
 
 
@@ -513,17 +515,18 @@ def _beyond_wall_2d(measurements: Measurements, model: TrackingModel, settings: 
                              half_plane=half_plane, memo=memo)
     if found is None:
         return None
-    best, inside, searched, advice = found
-    return _wall_reason(zone, sol.states, inside, best.states, best.cost, searched, advice)
+    best, inside, searched, advise = found
+    return _wall_reason(zone, sol.states, inside, best.states, best.cost, searched, advise)
 
 
 def _best_outside_2d(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
                      sol: SmootherSolution, window: Measurements, wide_zone: Zone, progress: Progress | None, *,
                      half_plane: HalfPlane | None, memo: SearchMemo | None
-                     ) -> tuple[SmootherSolution, float, str, str] | None:
+                     ) -> tuple[SmootherSolution, float, str, Callable[[], str]] | None:
     """The lowest-cost track without the zone wall from ``sol`` and from both initiations over ``wide_zone``
-    (:func:`_beyond_wall_2d` says which), ``sol``'s own data cost, where it was searched, and the zone to
-    advise (:func:`_zone_advice`; ``None``: the smoother could start from none of them)."""
+    (:func:`_beyond_wall_2d` says which), ``sol``'s own data cost, where it was searched, and what gives the
+    zone to advise (:func:`_zone_advice`, which costs a smoother run: asked only for a ``doubtful`` finding;
+    ``None``: the smoother could start from none of them)."""
     from fgdoppler.estimators.initiation import InitiationSettings, initiate
 
     wide = model.with_zone(wide_zone)
@@ -558,8 +561,8 @@ def _best_outside_2d(measurements: Measurements, model: TrackingModel, settings:
         if _at_edge(w, best.states[0]) else ""
     searched = (f" (searched to {w.speed_max:.0f} m/s, along {w.along[0] / 1e3:.1f} to "
                 f"{w.along[1] / 1e3:.1f} km, across {w.across[0] / 1e3:.1f} to {w.across[1] / 1e3:.1f} km{edge})")
-    return best, inside, searched, _zone_advice(measurements, model, settings, best, progress,
-                                                half_plane=half_plane, memo=memo)
+    return best, inside, searched, partial(_zone_advice, measurements, model, settings, best, progress,
+                                           half_plane=half_plane, memo=memo)
 
 
 def _zone_advice(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
@@ -668,7 +671,7 @@ def _outside_zone_2d(measurements: Measurements, model: TrackingModel, settings:
                              half_plane=half_plane, memo=memo)
     if found is None:
         return None
-    best, inside, searched, advice = found
+    best, inside, searched, advise = found
     excess, _ = zone.excess(best.states[0])
     gain = inside - best.cost
     if gain <= OUTSIDE_GAIN or not np.any(excess != 0.0):
@@ -681,7 +684,7 @@ def _outside_zone_2d(measurements: Measurements, model: TrackingModel, settings:
         f"{np.linalg.norm(best.states[0, :d] - sol.states[0, :d]) / 1e3:.1f} km away at "
         f"{np.linalg.norm(best.states[0, d:]):.0f} m/s (excess along, across, speed: "
         + ", ".join(f"{v:.3g}" for v in excess) + "): the target may be outside the zone; widen it to hold that "
-        f"start, {advice}"))
+        f"start, {advise()}"))
 
 
 def _covariances(prob: _Problem, x: FloatArray) -> tuple[FloatArray | None, str]:
