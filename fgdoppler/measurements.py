@@ -354,8 +354,7 @@ class Measurements:
                 raise MeasurementError(f"{where}: duplicate measurement for time {t[j]}, pair {p[j]} "
                                        f"(first at line {seen[key]})")
             seen[key] = int(table.lines[j])
-        order = np.lexsort((p, t))
-        return cls(time=t[order], pair=p[order], doppler=z[order], sigma=s[order])
+        return cls.from_arrays(t, p, z, s, sort=True)
 
 
 #: Physical bounds of every value (inclusive): a time beyond 30,000 years, a bistatic range rate

@@ -230,8 +230,7 @@ class Zone:
             bounds.append((float(lo), float(hi)))
         speed = float(np.linalg.norm(x[d:]))
         return replace(self, along=bounds[0], across=bounds[1], altitude=bounds[2] if d == 3 else None,
-                       speed_max=max(self.speed_max, (1.0 + margin) * speed) if speed > self.speed_max
-                       else self.speed_max)
+                       speed_max=(1.0 + margin) * speed if speed > self.speed_max else self.speed_max)
 
     def options(self) -> str:
         """The command-line options that give this zone (``--zone``, ``--altitude``, ``--speed-max``), its
