@@ -524,6 +524,60 @@ def test_following_the_zone_advice_never_ends_in_a_confident_mirror_track(
         assert side[0] * side[1] < 0 and min(abs(side)) > 1e3
 
 
+def test_the_zone_hint_is_the_union_of_the_advised_zones() -> None:
+    """Zones advised by two findings (from :meth:`Zone.reaching`, printed by :meth:`Zone.options`): the hint is
+    their union box, bounds rounded outward as each was; one advice, or advice in an ``ok`` finding, gives none."""
+    from fgdoppler.cli.track import zone_hint
+    from fgdoppler.estimators.verdict import Reason
+
+    for altitude in (None, (0.0, 3000.0)):
+        d = 2 if altitude is None else 3
+        zone = fd.Zone(along=(1000.0, 30000.0), across=(-3000.0, 3000.0), speed_max=200.0, altitude=altitude,
+                       frame=fd.Frame.identity(d))
+        a = zone.reaching(np.r_[[20000.0, 8000.5], [0.0] * (d - 2), [250.0], [0.0] * (d - 1)])
+        b = zone.reaching(np.r_[[35000.0, -9000.0], [5000.0] * (d - 2), [0.0] * d])
+        said = [Reason(code="boundary", status="doubtful", message=f"widen it, e.g. {a.options()}"),
+                Reason(code="reference", status="doubtful", message=f"the smoother's: e.g. {b.options()}")]
+        union = fd.Zone(along=(1000.0, b.along[1]), across=(b.across[0], a.across[1]), speed_max=a.speed_max,
+                        altitude=None if altitude is None else b.altitude, frame=fd.Frame.identity(d))
+        assert zone_hint(said) == union.options()
+        assert zone_hint(said[:1]) is None
+        assert zone_hint([said[0], Reason(code="reference", status="ok", message=said[1].message)]) is None
+
+
+def test_findings_advising_different_zones_get_one_that_holds_them_all(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An EKF on the quasi-monostatic recording of seed 8: the initiation advises a zone holding its window's
+    start, the offline smoother one holding the whole recording's start and its mirror image's; only the
+    hint's zone holds both, and the truth's start."""
+    import re
+
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--geometry", str(QUASI_MONOSTATIC), "--start-x", "15000", "--start-y",
+                 "12000", "--velocity", "80", "-60", "--seed", "8", "--out", str(sim)]) == 0
+    capsys.readouterr()
+    assert main(["track", str(sim / "measurements.csv"), "--estimator", "ekf"]) == 0
+    err = capsys.readouterr().err
+    geometry = fd.Geometry.from_toml(sim / "geometry.toml")
+
+    def zone(groups: tuple[str, ...]) -> fd.Zone:
+        v = tuple(map(float, groups))
+        return fd.Zone(frame=geometry.frame, along=v[0:2], across=v[2:4], speed_max=v[4])
+
+    pattern = r"--zone (-?\d+) (-?\d+) (-?\d+) (-?\d+) --speed-max (\d+)"
+    advised = {m.groups() for m in re.finditer(r"e\.g\. " + pattern, err)}
+    hint = re.search(r"hint: the findings above advise different zones; one holding every start they name: "
+                     + pattern, err)
+    assert len(advised) == 2 and hint is not None
+    held = zone(hint.groups())
+    for a in map(zone, advised):
+        assert all(h[0] <= v[0] and v[1] <= h[1] for h, v in zip(held.intervals, a.intervals, strict=True))
+        assert held.speed_max >= a.speed_max
+    truth = fd.Trajectory.from_csv(sim / "truth.csv")
+    assert bool(held.contains(truth.states[0])) and sum(bool(a.contains(truth.states[0]))
+                                                        for a in map(zone, advised)) == 1
+
+
 def test_a_default_zone_is_said_to_be_an_assumption(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The zone line says when the zone is the default rule's (every verdict assumes it), not when it is given."""
     sim = tmp_path / "sim"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 from dataclasses import fields
 from pathlib import Path
@@ -249,6 +250,33 @@ def _print_half_plane_hint(reasons: Any, geom: Geometry, args: argparse.Namespac
           file=sys.stderr)
 
 
+#: The zone options a finding advises (:meth:`~fgdoppler.zone.Zone.options`' form).
+ZONE_ADVICE = re.compile(r"--zone (-?\d+) (-?\d+) (-?\d+) (-?\d+)(?: --altitude (-?\d+) (-?\d+))? --speed-max (\d+)")
+
+
+def zone_hint(reasons: Any) -> str | None:
+    """The options of the smallest zone holding every zone the ``doubtful``/``failed`` findings advise, where
+    they advise more than one (e.g. the initiation's, for its window's start alone, and the offline smoother's,
+    for the whole recording's start and its mirror image's); ``None`` otherwise.  Each advised zone holds the
+    default one, so their union box is one a user can give and every start they name lies in it."""
+    advised = {m.groups() for r in reasons if r.status != "ok" for m in ZONE_ADVICE.finditer(r.message)}
+    if len(advised) < 2:
+        return None
+    v = np.array([[np.nan if g is None else float(g) for g in a] for a in advised])
+    lo, hi = np.min(v[:, 0:6:2], axis=0), np.max(v[:, 1:6:2], axis=0)
+    alt = "" if np.isnan(lo[2]) else f" --altitude {lo[2]:.0f} {hi[2]:.0f}"
+    return (f"--zone {lo[0]:.0f} {hi[0]:.0f} {lo[1]:.0f} {hi[1]:.0f}{alt} "
+            f"--speed-max {np.max(v[:, 6]):.0f}")
+
+
+def _print_zone_hint(reasons: Any) -> None:
+    """Where findings advise different zones, one that holds them all (:func:`zone_hint`)."""
+    hint = zone_hint(reasons)
+    if hint is not None:
+        print(f"  hint: the findings above advise different zones; one holding every start they name: {hint}",
+              file=sys.stderr)
+
+
 def _print_events(events: Any, limit: int = 10) -> None:
     """The first events and, when there are more than ``limit``, the last one too: a run's closing summary."""
     events = list(events)
@@ -283,6 +311,7 @@ def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: A
     _write(args, init.csv_text(header=tuple(_csv_header(where))), text, figure)
     _print_verdict(init.status, init.reasons)
     _print_half_plane_hint(init.reasons, geom, args, window.pair)
+    _print_zone_hint(init.reasons)
     if args.json:
         emit_json(payload)
         return str(init.status)
@@ -400,6 +429,7 @@ def _run_tracker(args: argparse.Namespace, settings: Any, init: Any, meas: Any, 
     _write(args, result.csv_text(header=_csv_header(where)), result.json_text(extra=where), figure)
     _print_verdict(result.status, result.reasons)
     _print_half_plane_hint(result.reasons, model.geometry, args, meas.pair)
+    _print_zone_hint(result.reasons)
     if args.json:
         emit_json({**result.to_dict(all_estimates=False), **where})
         return str(result.status)
