@@ -24,6 +24,8 @@ __all__ = [
     "Geometry",
     "bistatic_range",
     "ellipse_tangent",
+    "is_mirror_image",
+    "mirrored",
     "paper_geometry",
     "principal_line",
 ]
@@ -60,6 +62,44 @@ def principal_line(points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.f
     c = p.mean(axis=0)
     _, s, vt = np.linalg.svd(p - c)
     return c, vt[0], s
+
+
+def mirrored(states: ArrayLike, geometry: Geometry) -> NDArray[np.float64]:
+    r"""2-D states reflected across the least-squares line through the sensors (every pair's Tx and Rx).
+
+    With :math:`\mathbf c` the sensors' centroid and :math:`\mathbf n` the unit normal of their principal
+    direction, :math:`\mathbf p \to \mathbf c + \mathbf M(\mathbf p - \mathbf c)` and
+    :math:`\mathbf v \to \mathbf M\mathbf v`, :math:`\mathbf M = \mathbf I - 2\mathbf n\mathbf n^\top`.
+    With every sensor on that line the reflected track gives exactly the same Doppler.
+
+    Raises
+    ------
+    ValueError
+        For states other than 2-D ``(n, 4)``.
+    """
+    x = np.asarray(states, dtype=float)
+    if x.ndim != 2 or x.shape[1] != 4:
+        raise ValueError(f"mirrored takes 2-D states (n, 4), got {x.shape}")
+    c, u, _ = principal_line(np.vstack([geometry.tx, geometry.rx])[:, :2])
+    m = np.eye(2) - 2.0 * np.outer([-u[1], u[0]], [-u[1], u[0]])
+    return np.column_stack([c + (x[:, :2] - c) @ m, x[:, 2:] @ m])
+
+
+#: What a finding says of a rival that is the reported solution's mirror image (:func:`is_mirror_image`); the
+#: command line prints the ``--half-plane`` options of either side of the sensors' line on these words.
+MIRROR_ADVICE = ("mirror image across the sensors' line: if the target's side of that line is known, give it "
+                 "(--half-plane)")
+
+
+def is_mirror_image(point: ArrayLike, other: ArrayLike, geometry: Geometry) -> bool:
+    r"""Whether the 2-D position ``other`` is ``point``'s mirror image across the sensors' line (:func:`mirrored`),
+    to within a quarter of their distance: :math:`\lVert \mathbf q - \mathbf p'\rVert <
+    \tfrac14\lVert \mathbf q - \mathbf p\rVert`, :math:`\mathbf p' = \mathbf c + \mathbf M(\mathbf p -
+    \mathbf c)` the image of :math:`\mathbf p`."""
+    p = np.asarray(point, dtype=float)[:2]
+    q = np.asarray(other, dtype=float)[:2]
+    image = mirrored(np.r_[p, 0.0, 0.0][None], geometry)[0, :2]
+    return bool(np.linalg.norm(q - image) < 0.25 * np.linalg.norm(q - p))
 
 
 @dataclass(frozen=True)

@@ -524,6 +524,28 @@ def test_following_the_zone_advice_never_ends_in_a_confident_mirror_track(
         assert side[0] * side[1] < 0 and min(abs(side)) > 1e3
 
 
+def test_an_initiation_whose_alternative_is_the_mirror_image_gets_the_half_planes(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--estimator init`` on the quasi-monostatic recording of seed 1: the window fits the start and its
+    mirror image equally (costs 5.49 and 5.50 when measured); the ``ambiguous`` finding names the mirror and the
+    hint's half planes put the start and that alternative on opposite sides."""
+    import re
+
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--geometry", str(QUASI_MONOSTATIC), "--start-x", "15000", "--start-y",
+                 "12000", "--velocity", "80", "-60", "--seed", "1", "--out", str(sim)]) == 0
+    capsys.readouterr()
+    assert main(["track", str(sim / "measurements.csv"), "--estimator", "init", "--json"]) == 0
+    captured = capsys.readouterr()
+    res = json.loads(captured.out)
+    found = [r for r in res["reasons"] if r["code"] == "ambiguous" and "mirror image" in r["message"]]
+    hint = re.search(r"--half-plane (\S+) (\S+) (\S+) (\S+) puts", captured.err)
+    assert found and found[0]["status"] == "doubtful" and hint is not None
+    plane = np.array(hint.groups(), dtype=float)
+    sides = [plane[2:] @ (np.asarray(x)[:2] - plane[:2]) for x in (res["x_start"], res["alternatives"][0]["state"])]
+    assert sides[0] * sides[1] < 0
+
+
 def test_the_zone_hint_is_the_union_of_the_advised_zones() -> None:
     """Zones advised by two findings (from :meth:`Zone.reaching`, printed by :meth:`Zone.options`): the hint is
     their union box, bounds rounded outward as each was; one advice, or advice in an ``ok`` finding, gives none."""

@@ -179,3 +179,32 @@ def test_design_contract_names_import_from_the_package() -> None:
     assert fd.bistatic_doppler(states, geom).shape == (1, 2)
     assert fd.bistatic_doppler_jacobian(states, geom).shape == (1, 2, 4)
     assert isinstance(fd.observability_measure(states[0], geom, [np.arange(3.0), np.arange(3.0)]), float)
+
+
+def test_a_mirror_image_is_recognised_within_a_quarter_of_the_distance() -> None:
+    """``is_mirror_image``: the reflection of a point across the sensors' least-squares line is its image (the
+    Doppler of the reflected state equals the original's when the sensors lie on the line), a point nearer the
+    image than a quarter of the two points' distance is too, one farther off is not; the same after moving
+    and turning the whole layout."""
+    from fgdoppler.geometry import is_mirror_image, mirrored
+
+    rng = np.random.default_rng(4)
+    on_line = fd.Geometry(pairs=(fd.BistaticPair(tx=(0.0, 0.0), rx=(30e3, 0.0)),
+                                 fd.BistaticPair(tx=(10e3, 0.0), rx=(45e3, 0.0))))
+    x = np.array([[20e3, 6e3, 40.0, -90.0]])
+    np.testing.assert_allclose(fd.bistatic_doppler(mirrored(x, on_line), on_line), fd.bistatic_doppler(x, on_line),
+                               rtol=0, atol=1e-9)
+    for _ in range(5):
+        angle, shift = rng.uniform(0, 2 * np.pi), rng.uniform(-1e5, 1e5, 2)
+        rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+        g = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=rot @ p.tx + shift, rx=rot @ p.rx + shift)
+                                    for p in on_line.pairs))
+        p = rot @ x[0, :2] + shift
+        image = mirrored(np.r_[p, 0.0, 0.0][None], g)[0, :2]
+        apart = np.linalg.norm(image - p)
+        np.testing.assert_allclose(apart, 12e3, rtol=1e-9)
+        side = rot @ np.array([1.0, 0.0])  # along the line: keeps the distance to p about the same
+        assert is_mirror_image(p, image, g) and is_mirror_image(image, p, g)
+        assert is_mirror_image(p, image + 0.2 * apart * side, g)
+        assert not is_mirror_image(p, image + 0.3 * apart * side, g)
+        assert not is_mirror_image(p, p, g) and not is_mirror_image(p, p + 0.2 * apart * side, g)

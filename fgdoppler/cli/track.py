@@ -25,7 +25,7 @@ from fgdoppler.cli.common import (
 )
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
-from fgdoppler.geometry import Geometry, principal_line
+from fgdoppler.geometry import MIRROR_ADVICE, Geometry, principal_line
 
 __all__ = ["add_track"]
 
@@ -221,8 +221,9 @@ def _print_verdict(status: str, reasons: Any) -> None:
         print(f"  {r.status}: {r.message}", file=sys.stderr)
 
 
-#: The words of the smoother's ``competing`` finding when its rival is the reported track's mirror image.
-MIRROR_CUE = "mirror image across the sensors' line: if the target's side of that line is known"
+#: The words of a finding whose rival is the reported solution's mirror image (the smoother's ``competing``,
+#: the initiation's ``ambiguous``).
+MIRROR_CUE = MIRROR_ADVICE
 #: The words of the ``data`` finding when the sensors of the pairs that reported lie on one line.
 COLLINEAR_CUE = "lie on one line: the mirror image of the track across it fits the data exactly"
 
@@ -233,6 +234,7 @@ def _print_half_plane_hint(reasons: Any, geom: Geometry, args: argparse.Namespac
     mirror rival) or the line the sensors of the reporting ``pairs`` lie on (the ``data`` finding)."""
     if args.half_plane is not None or geom.dim != 2:
         return
+    reasons = [r for r in reasons if r.status != "ok"]  # a settled ambiguity (the filters' hypotheses) needs none
     if any(COLLINEAR_CUE in r.message for r in reasons):
         used = np.unique(np.asarray(pairs, dtype=int))
         sensors = np.vstack([geom.tx[used], geom.rx[used]])

@@ -80,7 +80,7 @@ from fgdoppler.estimators.marginals import marginal_covariances
 from fgdoppler.estimators.verdict import Event, Judged, Reason
 from fgdoppler.factors import X, region_factor
 from fgdoppler.frames import Frame
-from fgdoppler.geometry import Geometry
+from fgdoppler.geometry import MIRROR_ADVICE, Geometry, is_mirror_image
 from fgdoppler.graphs import chain_graph, chain_values, cv_graph
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.doppler import StackedTimes, cv_doppler, cv_doppler_jacobian, cv_information
@@ -574,10 +574,15 @@ def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: t
         far = max(float(np.linalg.norm(a.state[:d] - fit.x0[:d])) for a in alternatives)
         shares = _shares([fit.log_evidence, *(a.log_evidence for a in alternatives)])
         share = "" if shares is None else f", holding {1.0 - shares[0]:.1%} of its posterior in the zone"
+        images = [i + 1 for i, a in enumerate(alternatives)
+                  if d == 2 and settings.half_plane is None and is_mirror_image(fit.x0, a.state, w.geometry)]
+        mirror = "" if not images else (
+            f"; alternative {' and '.join(map(str, images))} {'is' if len(images) == 1 else 'are each'} the "
+            f"start's {MIRROR_ADVICE}")
         reasons.append(Reason(code="ambiguous", status="doubtful", message=(
             f"{len(alternatives)} other solution(s) fit the window as well (costs "
             + ", ".join(f"{a.cost:.1f}" for a in alternatives) + f" vs {fit.cost:.1f}; up to {far / 1e3:.1f} km "
-            f"away{share}): the window alone cannot tell them apart")))
+            f"away{share}): the window alone cannot tell them apart{mirror}")))
     return Initiation(
         method=settings.method, t_start=w.t0, t_end=w.t0 + float(w.scan_times[-1]),
         x_start=np.asarray(fit.x0, dtype=float), x_end=np.asarray(fit.x1, dtype=float),

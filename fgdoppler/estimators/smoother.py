@@ -61,6 +61,7 @@ from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.estimators.spread import MAX_SPAN, posterior_spread
 from fgdoppler.estimators.verdict import Event, Judged, Reason
 from fgdoppler.factors import X
+from fgdoppler.geometry import MIRROR_ADVICE, is_mirror_image
 from fgdoppler.measurements import Measurements, Scans
 from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.observation import DopplerModel, check_channels
@@ -1030,13 +1031,8 @@ def _rival_reason(found: Sequence[_Mode], best: _Mode, zone: Zone, geometry: Geo
             f"{zone.frame.points_to_local(end)[2]:.0f} m; reported sigma in that direction {sd:.0f} m): the data do "
             "not fix the track in 3-D"))
     mirror = ""
-    if geometry is not None and k == 2:
-        from fgdoppler.estimators.smoother_offsets import mirrored
-
-        image = mirrored(best.states[-1:], geometry)[0, :2]
-        if float(np.linalg.norm(rival.states[-1, :2] - image)) < 0.25 * apart:
-            mirror = ("; the other track is the reported one's mirror image across the sensors' line: if the "
-                      "target's side of that line is known, give it (--half-plane)")
+    if geometry is not None and k == 2 and is_mirror_image(end, rival.states[-1], geometry):
+        mirror = f"; the other track is the reported one's {MIRROR_ADVICE}"
     return Reason(code="competing", status="doubtful", message=(
         f"{head} (reported sigma in that direction {sd:.0f} m): the data do not tell the two apart, and the "
         f"reported covariance, about one of them, understates the error{mirror}"))

@@ -67,7 +67,7 @@ from fgdoppler.estimators.marginals import bordered_chain_solve, check_covarianc
 from fgdoppler.estimators.results import OffsetEstimate
 from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.estimators.smoother import _levenberg_marquardt, _Problem
-from fgdoppler.geometry import Geometry, principal_line
+from fgdoppler.geometry import mirrored
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.zone import Zone
@@ -242,27 +242,6 @@ def solve_with_offsets(measurements: Measurements, model: TrackingModel, setting
     return JointSolution(times=prob.times, states=x.copy(), offsets=OffsetEstimate(pairs=prob.pairs, values=b.copy(),
                                                                  covariance=sol.border_covariance),
                          covariances=sol.covariances, conditional=sol.conditional, cost=cost, notes=tuple(notes))
-
-
-def mirrored(states: FloatArray, geometry: Geometry) -> FloatArray:
-    r"""2-D states reflected across the least-squares line through the sensors (every pair's Tx and Rx).
-
-    With :math:`\mathbf c` the sensors' centroid and :math:`\mathbf n` the unit normal of their principal
-    direction, :math:`\mathbf p \to \mathbf c + \mathbf M(\mathbf p - \mathbf c)` and
-    :math:`\mathbf v \to \mathbf M\mathbf v`, :math:`\mathbf M = \mathbf I - 2\mathbf n\mathbf n^\top`.
-    With every sensor on that line the reflected track gives exactly the same Doppler.
-
-    Raises
-    ------
-    ValueError
-        For states other than 2-D ``(n, 4)``.
-    """
-    x = np.asarray(states, dtype=float)
-    if x.ndim != 2 or x.shape[1] != 4:
-        raise ValueError(f"mirrored takes 2-D states (n, 4), got {x.shape}")
-    c, u, _ = principal_line(np.vstack([geometry.tx, geometry.rx])[:, :2])
-    m = np.eye(2) - 2.0 * np.outer([-u[1], u[0]], [-u[1], u[0]])
-    return np.column_stack([c + (x[:, :2] - c) @ m, x[:, 2:] @ m])
 
 
 def mirror_solution(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,

@@ -81,7 +81,15 @@ def test_collinear_geometry_reports_mirror_and_half_plane_resolves_it() -> None:
     assert any(np.all(np.abs(a.state - mirror) < 1e-4 * sd) for a in r.alternatives)
     assert any(abs(a.cost - r.cost) < 1e-6 for a in r.alternatives)
     assert all(a.passes_chi2 for a in r.alternatives)
+    # the finding says which alternative is the mirror image, and how to settle it (the command line then
+    # prints the half planes); with the half plane given it says no mirror
+    from fgdoppler.geometry import MIRROR_ADVICE
+
+    found = next(x for x in r.reasons if x.code == "ambiguous")
+    image = next(i + 1 for i, a in enumerate(r.alternatives) if np.all(np.abs(a.state - mirror) < 1e-4 * sd))
+    assert f"alternative {image} is the start's {MIRROR_ADVICE}" in found.message
     north = initiate(w, g, InitiationSettings(half_plane=HalfPlane(point=(0.0, 0.0), normal=(0.0, 1.0))))
+    assert not any(MIRROR_ADVICE in x.message for x in north.reasons)
     assert north.x_start[1] > 0
     assert not any(a.state[1] < 0 for a in north.alternatives)
     assert np.linalg.norm(north.x_start[:2] - np.asarray(sc.x0[:2])) < 1e3
