@@ -175,6 +175,12 @@ class InitiationSettings:
         inliers — residuals within the 0.9999 quantile of a standard normal,
         3.89 σ, the trackers' default gate — and counts the outliers.  ILS
         stays the paper's Gaussian method.
+    sign_check : bool, default True
+        Where the window fails the verdict's χ² test, initiate again with the
+        Doppler of every pair negated, and of each pair alone, and report a
+        ``sign`` finding if one of them passes (:func:`sign_reasons`): a file
+        written with the opposite sign convention.  Costs nothing on a window
+        that fits.
     """
 
     method: Method = "lm"
@@ -191,6 +197,7 @@ class InitiationSettings:
     same_solution_m: float = 50.0
     same_solution_mps: float = 0.5
     huber_k: float | None = None
+    sign_check: bool = True
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -539,7 +546,58 @@ def initiate(
         fit = _refine_lm(w, model, settings, grid, threshold)
     else:
         fit = _refine_closed_form(w, model, settings, grid, candidates, threshold)
-    return _assemble(w, settings, fit, candidates, time.perf_counter() - t_begin)
+    result = _assemble(w, settings, fit, candidates, time.perf_counter() - t_begin)
+    if not settings.sign_check:
+        return result
+    found = sign_reasons(measurements, model, settings, result)
+    return replace(result, reasons=(*result.reasons, *found)) if found else result
+
+
+#: The data's sign convention, as a ``sign`` finding states it (docs/data-formats.md says the same).
+SIGN_CONVENTION = ("fgdoppler's doppler is the bistatic range rate, negative for a target closing on the pair; "
+                   "from a Doppler shift f_D in Hz, doppler = -wavelength * f_D")
+
+
+def sign_reasons(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
+                 result: Initiation) -> list[Reason]:
+    r"""A ``sign`` finding where the window fits only with some pairs' Doppler negated.
+
+    Negating a pair's Doppler is not a change of the target's state: the
+    bistatic range rate :math:`\dot r = \mathbf v \cdot (\mathbf u_T +
+    \mathbf u_R)` changes sign with :math:`\mathbf v`, but a track
+    flown backwards visits its positions in the reverse order, so a window
+    of measurements with the opposite sign convention fits no
+    constant-velocity track (on the paper's six scenarios, 20 windows each,
+    the negated windows cost 48–442 at the median against the 99.9 %
+    level 39.3, and a single pair negated 81–3,120).  So where ``result``
+    fails the verdict's χ² test (:data:`VERDICT_LEVEL`), the window is
+    initiated again with every pair's Doppler negated and, with more than
+    one pair, with each pair's alone; the cheapest of those that pass the
+    χ² test at ``settings.confidence`` is reported as a ``doubtful``
+    finding naming the pairs to negate.  A window that fails for another
+    reason (outliers, a manoeuvre, a wrong sigma) is not mended by a sign
+    and gets no finding.
+    """
+    if result.cost <= float(chi2.ppf(VERDICT_LEVEL, max(result.dof, 1))):
+        return []
+    pairs = [int(k) for k in np.unique(measurements.pair)]
+    flips = [pairs] + ([[k] for k in pairs] if len(pairs) > 1 else [])
+    quiet = replace(settings, sign_check=False)
+    passing = []
+    for flipped in flips:
+        sign = np.where(np.isin(measurements.pair, flipped), -1.0, 1.0)
+        again = initiate(replace(measurements, doppler=sign * measurements.doppler), model, quiet)
+        if again.passes_chi2:
+            passing.append((again.cost, flipped))
+    if not passing:
+        return []
+    cost, flipped = min(passing, key=lambda p: p[0])
+    which = "every pair" if flipped == pairs else "pair " + ", ".join(map(str, flipped))
+    return [Reason(code="sign", status="doubtful", message=(
+        f"with the Doppler of {which} negated the window fits (cost {cost:.2f}, passing the "
+        f"{settings.confidence:.0%} chi-square test, against {result.cost:.2f} as given): the data likely follow "
+        f"the opposite sign convention ({SIGN_CONVENTION}); if so, negate the doppler column"
+        + ("" if flipped == pairs else f" of {which}")))]
 
 
 def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: tuple[Candidate, ...],

@@ -535,7 +535,8 @@ def _best_outside_2d(measurements: Measurements, model: TrackingModel, settings:
 
     def window_starts() -> list[FloatArray]:
         try:
-            again = initiate(window, wide, InitiationSettings(huber_k=settings.huber_k, half_plane=half_plane))
+            again = initiate(window, wide, InitiationSettings(huber_k=settings.huber_k, half_plane=half_plane,
+                                                               sign_check=False))
         except ValueError:
             return []
         return [model.motion.propagate(x, sol.times - again.t_start)
@@ -774,7 +775,8 @@ def _recording_starts(measurements: Measurements, model: TrackingModel, settings
             measurements, model, settings, progress, per_pair=per_pair, half_plane=half_plane, k_best=k_best)))
     from fgdoppler.estimators.initiation import InitiationSettings, initiate, window_grid
 
-    init_settings = InitiationSettings(window="cv", huber_k=settings.huber_k, half_plane=half_plane, k_best=k_best)
+    init_settings = InitiationSettings(window="cv", huber_k=settings.huber_k, half_plane=half_plane, k_best=k_best,
+                                       sign_check=False)
     # The grid only has to find the basins, and its cost grows with the measurements it
     # scores: search a bounded, evenly spread subset, then let LM refine each candidate
     # against every measurement.

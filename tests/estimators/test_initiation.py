@@ -248,3 +248,52 @@ def test_the_initiation_carries_its_half_plane_in_its_own_coordinates() -> None:
     assert r.to_dict()["half_plane"] is not None
     assert initiate(sim.measurements.first_per_pair(20), model).half_plane is None
 
+
+
+def _negated(m: fd.Measurements, pairs: list[int]) -> fd.Measurements:
+    return fd.Measurements(time=m.time, pair=m.pair, doppler=np.where(np.isin(m.pair, pairs), -m.doppler, m.doppler),
+                           sigma=m.sigma)
+
+
+@pytest.mark.parametrize(("start", "seed"), [(45e3, 0), (5e3, 1)])
+def test_a_window_with_the_opposite_sign_convention_is_named(start: float, seed: int) -> None:
+    """Case a: the window as simulated gets no ``sign`` finding; with every pair's Doppler negated, or one pair's,
+    the window fails the verdict's χ² test and the finding names exactly the negated pairs, with the cost of
+    the window negated back — which is the window as simulated, so that cost is the simulated window's own.
+    The same in a moved and turned copy of the problem (the check runs in the sensors' frame); none with the
+    check off."""
+    from fgdoppler.geometry import Geometry
+
+    sc = fd.paper_scenario("a", start)
+    w = fd.simulate(sc, np.random.default_rng(seed)).measurements.first_per_pair(10)
+    plain = initiate(w, sc.geometry)
+    assert plain.passes_chi2 and not [r for r in plain.reasons if r.code == "sign"]
+    angle, shift = 0.7, np.array([3e5, -2e5])
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    moved = Geometry(pairs=tuple(fd.BistaticPair(tx=rot @ p.tx + shift, rx=rot @ p.rx + shift)
+                                 for p in sc.geometry.pairs))
+    for pairs, named in (([0, 1], "every pair"), ([1], "pair 1"), ([0], "pair 0")):
+        for geometry in (sc.geometry, moved):
+            r = initiate(_negated(w, pairs), geometry)
+            found = [x for x in r.reasons if x.code == "sign"]
+            assert not r.passes_chi2 and len(found) == 1 and found[0].status == "doubtful", (pairs, geometry.name)
+            assert f"with the Doppler of {named} negated the window fits (cost {plain.cost:.2f}," in found[0].message
+        off = initiate(_negated(w, pairs), sc.geometry, InitiationSettings(sign_check=False))
+        assert not [x for x in off.reasons if x.code == "sign"]
+
+
+def test_a_window_that_fails_for_another_reason_gets_no_sign_finding() -> None:
+    """Noise three times the stated sigma, or four 30-sigma outliers: the window fails the verdict's test, but
+    no negation of its pairs makes it fit, so no ``sign`` finding is made."""
+    sc = fd.paper_scenario("b", 25e3)
+    sim = fd.simulate(sc, np.random.default_rng(3))
+    w = sim.measurements.first_per_pair(10)
+    clean = fd.bistatic_doppler(sim.truth.at(w.time), sc.geometry)[np.arange(len(w)), w.pair]
+    noisy = fd.Measurements(time=w.time, pair=w.pair, doppler=clean + 3.0 * (w.doppler - clean), sigma=w.sigma)
+    jumps = np.zeros(len(w))
+    jumps[[3, 8, 12, 17]] = 30.0 * w.sigma[[3, 8, 12, 17]]
+    outliers = fd.Measurements(time=w.time, pair=w.pair, doppler=w.doppler + jumps, sigma=w.sigma)
+    for bad in (noisy, outliers):
+        r = initiate(bad, sc.geometry)
+        assert any(x.code == "chi2" and x.status == "doubtful" for x in r.reasons)
+        assert not [x for x in r.reasons if x.code == "sign"]
