@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import csv
 import re
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -105,7 +105,8 @@ def header_names(path: str | Path, *, comments: bool = False) -> tuple[str, ...]
 
 
 def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str, ...] = (),
-               what: str = "file", comments: bool = False) -> Table:
+               what: str = "file", comments: bool = False,
+               labels: Mapping[str, Mapping[str, float]] | None = None) -> Table:
     """Read a numeric CSV whose columns are those of ``header`` and any of ``optional``, in any order.
 
     The columns are matched by name (case-insensitively, surrounding spaces
@@ -126,6 +127,11 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
         What the file is, for messages ("measurement file").
     comments
         Skip lines starting with ``#``.
+    labels
+        Per column, text that stands for a number (surrounding spaces
+        ignored): the geometry's pair names in the ``pair`` column.  A field
+        of such a column that is neither a number nor a label is an error
+        that lists the labels.
 
     Raises
     ------
@@ -154,11 +160,25 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
         where = f"{path}:{line}"
         if len(fields) != len(names):
             raise CSVError(f"{where}: expected {len(names)} fields, got {len(fields)}")
-        values[j] = [parse_number(f, where, n) for f, n in zip(fields, names, strict=True)]
+        values[j] = [_field(f, where, n, (labels or {}).get(n)) for f, n in zip(fields, names, strict=True)]
         lines[j] = line
     columns = tuple(c for c in (*header, *optional) if c in names)
     order = [names.index(c) for c in columns]
     return Table(path=path, header=columns, values=values[:, order], lines=lines)
+
+
+def _field(text: str, where: str, name: str, labels: Mapping[str, float] | None) -> float:
+    """A number, or the number a label of the column stands for."""
+    if labels is None:
+        return parse_number(text, where, name)
+    if text.strip() in labels:
+        return labels[text.strip()]
+    try:
+        return parse_number(text, where, name)
+    except CSVError:
+        shown = text.strip() if len(text.strip()) <= 40 else text.strip()[:40] + "..."
+        raise CSVError(f"{where}: {name} {shown!r} is neither a number nor one of the names "
+                       + ", ".join(map(repr, labels))) from None
 
 
 def _header_problem(names: tuple[str, ...], header: tuple[str, ...], optional: tuple[str, ...]) -> str:

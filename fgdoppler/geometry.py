@@ -102,6 +102,36 @@ def is_mirror_image(point: ArrayLike, other: ArrayLike, geometry: Geometry) -> b
     return bool(np.linalg.norm(q - image) < 0.25 * np.linalg.norm(q - p))
 
 
+#: Characters a pair name may not hold: the measurement CSV's separators and quotes, and line breaks.
+_NAME_FORBIDDEN = frozenset(',"\'\n\r')
+
+
+def _checked_names(names: object, n: int) -> tuple[str, ...]:
+    """``names`` as a tuple, checked (rule: :class:`Geometry`'s ``pair_names``)."""
+    out = tuple(names) if isinstance(names, list | tuple) else names
+    if not isinstance(out, tuple) or not all(isinstance(v, str) for v in out):
+        raise TypeError(f"pair_names must be a sequence of strings, got {names!r}")
+    if not out:
+        return out
+    if len(out) != n:
+        raise ValueError(f"pair_names has {len(out)} name(s) for {n} pair(s): name every pair or none")
+    for i, v in enumerate(out):
+        if not v or v != v.strip() or _NAME_FORBIDDEN & set(v):
+            raise ValueError(f"pair {i}'s name {v!r} must be non-empty text without surrounding spaces, "
+                             "commas, quotes or line breaks")
+        try:
+            float(v)
+        except ValueError:
+            pass
+        else:
+            raise ValueError(f"pair {i}'s name {v!r} is a number: a measurement file's pair {v} would be read as "
+                             "an index; give it a name that is not a number")
+    repeated = sorted({v for v in out if out.count(v) > 1})
+    if repeated:
+        raise ValueError(f"pair names must be unique: {', '.join(map(repr, repeated))} given twice")
+    return out
+
+
 @dataclass(frozen=True)
 class BistaticPair:
     r"""One transmitter–receiver pair.
@@ -156,11 +186,20 @@ class Geometry:
         Overrides of the default detectable zone in the sensors' frame
         (the ``[zone]`` table of the geometry file); see :attr:`zone`.  An
         altitude band makes the problem 3-D (:attr:`dim`).
+    pair_names
+        Optional names of the pairs, one per pair in their order (``()``:
+        none), e.g. the receivers' sites: a measurement file may then give
+        a pair by its name instead of its index, so that a file and a
+        geometry listing the pairs in different orders cannot be matched
+        wrongly (:meth:`pair_index`).  Each is non-empty text without
+        surrounding spaces, not a number (it would read as an index),
+        without a comma, quote or line break, and unique.
     """
 
     pairs: tuple[BistaticPair, ...]
     name: str = ""
     zone_limits: ZoneLimits = field(default_factory=ZoneLimits)
+    pair_names: tuple[str, ...] = ()
     _tx: NDArray[np.float64] = field(init=False, repr=False, compare=False)
     _rx: NDArray[np.float64] = field(init=False, repr=False, compare=False)
 
@@ -172,6 +211,7 @@ class Geometry:
             if not isinstance(p, BistaticPair):
                 raise TypeError(f"pair {i} is {type(p).__name__}, expected BistaticPair")
         object.__setattr__(self, "pairs", pairs)
+        object.__setattr__(self, "pair_names", _checked_names(self.pair_names, len(pairs)))
         d = 3 if self.zone_limits.altitude is not None or any(len(p.tx) == 3 or len(p.rx) == 3 for p in pairs) \
             else 2
         tx = np.array([_padded(p.tx, d) for p in pairs], dtype=float)
@@ -191,6 +231,13 @@ class Geometry:
     def n_pairs(self) -> int:
         """Number of bistatic pairs."""
         return len(self.pairs)
+
+    def pair_index(self, label: str) -> int | None:
+        """The index of the pair named ``label`` (:attr:`pair_names`; surrounding spaces ignored), or ``None``."""
+        try:
+            return self.pair_names.index(label.strip())
+        except ValueError:
+            return None
 
     @property
     def dim(self) -> int:
@@ -352,6 +399,7 @@ class Geometry:
                 for p in self.pairs
             ),
             name=self.name,
+            pair_names=self.pair_names,
         )
 
     # -- TOML -----------------------------------------------------------------

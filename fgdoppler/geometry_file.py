@@ -11,6 +11,7 @@ Format (metres, m/s)::
     [[pair]]                    # one table per bistatic pair, pair 0 first
     tx = [50000.0, 0.0]         # [x, y] (on the ground: z = 0) or [x, y, z]
     rx = [0.0, 0.0]
+    name = "north"              # optional (every pair or none): the measurement file may say "north" for 0
 
 The problem is 3-D (states ``[x, y, z, vx, vy, vz]``) when a sensor has three
 coordinates or the zone has an ``altitude`` band, 2-D otherwise: files with
@@ -42,7 +43,7 @@ MAX_GEOMETRY_BYTES = 1 << 20
 
 _TOP = ("name", "zone", "pair")
 _ZONE = ("along", "across", "speed_max", "altitude")
-_PAIR = ("tx", "rx")
+_PAIR = ("tx", "rx", "name")
 
 
 def _line_of(text: str, key: str, occurrence: int = 0, table: str | None = None) -> int | None:
@@ -103,6 +104,7 @@ def read_geometry(path: str | Path) -> Any:
     if not isinstance(raw, list) or not raw:
         raise ValueError(f"{path}: expected one or more [[pair]] tables with tx and rx")
     pairs = []
+    names: list[str] = []
     for i, item in enumerate(raw):
         if not isinstance(item, dict):
             raise ValueError(f"{path}: pair {i} needs both tx and rx")
@@ -113,6 +115,21 @@ def read_geometry(path: str | Path) -> Any:
             pairs.append(BistaticPair(tx=item["tx"], rx=item["rx"]))
         except (ValueError, TypeError) as exc:
             raise ValueError(f"{_where(path, _line_of(text, 'tx', i, 'pair'))}: pair {i}: {exc}") from None
+        if "name" in item:
+            if not isinstance(item["name"], str):
+                raise ValueError(f"{_where(path, _line_of(text, 'name', len(names), 'pair'))}: pair {i}: name must be a "
+                                 f"string, got {item['name']!r}")
+            names.append(item["name"])
+    if names and len(names) != len(pairs):
+        unnamed = next(i for i, item in enumerate(raw) if "name" not in item)
+        raise ValueError(f"{path}: pair {unnamed} has no name while {len(names)} other pair(s) have one: name "
+                         "every pair or none")
+    try:
+        Geometry(pairs=tuple(pairs), pair_names=tuple(names))
+    except ValueError as exc:
+        named = re.match(r"pair (\d+)'s name", str(exc))
+        line = _line_of(text, "name", int(named.group(1)), "pair") if named else None
+        raise ValueError(f"{_where(path, line)}: {exc}") from None
     name = doc.get("name", "")
     if not isinstance(name, str):
         raise ValueError(f"{_where(path, _line_of(text, 'name'))}: name must be a string, got {name!r}")
@@ -122,7 +139,7 @@ def read_geometry(path: str | Path) -> Any:
     _check_keys(path, text, zone, _ZONE, "[zone]", "zone")
     try:
         limits = ZoneLimits(**zone)
-        geometry = Geometry(pairs=tuple(pairs), name=name, zone_limits=limits)
+        geometry = Geometry(pairs=tuple(pairs), name=name, zone_limits=limits, pair_names=tuple(names))
         geometry.check_zone()
     except ValueError as exc:
         key = next((k for k in _ZONE if k in str(exc)), None)
@@ -140,7 +157,8 @@ def geometry_text(geometry: Any) -> str:
         doc["name"] = geometry.name
     if not geometry.zone_limits.empty:
         doc["zone"] = geometry.zone_limits.to_dict()
-    doc["pair"] = [{"tx": list(p.tx), "rx": list(p.rx)} for p in geometry.pairs]
+    doc["pair"] = [{"tx": list(p.tx), "rx": list(p.rx), **({"name": geometry.pair_names[i]} if geometry.pair_names
+                                                            else {})} for i, p in enumerate(geometry.pairs)]
     return str(tomli_w.dumps(doc))
 
 

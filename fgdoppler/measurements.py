@@ -299,7 +299,9 @@ class Measurements:
         path
             The file.
         geometry
-            If given, pair indices are checked against it.
+            If given, pair indices are checked against it, and a pair may be
+            given by its name (:attr:`~fgdoppler.geometry.Geometry.pair_names`)
+            instead of its index.
         default_sigma
             Used when the file has no ``sigma`` column (required then).
 
@@ -324,7 +326,9 @@ class Measurements:
 
         path = Path(path)
         try:
-            table = read_table(path, header=HEADER[:3], optional=HEADER[3:], what="measurement file")
+            names = {} if geometry is None else {v: float(i) for i, v in enumerate(geometry.pair_names)}
+            table = read_table(path, header=HEADER[:3], optional=HEADER[3:], what="measurement file",
+                               labels={"pair": names} if names else None)
         except CSVError as exc:
             raise MeasurementError(str(exc)) from None
         if table.values.shape[1] == 3:

@@ -646,3 +646,24 @@ def test_one_pairs_mirror_is_settled_by_the_half_plane_the_hint_gives(
     assert "hint" not in captured.err
     assert not any("lie on one line" in r["message"] for r in result["reasons"])
     assert np.sign(result["states"][-1][1]) == np.sign(truth.states[-1, 1])
+
+
+def test_a_measurement_file_may_name_its_pairs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A geometry file that names its pairs: ``simulate`` keeps the names in the geometry it writes, ``track``
+    reads a file that gives the pairs by name (rows in another order) as the one with indices, and records the
+    names with the geometry in its JSON."""
+    geometry = tmp_path / "named.toml"
+    fd.Geometry(pairs=fd.paper_geometry("a").pairs, pair_names=("north", "south")).to_toml(geometry)
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--geometry", str(geometry), "--start-x", "40000", "--out", str(sim)]) == 0
+    rows = (sim / "measurements.csv").read_text().splitlines()
+    names = {"0": "north", "1": "south"}
+    body = [",".join((r.split(",")[0], names[r.split(",")[1]], *r.split(",")[2:])) for r in rows[1:]]
+    (sim / "named.csv").write_text("\n".join([rows[0], *sorted(body, key=lambda r: r.split(",")[1])]) + "\n")
+    capsys.readouterr()
+    runs = []
+    for file in ("measurements.csv", "named.csv"):
+        assert main(["track", str(sim / file), "--estimator", "init", "--json"]) == 0
+        runs.append(json.loads(capsys.readouterr().out))
+    assert runs[0]["x_start"] == runs[1]["x_start"] and runs[0]["cost"] == runs[1]["cost"]
+    assert [p["name"] for p in runs[1]["geometry"]["pairs"]] == ["north", "south"]

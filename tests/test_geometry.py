@@ -135,6 +135,12 @@ PAIR = "[[pair]]\ntx = [50000.0, 0.0]\nrx = [0.0, 0.0]\n"
         ("[zone]\nspeed_max = -1.0\n" + PAIR, "speed_max", 2),
         ("[zone]\nspeed_max = true\n" + PAIR, "speed_max", 2),
         ("[zone]\nalong = [5e7, 6e7]\n" + PAIR, "from the nearest sensor", None),
+        (PAIR + "name = 3\n", "pair 0: name must be a string", 4),
+        (PAIR + "name = 'north'\n" + PAIR.replace("50000.0, 0.0", "50000.0, 1e3"), "pair 1 has no name", None),
+        (PAIR + "name = 'n'\n" + PAIR.replace("50000.0, 0.0", "50000.0, 1e3") + "name = '1'\n", "is a number", 8),
+        (PAIR + "name = 'n'\n" + PAIR.replace("50000.0, 0.0", "50000.0, 1e3") + "name = 'a,b'\n", "commas", 8),
+        (PAIR + "name = ' n'\n" + PAIR.replace("50000.0, 0.0", "50000.0, 1e3") + "name = 'm'\n", "spaces", 4),
+        (PAIR + "name = 'n'\n" + PAIR.replace("50000.0, 0.0", "50000.0, 1e3") + "name = 'n'\n", "unique", None),
     ],
 )
 def test_toml_errors_name_the_file_and_line(tmp_path, text: str, msg: str, line: int | None) -> None:
@@ -208,3 +214,21 @@ def test_a_mirror_image_is_recognised_within_a_quarter_of_the_distance() -> None
         assert is_mirror_image(p, image + 0.2 * apart * side, g)
         assert not is_mirror_image(p, image + 0.3 * apart * side, g)
         assert not is_mirror_image(p, p, g) and not is_mirror_image(p, p + 0.2 * apart * side, g)
+
+
+def test_pair_names_round_trip_and_survive_the_frames(tmp_path) -> None:
+    """Named pairs: the file writes and reads them back, :meth:`Geometry.pair_index` finds them (spaces around a
+    label ignored), and a change of frame or zone keeps them; names for some pairs only are refused."""
+    from fgdoppler.zone import ZoneLimits
+
+    g = fd.Geometry(pairs=fd.paper_geometry("b").pairs, pair_names=("north site", "south"))
+    path = tmp_path / "g.toml"
+    g.to_toml(path)
+    back = fd.Geometry.from_toml(path)
+    assert back == g and back.pair_names == ("north site", "south")
+    assert back.pair_index(" south ") == 1 and back.pair_index("north site") == 0 and back.pair_index("x") is None
+    assert g.in_frame(g.frame).pair_names == g.pair_names
+    assert g.with_zone(ZoneLimits(speed_max=300.0)).pair_names == g.pair_names
+    assert g.mirrored_x(1e3).pair_names == g.pair_names
+    with pytest.raises(ValueError, match="name every pair or none"):
+        fd.Geometry(pairs=g.pairs, pair_names=("north",))

@@ -105,7 +105,9 @@ def _geometry_spec(args: argparse.Namespace) -> str:
 def _describe(geometry: Any, spec: str) -> dict[str, Any]:
     """The geometry and its zone as recorded in every output."""
     return {"geometry": {"source": spec, "name": geometry.name,
-                         "pairs": [{"tx": list(p.tx), "rx": list(p.rx)} for p in geometry.pairs]},
+                         "pairs": [{"tx": list(p.tx), "rx": list(p.rx),
+                                    **({"name": geometry.pair_names[i]} if geometry.pair_names else {})}
+                                   for i, p in enumerate(geometry.pairs)]},
             "zone": geometry.zone.to_dict()}
 
 
@@ -463,7 +465,7 @@ def _csv_header(where: dict[str, Any]) -> list[str]:
     """Comment lines that record the geometry and the zone in the track CSV."""
     g, z = where["geometry"], where["zone"]
     return [f"geometry: {g['source']} name={g['name'] or '-'} pairs="
-            + ";".join(f"tx={p['tx']} rx={p['rx']}" for p in g["pairs"]),
+            + ";".join(f"tx={p['tx']} rx={p['rx']}" + (f" name={p['name']}" if "name" in p else "") for p in g["pairs"]),
             f"zone: along={z['along']} across={z['across']} "
             + (f"altitude={z['altitude']} " if "altitude" in z else "")
             + f"speed_max={z['speed_max']} "

@@ -175,12 +175,13 @@ class InitiationSettings:
         inliers — residuals within the 0.9999 quantile of a standard normal,
         3.89 σ, the trackers' default gate — and counts the outliers.  ILS
         stays the paper's Gaussian method.
-    sign_check : bool, default True
+    mistake_check : bool, default True
         Where the window fails the verdict's χ² test, initiate again with the
-        Doppler of every pair negated, and of each pair alone, and report a
-        ``sign`` finding if one of them passes (:func:`sign_reasons`): a file
-        written with the opposite sign convention.  Costs nothing on a window
-        that fits.
+        data as two common mistakes in a measurement file would have them
+        (:func:`mistake_reasons`): the Doppler of every pair, or of one pair,
+        negated (a ``sign`` finding), or two pairs' labels exchanged (a
+        ``swapped`` finding); a finding names the change that makes the
+        window fit.  Costs nothing on a window that fits.
     """
 
     method: Method = "lm"
@@ -197,7 +198,7 @@ class InitiationSettings:
     same_solution_m: float = 50.0
     same_solution_mps: float = 0.5
     huber_k: float | None = None
-    sign_check: bool = True
+    mistake_check: bool = True
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -547,9 +548,9 @@ def initiate(
     else:
         fit = _refine_closed_form(w, model, settings, grid, candidates, threshold)
     result = _assemble(w, settings, fit, candidates, time.perf_counter() - t_begin)
-    if not settings.sign_check:
+    if not settings.mistake_check:
         return result
-    found = sign_reasons(measurements, model, settings, result)
+    found = mistake_reasons(measurements, model, settings, result)
     return replace(result, reasons=(*result.reasons, *found)) if found else result
 
 
@@ -558,46 +559,66 @@ SIGN_CONVENTION = ("fgdoppler's doppler is the bistatic range rate, negative for
                    "from a Doppler shift f_D in Hz, doppler = -wavelength * f_D")
 
 
-def sign_reasons(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
-                 result: Initiation) -> list[Reason]:
-    r"""A ``sign`` finding where the window fits only with some pairs' Doppler negated.
+def mistake_reasons(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
+                    result: Initiation) -> list[Reason]:
+    r"""A ``sign`` or ``swapped`` finding where the window fits only with its data changed as a common mistake
+    in writing a measurement file would have changed them.
 
-    Negating a pair's Doppler is not a change of the target's state: the
-    bistatic range rate :math:`\dot r = \mathbf v \cdot (\mathbf u_T +
-    \mathbf u_R)` changes sign with :math:`\mathbf v`, but a track
-    flown backwards visits its positions in the reverse order, so a window
-    of measurements with the opposite sign convention fits no
-    constant-velocity track (on the paper's six scenarios, 20 windows each,
-    the negated windows cost 48–442 at the median against the 99.9 %
-    level 39.3, and a single pair negated 81–3,120).  So where ``result``
-    fails the verdict's χ² test (:data:`VERDICT_LEVEL`), the window is
-    initiated again with every pair's Doppler negated and, with more than
-    one pair, with each pair's alone; the cheapest of those that pass the
-    χ² test at ``settings.confidence`` is reported as a ``doubtful``
-    finding naming the pairs to negate.  A window that fails for another
-    reason (outliers, a manoeuvre, a wrong sigma) is not mended by a sign
-    and gets no finding.
+    * **Sign.**  Negating a pair's Doppler is not a change of the target's
+      state: the bistatic range rate :math:`\dot r = \mathbf v \cdot
+      (\mathbf u_T + \mathbf u_R)` changes sign with :math:`\mathbf v`,
+      but a track flown backwards visits its positions in the reverse
+      order, so a window with the opposite sign convention fits no
+      constant-velocity track (on the paper's six scenarios, 20 windows
+      each, the negated windows cost 48–442 at the median against the
+      99.9 % level 39.3, and a single pair negated 81–3,120).  Tried: every
+      pair's Doppler negated and, with more than one pair, each pair's
+      alone.
+    * **Swapped.**  Two pairs' labels exchanged (a geometry file listing the
+      receivers in another order than the recording).  Tried: each pair of
+      pairs.  Where the exchanged data fit another track, no window can
+      tell (the paper's closely spaced pairs: ``studies/data_mistakes.py``);
+      pair names in the geometry and the file rule that mistake out.
+
+    Only where ``result`` fails the verdict's χ² test
+    (:data:`VERDICT_LEVEL`); the change whose window passes the χ² test at
+    ``settings.confidence`` with the least cost is reported as a
+    ``doubtful`` finding.  A window that fails for another reason
+    (outliers, a manoeuvre, a wrong sigma) is mended by none of these and
+    gets no finding.
     """
     if result.cost <= float(chi2.ppf(VERDICT_LEVEL, max(result.dof, 1))):
         return []
     pairs = [int(k) for k in np.unique(measurements.pair)]
-    flips = [pairs] + ([[k] for k in pairs] if len(pairs) > 1 else [])
-    quiet = replace(settings, sign_check=False)
-    passing = []
-    for flipped in flips:
+    changes: list[tuple[str, Measurements]] = []
+    for flipped in [pairs] + ([[k] for k in pairs] if len(pairs) > 1 else []):
         sign = np.where(np.isin(measurements.pair, flipped), -1.0, 1.0)
-        again = initiate(replace(measurements, doppler=sign * measurements.doppler), model, quiet)
+        changes.append(("every pair" if flipped == pairs else f"pair {flipped[0]}",
+                        replace(measurements, doppler=sign * measurements.doppler)))
+    for i, a in enumerate(pairs):
+        for b in pairs[i + 1:]:
+            label = np.where(measurements.pair == a, b, np.where(measurements.pair == b, a, measurements.pair))
+            changes.append((f"pairs {a} and {b}", Measurements.from_arrays(
+                measurements.time, label, measurements.doppler, measurements.sigma, sort=True)))
+    quiet = replace(settings, mistake_check=False)
+    passing = []
+    for k, (which, changed) in enumerate(changes):
+        again = initiate(changed, model, quiet)
         if again.passes_chi2:
-            passing.append((again.cost, flipped))
+            passing.append((again.cost, k, which))
     if not passing:
         return []
-    cost, flipped = min(passing, key=lambda p: p[0])
-    which = "every pair" if flipped == pairs else "pair " + ", ".join(map(str, flipped))
+    cost, k, which = min(passing)
+    fits = (f"the window fits (cost {cost:.2f}, passing the {settings.confidence:.0%} chi-square test, against "
+            f"{result.cost:.2f} as given)")
+    if which.startswith("pairs "):
+        return [Reason(code="swapped", status="doubtful", message=(
+            f"with the labels of {which} exchanged {fits}: the measurement file and the geometry may list those "
+            "pairs in different orders; if so, exchange them in one of the two, or name the pairs in the "
+            "geometry (name = ...) and give the names in the file's pair column"))]
     return [Reason(code="sign", status="doubtful", message=(
-        f"with the Doppler of {which} negated the window fits (cost {cost:.2f}, passing the "
-        f"{settings.confidence:.0%} chi-square test, against {result.cost:.2f} as given): the data likely follow "
-        f"the opposite sign convention ({SIGN_CONVENTION}); if so, negate the doppler column"
-        + ("" if flipped == pairs else f" of {which}")))]
+        f"with the Doppler of {which} negated {fits}: the data likely follow the opposite sign convention "
+        f"({SIGN_CONVENTION}); if so, negate the doppler column" + ("" if which == "every pair" else f" of {which}")))]
 
 
 def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: tuple[Candidate, ...],

@@ -160,7 +160,7 @@ def fresh_start(measurements: Measurements, model: TrackingModel, settings: Trac
     data = measurements.subset(measurements.time <= tc)
     if old is None or len(data) < model.n + 1:
         return None
-    isets = InitiationSettings(window="cv", huber_k=settings.huber_k, half_plane=half_plane, sign_check=False)
+    isets = InitiationSettings(window="cv", huber_k=settings.huber_k, half_plane=half_plane, mistake_check=False)
     try:
         grid = window_grid(data.spread(PER_PAIR), model, isets)
     except ValueError:  # the data so far need a speed above the zone's bound: nothing in the zone to restart from

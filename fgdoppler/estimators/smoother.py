@@ -536,7 +536,7 @@ def _best_outside_2d(measurements: Measurements, model: TrackingModel, settings:
     def window_starts() -> list[FloatArray]:
         try:
             again = initiate(window, wide, InitiationSettings(huber_k=settings.huber_k, half_plane=half_plane,
-                                                               sign_check=False))
+                                                               mistake_check=False))
         except ValueError:
             return []
         return [model.motion.propagate(x, sol.times - again.t_start)
@@ -776,7 +776,7 @@ def _recording_starts(measurements: Measurements, model: TrackingModel, settings
     from fgdoppler.estimators.initiation import InitiationSettings, initiate, window_grid
 
     init_settings = InitiationSettings(window="cv", huber_k=settings.huber_k, half_plane=half_plane, k_best=k_best,
-                                       sign_check=False)
+                                       mistake_check=False)
     # The grid only has to find the basins, and its cost grows with the measurements it
     # scores: search a bounded, evenly spread subset, then let LM refine each candidate
     # against every measurement.

@@ -278,7 +278,7 @@ def test_a_window_with_the_opposite_sign_convention_is_named(start: float, seed:
             found = [x for x in r.reasons if x.code == "sign"]
             assert not r.passes_chi2 and len(found) == 1 and found[0].status == "doubtful", (pairs, geometry.name)
             assert f"with the Doppler of {named} negated the window fits (cost {plain.cost:.2f}," in found[0].message
-        off = initiate(_negated(w, pairs), sc.geometry, InitiationSettings(sign_check=False))
+        off = initiate(_negated(w, pairs), sc.geometry, InitiationSettings(mistake_check=False))
         assert not [x for x in off.reasons if x.code == "sign"]
 
 
@@ -297,3 +297,27 @@ def test_a_window_that_fails_for_another_reason_gets_no_sign_finding() -> None:
         r = initiate(bad, sc.geometry)
         assert any(x.code == "chi2" and x.status == "doubtful" for x in r.reasons)
         assert not [x for x in r.reasons if x.code == "sign"]
+
+
+#: Three pairs anywhere (draw 106 of studies/random_layouts.py, rounded to the metre), and its target's start.
+SPREAD_OUT = fd.Geometry(pairs=(fd.BistaticPair(tx=(12165.0, 1921.0), rx=(-27238.0, -20527.0)),
+                                fd.BistaticPair(tx=(-5481.0, 2590.0), rx=(-1065.0, -15248.0)),
+                                fd.BistaticPair(tx=(-21887.0, 29768.0), rx=(11061.0, 2292.0))))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_window_with_two_pairs_labels_exchanged_is_named(seed: int) -> None:
+    """Three pairs far apart: with the labels of two pairs exchanged the window fits no track, and the
+    ``swapped`` finding names those two pairs, with the cost of the window exchanged back — the simulated
+    window's own; the window as simulated gets no finding."""
+    sc = fd.Scenario(geometry=SPREAD_OUT, x0=(-13457.0, 5810.0, -126.0, 86.0), duration=30.0, dt=0.5)
+    w = fd.simulate(sc, np.random.default_rng(seed)).measurements.first_per_pair(10)
+    plain = initiate(w, SPREAD_OUT)
+    assert not [r for r in plain.reasons if r.code in ("sign", "swapped")]
+    for a, b in ((0, 1), (1, 2)):
+        label = np.where(w.pair == a, b, np.where(w.pair == b, a, w.pair))
+        r = initiate(fd.Measurements.from_arrays(w.time, label, w.doppler, w.sigma, sort=True), SPREAD_OUT)
+        found = [x for x in r.reasons if x.code in ("sign", "swapped")]
+        assert len(found) == 1 and found[0].code == "swapped" and found[0].status == "doubtful"
+        assert found[0].message.startswith(f"with the labels of pairs {a} and {b} exchanged the window fits "
+                                           f"(cost {plain.cost:.2f},")

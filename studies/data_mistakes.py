@@ -1,0 +1,130 @@
+r"""Mistakes a user makes writing a measurement file: does the verdict say so, and only then?
+
+Two mistakes, each checked on the same recordings:
+
+* **The opposite sign convention.**  A Doppler shift in Hz is positive for a closing target;
+  fgdoppler's ``doppler`` column is the bistatic range rate, negative for one
+  (docs/data-formats.md).  A file converted without the minus sign — for every pair, or for one
+  receiver whose software differs.  The initiation's ``sign`` finding
+  should name the negated pairs.
+* **Pairs swapped.**  The file's pair 0 is the geometry's pair 1 and the other way round (a
+  geometry file listing the receivers in another order than the recording's software).  Data
+  cannot always tell: the swapped data may fit another track as well as the right data fit the
+  truth's; where the window fails, the initiation's ``swapped`` finding should name the pairs.
+  Pair names (``name`` in the geometry's ``[[pair]]`` tables, used in the file's ``pair`` column)
+  rule the mistake out.
+
+Per recording, four versions of the data: as simulated, every pair's Doppler negated, pair 0's
+alone negated, pairs 0 and 1 swapped.  For each: whether the initiation has a ``sign`` or a
+``swapped`` finding (:func:`fgdoppler.estimators.initiation.mistake_reasons`) and what it names, and (``--track 1``, the default) the offline smoother's verdict from that
+initiation, with its final position error against its own sigma along the major axis (wrong:
+beyond 3 sigma).
+
+Recordings: the accuracy benchmark's runs of the paper's six scenarios (``--runs`` each, ``--seed``)
+and as many random layouts of ``studies/random_layouts.py`` (draw ``100 s + r``: two to four
+pairs anywhere, the target anywhere in the default zone).
+
+Run: python studies/data_mistakes.py [--runs 10] [--seed 2026] [--track 1] [--workers 2] [--out DIR]
+(``--runs 10``: about 7 min on 2 cores; ``--track 0``: the initiations alone, 2 min for ``--runs 20``)
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from _common import each_run, paper_run
+from random_layouts import draw, one_blas_thread, recorded
+
+import fgdoppler as fd
+
+
+def _negated(m: fd.Measurements, pairs: list[int] | None) -> fd.Measurements:
+    """``m`` with the Doppler of ``pairs`` (``None``: every pair) negated."""
+    sign = -np.ones(len(m)) if pairs is None else np.where(np.isin(m.pair, pairs), -1.0, 1.0)
+    return fd.Measurements(time=m.time, pair=m.pair, doppler=sign * m.doppler, sigma=m.sigma)
+
+
+def _swapped(m: fd.Measurements) -> fd.Measurements:
+    """``m`` with pairs 0 and 1 exchanged."""
+    pair = np.where(m.pair == 0, 1, np.where(m.pair == 1, 0, m.pair))
+    return fd.Measurements.from_arrays(m.time, pair, m.doppler, m.sigma, sort=True)
+
+
+#: The versions of each recording: name -> (the data, what a ``sign`` or ``swapped`` finding should name).
+VERSIONS: dict[str, tuple[Callable[[fd.Measurements], fd.Measurements], str]] = {
+    "as given": (lambda m: m, ""),
+    "every pair negated": (lambda m: _negated(m, None), "every pair"),
+    "pair 0 negated": (lambda m: _negated(m, [0]), "pair 0"),
+    "pairs 0 and 1 swapped": (_swapped, "pairs 0 and 1"),
+}
+
+
+def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for name, (version, _) in VERSIONS.items():
+        m = version(sim.measurements)
+        init = fd.initiate(m.first_per_pair(10), model)
+        found = [r for r in init.reasons if r.code in ("sign", "swapped")]
+        named = re.match(r"with the (?:Doppler|labels) of (.+?) (?:negated|exchanged)", found[0].message) if found \
+            else None
+        row: dict[str, Any] = {"finding": found[0].code if found else "",
+                               "names": named.group(1) if named else ""}
+        if track:
+            r = fd.run_estimator("smoother", m, model, init)
+            e = r.primary
+            k = e.states.shape[1] // 2
+            err = float(np.linalg.norm(e.states[-1, :k] - sim.truth.at(e.times[-1:])[0][:k]))
+            sd = float(np.sqrt(np.max(np.linalg.eigvalsh(e.covariances[-1][:k, :k])))) if e.cov_ok[-1] else np.nan
+            row.update(status=str(r.status), error=round(err, 1), sigma=round(sd, 1))
+        out[name] = row
+    return out
+
+
+@one_blas_thread
+def one(task: tuple[int, int, int], track: int = 1) -> dict[str, Any]:
+    s, r, seed = task
+    sim, model, _ = paper_run(s, r, seed)
+    out: dict[str, Any] = {"scenario": s, "run": r, "paper": _judged(sim, model, track)}
+    i = 100 * s + r
+    record, layout_sim, init = recorded(i, *draw(i))
+    if init is not None:
+        out["layout"] = _judged(layout_sim, fd.TrackingModel.of(layout_sim.scenario.geometry), track)
+    else:
+        out["layout refused"] = record.get("refused", "")
+    return out
+
+
+def _table(rows: list[dict[str, Any]], where: str, track: bool) -> list[str]:
+    lines = [f"### {where}", "", "| data | recordings | sign / swapped finding | names the change made | "
+             + ("smoother ok | ok and beyond 3 sigma |" if track else ""),
+             "|---|---|---|---|" + ("---|---|" if track else "")]
+    for name, (_, want) in VERSIONS.items():
+        got = [r[where][name] for r in rows if where in r]
+        right = str(sum(g["names"] == want for g in got)) if want else "—"
+        said = [g["finding"] for g in got if g["finding"]]
+        line = f"| {name} | {len(got)} | {said.count('sign')} / {said.count('swapped')} | {right} |"
+        if track:
+            ok = [g for g in got if g["status"] == "ok"]
+            wrong = sum(g["error"] > 3.0 * g["sigma"] for g in ok)
+            line += f" {len(ok)} | {wrong} |"
+        lines.append(line)
+    return [*lines, ""]
+
+
+def main() -> None:
+    args, rows = each_run(one, "data_mistakes.py", "studies",
+                          options={"--track": {"type": int, "default": 1}})
+    text = "\n".join([f"{args.runs} runs per paper scenario and as many random layouts, seed {args.seed}", "",
+                      *_table(rows, "paper", bool(args.track)), *_table(rows, "layout", bool(args.track))])
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "data_mistakes.md").write_text(text)
+    (args.out / "data_mistakes.json").write_text(json.dumps(rows, indent=1))
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
