@@ -585,7 +585,9 @@ def mistake_reasons(measurements: Measurements, model: TrackingModel, settings: 
     ``settings.confidence`` with the least cost is reported as a
     ``doubtful`` finding.  A window that fails for another reason
     (outliers, a manoeuvre, a wrong sigma) is mended by none of these and
-    gets no finding.
+    gets no finding.  With :math:`P \ge 2` pairs that is :math:`1 + P + P(P-1)/2`
+    more initiations of the window (two pairs: 4; four: 11; one pair: 1),
+    made only for a window that fails.
     """
     if result.cost <= float(chi2.ppf(VERDICT_LEVEL, max(result.dof, 1))):
         return []
