@@ -1,12 +1,15 @@
 r"""Mistakes a user makes writing a measurement file: does the verdict say so, and only then?
 
-Two mistakes, each checked on the same recordings:
+Three mistakes, each checked on the same recordings:
 
 * **The opposite sign convention.**  A Doppler shift in Hz is positive for a closing target;
   fgdoppler's ``doppler`` column is the bistatic range rate, negative for one
   (docs/data-formats.md).  A file converted without the minus sign — for every pair, or for one
   receiver whose software differs.  The initiation's ``sign`` finding
   should name the negated pairs.
+* **A receiver's clock off.**  Pair 1's times ``--late`` s late (default 0.5; one clock for every
+  pair is assumed).
+  Not looked for: a finding cannot tell such data from another track's where they fit it.
 * **Pairs swapped.**  The file's pair 0 is the geometry's pair 1 and the other way round (a
   geometry file listing the receivers in another order than the recording's software).  Data
   cannot always tell: the swapped data may fit another track as well as the right data fit the
@@ -14,8 +17,8 @@ Two mistakes, each checked on the same recordings:
   Pair names (``name`` in the geometry's ``[[pair]]`` tables, used in the file's ``pair`` column)
   rule the mistake out.
 
-Per recording, four versions of the data: as simulated, every pair's Doppler negated, pair 0's
-alone negated, pairs 0 and 1 swapped.  For each: whether the initiation has a ``sign`` or a
+Per recording, five versions of the data: as simulated, every pair's Doppler negated, pair 0's
+alone negated, pairs 0 and 1 swapped, pair 1's clock late.  For each: whether the initiation has a ``sign`` or a
 ``swapped`` finding (:func:`fgdoppler.estimators.initiation.mistake_reasons`) and what it names, and (``--track 1``, the default) the offline smoother's verdict from that
 initiation, with its final position error against its own sigma along the major axis (wrong:
 beyond 3 sigma).
@@ -24,7 +27,7 @@ Recordings: the accuracy benchmark's runs of the paper's six scenarios (``--runs
 and as many random layouts of ``studies/random_layouts.py`` (draw ``100 s + r``: two to four
 pairs anywhere, the target anywhere in the default zone).
 
-Run: python studies/data_mistakes.py [--runs 10] [--seed 2026] [--track 1] [--workers 2] [--out DIR]
+Run: python studies/data_mistakes.py [--runs 10] [--seed 2026] [--track 1] [--late 0.5] [--workers 2] [--out DIR]
 (``--runs 10``: about 7 min on 2 cores; ``--track 0``: the initiations alone, 2 min for ``--runs 20``)
 """
 
@@ -54,19 +57,27 @@ def _swapped(m: fd.Measurements) -> fd.Measurements:
     return fd.Measurements.from_arrays(m.time, pair, m.doppler, m.sigma, sort=True)
 
 
-#: The versions of each recording: name -> (the data, what a ``sign`` or ``swapped`` finding should name).
-VERSIONS: dict[str, tuple[Callable[[fd.Measurements], fd.Measurements], str]] = {
-    "as given": (lambda m: m, ""),
-    "every pair negated": (lambda m: _negated(m, None), "every pair"),
-    "pair 0 negated": (lambda m: _negated(m, [0]), "pair 0"),
-    "pairs 0 and 1 swapped": (_swapped, "pairs 0 and 1"),
+def _late(m: fd.Measurements, seconds: float) -> fd.Measurements:
+    """``m`` with pair 1's times ``seconds`` late (its receiver's clock off)."""
+    return fd.Measurements.from_arrays(np.where(m.pair == 1, m.time + seconds, m.time), m.pair, m.doppler, m.sigma,
+                                       sort=True)
+
+
+#: The versions of each recording: name -> (the data given the clock's lateness in s, what a ``sign`` or
+#: ``swapped`` finding should name).
+VERSIONS: dict[str, tuple[Callable[[fd.Measurements, float], fd.Measurements], str]] = {
+    "as given": (lambda m, _: m, ""),
+    "every pair negated": (lambda m, _: _negated(m, None), "every pair"),
+    "pair 0 negated": (lambda m, _: _negated(m, [0]), "pair 0"),
+    "pairs 0 and 1 swapped": (lambda m, _: _swapped(m), "pairs 0 and 1"),
+    "pair 1's clock late": (_late, ""),
 }
 
 
-def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int) -> dict[str, Any]:
+def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for name, (version, _) in VERSIONS.items():
-        m = version(sim.measurements)
+        m = version(sim.measurements, late)
         init = fd.initiate(m.first_per_pair(10), model)
         found = [r for r in init.reasons if r.code in ("sign", "swapped")]
         named = re.match(r"with the (?:Doppler|labels) of (.+?) (?:negated|exchanged)", found[0].message) if found \
@@ -77,22 +88,23 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int) -> dict[str
             r = fd.run_estimator("smoother", m, model, init)
             e = r.primary
             k = e.states.shape[1] // 2
-            err = float(np.linalg.norm(e.states[-1, :k] - sim.truth.at(e.times[-1:])[0][:k]))
-            sd = float(np.sqrt(np.max(np.linalg.eigvalsh(e.covariances[-1][:k, :k])))) if e.cov_ok[-1] else np.nan
+            j = int(np.flatnonzero(e.times <= sim.truth.times[-1])[-1])  # a late clock's last times are not truth's
+            err = float(np.linalg.norm(e.states[j, :k] - sim.truth.at(e.times[j:j + 1])[0][:k]))
+            sd = float(np.sqrt(np.max(np.linalg.eigvalsh(e.covariances[j][:k, :k])))) if e.cov_ok[j] else np.nan
             row.update(status=str(r.status), error=round(err, 1), sigma=round(sd, 1))
         out[name] = row
     return out
 
 
 @one_blas_thread
-def one(task: tuple[int, int, int], track: int = 1) -> dict[str, Any]:
+def one(task: tuple[int, int, int], track: int = 1, late: float = 0.5) -> dict[str, Any]:
     s, r, seed = task
     sim, model, _ = paper_run(s, r, seed)
-    out: dict[str, Any] = {"scenario": s, "run": r, "paper": _judged(sim, model, track)}
+    out: dict[str, Any] = {"scenario": s, "run": r, "paper": _judged(sim, model, track, late)}
     i = 100 * s + r
     record, layout_sim, init = recorded(i, *draw(i))
     if init is not None:
-        out["layout"] = _judged(layout_sim, fd.TrackingModel.of(layout_sim.scenario.geometry), track)
+        out["layout"] = _judged(layout_sim, fd.TrackingModel.of(layout_sim.scenario.geometry), track, late)
     else:
         out["layout refused"] = record.get("refused", "")
     return out
@@ -117,8 +129,10 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool) -> list[str]:
 
 def main() -> None:
     args, rows = each_run(one, "data_mistakes.py", "studies",
-                          options={"--track": {"type": int, "default": 1}})
-    text = "\n".join([f"{args.runs} runs per paper scenario and as many random layouts, seed {args.seed}", "",
+                          options={"--track": {"type": int, "default": 1},
+                                   "--late": {"type": float, "default": 0.5}})
+    text = "\n".join([f"{args.runs} runs per paper scenario and as many random layouts, seed {args.seed}; "
+                       f"a late clock {args.late:g} s", "",
                       *_table(rows, "paper", bool(args.track)), *_table(rows, "layout", bool(args.track))])
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "data_mistakes.md").write_text(text)
