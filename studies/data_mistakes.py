@@ -5,23 +5,23 @@ Three mistakes, each checked on the same recordings:
 * **The opposite sign convention.**  A Doppler shift in Hz is positive for a closing target;
   fgdoppler's ``doppler`` column is the bistatic range rate, negative for one
   (docs/data-formats.md).  A file converted without the minus sign — for every pair, or for one
-  receiver whose software differs.  The initiation's ``sign`` finding
-  should name the negated pairs.
-* **A receiver's clock off.**  Pair 1's times ``--late`` s late (default 0.5; one clock for every
-  pair is assumed).
-  Not looked for: a finding cannot tell such data from another track's where they fit it.
+  receiver whose software differs.  The initiation's ``sign`` finding should name the negated
+  pairs.
 * **Pairs swapped.**  The file's pair 0 is the geometry's pair 1 and the other way round (a
   geometry file listing the receivers in another order than the recording's software).  Data
   cannot always tell: the swapped data may fit another track as well as the right data fit the
   truth's; where the window fails, the initiation's ``swapped`` finding should name the pairs.
   Pair names (``name`` in the geometry's ``[[pair]]`` tables, used in the file's ``pair`` column)
   rule the mistake out.
+* **A receiver's clock off.**  Pair 1's times ``--late`` seconds late (default 0.5; one clock for
+  every pair is assumed).  Not looked for: where such data fit another track, no finding can tell.
 
 Per recording, five versions of the data: as simulated, every pair's Doppler negated, pair 0's
-alone negated, pairs 0 and 1 swapped, pair 1's clock late.  For each: whether the initiation has a ``sign`` or a
-``swapped`` finding (:func:`fgdoppler.estimators.initiation.mistake_reasons`) and what it names, and (``--track 1``, the default) the offline smoother's verdict from that
-initiation, with its final position error against its own sigma along the major axis (wrong:
-beyond 3 sigma).
+alone negated, pairs 0 and 1 swapped, pair 1's clock late.  For each: whether the initiation has a
+``sign`` or a ``swapped`` finding (:func:`fgdoppler.estimators.initiation.mistake_reasons`) and
+what it names, and (``--track 1``, the default) the offline smoother's verdict from that
+initiation, with its position error at the last time of the truth against its own sigma along
+the major axis (wrong: beyond 3 sigma).
 
 Recordings: the accuracy benchmark's runs of the paper's six scenarios (``--runs`` each, ``--seed``)
 and as many random layouts of ``studies/random_layouts.py`` (draw ``100 s + r``: two to four
