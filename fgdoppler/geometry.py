@@ -191,7 +191,7 @@ class Geometry:
         none), e.g. the receivers' sites: a measurement file may then give
         a pair by its name instead of its index, so that a file and a
         geometry listing the pairs in different orders cannot be matched
-        wrongly (:meth:`pair_index`).  Each is non-empty text without
+        wrongly (:meth:`~fgdoppler.measurements.Measurements.from_csv`).  Each is non-empty text without
         surrounding spaces, not a number (it would read as an index),
         without a comma, quote or line break, and unique.
     """
@@ -231,13 +231,6 @@ class Geometry:
     def n_pairs(self) -> int:
         """Number of bistatic pairs."""
         return len(self.pairs)
-
-    def pair_index(self, label: str) -> int | None:
-        """The index of the pair named ``label`` (:attr:`pair_names`; surrounding spaces ignored), or ``None``."""
-        try:
-            return self.pair_names.index(label.strip())
-        except ValueError:
-            return None
 
     @property
     def dim(self) -> int:

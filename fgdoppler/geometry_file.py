@@ -124,12 +124,6 @@ def read_geometry(path: str | Path) -> Any:
         unnamed = next(i for i, item in enumerate(raw) if "name" not in item)
         raise ValueError(f"{path}: pair {unnamed} has no name while {len(names)} other pair(s) have one: name "
                          "every pair or none")
-    try:
-        Geometry(pairs=tuple(pairs), pair_names=tuple(names))
-    except ValueError as exc:
-        named = re.match(r"pair (\d+)'s name", str(exc))
-        line = _line_of(text, "name", int(named.group(1)), "pair") if named else None
-        raise ValueError(f"{_where(path, line)}: {exc}") from None
     name = doc.get("name", "")
     if not isinstance(name, str):
         raise ValueError(f"{_where(path, _line_of(text, 'name'))}: name must be a string, got {name!r}")
@@ -142,8 +136,10 @@ def read_geometry(path: str | Path) -> Any:
         geometry = Geometry(pairs=tuple(pairs), name=name, zone_limits=limits, pair_names=tuple(names))
         geometry.check_zone()
     except ValueError as exc:
-        key = next((k for k in _ZONE if k in str(exc)), None)
-        line = _line_of(text, key, table="zone") if key else None
+        named = re.match(r"pair (\d+)'s name", str(exc))
+        key = None if named or "pair names" in str(exc) else next((k for k in _ZONE if k in str(exc)), None)
+        line = (_line_of(text, "name", int(named.group(1)), "pair") if named
+                else _line_of(text, key, table="zone") if key else None)
         raise ValueError(f"{_where(path, line)}: {exc}") from None
     return geometry
 

@@ -511,10 +511,10 @@ def test_following_the_zone_advice_never_ends_in_a_confident_mirror_track(
     assert second["status"] == "doubtful" if competing else second["status"] == "ok"
     # the rival here is the mirror image: the finding says so, and the hint's two half planes, one per side of
     # the sensors' line, split the truth from its mirror image
-    from fgdoppler.cli.track import MIRROR_CUE
     from fgdoppler.estimators.smoother_offsets import mirrored
+    from fgdoppler.geometry import MIRROR_ADVICE
 
-    assert any(MIRROR_CUE in r["message"] for r in competing)
+    assert any(MIRROR_ADVICE in r["message"] for r in competing)
     hint = re.search(r"--half-plane (\S+) (\S+) (\S+) (\S+) puts .* --half-plane (\S+) (\S+) (\S+) (\S+) on", captured.err)
     assert hint is not None
     planes = np.array(hint.groups(), dtype=float).reshape(2, 4)

@@ -100,14 +100,14 @@ def test_a_pair_may_be_given_by_its_name(tmp_path: Path) -> None:
     m = fd.simulate(fd.paper_scenarios()[0], np.random.default_rng(3)).measurements
     m.to_csv(tmp_path / "m.csv")
     rows = (tmp_path / "m.csv").read_text().splitlines()
-    label = {"0": "north", "1": '"south rx"'}
+    label = {"0": " north ", "1": '"south rx"'}  # spaces around a name are ignored, as around a number
     named = [rows[0]] + [",".join((r.split(",")[0], label[r.split(",")[1]], *r.split(",")[2:])) for r in rows[1:]]
     mixed = [named[0]] + [n if i % 2 else r for i, (n, r) in enumerate(zip(named[1:], rows[1:], strict=True))]
     for name, lines in (("n.csv", named), ("x.csv", mixed)):
         back = fd.Measurements.from_csv(_write(tmp_path / name, "\n".join(lines) + "\n"), geometry=geom)
         for col in ("time", "pair", "doppler", "sigma"):
             np.testing.assert_array_equal(getattr(back, col), getattr(m, col))
-    bad = _write(tmp_path / "b.csv", "\n".join([named[0], named[1].replace("north", "nort")]) + "\n")
+    bad = _write(tmp_path / "b.csv", "\n".join([named[0], named[1].replace(" north ", "nort")]) + "\n")
     with pytest.raises(MeasurementError, match=r"b.csv:2: pair 'nort' is neither a number nor one of the names "
                                                r"'north', 'south rx'"):
         fd.Measurements.from_csv(bad, geometry=geom)

@@ -223,9 +223,6 @@ def _print_verdict(status: str, reasons: Any) -> None:
         print(f"  {r.status}: {r.message}", file=sys.stderr)
 
 
-#: The words of a finding whose rival is the reported solution's mirror image (the smoother's ``competing``,
-#: the initiation's ``ambiguous``).
-MIRROR_CUE = MIRROR_ADVICE
 #: The words of the ``data`` finding when the sensors of the pairs that reported lie on one line.
 COLLINEAR_CUE = "lie on one line: the mirror image of the track across it fits the data exactly"
 
@@ -240,7 +237,7 @@ def _print_half_plane_hint(reasons: Any, geom: Geometry, args: argparse.Namespac
     if any(COLLINEAR_CUE in r.message for r in reasons):
         used = np.unique(np.asarray(pairs, dtype=int))
         sensors = np.vstack([geom.tx[used], geom.rx[used]])
-    elif any(MIRROR_CUE in r.message for r in reasons):
+    elif any(MIRROR_ADVICE in r.message for r in reasons):  # a mirror rival: competing, ambiguous
         sensors = np.vstack([geom.tx, geom.rx])
     else:
         return

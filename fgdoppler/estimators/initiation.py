@@ -592,28 +592,28 @@ def mistake_reasons(measurements: Measurements, model: TrackingModel, settings: 
     if result.cost <= float(chi2.ppf(VERDICT_LEVEL, max(result.dof, 1))):
         return []
     pairs = [int(k) for k in np.unique(measurements.pair)]
-    changes: list[tuple[str, Measurements]] = []
+    changes: list[tuple[str, str, Measurements]] = []  # (finding's code, what changed, the changed window)
     for flipped in [pairs] + ([[k] for k in pairs] if len(pairs) > 1 else []):
         sign = np.where(np.isin(measurements.pair, flipped), -1.0, 1.0)
-        changes.append(("every pair" if flipped == pairs else f"pair {flipped[0]}",
+        changes.append(("sign", "every pair" if flipped == pairs else f"pair {flipped[0]}",
                         replace(measurements, doppler=sign * measurements.doppler)))
     for i, a in enumerate(pairs):
         for b in pairs[i + 1:]:
             label = np.where(measurements.pair == a, b, np.where(measurements.pair == b, a, measurements.pair))
-            changes.append((f"pairs {a} and {b}", Measurements.from_arrays(
+            changes.append(("swapped", f"pairs {a} and {b}", Measurements.from_arrays(
                 measurements.time, label, measurements.doppler, measurements.sigma, sort=True)))
     quiet = replace(settings, mistake_check=False)
     passing = []
-    for k, (which, changed) in enumerate(changes):
+    for k, (code, which, changed) in enumerate(changes):
         again = initiate(changed, model, quiet)
         if again.passes_chi2:
-            passing.append((again.cost, k, which))
+            passing.append((again.cost, k, code, which))
     if not passing:
         return []
-    cost, k, which = min(passing)
+    cost, _, code, which = min(passing)
     fits = (f"the window fits (cost {cost:.2f}, passing the {settings.confidence:.0%} chi-square test, against "
             f"{result.cost:.2f} as given)")
-    if which.startswith("pairs "):
+    if code == "swapped":
         return [Reason(code="swapped", status="doubtful", message=(
             f"with the labels of {which} exchanged {fits}: the measurement file and the geometry may list those "
             "pairs in different orders; if so, exchange them in one of the two, or name the pairs in the "
