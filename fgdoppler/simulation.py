@@ -272,6 +272,14 @@ class Scenario:
         fixed-lag smoother's settings accounts for offsets of unknown size
         in their covariances; that of the particle estimators' integrates
         them out of their likelihood.
+    clock_error
+        Per-pair clock error (s): pair ``i``'s measurement of true time
+        ``t`` is recorded at time ``t + clock_error_i`` (a receiver whose
+        clock runs late, or stamps its values differently), one value or one
+        per pair; default 0: every pair on the one true clock, which the
+        trackers assume.  The ``clock_sigma`` of the smoother's, the EKF's,
+        iSAM2's and the fixed-lag smoother's settings accounts for errors of
+        unknown size in their covariances.
     name
         Label used in reports.
     """
@@ -285,9 +293,11 @@ class Scenario:
     process_noise: ConstantVelocity | None = None
     manoeuvre: Manoeuvre | None = None
     bias: float | tuple[float, ...] = 0.0
+    clock_error: float | tuple[float, ...] = 0.0
     name: str = ""
     _sigmas: NDArray[np.float64] = field(init=False, repr=False, compare=False)
     _biases: NDArray[np.float64] = field(init=False, repr=False, compare=False)
+    _clock_errors: NDArray[np.float64] = field(init=False, repr=False, compare=False)
     _offsets: NDArray[np.float64] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -318,6 +328,10 @@ class Scenario:
         if bias.size not in (1, n) or not np.all(np.isfinite(bias)):
             raise ValueError(f"bias must be one finite value or one per pair ({n}) in m/s, got {self.bias}")
         object.__setattr__(self, "_biases", np.broadcast_to(bias, (n,)).copy())
+        clock = np.asarray(self.clock_error, dtype=float).reshape(-1)
+        if clock.size not in (1, n) or not np.all(np.isfinite(clock)):
+            raise ValueError(f"clock_error must be one finite value or one per pair ({n}) in s, got {self.clock_error}")
+        object.__setattr__(self, "_clock_errors", np.broadcast_to(clock, (n,)).copy())
         if self.manoeuvre is not None and self.process_noise is not None and self.process_noise.q > 0:
             raise ValueError("a scenario takes a manoeuvre or process noise, not both")
         if self.manoeuvre is not None:
@@ -335,6 +349,11 @@ class Scenario:
         """Constant Doppler offset per pair (m/s), shape ``(n_pairs,)``."""
         return self._biases.copy()
 
+    @property
+    def clock_errors(self) -> NDArray[np.float64]:
+        """Clock error per pair (s; recorded time less true time), shape ``(n_pairs,)``."""
+        return self._clock_errors.copy()
+
     def measurement_times(self) -> list[NDArray[np.float64]]:
         """Measurement times of each pair."""
         out = []
@@ -344,8 +363,10 @@ class Scenario:
         return out
 
     def truth_times(self) -> NDArray[np.float64]:
-        """All distinct measurement times, sorted (where the truth is reported)."""
-        return np.unique(np.concatenate(self.measurement_times()))
+        """All distinct measurement times, true and as recorded (``clock_error``), sorted (where the truth is
+        reported)."""
+        taken = self.measurement_times()
+        return np.unique(np.concatenate([*taken, *(t + c for t, c in zip(taken, self._clock_errors, strict=True))]))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -371,7 +392,8 @@ def simulate(scenario: Scenario, rng: np.random.Generator) -> Simulation:
     -------
     Simulation
         Measurements ``z = h(x(t)) + b_i + w``, ``w ~ N(0, sigma_i^2)`` (``b_i``
-        the scenario's ``bias`` of pair ``i``), and the truth at every
+        the scenario's ``bias`` of pair ``i``), recorded at ``t + c_i`` (``c_i``
+        its ``clock_error``), and the truth at every true and every recorded
         measurement time.
     """
     times = scenario.truth_times()
@@ -386,6 +408,9 @@ def simulate(scenario: Scenario, rng: np.random.Generator) -> Simulation:
         x = x0.copy()
         t_prev = 0.0
         for k, t in enumerate(times):
+            if t < 0:  # recorded by a clock running early: before the start, where the truth has no noise
+                states[k] = noise.propagate(x0, t)
+                continue
             dt = t - t_prev
             if dt > 0:
                 x = noise.propagate(x, dt) + noise.sample_noise(dt, rng)
@@ -401,7 +426,9 @@ def simulate(scenario: Scenario, rng: np.random.Generator) -> Simulation:
     clean = bistatic_doppler(states[idx], scenario.geometry)[np.arange(t_all.size), p_all]
     sig = scenario.sigmas[p_all]
     z = clean + sig * rng.standard_normal(t_all.size) + scenario.biases[p_all]
-    meas = Measurements(time=t_all, pair=p_all, doppler=z, sigma=sig)
+    recorded = t_all + scenario.clock_errors[p_all]
+    order = np.lexsort((p_all, recorded))  # the identity without clock errors
+    meas = Measurements(time=recorded[order], pair=p_all[order], doppler=z[order], sigma=sig[order])
     return Simulation(scenario=scenario, measurements=meas, truth=truth)
 
 

@@ -15,6 +15,8 @@ Three mistakes, each checked on the same recordings:
   rule the mistake out.
 * **A receiver's clock off.**  Pair 1's times ``--late`` seconds late (default 0.5; one clock for
   every pair is assumed).  Not looked for: where such data fit another track, no finding can tell.
+  With ``--clock-sigma S`` the smoother is told each pair's clock may be off by S (1 sigma;
+  ``SmootherSettings(clock_sigma=S)``, a consider covariance), on every version of the data.
 
 Per recording, five versions of the data: as simulated, every pair's Doppler negated, pair 0's
 alone negated, pairs 0 and 1 swapped, pair 1's clock late.  For each: whether the initiation has a
@@ -27,7 +29,8 @@ Recordings: the accuracy benchmark's runs of the paper's six scenarios (``--runs
 and as many random layouts of ``studies/random_layouts.py`` (draw ``100 s + r``: two to four
 pairs anywhere, the target anywhere in the default zone).
 
-Run: python studies/data_mistakes.py [--runs 10] [--seed 2026] [--track 1] [--late 0.5] [--workers 2] [--out DIR]
+Run: python studies/data_mistakes.py [--runs 10] [--seed 2026] [--track 1] [--late 0.5] [--clock-sigma 0]
+[--workers 2] [--out DIR]
 (``--runs 10``: about 7 min on 2 cores; ``--track 0``: the initiations alone, 2 min for ``--runs 20``)
 """
 
@@ -74,7 +77,8 @@ VERSIONS: dict[str, tuple[Callable[[fd.Measurements, float], fd.Measurements], s
 }
 
 
-def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float) -> dict[str, Any]:
+def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float, clock_sigma: float
+            ) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for name, (version, _) in VERSIONS.items():
         m = version(sim.measurements, late)
@@ -85,7 +89,7 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
         row: dict[str, Any] = {"finding": found[0].code if found else "",
                                "names": named.group(1) if named else ""}
         if track:
-            r = fd.run_estimator("smoother", m, model, init)
+            r = fd.run_estimator("smoother", m, model, init, fd.SmootherSettings(clock_sigma=clock_sigma))
             e = r.primary
             k = e.states.shape[1] // 2
             j = int(np.flatnonzero(e.times <= sim.truth.times[-1])[-1])  # a late clock's last times are not truth's
@@ -97,14 +101,15 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
 
 
 @one_blas_thread
-def one(task: tuple[int, int, int], track: int = 1, late: float = 0.5) -> dict[str, Any]:
+def one(task: tuple[int, int, int], track: int = 1, late: float = 0.5, clock_sigma: float = 0.0) -> dict[str, Any]:
     s, r, seed = task
     sim, model, _ = paper_run(s, r, seed)
-    out: dict[str, Any] = {"scenario": s, "run": r, "paper": _judged(sim, model, track, late)}
+    out: dict[str, Any] = {"scenario": s, "run": r, "paper": _judged(sim, model, track, late, clock_sigma)}
     i = 100 * s + r
     record, layout_sim, init = recorded(i, *draw(i))
     if init is not None:
-        out["layout"] = _judged(layout_sim, fd.TrackingModel.of(layout_sim.scenario.geometry), track, late)
+        out["layout"] = _judged(layout_sim, fd.TrackingModel.of(layout_sim.scenario.geometry), track, late,
+                                clock_sigma)
     else:
         out["layout refused"] = record.get("refused", "")
     return out
@@ -130,9 +135,10 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool) -> list[str]:
 def main() -> None:
     args, rows = each_run(one, "data_mistakes.py", "studies",
                           options={"--track": {"type": int, "default": 1},
-                                   "--late": {"type": float, "default": 0.5}})
+                                   "--late": {"type": float, "default": 0.5},
+                                   "--clock-sigma": {"type": float, "default": 0.0}})
     text = "\n".join([f"{args.runs} runs per paper scenario and as many random layouts, seed {args.seed}; "
-                       f"a late clock {args.late:g} s", "",
+                       f"a late clock {args.late:g} s; the smoother's clock_sigma {args.clock_sigma:g} s", "",
                       *_table(rows, "paper", bool(args.track)), *_table(rows, "layout", bool(args.track))])
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "data_mistakes.md").write_text(text)

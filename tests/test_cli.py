@@ -459,6 +459,56 @@ def test_a_monte_carlo_study_with_offsets_declared_to_the_trackers(tmp_path: Pat
     assert "(no --huber)" in capsys.readouterr().err and not (tmp_path / "huber.npz").exists()
 
 
+def test_a_late_clock_is_simulated_and_the_trackers_told_of_clock_uncertainty(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # simulate --clock-error records pair 1's values 0.5 s late (its truth file covers those times, so --truth
+    # reads it); track --clock-sigma widens the smoother's and the EKF's covariances by what such errors do (the
+    # track itself unchanged); refused where it does not apply
+    plain, late = tmp_path / "plain", tmp_path / "late"
+    assert main(["simulate", "--start-x", "45000", "--seed", "4", "--out", str(plain)]) == 0
+    assert main(["simulate", "--start-x", "45000", "--seed", "4", "--clock-error", "0", "0.5", "--out",
+                 str(late)]) == 0
+    a = fd.Measurements.from_csv(plain / "measurements.csv")
+    b = fd.Measurements.from_csv(late / "measurements.csv")
+    for p, shift in ((0, 0.0), (1, 0.5)):
+        np.testing.assert_allclose(b.time[b.pair == p], a.time[a.pair == p] + shift, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(b.doppler[b.pair == p], a.doppler[a.pair == p], rtol=0, atol=1e-9)
+    capsys.readouterr()
+    m = str(late / "measurements.csv")
+    for estimator in ("smoother", "ekf"):
+        runs = {}
+        for extra in ([], ["--clock-sigma", "0.5"]):
+            assert main(["track", m, "--estimator", estimator, "--truth", str(late / "truth.csv"), "--json",
+                         *extra]) == 0
+            runs[bool(extra)] = json.loads(capsys.readouterr().out)
+        assert runs[True]["states"] == runs[False]["states"] and runs[True]["status"] == runs[False]["status"]
+        assert runs[True]["settings"]["clock_sigma"] == 0.5
+        last = [np.array(runs[k]["covariances"][-1]) for k in (False, True)]
+        assert np.all(np.linalg.eigvalsh(last[1] - last[0]) > -1e-9) and np.trace(last[1]) > 10 * np.trace(last[0])
+    for bad, said in ((["--estimator", "particle", "--clock-sigma", "0.1"],
+                       "--clock-sigma applies to ekf, isam2, fixed-lag, smoother, not to particle"),
+                      (["--estimator", "init", "--clock-sigma", "0.1"], "not to init"),
+                      (["--estimator", "ekf", "--clock-sigma", "1", "1", "1"], "one per pair (2)"),
+                      (["--estimator", "fixed-lag", "--clock-sigma", "-1"], "--clock-sigma: clock_sigma must be")):
+        assert main(["track", m, *bad]) == 2
+        assert said in capsys.readouterr().err
+    assert main(["simulate", "--clock-error", "1", "2", "3", "--out", str(tmp_path / "bad")]) == 2
+    assert "--clock-error must be" in capsys.readouterr().err and not (tmp_path / "bad").exists()
+    # a Monte Carlo study: the same recordings with the late clock, the smoother told of it or not
+    out = {}
+    for extra in ([], ["--clock-sigma", "0.5"]):
+        stem = tmp_path / ("with" if extra else "without")
+        assert main(["montecarlo", "--case", "a", "--start-x", "45000", "--runs", "1", "--workers", "1",
+                     "--estimators", "smoother", "particle", "--clock-error", "0", "0.5", "--out", str(stem),
+                     *extra]) == 0
+        out[bool(extra)] = np.load(stem.with_suffix(".npz"))
+    assert "note: --clock-sigma applies to ekf, isam2, fixed-lag, smoother; particle run without it" \
+        in capsys.readouterr().err
+    np.testing.assert_array_equal(out[True]["pos_0_smoother"], out[False]["pos_0_smoother"])
+    np.testing.assert_array_equal(out[True]["nees_0_particle"], out[False]["nees_0_particle"])
+    assert np.nanmean(out[True]["nees_0_smoother"]) < np.nanmean(out[False]["nees_0_smoother"]) / 5
+
+
 #: Three sensors within 3.3 m of one line (the file says more; studies/zone_advice.py measures on it too).
 QUASI_MONOSTATIC = Path(__file__).resolve().parents[1] / "studies" / "geometries" / "quasi_monostatic.toml"
 

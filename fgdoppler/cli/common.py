@@ -127,6 +127,9 @@ def add_scenario_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
     g.add_argument("--bias", type=float, nargs="+", default=[0.0], metavar="M/S",
                    help="constant Doppler offset in m/s added to every measurement of a pair (an uncalibrated "
                    "frequency offset), one value or one per pair (default 0)")
+    g.add_argument("--clock-error", type=float, nargs="+", default=[0.0], metavar="S",
+                   help="each pair's clock error in s: its measurements are recorded this much after they were "
+                   "taken (a receiver's clock running late; negative: early), one value or one per pair (default 0)")
     return g
 
 
@@ -169,18 +172,19 @@ def scenario(args: argparse.Namespace, geometry: Any, start: tuple[float, ...], 
         offsets = (0.0, PAPER_CASE_B_OFFSET) if geometry.name == "b" else (0.0,) * geometry.n_pairs
     sigma = args.sigma[0] if len(args.sigma) == 1 else tuple(args.sigma)
     bias = args.bias[0] if len(args.bias) == 1 else tuple(args.bias)
+    clock = args.clock_error[0] if len(args.clock_error) == 1 else tuple(args.clock_error)
     manoeuvring = args.turn_rate != 0.0 or args.acceleration != 0.0
     try:
         manoeuvre = Manoeuvre(onset=args.manoeuvre_onset, turn_rate_deg=args.turn_rate,
                               acceleration=args.acceleration)  # checked even where it does nothing
         return Scenario(geometry=geometry, x0=(*start, *velocity), duration=args.duration, dt=args.dt,
-                        sigma=sigma, time_offsets=offsets, name=name, bias=bias,
+                        sigma=sigma, time_offsets=offsets, name=name, bias=bias, clock_error=clock,
                         manoeuvre=manoeuvre if manoeuvring else None,
                         process_noise=ConstantVelocity(q=args.process_noise) if args.process_noise > 0 else None)
     except ValueError as exc:
         msg = str(exc).replace("a scenario takes a manoeuvre or process noise, not both",
                                "--turn-rate/--acceleration and --process-noise cannot be combined")
-        msg = msg.replace("bias must be", "--bias must be")
+        msg = msg.replace("bias must be", "--bias must be").replace("clock_error must be", "--clock-error must be")
         for field, option in _MANOEUVRE_OPTIONS.items():
             msg = msg.replace(f"Manoeuvre.{field}", option)
         raise CLIError(msg) from None
@@ -198,8 +202,18 @@ def per_pair(values: list[float], n_pairs: int, option: str, where: str = "") ->
 
 
 def bias_sigma_error(exc: ValueError) -> CLIError:
-    """A tracker settings' refusal of ``bias_sigma``, in the command line's words."""
-    return CLIError(f"--bias-sigma: {str(exc).replace('(huber_k=None)', '(no --huber)')}")
+    """A tracker settings' refusal of ``bias_sigma`` or ``clock_sigma``, in the command line's words."""
+    text = str(exc).replace("(huber_k=None)", "(no --huber)")
+    return CLIError(f"{'--clock-sigma' if text.startswith('clock_sigma') else '--bias-sigma'}: {text}")
+
+
+def taking(setting: str) -> list[str]:
+    """The estimators whose settings have the field ``setting`` (e.g. ``"clock_sigma"``)."""
+    from dataclasses import fields
+
+    from fgdoppler.estimators.registry import ESTIMATORS
+
+    return [n for n, i in ESTIMATORS.items() if setting in {f.name for f in fields(i.settings)}]
 
 
 def _finite(v: float) -> bool:

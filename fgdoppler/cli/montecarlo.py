@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from fgdoppler.analysis.montecarlo import DEFAULT_ESTIMATORS
 from fgdoppler.cli.common import (
@@ -20,6 +22,7 @@ from fgdoppler.cli.common import (
     huber,
     per_pair,
     scenario,
+    taking,
 )
 
 __all__ = ["add_montecarlo"]
@@ -48,6 +51,10 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
                         "covariances of the smoother, ekf, isam2 and fixed-lag include what constant offsets of that "
                         "size would do; particle and map integrate such offsets out (default 0; simulate offsets "
                         "with --bias)")
+    p.add_argument("--clock-sigma", type=float, nargs="+", default=None, metavar="S",
+                   help="clock uncertainty per pair in s (1 sigma; one value or one per pair): the covariances of "
+                        "the smoother, ekf, isam2 and fixed-lag include what a pair's times all off by that much "
+                        "would do (particle and map do not model it; default 0; simulate errors with --clock-error)")
     p.add_argument("--estimate-offsets", action="store_true",
                    help="with --bias-sigma: the smoother estimates each pair's offset with the track instead")
     p.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS),
@@ -110,6 +117,8 @@ def _run(args: argparse.Namespace) -> int:
                 settings["smoother"] = replace(smoother, estimate_offsets=True)
         except ValueError as exc:
             raise bias_sigma_error(exc) from None
+    if args.clock_sigma is not None:
+        settings = _with_clock_sigma(args, scen, settings)
     try:
         spec = MonteCarloSpec(scenarios=tuple(scen), estimators=tuple(args.estimators), runs=args.runs, seed=args.seed,
                               initiation=InitiationSettings(grid=grid_spec(args), huber_k=k), settings=settings,
@@ -140,3 +149,21 @@ def _run(args: argparse.Namespace) -> int:
                                 title=res.scenario_names[0])
         plotting.save(ax, args.plot)
     return 0
+
+
+def _with_clock_sigma(args: argparse.Namespace, scen: list[Any], settings: dict[str, Any]) -> dict[str, Any]:
+    """``settings`` with ``--clock-sigma`` in those of the study's estimators that take it (a note on stderr names
+    the study's estimators that do not)."""
+    for sc in scen:  # every geometry of the study must take the count given
+        clock_sigma = per_pair(args.clock_sigma, sc.geometry.n_pairs, "--clock-sigma", f" in {sc.name}")
+    chosen = {"fixed-lag" if e.startswith("lag:") else e for e in args.estimators}
+    takes = taking("clock_sigma")
+    left = sorted(chosen & set(settings) - set(takes))
+    if left:
+        print(f"note: --clock-sigma applies to {', '.join(takes)}; {', '.join(left)} run without it",
+              file=sys.stderr)
+    try:
+        return {n: replace(s, clock_sigma=clock_sigma) if n in takes and n in chosen else s
+                for n, s in settings.items()}
+    except ValueError as exc:
+        raise bias_sigma_error(exc) from None

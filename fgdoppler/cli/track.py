@@ -6,7 +6,6 @@ import argparse
 import math
 import re
 import sys
-from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +21,7 @@ from fgdoppler.cli.common import (
     grid_spec,
     huber,
     per_pair,
+    taking,
 )
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
@@ -77,6 +77,11 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                         "the smoother's, ekf's, isam2's and fixed-lag's covariances include what constant offsets "
                         "of that size would do to the track; particle and map integrate such offsets out of their "
                         "likelihood (default 0)")
+    p.add_argument("--clock-sigma", type=float, nargs="+", default=None, metavar="S",
+                   help="each pair's clock uncertainty in s (1 sigma; one value or one per pair): the smoother's, "
+                        "ekf's, isam2's and fixed-lag's covariances include what a pair's measurement times all late "
+                        "or early by that much would do to the track (default 0: every pair's times from one "
+                        "clock)")
     p.add_argument("--estimate-offsets", action="store_true",
                    help="smoother, with --bias-sigma: estimate each pair's offset with the track (the track moves, "
                         "the offsets are reported) instead of only widening the covariances")
@@ -161,8 +166,10 @@ def _run(args: argparse.Namespace) -> int:
         option = ("--mode-candidates" if args.mode_candidates is not None else
                   "--most-likely" if args.most_likely else "--estimate-offsets")
         raise CLIError(f"{option} applies to the smoother, not to init")
-    elif args.bias_sigma is not None:
-        raise CLIError(f"--bias-sigma applies to {', '.join(_calibrated())}, not to init")
+    elif args.bias_sigma is not None or args.clock_sigma is not None:
+        option, field = ("--bias-sigma", "bias_sigma") if args.bias_sigma is not None else \
+            ("--clock-sigma", "clock_sigma")
+        raise CLIError(f"{option} applies to {', '.join(taking(field))}, not to init")
     if args.init_per_pair < 3:
         raise CLIError("--init-per-pair must be >= 3")
     if not (math.isfinite(args.init_seconds) and args.init_seconds >= 0):
@@ -181,6 +188,8 @@ def _run(args: argparse.Namespace) -> int:
     model = _model(args, geom)
     if args.bias_sigma is not None:
         per_pair(args.bias_sigma, geom.n_pairs, "--bias-sigma")
+    if args.clock_sigma is not None:
+        per_pair(args.clock_sigma, geom.n_pairs, "--clock-sigma")
     settings = _initiation_settings(args)
     window = meas.initiation_window(args.init_per_pair, args.init_seconds)
     try:
@@ -361,11 +370,6 @@ def _plot_landscape(args: argparse.Namespace, init: Any, window: Any, geom: Any,
     return plotting.figure_bytes(ax, args.plot.suffix.lower().lstrip("."))
 
 
-def _calibrated() -> list[str]:
-    """The estimators that take a calibration uncertainty (``bias_sigma``)."""
-    return [n for n, i in ESTIMATORS.items() if "bias_sigma" in {f.name for f in fields(i.settings)}]
-
-
 def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
     """The settings of tracker ``name`` from the options (a CLIError for values it rejects)."""
     from fgdoppler.estimators.settings import FixedLagSettings, ParticleSettings, SmootherSettings
@@ -382,11 +386,13 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
             raise CLIError(f"{option} applies to the smoother, not to {name}")
     if args.estimate_offsets and args.bias_sigma is None:
         raise CLIError("--estimate-offsets needs --bias-sigma (each pair's offset prior)")
-    if args.bias_sigma is not None and name not in _calibrated():
-        raise CLIError(f"--bias-sigma applies to {', '.join(_calibrated())}, not to {name}")
     offsets: dict[str, Any] = {}
-    if args.bias_sigma is not None:
-        offsets["bias_sigma"] = args.bias_sigma[0] if len(args.bias_sigma) == 1 else tuple(args.bias_sigma)
+    for values, option, field in ((args.bias_sigma, "--bias-sigma", "bias_sigma"),
+                                  (args.clock_sigma, "--clock-sigma", "clock_sigma")):
+        if values is not None and name not in taking(field):
+            raise CLIError(f"{option} applies to {', '.join(taking(field))}, not to {name}")
+        if values is not None:
+            offsets[field] = values[0] if len(values) == 1 else tuple(values)
     try:
         ESTIMATORS[name].settings(huber_k=k, **offsets)
     except ValueError as exc:

@@ -61,7 +61,7 @@ from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["QUADRATURE", "bias_sigmas", "moved_starts", "offset_shares", "shifted_by",
+__all__ = ["QUADRATURE", "bias_sigmas", "moved_starts", "offset_shares", "per_pair_sigmas", "shifted_by",
            "with_bias_uncertainty"]
 
 FloatArray = NDArray[np.float64]
@@ -78,6 +78,21 @@ def _rule(points: int) -> tuple[tuple[float, float], ...]:
 QUADRATURE: tuple[tuple[float, float], ...] = _rule(5)
 
 
+def per_pair_sigmas(value: float | tuple[float, ...], n_pairs: int, name: str = "bias_sigma",
+                    unit: str = "m/s") -> FloatArray:
+    """``value`` — one standard deviation for every pair or one per pair — for each of ``n_pairs`` pairs.
+
+    Raises
+    ------
+    ValueError
+        If it has neither one value nor one per pair, or a value is negative or not finite (naming ``name``).
+    """
+    sb = np.asarray(value, dtype=float).reshape(-1)
+    if sb.size not in (1, n_pairs) or not np.all(np.isfinite(sb) & (sb >= 0)):
+        raise ValueError(f"{name} must be one value >= 0 ({unit}) or one per pair ({n_pairs}), got {value}")
+    return np.broadcast_to(sb, (n_pairs,)).copy()
+
+
 def bias_sigmas(bias_sigma: float | tuple[float, ...], n_pairs: int) -> FloatArray:
     """``bias_sigma`` for each of ``n_pairs`` pairs.
 
@@ -86,10 +101,7 @@ def bias_sigmas(bias_sigma: float | tuple[float, ...], n_pairs: int) -> FloatArr
     ValueError
         If it has neither one value nor one per pair, or a value is negative or not finite.
     """
-    sb = np.asarray(bias_sigma, dtype=float).reshape(-1)
-    if sb.size not in (1, n_pairs) or not np.all(np.isfinite(sb) & (sb >= 0)):
-        raise ValueError(f"bias_sigma must be one value >= 0 (m/s) or one per pair ({n_pairs}), got {bias_sigma}")
-    return np.broadcast_to(sb, (n_pairs,)).copy()
+    return per_pair_sigmas(bias_sigma, n_pairs)
 
 
 def shifted_by(measurements: Measurements, offsets: ArrayLike) -> Measurements:
@@ -99,7 +111,8 @@ def shifted_by(measurements: Measurements, offsets: ArrayLike) -> Measurements:
 
 def offset_shares(measurements: Measurements, bias_sigma: ArrayLike, baseline: Sequence[ArrayLike],
                   respond: Callable[[Measurements], Sequence[ArrayLike]], *,
-                  directions: ArrayLike | None = None) -> list[FloatArray]:
+                  directions: ArrayLike | None = None,
+                  shift: Callable[[Measurements, FloatArray], Measurements] = shifted_by) -> list[FloatArray]:
     r"""The calibration offsets' share of the covariances of tracks that respond to the data by ``respond``.
 
     :math:`\sum_p \sum_i w_i\,\mathbf f_p(u_i\sigma_{b,p})\,\mathbf f_p(u_i\sigma_{b,p})^\top`
@@ -123,6 +136,8 @@ def offset_shares(measurements: Measurements, bias_sigma: ArrayLike, baseline: S
     directions
         ``(n_directions, n_pairs)`` offset vectors (m/s) to shift the data along, or ``None``: each pair by its
         own :math:`\sigma_{b,p}`.
+    shift
+        ``shift(measurements, v)``: the data with each pair ``p`` offset by ``v[p]``.
 
     Returns
     -------
@@ -144,7 +159,7 @@ def offset_shares(measurements: Measurements, bias_sigma: ArrayLike, baseline: S
         rows = list(np.atleast_2d(np.asarray(directions, dtype=float)))
     for d in rows:
         for step, weight in QUADRATURE:
-            moved = [np.asarray(m, dtype=float) for m in respond(shifted_by(measurements, step * d))]
+            moved = [np.asarray(m, dtype=float) for m in respond(shift(measurements, step * d))]
             if [m.shape for m in moved] != [b.shape for b in base]:
                 raise ValueError(f"the tracks of the shifted data are shaped {[m.shape for m in moved]}, "
                                  f"not as the recording's {[b.shape for b in base]}")

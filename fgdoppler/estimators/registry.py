@@ -28,6 +28,7 @@ from fgdoppler.estimators.ambiguity import (
     resolve_staged,
 )
 from fgdoppler.estimators.calibration import bias_sigmas, moved_starts, offset_shares
+from fgdoppler.estimators.clock_offsets import clock_shares, clock_sigmas
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.fixed_lag import run_fixed_lag
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate
@@ -168,7 +169,9 @@ def run_estimator(
     covariances include what calibration offsets of that size would do to
     it (:func:`~fgdoppler.estimators.calibration.offset_shares`, added last;
     the smoother adds its own; the particle estimators integrate the
-    offsets out of their likelihood, :mod:`~fgdoppler.estimators.offset_posterior`).
+    offsets out of their likelihood, :mod:`~fgdoppler.estimators.offset_posterior`),
+    and with ``settings.clock_sigma`` what clock offsets of that size would
+    (:func:`~fgdoppler.estimators.clock_offsets.clock_shares`).
     ``progress`` (:mod:`fgdoppler.progress`) is told of every task: each
     hypothesis's run, the reference smoother's, the runs on offset data.
 
@@ -196,6 +199,8 @@ def run_estimator(
     declared = getattr(settings, "bias_sigma", None)
     per_pair = None if declared is None else bias_sigmas(declared, model.observation.n_channels)
     offsets = per_pair if isinstance(settings, SampledCovarianceSettings) else None
+    clocks = clock_sigmas(settings.clock_sigma, model.observation.n_channels) \
+        if isinstance(settings, SampledCovarianceSettings) else None
     hyps, weights = _hypotheses(info, measurements, model, init, settings) if resolve_ambiguity else ([init], None)
     result = base = _solve(info, measurements, model, hyps, settings, progress, weights)
     if resolve_ambiguity and info.resolution == "likelihood" and getattr(settings, "restarts", False) \
@@ -211,8 +216,8 @@ def run_estimator(
     judged = judge(result, measurements, model, settings, reference, half_plane=init.half_plane is not None)
     if isinstance(settings, SampledCovarianceSettings) and settings.sampled_covariance:
         judged = _with_sampled_covariances(judged, measurements, model, settings)
-    if offsets is not None and np.any(offsets > 0):
-        judged = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings, offsets,
+    if (offsets is not None and np.any(offsets > 0)) or (clocks is not None and np.any(clocks > 0)):
+        judged = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings, offsets, clocks,
                                prefixed(progress, "calibration offsets"))
     if reference is not None:  # on the covariances reported, after the sampled check and the offsets
         judged = replace(judged, reasons=(*judged.reasons, *track_reference(judged.primary, reference.primary)))
@@ -370,16 +375,19 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
 
 def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, measurements: Measurements,
                   model: TrackingModel, hyps: list[Initiation], weights: NDArray[np.float64] | None,
-                  settings: TrackerSettings, offsets: NDArray[np.float64],
-                  progress: Progress | None = None) -> TrackResult:
-    """Every estimate's covariances with the calibration offsets' share added (``offsets``: σ per pair, m/s).
+                  settings: TrackerSettings, offsets: NDArray[np.float64] | None,
+                  clocks: NDArray[np.float64] | None = None, progress: Progress | None = None) -> TrackResult:
+    """Every estimate's covariances with the calibration offsets' share (``offsets``: σ per pair, m/s) and the
+    clock offsets' (``clocks``: σ per pair, s) added.
 
     The share is what the offsets do to ``base`` — the tracker's run from
     ``hyps`` before any restart — run again on the data with one pair
     shifted at a time, from starts moved as the window's solution moves
     (:func:`~fgdoppler.estimators.calibration.moved_starts`,
-    :func:`~fgdoppler.estimators.calibration.offset_shares`); it is added at
-    the reported estimates' times, which a restart does not change.
+    :func:`~fgdoppler.estimators.calibration.offset_shares`); a clock offset
+    shifts the data along ``base``'s primary track
+    (:func:`~fgdoppler.estimators.clock_offsets.clock_shares`).  It is added
+    at the reported estimates' times, which a restart does not change.
     """
     kinds = [e.kind for e in base.estimates]
     moved = moved_starts(hyps, measurements, model, huber_k=settings.huber_k)
@@ -388,14 +396,21 @@ def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, m
         again = _solve(info, data, model, moved(data), settings, progress, weights)
         return [again.estimate(k).states for k in kinds]
 
-    shares = dict(zip(kinds, offset_shares(measurements, offsets, [e.states for e in base.estimates], respond),
-                      strict=True))
+    baseline = [e.states for e in base.estimates]
+    shares = [np.zeros((*b.shape, b.shape[-1])) for b in baseline]
+    if offsets is not None and np.any(offsets > 0):
+        shares = [a + b for a, b in zip(shares, offset_shares(measurements, offsets, baseline, respond), strict=True)]
+    if clocks is not None and np.any(clocks > 0):
+        along = base.primary
+        shares = [a + b for a, b in zip(shares, clock_shares(measurements, model, clocks, along.times, along.states,
+                                                              baseline, respond), strict=True)]
+    by_kind = dict(zip(kinds, shares, strict=True))
     estimates = []
     for e in result.estimates:
-        if e.kind in shares:
+        if e.kind in by_kind:
             if not np.array_equal(e.times, base.estimate(e.kind).times):  # a restart keeps the scans' times
                 raise RuntimeError(f"{info.name}: the {e.kind} estimates' times changed after the first run")
-            e = replace(e, covariances=e.covariances + shares[e.kind])
+            e = replace(e, covariances=e.covariances + by_kind[e.kind])
         estimates.append(e)
     return replace(result, estimates=tuple(estimates))
 

@@ -28,16 +28,26 @@ def _flag(value: bool, name: str) -> None:
         raise ValueError(f"{name} must be True or False, got {value!r}")
 
 
-def _bias_sigma(value: Any) -> float | tuple[float, ...]:
-    """``bias_sigma`` as a float or a tuple of floats, each finite and >= 0 (m/s)."""
+def _per_pair_sigma(value: Any, name: str, unit: str) -> float | tuple[float, ...]:
+    """``value`` as a float or a tuple of floats, each finite and >= 0 (``unit``); ``name`` in the refusal."""
     many = isinstance(value, (tuple, list))
     try:
         values = [float(v) for v in (value if many else [value])]
     except (TypeError, ValueError):
         values = []
     if not values or not all(math.isfinite(v) and v >= 0 for v in values):
-        raise ValueError(f"bias_sigma must be a number >= 0 (m/s) or one per pair, got {value!r}")
+        raise ValueError(f"{name} must be a number >= 0 ({unit}) or one per pair, got {value!r}")
     return tuple(values) if many else values[0]
+
+
+def _bias_sigma(value: Any) -> float | tuple[float, ...]:
+    """``bias_sigma`` as a float or a tuple of floats, each finite and >= 0 (m/s)."""
+    return _per_pair_sigma(value, "bias_sigma", "m/s")
+
+
+def _clock_sigma(value: Any) -> float | tuple[float, ...]:
+    """``clock_sigma`` as a float or a tuple of floats, each finite and >= 0 (s)."""
+    return _per_pair_sigma(value, "clock_sigma", "s")
 
 
 def _count(value: int, name: str) -> None:
@@ -200,15 +210,30 @@ class SampledCovarianceSettings(GaussianSumSettings):
         findings with the offsets in the model
         (:func:`~fgdoppler.estimators.smoother.with_offset_findings`), so
         that offsets do not pass for a manoeuvre.
+    clock_sigma : float or tuple of float, default 0.0
+        Each pair's clock uncertainty (s, one standard deviation; one value
+        for every pair or one per pair): all of a pair's measurement times
+        may be late or early by one constant, which the data cannot tell
+        from another track (:mod:`~fgdoppler.estimators.clock_offsets`).
+        The reported covariances of every estimate then include what such
+        offsets would do to the answer — the tracker run again, from its
+        start moved as the initiation window's solution moves, on the data
+        as they would read with one pair's clock off at a time, made along
+        the tracker's own primary track
+        (:func:`~fgdoppler.estimators.clock_offsets.clock_shares`; four runs
+        per pair, added with the calibration offsets' share, last).  The
+        track and the verdict do not change.
     """
 
     sampled_covariance: bool = True
     sampling_interval: float = 5.0
     bias_sigma: float | tuple[float, ...] = 0.0
+    clock_sigma: float | tuple[float, ...] = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "bias_sigma", _bias_sigma(self.bias_sigma))
+        object.__setattr__(self, "clock_sigma", _clock_sigma(self.clock_sigma))
         _positive(self.sampling_interval, "sampling_interval")
         _flag(self.sampled_covariance, "sampled_covariance")
 
@@ -232,7 +257,7 @@ class EKFSettings(SampledCovarianceSettings):
         :class:`TrackerSettings`).
     components : int, default 8
         Gaussian-sum terms (see :class:`GaussianSumSettings`).
-    sampled_covariance, sampling_interval, bias_sigma
+    sampled_covariance, sampling_interval, bias_sigma, clock_sigma
         See :class:`SampledCovarianceSettings`.
     update : {"sequential", "scan"}, default "sequential"
         ``"sequential"``: one scalar update per measurement, relinearising
@@ -318,7 +343,7 @@ class ISAM2Settings(StreamingSettings, SampledCovarianceSettings):
         (:meth:`~fgdoppler.estimators.isam2.ISAM2Tracker.finish`).
     smoothed_covariances : bool, default True
         Compute the marginal covariance of every smoothed state at the end.
-    sampled_covariance, sampling_interval, bias_sigma
+    sampled_covariance, sampling_interval, bias_sigma, clock_sigma
         See :class:`SampledCovarianceSettings`.
     """
 
@@ -365,7 +390,7 @@ class FixedLagSettings(StreamingSettings, SampledCovarianceSettings):
         a stream from the prior, and the warm-up did not improve it
         (docs/concepts.md, "Feeding a tracker yourself").  Switch it on to feed the
         tracker without a guess of the first state.
-    sampled_covariance, sampling_interval, bias_sigma
+    sampled_covariance, sampling_interval, bias_sigma, clock_sigma
         See :class:`SampledCovarianceSettings`: the lagged covariances are
         checked against posterior samples of the data up to ``lag``
         seconds after their time (measured on the paper's six scenarios,
@@ -503,6 +528,18 @@ class SmootherSettings(TrackerSettings):
         mirror image across the sensors' line: free offsets can make that
         mode as likely, and then the verdict has a ``competing`` finding
         (as with the offsets only considered).
+    clock_sigma : float or tuple of float, default 0.0
+        Each pair's clock uncertainty (s, one standard deviation; one value
+        for every pair or one per pair): all of a pair's measurement times
+        may be late or early by one constant.  On the paper's closely spaced
+        pairs that moves the answer as another track would, with residuals
+        as good (:mod:`~fgdoppler.estimators.clock_offsets`).  The reported
+        covariances then include what such offsets would do to the answer
+        (a consider covariance,
+        :func:`~fgdoppler.estimators.clock_offsets.with_clock_uncertainty`;
+        four Levenberg–Marquardt solves per pair, from the smoother's own
+        solution on the data delayed along it, added after the calibration
+        offsets' share).  The track and the verdict do not change.
     """
 
     max_iterations: int = 100
@@ -517,10 +554,12 @@ class SmootherSettings(TrackerSettings):
     motion_check: bool = True
     bias_sigma: float | tuple[float, ...] = 0.0
     estimate_offsets: bool = False
+    clock_sigma: float | tuple[float, ...] = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "bias_sigma", _bias_sigma(self.bias_sigma))
+        object.__setattr__(self, "clock_sigma", _clock_sigma(self.clock_sigma))
         _flag(self.estimate_offsets, "estimate_offsets")
         sigmas = self.bias_sigma if isinstance(self.bias_sigma, tuple) else (self.bias_sigma,)
         if self.estimate_offsets and max(sigmas) == 0.0:

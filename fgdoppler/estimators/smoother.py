@@ -48,6 +48,7 @@ from scipy.stats import chi2
 
 from fgdoppler._text import first_line
 from fgdoppler.estimators.calibration import bias_sigmas, shifted_by, with_bias_uncertainty
+from fgdoppler.estimators.clock_offsets import clock_sigmas, with_clock_uncertainty
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.initiation import Initiation, inlier_statistic
 from fgdoppler.estimators.judge import REJECT_ROBUST
@@ -1163,7 +1164,8 @@ def _reported(measurements: Measurements, model: TrackingModel, settings: Smooth
     ``reasons``), with the calibration offsets' share (``settings.bias_sigma``) added — a consider covariance
     (:func:`~fgdoppler.estimators.calibration.with_bias_uncertainty`) or, with ``settings.estimate_offsets``, the
     joint solution's (``joint``, :func:`_joint`) shift and share (:mod:`~fgdoppler.estimators.smoother_offsets`;
-    its offsets are returned, what happened joins ``notes``)."""
+    its offsets are returned, what happened joins ``notes``), and the clock offsets' share (``settings.clock_sigma``,
+    :func:`~fgdoppler.estimators.clock_offsets.with_clock_uncertainty`, from the solution itself)."""
     states = list(sol.states)
     covs: list[FloatArray | None] = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
     has_covs = sol.covariances is not None and bool(np.all(np.isfinite(sol.covariances[0])))
@@ -1174,8 +1176,20 @@ def _reported(measurements: Measurements, model: TrackingModel, settings: Smooth
         if sampled is not None:
             states, covs = list(sampled.states), list(sampled.covariances)
             reasons.append(sampled.reason)
-    if not np.any(np.asarray(settings.bias_sigma) > 0):  # its count was checked when the run began
-        return states, covs, None
+    off = None
+    if np.any(np.asarray(settings.bias_sigma) > 0):  # its count was checked when the run began
+        states, covs, off = _with_bias(measurements, model, settings, sol, states, covs, has_covs, notes, joint)
+    if has_covs and np.any(np.asarray(settings.clock_sigma) > 0):
+        covs = list(with_clock_uncertainty(measurements, model, sol.times, sol.states, np.array(covs),
+                                           settings.clock_sigma, settings))
+    return states, covs, off
+
+
+def _with_bias(measurements: Measurements, model: TrackingModel, settings: SmootherSettings, sol: SmootherSolution,
+               states: list[FloatArray], covs: list[FloatArray | None], has_covs: bool, notes: list[str],
+               joint: JointSolution | str | None) -> tuple[list[FloatArray], list[FloatArray | None],
+                                                            OffsetEstimate | None]:
+    """:func:`_reported`'s states and covariances with the calibration offsets' share, and the offsets estimated."""
     n_pairs = model.observation.n_channels
     if joint is not None:
         if not isinstance(joint, str):
@@ -1306,6 +1320,7 @@ def draft_smoother(
     """
     settings = settings or SmootherSettings()
     bias_sigmas(settings.bias_sigma, model.observation.n_channels)  # a wrong count is said before any work
+    clock_sigmas(settings.clock_sigma, model.observation.n_channels)
     t_begin = time.perf_counter()
     progress = prefixed(progress, "smoother")
     x_init = initial_trajectory(measurements, model, init, settings, progress)
