@@ -62,7 +62,7 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
 __all__ = ["QUADRATURE", "bias_sigmas", "moved_starts", "offset_shares", "per_pair_sigmas", "shifted_by",
-           "with_bias_uncertainty"]
+           "smoother_response", "with_bias_uncertainty"]
 
 FloatArray = NDArray[np.float64]
 
@@ -198,16 +198,26 @@ def with_bias_uncertainty(measurements: Measurements, model: TrackingModel, time
     ValueError
         For a ``bias_sigma`` of the wrong length or with a negative value.
     """
+    sb = bias_sigmas(bias_sigma, model.observation.n_channels)
+    x = np.asarray(states, dtype=float)
+    respond = smoother_response(model, times, x, settings)
+    return np.asarray(covariances, dtype=float) + offset_shares(measurements, sb, [x], respond, directions=directions)[0]
+
+
+def smoother_response(model: TrackingModel, times: ArrayLike, states: ArrayLike,
+                      settings: SmootherSettings | None = None) -> Callable[[Measurements], list[FloatArray]]:
+    """The smoothed track as a function of the data: Levenberg–Marquardt from ``states`` at ``times`` with the
+    smoother's ``settings`` (loss, iteration cap, zone wall; no covariances), one state array in a list (the
+    ``respond`` of :func:`offset_shares`)."""
     from fgdoppler.estimators.smoother import solve_smoother
 
-    sb = bias_sigmas(bias_sigma, model.observation.n_channels)
     x = np.asarray(states, dtype=float)
     solve = replace(settings or SmootherSettings(), covariances=False)
 
     def respond(data: Measurements) -> list[FloatArray]:
         return [solve_smoother(data, model, x, solve, prior=model.prior(), times=times).states]
 
-    return np.asarray(covariances, dtype=float) + offset_shares(measurements, sb, [x], respond, directions=directions)[0]
+    return respond
 
 
 def moved_starts(hyps: Sequence[Initiation], measurements: Measurements, model: TrackingModel, *,

@@ -47,7 +47,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.estimators.calibration import offset_shares, per_pair_sigmas
+from fgdoppler.estimators.calibration import offset_shares, per_pair_sigmas, smoother_response
 from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
@@ -171,14 +171,7 @@ def with_clock_uncertainty(measurements: Measurements, model: TrackingModel, tim
     ValueError
         For a ``clock_sigma`` of the wrong length or with a negative value.
     """
-    from fgdoppler.estimators.smoother import solve_smoother
-
     sigmas = clock_sigmas(clock_sigma, model.observation.n_channels)
     x = np.asarray(states, dtype=float)
-    solve = replace(settings or SmootherSettings(), covariances=False)
-
-    def respond(data: Measurements) -> list[FloatArray]:
-        return [solve_smoother(data, model, x, solve, prior=model.prior(), times=times).states]
-
-    share = clock_shares(measurements, model, sigmas, times, x, [x], respond)[0]
-    return np.asarray(covariances, dtype=float) + share
+    respond = smoother_response(model, times, x, settings)
+    return np.asarray(covariances, dtype=float) + clock_shares(measurements, model, sigmas, times, x, [x], respond)[0]

@@ -194,13 +194,7 @@ def run_estimator(
                               settings, resolve_ambiguity=resolve_ambiguity, verify=verify, reference=local_ref,
                               progress=progress)
         return local.transformed(frame, to_world=True)
-    # the calibration uncertainty per pair, its count said before any work; the registry adds a filter's share,
-    # the smoother and the particle estimators account for it themselves
-    declared = getattr(settings, "bias_sigma", None)
-    per_pair = None if declared is None else bias_sigmas(declared, model.observation.n_channels)
-    offsets = per_pair if isinstance(settings, SampledCovarianceSettings) else None
-    clocks = clock_sigmas(settings.clock_sigma, model.observation.n_channels) \
-        if isinstance(settings, SampledCovarianceSettings) else None
+    per_pair, offsets, clocks = _declared_offsets(settings, model)
     hyps, weights = _hypotheses(info, measurements, model, init, settings) if resolve_ambiguity else ([init], None)
     result = base = _solve(info, measurements, model, hyps, settings, progress, weights)
     if resolve_ambiguity and info.resolution == "likelihood" and getattr(settings, "restarts", False) \
@@ -222,6 +216,18 @@ def run_estimator(
     if reference is not None:  # on the covariances reported, after the sampled check and the offsets
         judged = replace(judged, reasons=(*judged.reasons, *track_reference(judged.primary, reference.primary)))
     return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
+
+
+def _declared_offsets(settings: TrackerSettings, model: TrackingModel
+                      ) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """The calibration uncertainty per pair (``None`` where the settings have none), and those of it and of the
+    clocks whose share the registry adds (a filter's; the smoother and the particle estimators account for theirs
+    themselves).  Their counts are said here, before any work."""
+    declared = getattr(settings, "bias_sigma", None)
+    per_pair = None if declared is None else bias_sigmas(declared, model.observation.n_channels)
+    if not isinstance(settings, SampledCovarianceSettings):
+        return per_pair, None, None
+    return per_pair, per_pair, clock_sigmas(settings.clock_sigma, model.observation.n_channels)
 
 
 def _reference(measurements: Measurements, model: TrackingModel, init: Initiation, settings: TrackerSettings,
