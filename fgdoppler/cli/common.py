@@ -201,7 +201,7 @@ def per_pair(values: list[float], n_pairs: int, option: str, where: str = "") ->
     return values[0] if len(values) == 1 else tuple(values)
 
 
-def bias_sigma_error(exc: ValueError) -> CLIError:
+def offset_sigma_error(exc: ValueError) -> CLIError:
     """A tracker settings' refusal of ``bias_sigma`` or ``clock_sigma``, in the command line's words."""
     text = str(exc).replace("(huber_k=None)", "(no --huber)")
     return CLIError(f"{'--clock-sigma' if text.startswith('clock_sigma') else '--bias-sigma'}: {text}")

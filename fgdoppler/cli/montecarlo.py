@@ -14,12 +14,12 @@ from fgdoppler.cli.common import (
     add_huber_option,
     add_scenario_options,
     add_zone_options,
-    bias_sigma_error,
     emit_json,
     executor,
     geometry_with_zone,
     grid_spec,
     huber,
+    offset_sigma_error,
     per_pair,
     scenario,
     taking,
@@ -116,7 +116,7 @@ def _run(args: argparse.Namespace) -> int:
             if args.estimate_offsets and isinstance(smoother, SmootherSettings):
                 settings["smoother"] = replace(smoother, estimate_offsets=True)
         except ValueError as exc:
-            raise bias_sigma_error(exc) from None
+            raise offset_sigma_error(exc) from None
     if args.clock_sigma is not None:
         settings = _with_clock_sigma(args, scen, settings)
     try:
@@ -166,4 +166,4 @@ def _with_clock_sigma(args: argparse.Namespace, scen: list[Any], settings: dict[
         return {n: replace(s, clock_sigma=clock_sigma) if n in takes and n in chosen else s
                 for n, s in settings.items()}
     except ValueError as exc:
-        raise bias_sigma_error(exc) from None
+        raise offset_sigma_error(exc) from None

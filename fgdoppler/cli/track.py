@@ -15,11 +15,11 @@ from fgdoppler.cli.common import (
     CLIError,
     add_huber_option,
     add_zone_options,
-    bias_sigma_error,
     emit_json,
     geometry_with_zone,
     grid_spec,
     huber,
+    offset_sigma_error,
     per_pair,
     taking,
 )
@@ -396,7 +396,7 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
     try:
         ESTIMATORS[name].settings(huber_k=k, **offsets)
     except ValueError as exc:
-        raise bias_sigma_error(exc) from None
+        raise offset_sigma_error(exc) from None
     if name == "smoother":
         modes: dict[str, Any] = {}
         if args.mode_candidates is not None:

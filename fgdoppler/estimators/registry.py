@@ -173,7 +173,7 @@ def run_estimator(
     and with ``settings.clock_sigma`` what clock offsets of that size would
     (:func:`~fgdoppler.estimators.clock_offsets.clock_shares`).
     ``progress`` (:mod:`fgdoppler.progress`) is told of every task: each
-    hypothesis's run, the reference smoother's, the runs on offset data.
+    hypothesis's run, the reference smoother's, the runs on offset (or delayed) data.
 
     Raises
     ------
@@ -212,7 +212,7 @@ def run_estimator(
         judged = _with_sampled_covariances(judged, measurements, model, settings)
     if (offsets is not None and np.any(offsets > 0)) or (clocks is not None and np.any(clocks > 0)):
         judged = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings, offsets, clocks,
-                               prefixed(progress, "calibration offsets"))
+                               prefixed(progress, "calibration and clock offsets"))
     if reference is not None:  # on the covariances reported, after the sampled check and the offsets
         judged = replace(judged, reasons=(*judged.reasons, *track_reference(judged.primary, reference.primary)))
     return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
