@@ -601,6 +601,13 @@ class ParticleSettings(TrackerSettings):
         Metropolis steps after each resampling.
     start_move_steps : int, default 20
         Metropolis steps on the initiation window's posterior.
+    max_noise_share : float, default 0.1
+        Move the anchor on once the process noise the particles' likelihood
+        leaves out since the anchor exceeds this share of the posterior's
+        variance in the direction it affects most, unless the posterior is
+        too far from Gaussian for the summary
+        (:mod:`fgdoppler.estimators.particle`, "Re-anchoring");
+        ``math.inf``: only after ``max_span``.
     max_span : float, default 300.0
         Seconds of data a move may re-evaluate before the anchor moves on.
     tempered_start : bool, default True
@@ -630,6 +637,7 @@ class ParticleSettings(TrackerSettings):
     move_steps: int = 5
     start_move_steps: int = 20
     max_span: float = 300.0
+    max_noise_share: float = 0.1
     tempered_start: bool = True
     bias_sigma: float | tuple[float, ...] = 0.0
 
@@ -652,6 +660,8 @@ class ParticleSettings(TrackerSettings):
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"{name} must be a whole number >= 0, got {v!r}")
         _positive(self.max_span, "max_span")
+        if isinstance(self.max_noise_share, bool) or not self.max_noise_share > 0:
+            raise ValueError(f"max_noise_share must be a positive number (math.inf: off), got {self.max_noise_share!r}")
         _flag(self.tempered_start, "tempered_start")
 
 
