@@ -209,7 +209,7 @@ def run_estimator(
         reference = None
     judged = judge(result, measurements, model, settings, reference, half_plane=init.half_plane is not None)
     if isinstance(settings, SampledCovarianceSettings) and settings.sampled_covariance:
-        judged = _with_sampled_covariances(judged, measurements, model, settings)
+        judged = _with_sampled_covariances(judged, measurements, model, settings, reference)
     if (offsets is not None and np.any(offsets > 0)) or (clocks is not None and np.any(clocks > 0)):
         judged = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings, offsets, clocks,
                                prefixed(progress, "calibration and clock offsets"))
@@ -348,7 +348,8 @@ def _solve(info: EstimatorInfo, measurements: Measurements, model: TrackingModel
 
 
 def _with_sampled_covariances(result: TrackResult, measurements: Measurements, model: TrackingModel,
-                              settings: SampledCovarianceSettings) -> TrackResult:
+                              settings: SampledCovarianceSettings, reference: TrackResult | None = None
+                              ) -> TrackResult:
     """The primary covariances widened to posterior samples of the data the estimates have read (:func:`~fgdoppler.estimators.spread.filtered_spread`).
 
     A filter's estimates have read the data so far; a fixed-lag smoother's
@@ -360,7 +361,10 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
     witness of poor observability that a widened covariance would hide
     (paper's case a 5 km, seed 2026, run 79: ``doubtful`` on the Gaussian
     covariance, ``ok`` on the widened one, 2.4 km off with a position
-    sigma of 0.6 km).
+    sigma of 0.6 km).  Where the samples cannot describe the posterior (the
+    process noise), the filtered covariances are widened towards the
+    posterior of the data so far linearised about ``reference``'s track, the
+    offline smoother's (``filtered_spread``'s ``reference``).
     """
     e = result.primary
     rejected = result.nis[result.nis[:, 3] == 0] if result.nis.size else np.zeros((0, 4))
@@ -372,7 +376,9 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
         kept = measurements.subset(~drop)
     widened = filtered_spread(kept, model, e.times, e.states, e.covariances, e.cov_ok,
                               interval=settings.sampling_interval, lag=settings.look_ahead,
-                              huber_k=settings.huber_k)
+                              huber_k=settings.huber_k,
+                              reference=None if reference is None or not len(reference.primary)
+                              else (reference.primary.times, reference.primary.states))
     if widened is None:
         return result
     primary = replace(e, covariances=widened[0])
