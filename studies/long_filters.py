@@ -24,11 +24,9 @@ Run: ``python studies/long_filters.py [--recordings 12] [--truth-q 0]``
 
 from __future__ import annotations
 
-import json
-
 import _common  # the repository root on the path, and the runner
 import numpy as np
-from long_particles import CASES, scenario
+from long_particles import CASES, recording, save
 from scipy.stats import chi2
 
 import fgdoppler as fd
@@ -44,12 +42,7 @@ RUN_LIMIT = float(chi2.ppf(0.999, 4))
 def one(seed: int, truth_q: float) -> dict[str, dict[str, list[float | str]]]:
     out: dict[str, dict[str, list[float | str]]] = {}
     for case in CASES:
-        scen = scenario(case, truth_q)
-        sim = fd.simulate(scen, np.random.default_rng(seed))
-        m = sim.measurements
-        model = fd.TrackingModel.of(scen.geometry)
-        init = fd.initiate(m.first_per_pair(10), model)
-        smoother = fd.run_estimator("smoother", m, model, init)
+        sim, m, model, init, smoother = recording(case, truth_q, seed)
         for name in FILTERS:
             own = fd.run_estimator(name, m, model, init, verify=False).primary
             result = fd.run_estimator(name, m, model, init, reference=smoother)
@@ -83,10 +76,7 @@ def main() -> None:
                   f"(runs > {RUN_LIMIT:.1f}: {s['inconsistent_own']}, {s['inconsistent_own_ok']} ok), "
                   f"reported {s['nees_reported']:6.2f} (runs > {RUN_LIMIT:.1f}: {s['inconsistent_reported']}, "
                   f"{s['inconsistent_reported_ok']} ok), not ok {s['not_ok']} of {len(runs)}")
-    args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / f"long_filters_q{args.truth_q:g}.json"
-    path.write_text(json.dumps(summary, indent=1))
-    print(f"wrote {path}")
+    save(args.out, f"long_filters_q{args.truth_q:g}.json", summary)
 
 
 if __name__ == "__main__":

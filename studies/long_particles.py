@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
+from typing import Any
 
 import _common  # the repository root on the path, and the runner
 import numpy as np
@@ -48,16 +50,31 @@ def scenario(case: str, truth_q: float) -> fd.Scenario:
                        process_noise=fd.ConstantVelocity(q=truth_q) if truth_q > 0 else None)
 
 
+def recording(case: str, truth_q: float, seed: int
+              ) -> tuple[fd.Simulation, fd.Measurements, fd.TrackingModel, fd.Initiation, fd.TrackResult]:
+    """One recording of :func:`scenario` (seed ``seed``): simulation, measurements, model, initiation from the
+    first 10 measurements per pair, and the offline smoother's result."""
+    scen = scenario(case, truth_q)
+    sim = fd.simulate(scen, np.random.default_rng(seed))
+    m = sim.measurements
+    model = fd.TrackingModel.of(scen.geometry)
+    init = fd.initiate(m.first_per_pair(10), model)
+    return sim, m, model, init, fd.run_estimator("smoother", m, model, init)
+
+
+def save(out: Path, name: str, summary: dict[str, Any]) -> None:
+    """``summary`` as JSON in ``out/name``."""
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / name
+    path.write_text(json.dumps(summary, indent=1))
+    print(f"wrote {path}")
+
+
 @one_blas_thread
 def one(seed: int, truth_q: float) -> dict[str, dict[str, list[float | str]]]:
     out: dict[str, dict[str, list[float | str]]] = {}
     for case in CASES:
-        scen = scenario(case, truth_q)
-        sim = fd.simulate(scen, np.random.default_rng(seed))
-        m = sim.measurements
-        model = fd.TrackingModel.of(scen.geometry)
-        init = fd.initiate(m.first_per_pair(10), model)
-        smoother = fd.run_estimator("smoother", m, model, init)
+        sim, m, model, init, smoother = recording(case, truth_q, seed)
         for name, share in VARIANTS.items():
             result = smoother if share is None else fd.run_estimator(
                 "particle", m, model, init, fd.ParticleSettings(max_noise_share=share), reference=smoother)
@@ -84,10 +101,7 @@ def main() -> None:
                                          "nees_late": float(nees.mean()), "not_ok": flagged}
             print(f"case {case} {name:17s} RMSE t >= 300 s {np.sqrt(late.mean()):6.0f} m, last {np.sqrt(last.mean()):6.0f} m, "
                   f"NEES {nees.mean():6.2f}, not ok {flagged} of {len(runs)}")
-    args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / f"long_particles_q{args.truth_q:g}.json"
-    path.write_text(json.dumps(summary, indent=1))
-    print(f"wrote {path}")
+    save(args.out, f"long_particles_q{args.truth_q:g}.json", summary)
 
 
 if __name__ == "__main__":
