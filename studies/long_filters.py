@@ -19,7 +19,7 @@ the runs whose own average NEES exceeds the chi-square(4) 99.9 % point
 (18.5) and how many of those were judged ``ok``.
 
 Run: ``python studies/long_filters.py [--recordings 12] [--truth-q 0]``
-(25 CPU minutes per ``--truth-q``: about 13 minutes on 2 free cores).
+(20 CPU minutes per ``--truth-q``: 10 minutes on 2 free cores).
 """
 
 from __future__ import annotations
