@@ -24,9 +24,8 @@ Run: ``python studies/long_filters.py [--recordings 12] [--truth-q 0]``
 
 from __future__ import annotations
 
-import _common  # the repository root on the path, and the runner
 import numpy as np
-from long_particles import CASES, recording, save
+from long_particles import CASES, by_variant, recording, run_recordings, save
 from scipy.stats import chi2
 
 import fgdoppler as fd
@@ -57,25 +56,22 @@ def one(seed: int, truth_q: float) -> dict[str, dict[str, list[float | str]]]:
 
 
 def main() -> None:
-    args, rows = _common.each_count(one, __doc__.splitlines()[0], "recordings", 12, options={"truth_q": 0.0})
+    args, rows = run_recordings(one, __doc__)
     summary = {}
-    print(f"{args.recordings} recordings per case, truth process noise q = {args.truth_q:g} m^2/s^3")
-    for case in CASES:
-        for name in FILTERS:
-            runs = [r[case][name] for r in rows]
-            squared, before, after = (np.array([float(v[i]) for v in runs]) for i in range(3))
-            ok = np.array([v[3] == "ok" for v in runs])
-            summary[f"{case} {name}"] = {
-                "rmse": float(np.sqrt(squared.mean())), "nees_own": float(before.mean()),
-                "nees_reported": float(after.mean()), "inconsistent_own": int(np.sum(before > RUN_LIMIT)),
-                "inconsistent_own_ok": int(np.sum((before > RUN_LIMIT) & ok)),
-                "inconsistent_reported": int(np.sum(after > RUN_LIMIT)),
-                "inconsistent_reported_ok": int(np.sum((after > RUN_LIMIT) & ok)), "not_ok": int(np.sum(~ok))}
-            s = summary[f"{case} {name}"]
-            print(f"case {case} {name:6s} RMSE {s['rmse']:6.0f} m, NEES own {s['nees_own']:6.2f} "
-                  f"(runs > {RUN_LIMIT:.1f}: {s['inconsistent_own']}, {s['inconsistent_own_ok']} ok), "
-                  f"reported {s['nees_reported']:6.2f} (runs > {RUN_LIMIT:.1f}: {s['inconsistent_reported']}, "
-                  f"{s['inconsistent_reported_ok']} ok), not ok {s['not_ok']} of {len(runs)}")
+    for case, name, runs in by_variant(rows, FILTERS):
+        squared, before, after = (np.array([float(v[i]) for v in runs]) for i in range(3))
+        ok = np.array([v[3] == "ok" for v in runs])
+        summary[f"{case} {name}"] = {
+            "rmse": float(np.sqrt(squared.mean())), "nees_own": float(before.mean()),
+            "nees_reported": float(after.mean()), "inconsistent_own": int(np.sum(before > RUN_LIMIT)),
+            "inconsistent_own_ok": int(np.sum((before > RUN_LIMIT) & ok)),
+            "inconsistent_reported": int(np.sum(after > RUN_LIMIT)),
+            "inconsistent_reported_ok": int(np.sum((after > RUN_LIMIT) & ok)), "not_ok": int(np.sum(~ok))}
+        s = summary[f"{case} {name}"]
+        print(f"case {case} {name:6s} RMSE {s['rmse']:6.0f} m, NEES own {s['nees_own']:6.2f} "
+              f"(runs > {RUN_LIMIT:.1f}: {s['inconsistent_own']}, {s['inconsistent_own_ok']} ok), "
+              f"reported {s['nees_reported']:6.2f} (runs > {RUN_LIMIT:.1f}: {s['inconsistent_reported']}, "
+              f"{s['inconsistent_reported_ok']} ok), not ok {s['not_ok']} of {len(runs)}")
     save(args.out, f"long_filters_q{args.truth_q:g}.json", summary)
 
 

@@ -25,8 +25,10 @@ Run: ``python studies/long_particles.py [--recordings 12] [--truth-q 0]``
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +64,20 @@ def recording(case: str, truth_q: float, seed: int
     return sim, m, model, init, fd.run_estimator("smoother", m, model, init)
 
 
+def run_recordings(one: Callable[..., Any], doc: str) -> tuple[argparse.Namespace, list[Any]]:
+    """``one`` over ``--recordings`` seeds with ``--truth-q`` (``_common.each_count``), the header printed."""
+    args, rows = _common.each_count(one, doc.splitlines()[0], "recordings", 12, options={"truth_q": 0.0})
+    print(f"{args.recordings} recordings per case, truth process noise q = {args.truth_q:g} m^2/s^3")
+    return args, rows
+
+
+def by_variant(rows: list[Any], names: Iterable[str]) -> Iterator[tuple[str, str, list[Any]]]:
+    """``(case, name, that variant's result of every recording)`` for each case and each of ``names``."""
+    for case in CASES:
+        for name in names:
+            yield case, name, [r[case][name] for r in rows]
+
+
 def save(out: Path, name: str, summary: dict[str, Any]) -> None:
     """``summary`` as JSON in ``out/name``."""
     out.mkdir(parents=True, exist_ok=True)
@@ -89,18 +105,15 @@ def one(seed: int, truth_q: float) -> dict[str, dict[str, list[float | str]]]:
 
 
 def main() -> None:
-    args, rows = _common.each_count(one, __doc__.splitlines()[0], "recordings", 12, options={"truth_q": 0.0})
+    args, rows = run_recordings(one, __doc__)
     summary = {}
-    print(f"{args.recordings} recordings per case, truth process noise q = {args.truth_q:g} m^2/s^3")
-    for case in CASES:
-        for name in VARIANTS:
-            runs = [r[case][name] for r in rows]
-            late, last, nees = (np.array([float(v[i]) for v in runs]) for i in range(3))
-            flagged = sum(v[3] != "ok" for v in runs)
-            summary[f"{case} {name}"] = {"rmse_late": float(np.sqrt(late.mean())), "rmse_last": float(np.sqrt(last.mean())),
-                                         "nees_late": float(nees.mean()), "not_ok": flagged}
-            print(f"case {case} {name:17s} RMSE t >= 300 s {np.sqrt(late.mean()):6.0f} m, last {np.sqrt(last.mean()):6.0f} m, "
-                  f"NEES {nees.mean():6.2f}, not ok {flagged} of {len(runs)}")
+    for case, name, runs in by_variant(rows, VARIANTS):
+        late, last, nees = (np.array([float(v[i]) for v in runs]) for i in range(3))
+        flagged = sum(v[3] != "ok" for v in runs)
+        summary[f"{case} {name}"] = {"rmse_late": float(np.sqrt(late.mean())), "rmse_last": float(np.sqrt(last.mean())),
+                                     "nees_late": float(nees.mean()), "not_ok": flagged}
+        print(f"case {case} {name:17s} RMSE t >= 300 s {np.sqrt(late.mean()):6.0f} m, last {np.sqrt(last.mean()):6.0f} m, "
+              f"NEES {nees.mean():6.2f}, not ok {flagged} of {len(runs)}")
     save(args.out, f"long_particles_q{args.truth_q:g}.json", summary)
 
 

@@ -102,8 +102,7 @@ def delayed_by(measurements: Measurements, model: TrackingModel, times: ArrayLik
         raise ValueError(f"one delay per pair ({model.observation.n_channels}), got {tau.size}")
     if len(measurements) == 0:
         return measurements
-    j = np.clip(np.searchsorted(t, measurements.time, side="right") - 1, 0, t.size - 1)
-    now = model.motion.propagate(x[j], measurements.time - t[j])
+    now = model.motion.along(t, x, measurements.time)
     then = model.motion.propagate(now, -tau[measurements.pair])
     change = model.observation.predict(then, measurements.pair) - model.observation.predict(now, measurements.pair)
     return replace(measurements, doppler=measurements.doppler + change)

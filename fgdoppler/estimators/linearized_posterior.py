@@ -59,17 +59,9 @@ from fgdoppler.estimators.linearized import linearize_rows
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["linearized_filter", "mean_square_errors", "reference_at"]
+__all__ = ["linearized_filter", "mean_square_errors"]
 
 FloatArray = NDArray[np.float64]
-
-
-def reference_at(model: TrackingModel, ref_times: FloatArray, ref_states: FloatArray, t: FloatArray) -> FloatArray:
-    r"""The reference track at times ``t`` ``(m,)``: its state at the last of its times at or before each
-    (the first where none is), carried at constant velocity, :math:`\mathbf F(t - t_j)\bar{\mathbf x}_j`."""
-    j = np.clip(np.searchsorted(ref_times, t, side="right") - 1, 0, ref_times.size - 1)
-    dt = np.asarray(t, dtype=float) - ref_times[j]
-    return np.asarray(model.motion.propagate(ref_states[j], dt), dtype=float)
 
 
 def linearized_filter(measurements: Measurements, model: TrackingModel, ref_times: FloatArray,
@@ -107,7 +99,7 @@ def linearized_filter(measurements: Measurements, model: TrackingModel, ref_time
     means, covs = np.empty((n, d)), np.empty((n, d, d))
     if n == 0:
         return scans.times.astype(float), means, covs
-    at = reference_at(model, np.asarray(ref_times, dtype=float), np.asarray(ref_states, dtype=float), later.time)
+    at = model.motion.along(ref_times, ref_states, later.time)
     rows = linearize_rows(model.observation, at, later.pair, later.doppler, later.sigma, huber_k)
     x, P = np.array(x, dtype=float), np.array(P, dtype=float)
     eye = np.eye(d)

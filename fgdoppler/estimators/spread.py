@@ -609,68 +609,49 @@ def _spread_reason(lag: float, widened: int, checks: int, interval: float, linea
 
 
 class _Linearised:
-    """The linearised posterior of :func:`filtered_spread` beyond the samples' reach: built at its first use
-    (from the first estimate and its widened covariance), counting the times it was asked and widened."""
+    """The posterior of the data so far linearised about a reference track
+    (:func:`~fgdoppler.estimators.linearized_posterior.linearized_filter`) for :func:`filtered_spread` beyond
+    the samples' reach: run at its first use (:meth:`start`, from the first estimate and its widened
+    covariance), counting the times it was asked and widened."""
 
     def __init__(self, measurements: Measurements, model: TrackingModel, reference: tuple[FloatArray, FloatArray],
                  huber_k: float | None) -> None:
         self.measurements, self.model, self.reference, self.huber_k = measurements, model, reference, huber_k
-        self.posterior: _LinearPosterior | None = None
+        self.posterior: tuple[FloatArray, FloatArray, FloatArray] | None = None  # times, means, covariances
         self.started = False
         self.times = 0
         self.widened = 0
 
     def start(self, t: float, x: FloatArray, P: FloatArray) -> None:
-        """Run the linearised filter from ``(x, P)`` at ``t`` (``posterior`` stays ``None`` where it breaks down)."""
+        """Run the linearised filter from ``(x, P)`` at ``t``; ``posterior`` stays ``None`` where the model is
+        undefined at the reference (a track through a sensor) or the update breaks down."""
         self.started = True
-        self.posterior = _LinearPosterior.of(self.measurements, self.model, self.reference, t, x, P, self.huber_k)
-
-    def widening(self, t: float, x: FloatArray, P: FloatArray) -> FloatArray | None:
-        """:meth:`_LinearPosterior.widening` at ``t``, counted."""
-        if self.posterior is None:
-            return None
-        self.times += 1
-        out = self.posterior.widening(t, x, P)
-        self.widened += out is not None
-        return out
-
-
-@dataclass(frozen=True, kw_only=True)
-class _LinearPosterior:
-    """The posterior of the data so far linearised about a reference track
-    (:func:`~fgdoppler.estimators.linearized_posterior.linearized_filter`), at every later scan."""
-
-    model: TrackingModel
-    times: FloatArray
-    means: FloatArray
-    covariances: FloatArray
-
-    @classmethod
-    def of(cls, measurements: Measurements, model: TrackingModel, reference: tuple[FloatArray, FloatArray],
-           t_start: float, x: FloatArray, P: FloatArray, huber_k: float | None) -> _LinearPosterior | None:
-        """The linearised posterior from ``(x, P)`` at ``t_start`` (``None`` where the model is undefined at the
-        reference, a track through a sensor, or the update breaks down)."""
         try:
-            t, m, c = linearized_filter(measurements, model, reference[0], reference[1], t_start, x, P, huber_k)
+            out = linearized_filter(self.measurements, self.model, *self.reference, t, x, P, self.huber_k)
         except (ValueError, np.linalg.LinAlgError):
-            return None
-        if not (np.all(np.isfinite(m)) and np.all(np.isfinite(c))):
-            return None
-        return cls(model=model, times=t, means=m, covariances=c)
+            return
+        if np.all(np.isfinite(out[1])) and np.all(np.isfinite(out[2])):
+            self.posterior = out
 
     def widening(self, t: float, x: FloatArray, P: FloatArray) -> FloatArray | None:
         r"""The whitened widening of ``P`` towards the posterior mean-square error of ``x`` at ``t``
-        (:func:`_whitened_widening` with :data:`FILTER_WIDEN_MIN`; ``None``: none, or no scan read yet)."""
-        j = int(np.searchsorted(self.times, t, side="right")) - 1
+        (:func:`_whitened_widening` with :data:`FILTER_WIDEN_MIN`; ``None``: none, or no scan read yet), counted."""
+        if self.posterior is None:
+            return None
+        times, means, covariances = self.posterior
+        j = int(np.searchsorted(times, t, side="right")) - 1
         if j < 0:
             return None
-        dt = t - float(self.times[j])  # an estimate between scans: carried to its time
-        mean = self.model.motion.propagate(self.means[j], dt)
-        cov = self.model.motion.predict_covariance(self.covariances[j], dt)
+        self.times += 1
+        dt = t - float(times[j])  # an estimate between scans: carried to its time
+        mean = self.model.motion.propagate(means[j], dt)
+        cov = self.model.motion.predict_covariance(covariances[j], dt)
         try:
-            return _whitened_widening(P, mean_square_errors(x[None], mean[None], cov[None])[0], FILTER_WIDEN_MIN)
+            out = _whitened_widening(P, mean_square_errors(x[None], mean[None], cov[None])[0], FILTER_WIDEN_MIN)
         except np.linalg.LinAlgError:
-            return None
+            out = None
+        self.widened += out is not None
+        return out
 
 
 def _samples_reach(model: TrackingModel, P: FloatArray, dt: float) -> bool | None:

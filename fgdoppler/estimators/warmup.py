@@ -171,6 +171,5 @@ class WarmUp:
         states, note = solve_window(model, window, guesses, prior=prior, huber_k=huber_k)
         if note:
             events.append(Event(time=float(ts[0]), message=f"warm-up: {note}"))
-        idx = np.clip(np.searchsorted(scan_times, ts, side="right") - 1, 0, None)
-        return model.motion.propagate(states[idx], ts - scan_times[idx])
+        return model.motion.along(scan_times, states, ts)
 

@@ -110,6 +110,14 @@ class ConstantVelocity:
         pos = x[..., :d] + dt * x[..., d:]
         return np.concatenate([pos, np.broadcast_to(x[..., d:], pos.shape)], axis=-1)
 
+    def along(self, times: ArrayLike, states: ArrayLike, at: ArrayLike) -> FloatArray:
+        r"""A track ``(times, states)`` (time-ordered) read at times ``at`` ``(m,)``: each from the track's last
+        state at or before it (the first where none is), carried noise-free, :math:`\mathbf F(t - t_j)\mathbf x_j`."""
+        t = np.asarray(times, dtype=float)
+        when = np.asarray(at, dtype=float)
+        j = np.clip(np.searchsorted(t, when, side="right") - 1, 0, t.size - 1)
+        return self.propagate(np.asarray(states, dtype=float)[j], when - t[j])
+
     def predict_covariance(self, P: ArrayLike, dt: float) -> FloatArray:
         r"""Covariance of the prediction over ``dt``: :math:`\mathbf F\mathbf P\mathbf F' + \mathbf Q(dt)`."""
         F = self.F(dt)

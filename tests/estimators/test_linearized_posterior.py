@@ -6,11 +6,7 @@ import numpy as np
 
 import fgdoppler as fd
 from fgdoppler.estimators.linearized import linearize_rows
-from fgdoppler.estimators.linearized_posterior import (
-    linearized_filter,
-    mean_square_errors,
-    reference_at,
-)
+from fgdoppler.estimators.linearized_posterior import linearized_filter, mean_square_errors
 
 
 def _recording(seed: int = 3) -> tuple[fd.Simulation, fd.TrackingModel]:
@@ -50,8 +46,7 @@ def _batch(model: fd.TrackingModel, m: fd.Measurements, ref_t: np.ndarray, ref_x
         G[:, (k - 1) * d:k * d], G[:, k * d:(k + 1) * d] = -Wq @ model.motion.F(dt), Wq
         blocks.append(G)
         rhs.append(np.zeros(d))
-    j = np.clip(np.searchsorted(ref_t, later.time, side="right") - 1, 0, None)
-    at = model.motion.propagate(ref_x[j], later.time - ref_t[j])
+    at = model.motion.along(ref_t, ref_x, later.time)
     rows = linearize_rows(model.observation, at, later.pair, later.doppler, later.sigma)
     k_of = np.searchsorted(times, later.time)
     for i in range(len(later)):
@@ -103,7 +98,7 @@ def test_the_reference_is_carried_at_constant_velocity_between_its_times() -> No
     _, model = _recording()
     ref_t = np.array([0.0, 1.0, 3.0])
     ref_x = np.array([[0.0, 0.0, 10.0, -5.0], [20.0, 0.0, 1.0, 2.0], [0.0, 50.0, -3.0, 0.0]])
-    got = reference_at(model, ref_t, ref_x, np.array([-1.0, 0.0, 0.5, 1.0, 2.5, 3.0, 4.0]))
+    got = model.motion.along(ref_t, ref_x, np.array([-1.0, 0.0, 0.5, 1.0, 2.5, 3.0, 4.0]))
     want = np.array([[-10.0, 5.0, 10.0, -5.0], [0.0, 0.0, 10.0, -5.0], [5.0, -2.5, 10.0, -5.0],
                      [20.0, 0.0, 1.0, 2.0], [21.5, 3.0, 1.0, 2.0], [0.0, 50.0, -3.0, 0.0],
                      [-3.0, 50.0, -3.0, 0.0]])
