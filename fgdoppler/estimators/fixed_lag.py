@@ -14,7 +14,10 @@ Through :func:`~fgdoppler.estimators.registry.run_estimator` the lagged
 covariances are then checked against posterior samples of the data up to
 ``lag`` seconds after each estimate's time, the data it has read, and
 widened where those spread further (``FixedLagSettings.sampled_covariance``,
-:func:`~fgdoppler.estimators.spread.filtered_spread` with ``lag``);
+:func:`~fgdoppler.estimators.spread.filtered_spread` with ``lag``), and
+where the process noise puts those samples out of reach (long recordings)
+towards the posterior of the same data linearised about the verdict's
+offline smoother's track (:mod:`~fgdoppler.estimators.linearized_posterior`);
 :func:`run_fixed_lag` and :class:`FixedLagTracker` report the smoother's own
 marginals.
 

@@ -48,25 +48,124 @@ The posterior mean-square error of a filter's estimate
 (:func:`mean_square_errors`), which
 :func:`~fgdoppler.estimators.spread.filtered_spread` encloses where its
 samples cannot reach.
+
+A fixed-lag smoother's estimate of the state at :math:`t` has read the
+data up to :math:`t + \ell`; its posterior is the Rauch–Tung–Striebel
+smoother of the same linearised model run back from the last scan at or
+before :math:`t + \ell` (:meth:`LinearizedPosterior.at` with
+``horizons``): with the filtered :math:`(\mathbf x_i, \mathbf P_i)` and
+predicted :math:`(\mathbf x^-_{i+1}, \mathbf P^-_{i+1})` moments,
+
+.. math::
+
+    \mathbf G_i = \mathbf P_i\mathbf F_{i+1}^\top(\mathbf P^-_{i+1})^{-1},\quad
+    \mathbf x^s_i = \mathbf x_i + \mathbf G_i(\mathbf x^s_{i+1} - \mathbf x^-_{i+1}),\quad
+    \mathbf P^s_i = \mathbf P_i + \mathbf G_i(\mathbf P^s_{i+1} - \mathbf P^-_{i+1})\mathbf G_i^\top,
+
+the last step to a time between two scans taken the same way from the
+prediction to it.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.estimators.linearized import linearize_rows
 from fgdoppler.measurements import Measurements
+from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["linearized_filter", "mean_square_errors"]
+__all__ = ["LinearizedPosterior", "linearized_filter", "mean_square_errors"]
 
 FloatArray = NDArray[np.float64]
 
 
+@dataclass(frozen=True, kw_only=True)
+class LinearizedPosterior:
+    r"""The linearised Kalman filter's moments at its start and after each later scan (:func:`linearized_filter`).
+
+    Parameters
+    ----------
+    times
+        ``(n + 1,)``: the start, then every later scan.
+    means, covariances
+        ``(n + 1, 2d)``, ``(n + 1, 2d, 2d)``: the filtered moments (at the start, the starting ones).
+    predicted_means, predicted_covariances
+        The same before each scan's update (at the start, the starting ones).
+    gains
+        ``(n + 1, 2d, 2d)``: the smoother gains :math:`\mathbf G_i` from each entry back from the next (the
+        last: zero).
+    motion
+        The motion model of the prediction.
+    """
+
+    times: FloatArray
+    means: FloatArray
+    covariances: FloatArray
+    predicted_means: FloatArray
+    predicted_covariances: FloatArray
+    gains: FloatArray
+    motion: ConstantVelocity
+
+    def at(self, times: ArrayLike, horizons: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
+        r"""The posterior of the state at each of ``times`` given the scans up to its horizon.
+
+        Parameters
+        ----------
+        times
+            ``(m,)``, none before the start.
+        horizons
+            ``(m,)``, each at or after its time (``None``: the times themselves, the filter's posterior of
+            the data so far): the scans read are those at or before it.
+
+        Returns
+        -------
+        means, covariances
+            ``(m, 2d)``, ``(m, 2d, 2d)``: the filtered moments carried to each time where no scan falls
+            between it and its horizon, the smoothed ones (module docstring) elsewhere.
+
+        Raises
+        ------
+        ValueError
+            For a time before the start or a horizon before its time.
+        """
+        t = np.atleast_1d(np.asarray(times, dtype=float))
+        h = t if horizons is None else np.broadcast_to(np.asarray(horizons, dtype=float), t.shape)
+        if np.any(~(t >= self.times[0])):
+            raise ValueError(f"times must not be before the start {self.times[0]:g} s")
+        if np.any(~(h >= t)):
+            raise ValueError("each horizon must be at or after its time")
+        j = np.searchsorted(self.times, t, side="right") - 1  # the last entry at or before each time
+        e = np.searchsorted(self.times, h, side="right") - 1  # the last scan read
+        xs, Ps = self.means[e].copy(), self.covariances[e].copy()
+        cur = e.copy()
+        while np.any(back := cur > j + 1):  # smoothed back to the first scan after each time
+            i = cur[back] - 1
+            G = self.gains[i]
+            xs[back] = self.means[i] + np.einsum("kab,kb->ka", G, xs[back] - self.predicted_means[i + 1])
+            Ps[back] = self.covariances[i] + G @ (Ps[back] - self.predicted_covariances[i + 1]) @ np.swapaxes(G, 1, 2)
+            cur[back] -= 1
+        dt = t - self.times[j]
+        F = self.motion.F(dt)
+        means = np.einsum("kab,kb->ka", F, self.means[j])
+        covs = F @ self.covariances[j] @ np.swapaxes(F, 1, 2) + self.motion.Q(dt)
+        later = e > j
+        if np.any(later):  # the last step, from the first scan after the time back to it
+            F2 = self.motion.F(self.times[j[later] + 1] - t[later])
+            x_pred = np.einsum("kab,kb->ka", F2, means[later])
+            P_pred = F2 @ covs[later] @ np.swapaxes(F2, 1, 2) + self.motion.Q(self.times[j[later] + 1] - t[later])
+            G = np.swapaxes(np.linalg.solve(P_pred, F2 @ covs[later]), 1, 2)
+            means[later] = means[later] + np.einsum("kab,kb->ka", G, xs[later] - x_pred)
+            covs[later] = covs[later] + G @ (Ps[later] - P_pred) @ np.swapaxes(G, 1, 2)
+        return means, 0.5 * (covs + np.swapaxes(covs, 1, 2))
+
+
 def linearized_filter(measurements: Measurements, model: TrackingModel, ref_times: FloatArray,
                       ref_states: FloatArray, t_start: float, x: FloatArray, P: FloatArray,
-                      huber_k: float | None = None) -> tuple[FloatArray, FloatArray, FloatArray]:
+                      huber_k: float | None = None) -> LinearizedPosterior:
     r"""The Kalman filter of the module docstring from ``(x, P)`` at ``t_start`` over the later scans.
 
     Parameters
@@ -84,33 +183,35 @@ def linearized_filter(measurements: Measurements, model: TrackingModel, ref_time
 
     Returns
     -------
-    times, means, covariances
-        ``(n,)``, ``(n, 2d)``, ``(n, 2d, 2d)``: after each scan later than ``t_start``.
+    LinearizedPosterior
+        The moments at ``t_start`` and after each later scan, with the smoother gains.
 
     Raises
     ------
     ValueError
         From the measurement model, for a reference state on a sensor.
+    numpy.linalg.LinAlgError
+        Where a predicted covariance is singular (no smoother gain).
     """
     later = measurements.subset(measurements.time > t_start)
     scans = later.scans()
     n = scans.times.size
     d = model.n
-    means, covs = np.empty((n, d)), np.empty((n, d, d))
-    if n == 0:
-        return scans.times.astype(float), means, covs
+    x, P = np.array(x, dtype=float), np.array(P, dtype=float)
+    means, covs = np.empty((n + 1, d)), np.empty((n + 1, d, d))
+    pred_means, pred_covs = np.empty((n + 1, d)), np.empty((n + 1, d, d))
+    means[0], covs[0], pred_means[0], pred_covs[0] = x, P, x, P
+    times = np.concatenate([[float(t_start)], scans.times.astype(float)])
     at = model.motion.along(ref_times, ref_states, later.time)
     rows = linearize_rows(model.observation, at, later.pair, later.doppler, later.sigma, huber_k)
-    x, P = np.array(x, dtype=float), np.array(P, dtype=float)
     eye = np.eye(d)
-    t_prev = float(t_start)
-    for k, t in enumerate(scans.times):
-        dt = float(t) - t_prev
+    for k in range(1, n + 1):
+        dt = times[k] - times[k - 1]
         F = model.motion.F(dt)
         x = F @ x
         P = F @ P @ F.T + model.motion.Q(dt)
-        t_prev = float(t)
-        a, b = scans.bounds[k], scans.bounds[k + 1]
+        pred_means[k], pred_covs[k] = x, P
+        a, b = scans.bounds[k - 1], scans.bounds[k]
         A = rows.A[a:b]
         innovation = rows.b[a:b] + A @ (at[a] - x)
         S = A @ P @ A.T + np.eye(b - a)
@@ -120,7 +221,12 @@ def linearized_filter(measurements: Measurements, model: TrackingModel, ref_time
         P = IKA @ P @ IKA.T + K @ K.T
         P = 0.5 * (P + P.T)
         means[k], covs[k] = x, P
-    return scans.times.astype(float), means, covs
+    gains = np.zeros((n + 1, d, d))
+    if n:  # G_i = P_i F' (P-_{i+1})^-1, from (P-_{i+1})^-1 F P_i with both symmetric
+        F = model.motion.F(np.diff(times))
+        gains[:-1] = np.swapaxes(np.linalg.solve(pred_covs[1:], F @ covs[:-1]), 1, 2)
+    return LinearizedPosterior(times=times, means=means, covariances=covs, predicted_means=pred_means,
+                               predicted_covariances=pred_covs, gains=gains, motion=model.motion)
 
 
 def mean_square_errors(estimates: FloatArray, means: FloatArray, covariances: FloatArray) -> FloatArray:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import fgdoppler as fd
 from fgdoppler.estimators.linearized import linearize_rows
@@ -21,16 +22,17 @@ def _reference(sim: fd.Simulation, times: np.ndarray, rng: np.random.Generator) 
 
 
 def _batch(model: fd.TrackingModel, m: fd.Measurements, ref_t: np.ndarray, ref_x: np.ndarray, t_start: float,
-           x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and covariance of the last state of the same linear-Gaussian model, solved as one batch.
+           x: np.ndarray, P: np.ndarray, at: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and covariance of the state at ``at`` (default: the last scan) of the same linear-Gaussian model,
+    solved as one batch.
 
-    States at ``t_start`` and at every scan after it; a prior ``(x, P)`` on the first, the motion rows
-    ``x_k - F x_{k-1} ~ N(0, Q)``, and each measurement's whitened row ``A x_k ~ N(b + A xbar_k, 1)``: all
+    States at ``t_start``, at every scan after it and at ``at``; a prior ``(x, P)`` on the first, the motion
+    rows ``x_k - F x_{k-1} ~ N(0, Q)``, and each measurement's whitened row ``A x_k ~ N(b + A xbar_k, 1)``: all
     whitened and stacked into one least-squares system ``J y = r``, solved by QR (``J = QR``: the mean
-    ``R^-1 Q'r``, the covariance ``R^-1 R^-T``), whose last block is the last state's.
+    ``R^-1 Q'r``, the covariance ``R^-1 R^-T``), whose block at ``at`` is returned.
     """
     later = m.subset(m.time > t_start)
-    times = np.concatenate([[t_start], np.unique(later.time)])
+    times = np.unique(np.concatenate([[t_start], later.time, [] if at is None else [at]]))
     n, d = times.size, model.n
     blocks: list[np.ndarray] = []
     rhs: list[np.ndarray] = []
@@ -46,36 +48,79 @@ def _batch(model: fd.TrackingModel, m: fd.Measurements, ref_t: np.ndarray, ref_x
         G[:, (k - 1) * d:k * d], G[:, k * d:(k + 1) * d] = -Wq @ model.motion.F(dt), Wq
         blocks.append(G)
         rhs.append(np.zeros(d))
-    at = model.motion.along(ref_t, ref_x, later.time)
-    rows = linearize_rows(model.observation, at, later.pair, later.doppler, later.sigma)
+    lin = model.motion.along(ref_t, ref_x, later.time)
+    rows = linearize_rows(model.observation, lin, later.pair, later.doppler, later.sigma)
     k_of = np.searchsorted(times, later.time)
     for i in range(len(later)):
         a = np.zeros((1, n * d))
         a[0, k_of[i] * d:(k_of[i] + 1) * d] = rows.A[i]
         blocks.append(a)
-        rhs.append(np.array([rows.b[i] + rows.A[i] @ at[i]]))
+        rhs.append(np.array([rows.b[i] + rows.A[i] @ lin[i]]))
     q, r = np.linalg.qr(np.vstack(blocks))
     mean = np.linalg.solve(r, q.T @ np.concatenate(rhs))
     ri = np.linalg.inv(r)
-    return mean[-d:], (ri @ ri.T)[-d:, -d:]
+    k = n - 1 if at is None else int(np.searchsorted(times, at))
+    return mean[k * d:(k + 1) * d], (ri @ ri.T)[k * d:(k + 1) * d, k * d:(k + 1) * d]
+
+
+def _start(sim: fd.Simulation, ref_t: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """A start off the truth at the first scan, with a covariance that holds the offset."""
+    t0 = float(ref_t[0])
+    x = sim.truth.at(np.array([t0]))[0] + np.array([200.0, -150.0, 2.0, -1.0])
+    return t0, x, np.diag([500.0**2, 500.0**2, 10.0**2, 10.0**2])
+
+
+def _close(got: tuple[np.ndarray, np.ndarray], want: tuple[np.ndarray, np.ndarray]) -> None:
+    """Means to 1e-6 of the largest standard deviation, covariances to 1e-7 relative."""
+    np.testing.assert_allclose(got[0], want[0], rtol=0, atol=1e-6 * np.sqrt(np.diag(want[1])).max())
+    np.testing.assert_allclose(got[1], want[1], rtol=1e-7, atol=1e-9 * np.abs(want[1]).max())
 
 
 def test_the_recursion_is_the_batch_posterior_of_the_linearised_model() -> None:
     """At the last scan and at one half-way, the filter's mean and covariance equal the batch solution."""
     sim, model = _recording()
     m = sim.measurements
-    rng = np.random.default_rng(0)
     ref_t = np.unique(m.time)
-    ref_x = _reference(sim, ref_t, rng)
-    t0 = float(ref_t[0])
-    x = sim.truth.at(np.array([t0]))[0] + np.array([200.0, -150.0, 2.0, -1.0])
-    P = np.diag([500.0**2, 500.0**2, 10.0**2, 10.0**2])
-    t, means, covs = linearized_filter(m, model, ref_t, ref_x, t0, x, P)
-    np.testing.assert_array_equal(t, ref_t[1:])
+    ref_x = _reference(sim, ref_t, np.random.default_rng(0))
+    t0, x, P = _start(sim, ref_t)
+    post = linearized_filter(m, model, ref_t, ref_x, t0, x, P)
+    t = post.times
+    np.testing.assert_array_equal(t, ref_t)
     for stop in (t.size // 2, t.size - 1):
-        mean, cov = _batch(model, m.subset(m.time <= t[stop]), ref_t, ref_x, t0, x, P)
-        np.testing.assert_allclose(means[stop], mean, rtol=0, atol=1e-6 * np.sqrt(np.diag(cov)).max())
-        np.testing.assert_allclose(covs[stop], cov, rtol=1e-7, atol=1e-9 * np.abs(cov).max())
+        want = _batch(model, m.subset(m.time <= t[stop]), ref_t, ref_x, t0, x, P)
+        _close((post.means[stop], post.covariances[stop]), want)
+        got = post.at(np.array([t[stop]]))
+        _close((got[0][0], got[1][0]), want)
+
+
+def test_with_a_horizon_the_posterior_is_the_batch_solutions_interior_block() -> None:
+    """The state at a time given the scans up to a later horizon (the smoother's read-out) is the block at
+    that time of the batch solution over those scans: at a scan, between two scans (a state with no
+    measurement), at the start, and with the horizon between scans or at the time itself (the filter's,
+    carried to a time between scans)."""
+    sim, model = _recording(4)
+    m = sim.measurements
+    ref_t = np.unique(m.time)
+    ref_x = _reference(sim, ref_t, np.random.default_rng(3))
+    t0, x, P = _start(sim, ref_t)
+    post = linearized_filter(m, model, ref_t, ref_x, t0, x, P)
+    mid = 0.5 * (ref_t[3] + ref_t[4])
+    cases = [(ref_t[3], ref_t[8]), (mid, ref_t[8] + 0.1), (t0, ref_t[5]), (ref_t[2], ref_t[-1]), (mid, mid)]
+    got = post.at(np.array([c[0] for c in cases]), np.array([c[1] for c in cases]))
+    for k, (t, h) in enumerate(cases):
+        want = _batch(model, m.subset(m.time <= h), ref_t, ref_x, t0, x, P, at=t)
+        _close((got[0][k], got[1][k]), want)
+
+
+def test_times_before_the_start_or_horizons_before_their_time_are_refused() -> None:
+    sim, model = _recording()
+    m = sim.measurements
+    ref_t = np.unique(m.time)
+    post = linearized_filter(m, model, ref_t, sim.truth.at(ref_t), *_start(sim, ref_t))
+    with pytest.raises(ValueError, match="before the start"):
+        post.at(np.array([ref_t[0] - 0.5]))
+    with pytest.raises(ValueError, match="horizon"):
+        post.at(np.array([ref_t[3]]), np.array([ref_t[2]]))
 
 
 def test_each_posterior_reads_only_the_measurements_up_to_its_time() -> None:
@@ -88,10 +133,9 @@ def test_each_posterior_reads_only_the_measurements_up_to_its_time() -> None:
     whole = linearized_filter(m, model, ref_t, ref_x, t0, x, P)
     cut = float(ref_t[ref_t.size // 3])
     part = linearized_filter(m.subset(m.time <= cut), model, ref_t, ref_x, t0, x, P)
-    k = part[0].size
-    np.testing.assert_array_equal(part[0], whole[0][:k])
-    np.testing.assert_array_equal(part[1], whole[1][:k])
-    np.testing.assert_array_equal(part[2], whole[2][:k])
+    k = part.times.size
+    for name in ("times", "means", "covariances", "predicted_means", "predicted_covariances"):
+        np.testing.assert_array_equal(getattr(part, name), getattr(whole, name)[:k])
 
 
 def test_the_reference_is_carried_at_constant_velocity_between_its_times() -> None:
