@@ -213,11 +213,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fgdoppler.estimators.curvature import probe_axis, probe_rises
-from fgdoppler.estimators.linearized_posterior import (
-    LinearizedPosterior,
-    linearized_filter,
-    mean_square_errors,
-)
+from fgdoppler.estimators.linearized_posterior import linearized_filter, mean_square_errors
 from fgdoppler.estimators.particle import _Data, _Posterior, _weighted_cov
 from fgdoppler.estimators.settings import ParticleSettings
 from fgdoppler.estimators.verdict import Reason
@@ -569,6 +565,7 @@ def _check_along(measurements: Measurements, model: TrackingModel, times: FloatA
     checks, widened, worst = 0, 0, (1.0, 0.0, 0.0, 0.0)  # (sd ratio, time, sampled sd, filter sd)
     pos = slice(0, model.dim)
     beyond = False  # the last check found the samples' deterministic motion unable to describe the posterior
+    outside: list[int] = []  # the estimates beyond the samples' reach
     for k, t in enumerate(np.asarray(times, dtype=float)):
         if not usable[k]:
             continue
@@ -586,15 +583,13 @@ def _check_along(measurements: Measurements, model: TrackingModel, times: FloatA
             if widening is not None:
                 widened += 1
                 worst = max(worst, _sd_ratio(P, _whitened_apply(P, widening), pos, t))
-        if beyond and linear is not None:
-            if not linear.started:
-                first = int(np.flatnonzero(usable)[0])
-                linear.start(float(times[first]), states[first], out[first])
-            widening = linear.widening(t, states[k], P)
-            if widening is not None:
-                worst = max(worst, _sd_ratio(P, _whitened_apply(P, widening), pos, t))
-        if widening is not None:
+        if beyond:
+            outside.append(k)
+        elif widening is not None:
             out[k] = _whitened_apply(P, widening)
+    if linear is not None and outside:
+        first = int(np.flatnonzero(usable)[0])
+        worst = max(worst, linear.widen(out, np.asarray(times, dtype=float), states, np.array(outside), first))
     return out, widened, checks, worst
 
 
@@ -619,44 +614,50 @@ def _spread_reason(lag: float, widened: int, checks: int, interval: float, linea
 
 class _Linearised:
     """The posterior of the data an estimate has read, linearised about a reference track
-    (:mod:`~fgdoppler.estimators.linearized_posterior`), for :func:`filtered_spread` beyond the samples' reach:
-    run at its first use (:meth:`start`, from the first estimate and its widened covariance), counting the
-    times it was asked and widened."""
+    (:mod:`~fgdoppler.estimators.linearized_posterior`), for :func:`filtered_spread` beyond the samples' reach,
+    counting the estimates it was asked about and widened."""
 
     def __init__(self, measurements: Measurements, model: TrackingModel, reference: tuple[FloatArray, FloatArray],
                  huber_k: float | None, lag: float) -> None:
         self.measurements, self.model, self.reference, self.huber_k = measurements, model, reference, huber_k
         self.lag = lag
-        self.posterior: LinearizedPosterior | None = None
-        self.started = False
         self.times = 0
         self.widened = 0
 
-    def start(self, t: float, x: FloatArray, P: FloatArray) -> None:
-        """Run the linearised filter from ``(x, P)`` at ``t``; ``posterior`` stays ``None`` where the model is
-        undefined at the reference (a track through a sensor) or the recursion breaks down."""
-        self.started = True
-        try:
-            out = linearized_filter(self.measurements, self.model, *self.reference, t, x, P, self.huber_k)
-        except (ValueError, np.linalg.LinAlgError):
-            return
-        if all(np.all(np.isfinite(v)) for v in (out.means, out.covariances, out.gains)):
-            self.posterior = out
+    def widen(self, out: FloatArray, times: FloatArray, states: FloatArray, at: NDArray[np.intp],
+              first: int) -> tuple[float, float, float, float]:
+        r"""Widen ``out[at]`` in place towards the posterior mean-square error of ``states[at]`` given the data up
+        to ``lag`` after their times (:func:`_whitened_widening` with :data:`FILTER_WIDEN_MIN`), the linearised
+        filter started from estimate ``first`` and ``out[first]``.
 
-    def widening(self, t: float, x: FloatArray, P: FloatArray) -> FloatArray | None:
-        r"""The whitened widening of ``P`` towards the posterior mean-square error of ``x`` at ``t`` given the
-        data up to ``t + lag`` (:func:`_whitened_widening` with :data:`FILTER_WIDEN_MIN`; ``None``: none, or
-        ``t`` before the start), counted."""
-        if self.posterior is None or t < self.posterior.times[0]:
-            return None
-        self.times += 1
-        mean, cov = self.posterior.at(np.array([t]), np.array([t + self.lag]))
+        Nothing is widened where the model is undefined at the reference (a track through a sensor) or the
+        recursion breaks down.  Returns the largest widening as :func:`_sd_ratio` does (ratio 1: none).
+        """
+        worst = (1.0, 0.0, 0.0, 0.0)
+        t_start = float(times[first])
         try:
-            out = _whitened_widening(P, mean_square_errors(x[None], mean, cov)[0], FILTER_WIDEN_MIN)
-        except np.linalg.LinAlgError:
-            out = None
-        self.widened += out is not None
-        return out
+            post = linearized_filter(self.measurements, self.model, *self.reference, t_start, states[first],
+                                     out[first], self.huber_k)
+        except (ValueError, np.linalg.LinAlgError):
+            return worst
+        if not all(np.all(np.isfinite(v)) for v in (post.means, post.covariances, post.gains)):
+            return worst
+        at = at[times[at] >= t_start]
+        means, covs = post.at(times[at], times[at] + self.lag)
+        errors = mean_square_errors(states[at], means, covs)
+        pos = slice(0, self.model.dim)
+        self.times += at.size
+        for k, S in zip(at, errors, strict=True):
+            P = out[k].copy()
+            try:
+                widening = _whitened_widening(P, S, FILTER_WIDEN_MIN)
+            except np.linalg.LinAlgError:
+                continue
+            if widening is not None:
+                self.widened += 1
+                out[k] = _whitened_apply(P, widening)
+                worst = max(worst, _sd_ratio(P, out[k], pos, float(times[k])))
+        return worst
 
 
 def _samples_reach(model: TrackingModel, P: FloatArray, dt: float) -> bool | None:
