@@ -74,7 +74,7 @@ from fgdoppler.simulation import (
     paper_scenarios,
     simulate,
 )
-from fgdoppler.zone import Zone
+from fgdoppler.zone import Zone, ZoneBox
 
 try:
     __version__ = version("fgdoppler")
@@ -118,6 +118,7 @@ __all__ = [
     "TrackingModel",
     "Trajectory",
     "Zone",
+    "ZoneBox",
     "__version__",
     "bistatic_doppler",
     "bistatic_doppler_and_jacobian",

@@ -40,7 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.frames import Frame
 
-__all__ = ["DEFAULT_SPEED_MAX", "Zone", "ZoneLimits", "default_zone"]
+__all__ = ["DEFAULT_SPEED_MAX", "Zone", "ZoneBox", "ZoneLimits", "default_zone"]
 
 FloatArray = NDArray[np.float64]
 
@@ -59,6 +59,81 @@ def _interval(value: object, name: str) -> tuple[float, float]:
     if not lo < hi:
         raise ValueError(f"zone {name} is empty or inverted: [{lo:g}, {hi:g}] needs low < high")
     return lo, hi
+
+
+def _speed_max(value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer) or not (
+            math.isfinite(value) and value > 0):
+        raise ValueError(f"zone speed_max must be a positive number of m/s, got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ZoneBox:
+    """A zone's box and speed bound in its own axes, without its frame: what ``--zone``, ``--altitude`` and
+    ``--speed-max`` give.
+
+    The zone a finding advises (:attr:`~fgdoppler.estimators.verdict.Reason.zone`) is one: its numbers are
+    those of the command-line options that give it (:meth:`options`), in the axes of the zone the user
+    gave (the geometry's frame for the default one), so it stays the same whatever frame the estimator ran in.
+
+    Parameters
+    ----------
+    along, across, speed_max, altitude
+        As :class:`Zone`'s.
+
+    Raises
+    ------
+    ValueError
+        As :class:`Zone`.
+    """
+
+    along: tuple[float, float]
+    across: tuple[float, float]
+    speed_max: float
+    altitude: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "along", _interval(self.along, "along"))
+        object.__setattr__(self, "across", _interval(self.across, "across"))
+        if self.altitude is not None:
+            object.__setattr__(self, "altitude", _interval(self.altitude, "altitude"))
+        object.__setattr__(self, "speed_max", _speed_max(self.speed_max))
+
+    def options(self) -> str:
+        """The command-line options that give this box (``--zone``, ``--altitude``, ``--speed-max``), its bounds
+        rounded outward to the metre and the speed up to the m/s."""
+        def box(iv: tuple[float, float]) -> str:
+            return f"{math.floor(iv[0])} {math.ceil(iv[1])}"
+        alt = "" if self.altitude is None else f" --altitude {box(self.altitude)}"
+        return f"--zone {box(self.along)} {box(self.across)}{alt} --speed-max {math.ceil(self.speed_max)}"
+
+    def union(self, other: ZoneBox) -> ZoneBox:
+        """The smallest box holding both, with the larger speed bound.
+
+        Raises
+        ------
+        ValueError
+            If one box has an altitude band and the other not.
+        """
+        if (self.altitude is None) != (other.altitude is None):
+            raise ValueError("cannot join a 2-D zone box with a 3-D one")
+
+        def hull(a: tuple[float, float], b: tuple[float, float]) -> tuple[float, float]:
+            return min(a[0], b[0]), max(a[1], b[1])
+        return ZoneBox(along=hull(self.along, other.along), across=hull(self.across, other.across),
+                       speed_max=max(self.speed_max, other.speed_max),
+                       altitude=None if self.altitude is None or other.altitude is None
+                       else hull(self.altitude, other.altitude))
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready form, with the options that give it."""
+        out: dict[str, object] = {"along": list(self.along), "across": list(self.across),
+                                  "speed_max": self.speed_max}
+        if self.altitude is not None:
+            out["altitude"] = list(self.altitude)
+        out["options"] = self.options()
+        return out
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -96,9 +171,7 @@ class Zone:
         object.__setattr__(self, "across", _interval(self.across, "across"))
         if self.altitude is not None:
             object.__setattr__(self, "altitude", _interval(self.altitude, "altitude"))
-        if isinstance(self.speed_max, bool) or not (math.isfinite(self.speed_max) and self.speed_max > 0):
-            raise ValueError(f"zone speed_max must be a positive number of m/s, got {self.speed_max!r}")
-        object.__setattr__(self, "speed_max", float(self.speed_max))
+        object.__setattr__(self, "speed_max", _speed_max(self.speed_max))
         if self.frame.dim != self.dim:
             raise ValueError(f"a {self.dim}-D zone (altitude band {'set' if self.altitude else 'not set'}) "
                              f"needs a {self.dim}-D frame, got {self.frame.dim}-D")
@@ -232,13 +305,14 @@ class Zone:
         return replace(self, along=bounds[0], across=bounds[1], altitude=bounds[2] if d == 3 else None,
                        speed_max=(1.0 + margin) * speed if speed > self.speed_max else self.speed_max)
 
+    def box(self) -> ZoneBox:
+        """The box and speed bound in the zone's own axes, without its frame."""
+        return ZoneBox(along=self.along, across=self.across, speed_max=self.speed_max, altitude=self.altitude)
+
     def options(self) -> str:
         """The command-line options that give this zone (``--zone``, ``--altitude``, ``--speed-max``), its
-        bounds rounded outward to the metre and the speed up to the m/s."""
-        def box(iv: tuple[float, float]) -> str:
-            return f"{math.floor(iv[0])} {math.ceil(iv[1])}"
-        alt = "" if self.altitude is None else f" --altitude {box(self.altitude)}"
-        return f"--zone {box(self.along)} {box(self.across)}{alt} --speed-max {math.ceil(self.speed_max)}"
+        bounds rounded outward to the metre and the speed up to the m/s (:meth:`ZoneBox.options`)."""
+        return self.box().options()
 
     def relative_to(self, frame: Frame) -> Zone:
         """The same zone with its frame expressed in ``frame``'s local coordinates."""

@@ -597,8 +597,8 @@ def test_an_initiation_whose_alternative_is_the_mirror_image_gets_the_half_plane
 
 
 def test_the_zone_hint_is_the_union_of_the_advised_zones() -> None:
-    """Zones advised by two findings (from :meth:`Zone.reaching`, printed by :meth:`Zone.options`): the hint is
-    their union box, bounds rounded outward as each was; one advice, or advice in an ``ok`` finding, gives none."""
+    """Zones advised by two findings (from :meth:`Zone.reaching`): the hint is their union box, bounds
+    rounded outward; one advice, the same advice twice, or advice in an ``ok`` finding gives none."""
     from fgdoppler.cli.track import zone_hint
     from fgdoppler.estimators.verdict import Reason
 
@@ -608,13 +608,14 @@ def test_the_zone_hint_is_the_union_of_the_advised_zones() -> None:
                        frame=fd.Frame.identity(d))
         a = zone.reaching(np.r_[[20000.0, 8000.5], [0.0] * (d - 2), [250.0], [0.0] * (d - 1)])
         b = zone.reaching(np.r_[[35000.0, -9000.0], [5000.0] * (d - 2), [0.0] * d])
-        said = [Reason(code="boundary", status="doubtful", message=f"widen it, e.g. {a.options()}"),
-                Reason(code="reference", status="doubtful", message=f"the smoother's: e.g. {b.options()}")]
+        said = [Reason(code="boundary", status="doubtful", message="widen it", zone=a.box()),
+                Reason(code="reference", status="doubtful", message="the smoother's", zone=b.box())]
         union = fd.Zone(along=(1000.0, b.along[1]), across=(b.across[0], a.across[1]), speed_max=a.speed_max,
                         altitude=None if altitude is None else b.altitude, frame=fd.Frame.identity(d))
         assert zone_hint(said) == union.options()
         assert zone_hint(said[:1]) is None
-        assert zone_hint([said[0], Reason(code="reference", status="ok", message=said[1].message)]) is None
+        assert zone_hint([said[0], Reason(code="zone", status="doubtful", message="again", zone=a.box())]) is None
+        assert zone_hint([said[0], Reason(code="reference", status="ok", message="", zone=b.box())]) is None
 
 
 def test_findings_advising_different_zones_get_one_that_holds_them_all(
@@ -628,9 +629,15 @@ def test_findings_advising_different_zones_get_one_that_holds_them_all(
     assert main(["simulate", "--geometry", str(QUASI_MONOSTATIC), "--start-x", "15000", "--start-y",
                  "12000", "--velocity", "80", "-60", "--seed", "8", "--out", str(sim)]) == 0
     capsys.readouterr()
-    assert main(["track", str(sim / "measurements.csv"), "--estimator", "ekf"]) == 0
-    err = capsys.readouterr().err
+    assert main(["track", str(sim / "measurements.csv"), "--estimator", "ekf", "--json"]) == 0
+    captured = capsys.readouterr()
+    err = captured.err
     geometry = fd.Geometry.from_toml(sim / "geometry.toml")
+    # each finding that advises a zone carries it in the JSON, as the options its message names
+    carried = [r for r in json.loads(captured.out)["reasons"] if "zone" in r]
+    assert len(carried) >= 1
+    for r in carried:
+        assert "e.g. " + r["zone"]["options"] in r["message"]
 
     def zone(groups: tuple[str, ...]) -> fd.Zone:
         v = tuple(map(float, groups))

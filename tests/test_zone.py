@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 import fgdoppler as fd
+from fgdoppler.estimators.verdict import Reason
 from fgdoppler.frames import Frame, sensor_frame
-from fgdoppler.zone import default_zone
+from fgdoppler.zone import ZoneBox, default_zone
 
 
 def _rotation(angle: float, reflect: bool = False) -> np.ndarray:
@@ -164,3 +167,40 @@ def test_frame_round_trips_and_rejects_non_orthonormal_bases() -> None:
         Frame(origin=(0.0, 0.0), basis=((1.0, 0.0), (1.0, 1.0)))
     assert sensor_frame(np.array([[50e3, 0.0]]), np.array([[0.0, 0.0]])).is_identity
     assert default_zone(Frame.identity(), [[50e3, 0.0]], [[0.0, 0.0]]).along == (2e3, 48e3)
+
+
+def test_a_zone_box_is_the_zone_without_its_frame_and_joins_by_hand() -> None:
+    """``Zone.box`` keeps the bounds in the zone's own axes whatever its frame; the options are the zone's;
+    the union is the hull of the intervals with the larger speed bound, worked by hand."""
+    frame = Frame(origin=(1000.0, -500.0), basis=((0.6, 0.8), (-0.8, 0.6)))
+    zone = fd.Zone(frame=frame, along=(100.2, 900.7), across=(-50.5, 50.0), speed_max=120.4)
+    box = zone.box()
+    assert (box.along, box.across, box.speed_max, box.altitude) == ((100.2, 900.7), (-50.5, 50.0), 120.4, None)
+    assert box.options() == zone.options() == "--zone 100 901 -51 50 --speed-max 121"
+    other = ZoneBox(along=(-20.0, 300.0), across=(0.0, 80.0), speed_max=90.0)
+    assert box.union(other) == other.union(box) == ZoneBox(along=(-20.0, 900.7), across=(-50.5, 80.0),
+                                                            speed_max=120.4)
+    up = ZoneBox(along=(0.0, 1.0), across=(0.0, 1.0), speed_max=10.0, altitude=(100.0, 200.0))
+    assert up.union(ZoneBox(along=(0.0, 1.0), across=(0.0, 1.0), speed_max=10.0, altitude=(50.0, 150.0))).altitude \
+        == (50.0, 200.0)
+    assert up.to_dict() == {"along": [0.0, 1.0], "across": [0.0, 1.0], "speed_max": 10.0, "altitude": [100.0, 200.0],
+                            "options": "--zone 0 1 0 1 --altitude 100 200 --speed-max 10"}
+    with pytest.raises(ValueError, match="2-D zone box with a 3-D"):
+        box.union(up)
+
+
+@pytest.mark.parametrize("bad", [{"along": (5.0, 1.0)}, {"across": (0.0, math.inf)}, {"speed_max": 0.0},
+                                 {"speed_max": "fast"}, {"speed_max": True}])
+def test_a_zone_box_refuses_what_a_zone_refuses(bad: dict[str, object]) -> None:
+    good: dict[str, object] = {"along": (0.0, 1.0), "across": (0.0, 1.0), "speed_max": 10.0}
+    with pytest.raises(ValueError, match="zone"):
+        ZoneBox(**{**good, **bad})  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="zone"):
+        fd.Zone(**{**good, **bad})  # type: ignore[arg-type]
+
+
+def test_a_finding_carries_its_advised_zone_into_json() -> None:
+    box = ZoneBox(along=(0.0, 10.0), across=(-1.0, 1.0), speed_max=5.0)
+    assert Reason(code="zone", status="doubtful", message="m", zone=box).to_dict() == {
+        "code": "zone", "status": "doubtful", "message": "m", "zone": box.to_dict()}
+    assert Reason(code="fit", status="ok", message="m").to_dict() == {"code": "fit", "status": "ok", "message": "m"}

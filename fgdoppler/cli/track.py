@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import math
-import re
 import sys
 from pathlib import Path
 from typing import Any
@@ -26,6 +26,7 @@ from fgdoppler.cli.common import (
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
 from fgdoppler.geometry import MIRROR_ADVICE, Geometry, principal_line
+from fgdoppler.zone import ZoneBox
 
 __all__ = ["add_track"]
 
@@ -260,23 +261,16 @@ def _print_half_plane_hint(reasons: Any, geom: Geometry, args: argparse.Namespac
           file=sys.stderr)
 
 
-#: The zone options a finding advises (:meth:`~fgdoppler.zone.Zone.options`' form).
-ZONE_ADVICE = re.compile(r"--zone (-?\d+) (-?\d+) (-?\d+) (-?\d+)(?: --altitude (-?\d+) (-?\d+))? --speed-max (\d+)")
-
-
 def zone_hint(reasons: Any) -> str | None:
-    """The options of the smallest zone holding every zone the ``doubtful``/``failed`` findings advise, where
-    they advise more than one (e.g. the initiation's, for its window's start alone, and the offline smoother's,
-    for the whole recording's start and its mirror image's); ``None`` otherwise.  Each advised zone holds the
-    default one, so their union box is one a user can give and every start they name lies in it."""
-    advised = {m.groups() for r in reasons if r.status != "ok" for m in ZONE_ADVICE.finditer(r.message)}
+    """The options of the smallest zone holding every zone the ``doubtful``/``failed`` findings advise
+    (:attr:`~fgdoppler.estimators.verdict.Reason.zone`), where they advise more than one (e.g. the
+    initiation's, for its window's start alone, and the offline smoother's, for the whole recording's start
+    and its mirror image's); ``None`` otherwise.  Each advised zone holds the given one, so their union box is
+    one a user can give and every start they name lies in it."""
+    advised = {r.zone.options(): r.zone for r in reasons if r.status != "ok" and r.zone is not None}
     if len(advised) < 2:
         return None
-    v = np.array([[np.nan if g is None else float(g) for g in a] for a in advised])
-    lo, hi = np.min(v[:, 0:6:2], axis=0), np.max(v[:, 1:6:2], axis=0)
-    alt = "" if np.isnan(lo[2]) else f" --altitude {lo[2]:.0f} {hi[2]:.0f}"
-    return (f"--zone {lo[0]:.0f} {hi[0]:.0f} {lo[1]:.0f} {hi[1]:.0f}{alt} "
-            f"--speed-max {np.max(v[:, 6]):.0f}")
+    return functools.reduce(ZoneBox.union, advised.values()).options()
 
 
 def _print_zone_hint(reasons: Any) -> None:

@@ -912,10 +912,10 @@ def _boundary_reasons(best: _Solution, graph: gtsam.NonlinearFactorGraph, n_data
     held = (f"the start state is held at the zone's boundary (excess {axes}, speed: "
             + ", ".join(f"{v:.3g}" for v in excess) + f"; window cost {best.cost:.2f} inside the zone{outside})")
     if gain > limit and not isinstance(free, str):
-        return [Reason(code="boundary", status="doubtful", message=(
+        advised = model.zone.reaching(free.x0)
+        return [Reason(code="boundary", status="doubtful", zone=advised.box(), message=(
             f"{held}: the data prefer a start outside the zone (cost lower by {gain:.1f} > {limit:.2f}); widen "
-            f"the zone to hold that start (e.g. {model.zone.reaching(free.x0).options()}) or lift the bound "
-            "(--no-region-bound)"))]
+            f"the zone to hold that start (e.g. {advised.options()}) or lift the bound (--no-region-bound)"))]
     return [Reason(code="boundary", status="ok", message=f"{held}: the data do not prefer a start outside it")]
 
 

@@ -78,6 +78,7 @@ competing hypotheses by :mod:`fgdoppler.estimators.ambiguity`
 
 from __future__ import annotations
 
+import functools
 from dataclasses import replace
 
 import numpy as np
@@ -93,6 +94,7 @@ from fgdoppler.geometry import principal_line
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import DopplerModel
 from fgdoppler.models.tracking import TrackingModel
+from fgdoppler.zone import ZoneBox
 
 __all__ = ["COVARIANCE_RATIO", "LEVEL", "LOST", "MIN_FIT_DOF", "MIN_MEASUREMENTS", "REJECT_DOUBTFUL", "REJECT_FAILED",
            "REJECT_ROBUST", "REMOTE_FACTOR", "SPEED_FACTOR", "ZONE_TOLERANCE", "judge", "needed_speed",
@@ -204,8 +206,10 @@ def _reference_reasons(est: Estimates, reference: TrackResult) -> list[Reason]:
     own = [r for r in reference.reasons if not r.code.startswith("initiation-")]  # the track has those already
     worst = status_of(own)
     if worst != "ok":
+        advised = [r.zone for r in own if r.status == worst and r.zone is not None]
         out.append(Reason(code="reference", status="doubtful", message=(
-            f"the offline smoother of the same data is {worst}: {message_of(own)}")))
+            f"the offline smoother of the same data is {worst}: {message_of(own)}"),
+            zone=functools.reduce(ZoneBox.union, advised) if advised else None))
     ref = reference.primary
     if not (len(est) and len(ref) and abs(est.times[-1] - ref.times[-1]) < 1e-9 and est.cov_ok[-1] and ref.cov_ok[-1]):
         return out

@@ -450,7 +450,7 @@ def _boundary_reasons(prob: _Problem, x: FloatArray, max_iterations: int) -> lis
 
 
 def _wall_reason(zone: Zone, x: FloatArray, inside: float, free: FloatArray, free_cost: float,
-                 searched: str = "", advise: Callable[[], str] | None = None) -> Reason:
+                 searched: str = "", advise: Callable[[], tuple[str, Zone]] | None = None) -> Reason:
     """The ``boundary`` finding for a track ``x`` held by the wall (data cost ``inside``) and the best track
     found without it (``free``, cost ``free_cost``; ``searched`` says where it was looked for, and whether the
     start found lies at its edge; ``advise`` gives the zone to try, asked only when the finding is
@@ -465,9 +465,10 @@ def _wall_reason(zone: Zone, x: FloatArray, inside: float, free: FloatArray, fre
             f"instead of {inside:.2f}, {np.linalg.norm(free[0, :d] - x[0, :d]) / 1e3:.1f} km away"
             f" (speed {np.linalg.norm(free[0, d:]):.0f} m/s)")
     if gain > limit:
+        text, advised = advise() if advise else _held_start(zone.reaching(free[0]))
         return Reason(code="boundary", status="doubtful", message=(
             f"{held}: the data prefer a start outside the zone (lower by {gain:.1f} > {limit:.2f}); widen the "
-            f"zone to hold that start, {advise() if advise else 'e.g. ' + zone.reaching(free[0]).options()}"))
+            f"zone to hold that start, {text}"), zone=advised.box())
     return Reason(code="boundary", status="ok", message=f"{held}: the data do not prefer a start outside it")
 
 
@@ -524,7 +525,7 @@ def _beyond_wall_2d(measurements: Measurements, model: TrackingModel, settings: 
 def _best_outside_2d(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
                      sol: SmootherSolution, window: Measurements, wide_zone: Zone, progress: Progress | None, *,
                      half_plane: HalfPlane | None, memo: SearchMemo | None
-                     ) -> tuple[SmootherSolution, float, str, Callable[[], str]] | None:
+                     ) -> tuple[SmootherSolution, float, str, Callable[[], tuple[str, Zone]]] | None:
     """The lowest-cost track without the zone wall from ``sol`` and from both initiations over ``wide_zone``
     (:func:`_beyond_wall_2d` says which), ``sol``'s own data cost, where it was searched, and what gives the
     zone to advise (:func:`_zone_advice`, which costs a smoother run: asked only for a ``doubtful`` finding;
@@ -570,9 +571,9 @@ def _best_outside_2d(measurements: Measurements, model: TrackingModel, settings:
 
 def _zone_advice(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
                  best: SmootherSolution, progress: Progress | None, *, half_plane: HalfPlane | None,
-                 memo: SearchMemo | None) -> str:
-    """The zone a search outside it advises: one that holds ``best``'s start — and its mirror image's where that
-    is a mode the data cannot tell from it.
+                 memo: SearchMemo | None) -> tuple[str, Zone]:
+    """The zone a search outside it advises, and its words: one that holds ``best``'s start — and its mirror
+    image's where that is a mode the data cannot tell from it.
 
     Sensors near one line give a track and its mirror image across that
     line nearly the same Doppler.  Measured on a quasi-monostatic radar
@@ -603,15 +604,21 @@ def _zone_advice(measurements: Measurements, model: TrackingModel, settings: Smo
     advised = zone.reaching(best.states[0])
     geometry = getattr(model.observation, "geometry", None)
     if geometry is None or half_plane is not None:
-        return "e.g. " + advised.options()
+        return _held_start(advised)
     twins = [s for s in _smooth_from(measurements, model, replace(settings, region_bound=False, covariances=False),
                                      [mirrored(best.states, geometry)], progress, memo)
              if _apart(best, s) and s.cost < best.cost + COMPETING]
     if not twins:
-        return "e.g. " + advised.options()
+        return _held_start(advised)
     twin = min(twins, key=lambda s: s.cost)
+    both = advised.reaching(twin.states[0])
     return (f"and its mirror image across the sensors' line, whose track fits the data nearly as well (cost "
-            f"{twin.cost:.2f}), e.g. {advised.reaching(twin.states[0]).options()}")
+            f"{twin.cost:.2f}), e.g. {both.options()}", both)
+
+
+def _held_start(advised: Zone) -> tuple[str, Zone]:
+    """The words of :func:`_zone_advice` for a zone that holds one start, and the zone."""
+    return "e.g. " + advised.options(), advised
 
 
 def _at_edge(zone: Zone, x0: FloatArray) -> bool:
@@ -680,14 +687,15 @@ def _outside_zone_2d(measurements: Measurements, model: TrackingModel, settings:
     if gain <= OUTSIDE_GAIN or not np.any(excess != 0.0):
         return None
     d = zone.dim
-    return Reason(code="zone", status="doubtful", message=(
+    text, advised = advise()
+    return Reason(code="zone", status="doubtful", zone=advised.box(), message=(
         f"the track fits the data poorly ({'cost' if settings.huber_k is None else 'inlier chi-square'} "
         f"{misfit:.1f} above the {OUTSIDE_LEVEL:.0%} chi-square level {threshold:.1f}) and a track starting outside the zone fits them better{searched}: cost {best.cost:.2f} instead of "
         f"{inside:.2f}, lower by {gain:.1f} > {OUTSIDE_GAIN:.2f}, starting "
         f"{np.linalg.norm(best.states[0, :d] - sol.states[0, :d]) / 1e3:.1f} km away at "
         f"{np.linalg.norm(best.states[0, d:]):.0f} m/s (excess along, across, speed: "
         + ", ".join(f"{v:.3g}" for v in excess) + "): the target may be outside the zone; widen it to hold that "
-        f"start, {advise()}"))
+        f"start, {text}"))
 
 
 def _covariances(prob: _Problem, x: FloatArray) -> tuple[FloatArray | None, str]:

@@ -30,6 +30,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Literal
 
+from fgdoppler.zone import ZoneBox
+
 __all__ = ["NOT_CONVERGED", "STATUSES", "Event", "Judged", "Reason", "Status", "message_of", "status_of"]
 
 Status = Literal["ok", "doubtful", "failed"]
@@ -50,19 +52,28 @@ class Reason:
         informational findings).
     message
         What was found, in words, with the numbers.
+    zone
+        The zone the finding advises trying (a start found outside the
+        given one), as the command-line options that give it name it, in
+        the given zone's own axes; ``None`` for most findings.  The message
+        names it too (:meth:`~fgdoppler.zone.ZoneBox.options`).
     """
 
     code: str
     status: Status
     message: str
+    zone: ZoneBox | None = None
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
             raise ValueError(f"status must be one of {STATUSES}, got {self.status!r}")
 
-    def to_dict(self) -> dict[str, str]:
-        """JSON-ready form."""
-        return {"code": self.code, "status": self.status, "message": self.message}
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready form (``zone`` only where the finding advises one)."""
+        out: dict[str, object] = {"code": self.code, "status": self.status, "message": self.message}
+        if self.zone is not None:
+            out["zone"] = self.zone.to_dict()
+        return out
 
 
 #: The finding of a tracker whose final smoothing hit its iteration cap (its events say more).
