@@ -68,6 +68,15 @@ def _speed_max(value: object) -> float:
     return float(value)
 
 
+def _check_bounds(box: Zone | ZoneBox) -> None:
+    """Validate and normalise a frozen zone's (or box's) intervals and speed bound in place."""
+    object.__setattr__(box, "along", _interval(box.along, "along"))
+    object.__setattr__(box, "across", _interval(box.across, "across"))
+    if box.altitude is not None:
+        object.__setattr__(box, "altitude", _interval(box.altitude, "altitude"))
+    object.__setattr__(box, "speed_max", _speed_max(box.speed_max))
+
+
 @dataclass(frozen=True, kw_only=True)
 class ZoneBox:
     """A zone's box and speed bound in its own axes, without its frame: what ``--zone``, ``--altitude`` and
@@ -94,11 +103,7 @@ class ZoneBox:
     altitude: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "along", _interval(self.along, "along"))
-        object.__setattr__(self, "across", _interval(self.across, "across"))
-        if self.altitude is not None:
-            object.__setattr__(self, "altitude", _interval(self.altitude, "altitude"))
-        object.__setattr__(self, "speed_max", _speed_max(self.speed_max))
+        _check_bounds(self)
 
     def options(self) -> str:
         """The command-line options that give this box (``--zone``, ``--altitude``, ``--speed-max``), its bounds
@@ -167,11 +172,7 @@ class Zone:
     altitude: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "along", _interval(self.along, "along"))
-        object.__setattr__(self, "across", _interval(self.across, "across"))
-        if self.altitude is not None:
-            object.__setattr__(self, "altitude", _interval(self.altitude, "altitude"))
-        object.__setattr__(self, "speed_max", _speed_max(self.speed_max))
+        _check_bounds(self)
         if self.frame.dim != self.dim:
             raise ValueError(f"a {self.dim}-D zone (altitude band {'set' if self.altitude else 'not set'}) "
                              f"needs a {self.dim}-D frame, got {self.frame.dim}-D")
