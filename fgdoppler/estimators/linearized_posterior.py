@@ -144,9 +144,8 @@ class LinearizedPosterior:
         cur = e.copy()
         while np.any(back := cur > j + 1):  # smoothed back to the first scan after each time
             i = cur[back] - 1
-            G = self.gains[i]
-            xs[back] = self.means[i] + np.einsum("kab,kb->ka", G, xs[back] - self.predicted_means[i + 1])
-            Ps[back] = self.covariances[i] + G @ (Ps[back] - self.predicted_covariances[i + 1]) @ np.swapaxes(G, 1, 2)
+            xs[back], Ps[back] = _rts_step(self.means[i], self.covariances[i], self.gains[i], xs[back], Ps[back],
+                                           self.predicted_means[i + 1], self.predicted_covariances[i + 1])
             cur[back] -= 1
         dt = t - self.times[j]
         F = self.motion.F(dt)
@@ -157,9 +156,8 @@ class LinearizedPosterior:
             F2 = self.motion.F(self.times[j[later] + 1] - t[later])
             x_pred = np.einsum("kab,kb->ka", F2, means[later])
             P_pred = F2 @ covs[later] @ np.swapaxes(F2, 1, 2) + self.motion.Q(self.times[j[later] + 1] - t[later])
-            G = np.swapaxes(np.linalg.solve(P_pred, F2 @ covs[later]), 1, 2)
-            means[later] = means[later] + np.einsum("kab,kb->ka", G, xs[later] - x_pred)
-            covs[later] = covs[later] + G @ (Ps[later] - P_pred) @ np.swapaxes(G, 1, 2)
+            G = _rts_gains(covs[later], F2, P_pred)
+            means[later], covs[later] = _rts_step(means[later], covs[later], G, xs[later], Ps[later], x_pred, P_pred)
         return means, 0.5 * (covs + np.swapaxes(covs, 1, 2))
 
 
@@ -222,11 +220,24 @@ def linearized_filter(measurements: Measurements, model: TrackingModel, ref_time
         P = 0.5 * (P + P.T)
         means[k], covs[k] = x, P
     gains = np.zeros((n + 1, d, d))
-    if n:  # G_i = P_i F' (P-_{i+1})^-1, from (P-_{i+1})^-1 F P_i with both symmetric
-        F = model.motion.F(np.diff(times))
-        gains[:-1] = np.swapaxes(np.linalg.solve(pred_covs[1:], F @ covs[:-1]), 1, 2)
+    if n:
+        gains[:-1] = _rts_gains(covs[:-1], model.motion.F(np.diff(times)), pred_covs[1:])
     return LinearizedPosterior(times=times, means=means, covariances=covs, predicted_means=pred_means,
                                predicted_covariances=pred_covs, gains=gains, motion=model.motion)
+
+
+def _rts_gains(P: FloatArray, F: FloatArray, P_pred: FloatArray) -> FloatArray:
+    r"""Smoother gains :math:`\mathbf G = \mathbf P\mathbf F^\top(\mathbf P^-)^{-1}`, stacked ``(k, 2d, 2d)``
+    (as :math:`((\mathbf P^-)^{-1}\mathbf F\mathbf P)^\top`, both covariances symmetric)."""
+    return np.asarray(np.swapaxes(np.linalg.solve(P_pred, F @ P), 1, 2), dtype=float)
+
+
+def _rts_step(x: FloatArray, P: FloatArray, G: FloatArray, x_next: FloatArray, P_next: FloatArray,
+              x_pred: FloatArray, P_pred: FloatArray) -> tuple[FloatArray, FloatArray]:
+    r"""One stacked Rauch–Tung–Striebel step back: :math:`\mathbf x + \mathbf G(\mathbf x^s - \mathbf x^-)`,
+    :math:`\mathbf P + \mathbf G(\mathbf P^s - \mathbf P^-)\mathbf G^\top`."""
+    return (x + np.einsum("kab,kb->ka", G, x_next - x_pred),
+            P + G @ (P_next - P_pred) @ np.swapaxes(G, 1, 2))
 
 
 def mean_square_errors(estimates: FloatArray, means: FloatArray, covariances: FloatArray) -> FloatArray:
