@@ -85,8 +85,9 @@ def mirrored(states: ArrayLike, geometry: Geometry) -> NDArray[np.float64]:
     return np.column_stack([c + (x[:, :2] - c) @ m, x[:, 2:] @ m])
 
 
-#: What a finding says of a rival that is the reported solution's mirror image (:func:`is_mirror_image`); the
-#: command line prints the ``--half-plane`` options of either side of the sensors' line on these words.
+#: What a finding says of a rival that is the reported solution's mirror image (:func:`is_mirror_image`); such a
+#: finding also carries ``mirror="sensors"`` (:class:`~fgdoppler.estimators.verdict.Reason`), on which the command
+#: line prints the ``--half-plane`` options of either side of the sensors' line.
 MIRROR_ADVICE = ("mirror image across the sensors' line: if the target's side of that line is known, give it "
                  "(--half-plane)")
 

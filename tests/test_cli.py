@@ -564,7 +564,8 @@ def test_following_the_zone_advice_never_ends_in_a_confident_mirror_track(
     from fgdoppler.estimators.smoother_offsets import mirrored
     from fgdoppler.geometry import MIRROR_ADVICE
 
-    assert any(MIRROR_ADVICE in r["message"] for r in competing)
+    assert any(MIRROR_ADVICE in r["message"] and r["mirror"] == "sensors" for r in competing)
+    assert all(("mirror" in r) == (MIRROR_ADVICE in r["message"]) for r in second["reasons"])
     hint = re.search(r"--half-plane (\S+) (\S+) (\S+) (\S+) puts .* --half-plane (\S+) (\S+) (\S+) (\S+) on", captured.err)
     assert hint is not None
     planes = np.array(hint.groups(), dtype=float).reshape(2, 4)
@@ -590,7 +591,7 @@ def test_an_initiation_whose_alternative_is_the_mirror_image_gets_the_half_plane
     res = json.loads(captured.out)
     found = [r for r in res["reasons"] if r["code"] == "ambiguous" and "mirror image" in r["message"]]
     hint = re.search(r"--half-plane (\S+) (\S+) (\S+) (\S+) puts", captured.err)
-    assert found and found[0]["status"] == "doubtful" and hint is not None
+    assert found and found[0]["status"] == "doubtful" and found[0]["mirror"] == "sensors" and hint is not None
     plane = np.array(hint.groups(), dtype=float)
     sides = [plane[2:] @ (np.asarray(x)[:2] - plane[:2]) for x in (res["x_start"], res["alternatives"][0]["state"])]
     assert sides[0] * sides[1] < 0
@@ -691,7 +692,9 @@ def test_one_pairs_mirror_is_settled_by_the_half_plane_the_hint_gives(
     captured = capsys.readouterr()
     hint = re.search(r"--half-plane (\S+) (\S+) (\S+) (\S+) puts .* --half-plane (\S+) (\S+) (\S+) (\S+) on",
                      captured.err)
-    assert hint is not None and json.loads(captured.out)["status"] == "doubtful"
+    first = json.loads(captured.out)
+    assert hint is not None and first["status"] == "doubtful"
+    assert [r["mirror"] for r in first["reasons"] if "lie on one line" in r["message"]] == ["reporting"]
     planes = np.array(hint.groups(), dtype=float).reshape(2, 4)
     np.testing.assert_allclose(planes[0, 1], 0.0, atol=1e-9)  # the baseline y = 0 of pair 0
     truth = fd.Trajectory.from_csv(sim / "truth.csv")

@@ -199,8 +199,12 @@ def test_a_zone_box_refuses_what_a_zone_refuses(bad: dict[str, object]) -> None:
         fd.Zone(**{**good, **bad})  # type: ignore[arg-type]
 
 
-def test_a_finding_carries_its_advised_zone_into_json() -> None:
+def test_a_finding_carries_its_advised_zone_and_mirror_into_json() -> None:
     box = ZoneBox(along=(0.0, 10.0), across=(-1.0, 1.0), speed_max=5.0)
     assert Reason(code="zone", status="doubtful", message="m", zone=box).to_dict() == {
         "code": "zone", "status": "doubtful", "message": "m", "zone": box.to_dict()}
     assert Reason(code="fit", status="ok", message="m").to_dict() == {"code": "fit", "status": "ok", "message": "m"}
+    assert Reason(code="data", status="doubtful", message="m", mirror="reporting").to_dict() == {
+        "code": "data", "status": "doubtful", "message": "m", "mirror": "reporting"}
+    with pytest.raises(ValueError, match="mirror"):
+        Reason(code="data", status="doubtful", message="m", mirror="left")  # type: ignore[arg-type]

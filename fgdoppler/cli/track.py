@@ -25,7 +25,7 @@ from fgdoppler.cli.common import (
 )
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
-from fgdoppler.geometry import MIRROR_ADVICE, Geometry, principal_line
+from fgdoppler.geometry import Geometry, principal_line
 from fgdoppler.zone import ZoneBox
 
 __all__ = ["add_track"]
@@ -233,21 +233,19 @@ def _print_verdict(status: str, reasons: Any) -> None:
         print(f"  {r.status}: {r.message}", file=sys.stderr)
 
 
-#: The words of the ``data`` finding when the sensors of the pairs that reported lie on one line.
-COLLINEAR_CUE = "lie on one line: the mirror image of the track across it fits the data exactly"
-
-
 def _print_half_plane_hint(reasons: Any, geom: Geometry, args: argparse.Namespace, pairs: Any) -> None:
-    """Where a finding says a mirror image fits the data, the ``--half-plane`` options of either side of the
-    line it is taken across, in the user's coordinates: the least-squares line of every sensor (the smoother's
-    mirror rival) or the line the sensors of the reporting ``pairs`` lie on (the ``data`` finding)."""
+    """Where a finding says a mirror image fits the data (:attr:`~fgdoppler.estimators.verdict.Reason.mirror`),
+    the ``--half-plane`` options of either side of the line it is taken across, in the user's coordinates: the
+    least-squares line of every sensor (the smoother's mirror rival, the initiation's mirror start) or the line
+    the sensors of the reporting ``pairs`` lie on (the ``data`` finding)."""
     if args.half_plane is not None or geom.dim != 2:
         return
-    reasons = [r for r in reasons if r.status != "ok"]  # a settled ambiguity (the filters' hypotheses) needs none
-    if any(COLLINEAR_CUE in r.message for r in reasons):
+    # a settled ambiguity (the filters' hypotheses) needs none
+    mirrors = {r.mirror for r in reasons if r.status != "ok" and r.mirror is not None}
+    if "reporting" in mirrors:
         used = np.unique(np.asarray(pairs, dtype=int))
         sensors = np.vstack([geom.tx[used], geom.rx[used]])
-    elif any(MIRROR_ADVICE in r.message for r in reasons):  # a mirror rival: competing, ambiguous
+    elif "sensors" in mirrors:  # a mirror rival: competing, ambiguous
         sensors = np.vstack([geom.tx, geom.rx])
     else:
         return

@@ -663,7 +663,7 @@ def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: t
         reasons.append(Reason(code="ambiguous", status="doubtful", message=(
             f"{len(alternatives)} other solution(s) fit the window as well (costs "
             + ", ".join(f"{a.cost:.1f}" for a in alternatives) + f" vs {fit.cost:.1f}; up to {far / 1e3:.1f} km "
-            f"away{share}): the window alone cannot tell them apart{mirror}")))
+            f"away{share}): the window alone cannot tell them apart{mirror}"), mirror="sensors" if images else None))
     return Initiation(
         method=settings.method, t_start=w.t0, t_end=w.t0 + float(w.scan_times[-1]),
         x_start=np.asarray(fit.x0, dtype=float), x_end=np.asarray(fit.x1, dtype=float),

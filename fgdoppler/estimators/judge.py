@@ -197,7 +197,7 @@ def _data_reasons(measurements: Measurements, model: TrackingModel, half_plane: 
             out.append(Reason(code="data", status="doubtful", message=(
                 f"the sensors of the pairs that reported ({', '.join(str(int(k)) for k in used)}) lie on one "
                 "line: the mirror image of the track across it fits the data exactly (restrict the initiation "
-                "to one side with a half plane, --half-plane)")))
+                "to one side with a half plane, --half-plane)"), mirror="reporting"))
     return out
 
 
@@ -206,10 +206,13 @@ def _reference_reasons(est: Estimates, reference: TrackResult) -> list[Reason]:
     own = [r for r in reference.reasons if not r.code.startswith("initiation-")]  # the track has those already
     worst = status_of(own)
     if worst != "ok":
-        advised = [r.zone for r in own if r.status == worst and r.zone is not None]
+        setting = [r for r in own if r.status == worst]
+        advised = [r.zone for r in setting if r.zone is not None]
+        mirrors = {r.mirror for r in setting if r.mirror is not None}
         out.append(Reason(code="reference", status="doubtful", message=(
             f"the offline smoother of the same data is {worst}: {message_of(own)}"),
-            zone=functools.reduce(ZoneBox.union, advised) if advised else None))
+            zone=functools.reduce(ZoneBox.union, advised) if advised else None,
+            mirror=next((m for m in ("reporting", "sensors") if m in mirrors), None)))
     ref = reference.primary
     if not (len(est) and len(ref) and abs(est.times[-1] - ref.times[-1]) < 1e-9 and est.cov_ok[-1] and ref.cov_ok[-1]):
         return out

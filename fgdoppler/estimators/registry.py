@@ -445,7 +445,7 @@ def _with_initiation_reasons(result: TrackResult, init: Initiation, *, native: b
     inherited = tuple(
         Reason(code=f"initiation-{r.code}",
                status="ok" if (informational and r.code in START_COVARIANCE_FINDINGS) else r.status,
-               message=f"initiation: {r.message}", zone=r.zone)
+               message=f"initiation: {r.message}", zone=r.zone, mirror=r.mirror)
         for r in init.reasons if r.code != "ambiguous")
     return replace(result, reasons=inherited + result.reasons) if inherited else result
 

@@ -1041,12 +1041,12 @@ def _rival_reason(found: Sequence[_Mode], best: _Mode, zone: Zone, geometry: Geo
             f"{head} (height {zone.frame.points_to_local(rival.states[-1, :3])[2]:.0f} m vs "
             f"{zone.frame.points_to_local(end)[2]:.0f} m; reported sigma in that direction {sd:.0f} m): the data do "
             "not fix the track in 3-D"))
-    mirror = ""
-    if geometry is not None and k == 2 and is_mirror_image(end, rival.states[-1], geometry):
-        mirror = f"; the other track is the reported one's {MIRROR_ADVICE}"
+    mirror = geometry is not None and k == 2 and is_mirror_image(end, rival.states[-1], geometry)
     return Reason(code="competing", status="doubtful", message=(
         f"{head} (reported sigma in that direction {sd:.0f} m): the data do not tell the two apart, and the "
-        f"reported covariance, about one of them, understates the error{mirror}"))
+        "reported covariance, about one of them, understates the error"
+        + (f"; the other track is the reported one's {MIRROR_ADVICE}" if mirror else "")),
+        mirror="sensors" if mirror else None)
 
 
 def _outside_findings(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
@@ -1117,7 +1117,7 @@ def _mirror_reason(measurements: Measurements, model: TrackingModel, settings: S
         return None
     return replace(found, message=(
         f"{found.message} — the mirror image of the track across the sensors' line, with the offsets "
-        f"{mirror.offsets.describe()} (the reported track's: {joint.offsets.describe()})"))
+        f"{mirror.offsets.describe()} (the reported track's: {joint.offsets.describe()})"), mirror="sensors")
 
 
 def with_offset_findings(reference: TrackResult, measurements: Measurements, model: TrackingModel,

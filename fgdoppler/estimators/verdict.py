@@ -32,9 +32,13 @@ from typing import Literal
 
 from fgdoppler.zone import ZoneBox
 
-__all__ = ["NOT_CONVERGED", "STATUSES", "Event", "Judged", "Reason", "Status", "message_of", "status_of"]
+__all__ = ["NOT_CONVERGED", "STATUSES", "Event", "Judged", "Mirror", "Reason", "Status", "message_of", "status_of"]
 
 Status = Literal["ok", "doubtful", "failed"]
+#: Which line a mirror image is taken across: that of every sensor (least squares), or the one the sensors of
+#: the pairs that reported lie on exactly.
+Mirror = Literal["sensors", "reporting"]
+MIRRORS: tuple[Mirror, ...] = ("sensors", "reporting")
 #: The status vocabulary, from best to worst.
 STATUSES: tuple[Status, ...] = ("ok", "doubtful", "failed")
 
@@ -57,22 +61,35 @@ class Reason:
         given one), as the command-line options that give it name it, in
         the given zone's own axes; ``None`` for most findings.  The message
         names it too (:meth:`~fgdoppler.zone.ZoneBox.options`).
+    mirror
+        Where the finding says the mirror image of the answer across a line
+        of sensors fits the data (as well, or nearly): ``"sensors"``, the
+        least-squares line of every sensor (a rival track or start that is
+        the answer's mirror image); ``"reporting"``, the line the sensors of
+        the pairs that reported lie on exactly (any track's image fits).  A
+        half plane on either side of that line settles it.  ``None`` for
+        most findings.
     """
 
     code: str
     status: Status
     message: str
     zone: ZoneBox | None = None
+    mirror: Mirror | None = None
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
             raise ValueError(f"status must be one of {STATUSES}, got {self.status!r}")
+        if self.mirror is not None and self.mirror not in MIRRORS:
+            raise ValueError(f"mirror must be None or one of {MIRRORS}, got {self.mirror!r}")
 
     def to_dict(self) -> dict[str, object]:
-        """JSON-ready form (``zone`` only where the finding advises one)."""
+        """JSON-ready form (``zone`` and ``mirror`` only where the finding has them)."""
         out: dict[str, object] = {"code": self.code, "status": self.status, "message": self.message}
         if self.zone is not None:
             out["zone"] = self.zone.to_dict()
+        if self.mirror is not None:
+            out["mirror"] = self.mirror
         return out
 
 

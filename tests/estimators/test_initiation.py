@@ -88,8 +88,10 @@ def test_collinear_geometry_reports_mirror_and_half_plane_resolves_it() -> None:
     found = next(x for x in r.reasons if x.code == "ambiguous")
     image = next(i + 1 for i, a in enumerate(r.alternatives) if np.all(np.abs(a.state - mirror) < 1e-4 * sd))
     assert f"alternative {image} is the start's {MIRROR_ADVICE}" in found.message
+    assert found.mirror == "sensors" and found.to_dict()["mirror"] == "sensors"
     north = initiate(w, g, InitiationSettings(half_plane=HalfPlane(point=(0.0, 0.0), normal=(0.0, 1.0))))
     assert not any(MIRROR_ADVICE in x.message for x in north.reasons)
+    assert all(x.mirror is None for x in north.reasons)
     assert north.x_start[1] > 0
     assert not any(a.state[1] < 0 for a in north.alternatives)
     assert np.linalg.norm(north.x_start[:2] - np.asarray(sc.x0[:2])) < 1e3

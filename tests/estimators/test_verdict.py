@@ -175,6 +175,42 @@ def test_judge_findings_on_constructed_results() -> None:
     assert lost.status == "failed" and {"rejections", "lost"} <= {r.code for r in lost.reasons}
 
 
+def test_the_reference_finding_carries_the_smoothers_advice() -> None:
+    """A doubtful offline smoother's findings reach the filter as one ``reference`` finding: its zone is the union
+    of the advised zones, its mirror the line of the worst findings' (the reporting pairs' before every sensor's),
+    both only from the findings that set the smoother's status."""
+    from dataclasses import replace
+
+    from fgdoppler.estimators.judge import judge
+    from fgdoppler.estimators.verdict import Reason
+    from fgdoppler.zone import ZoneBox
+
+    sim = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(1))
+    model = fd.TrackingModel.of(sim.scenario.geometry)
+    init = fd.initiate(sim.measurements.first_per_pair(10), model)
+    ekf = fd.run_estimator("ekf", sim.measurements, model, init, verify=False)
+    ref = fd.run_estimator("smoother", sim.measurements, model, init)
+    a = ZoneBox(along=(0.0, 10e3), across=(-1e3, 1e3), speed_max=300.0)
+    b = ZoneBox(along=(5e3, 20e3), across=(-3e3, 0.0), speed_max=250.0)
+
+    def wrapped(*said: Reason) -> Reason:
+        out = judge(ekf, sim.measurements, model, fd.EKFSettings(), replace(ref, reasons=said))
+        (found,) = [r for r in out.reasons if r.code == "reference" and "offline smoother" in r.message]
+        return found
+
+    found = wrapped(Reason(code="zone", status="doubtful", message="z", zone=a),
+                    Reason(code="competing", status="doubtful", message="m", mirror="sensors"),
+                    Reason(code="boundary", status="doubtful", message="w", zone=b))
+    assert found.zone == a.union(b) and found.mirror == "sensors"
+    found = wrapped(Reason(code="competing", status="doubtful", message="m", mirror="sensors"),
+                    Reason(code="data", status="doubtful", message="d", mirror="reporting"))
+    assert found.zone is None and found.mirror == "reporting"
+    # an informational finding does not set the status and advises nothing
+    found = wrapped(Reason(code="zone", status="doubtful", message="z"),
+                    Reason(code="competing", status="ok", message="m", zone=a, mirror="sensors"))
+    assert found.zone is None and found.mirror is None
+
+
 def test_a_track_confidently_elsewhere_for_a_while_is_doubtful_though_it_ends_well() -> None:
     """The ``reference`` finding over the whole track, not only its last state.
 
