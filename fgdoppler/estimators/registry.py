@@ -362,9 +362,11 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
     (paper's case a 5 km, seed 2026, run 79: ``doubtful`` on the Gaussian
     covariance, ``ok`` on the widened one, 2.4 km off with a position
     sigma of 0.6 km).  Where the samples cannot describe the posterior (the
-    process noise), the covariances are widened towards the posterior of the
-    data the estimates have read linearised about ``reference``'s track, the
-    offline smoother's (``filtered_spread``'s ``reference``).
+    process noise) — and with ``settings.linearised_everywhere`` at every
+    estimate, after the checks — the covariances are widened towards
+    the posterior of the data the estimates have read linearised about
+    ``reference``'s track, the offline smoother's (``filtered_spread``'s
+    ``reference``).
     """
     e = result.primary
     rejected = result.nis[result.nis[:, 3] == 0] if result.nis.size else np.zeros((0, 4))
@@ -376,7 +378,7 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
         kept = measurements.subset(~drop)
     widened = filtered_spread(kept, model, e.times, e.states, e.covariances, e.cov_ok,
                               interval=settings.sampling_interval, lag=settings.look_ahead,
-                              huber_k=settings.huber_k,
+                              huber_k=settings.huber_k, linearised_everywhere=settings.linearised_everywhere,
                               reference=None if reference is None or not len(reference.primary)
                               else (reference.primary.times, reference.primary.states))
     if widened is None:
