@@ -208,13 +208,20 @@ def run_estimator(
     else:
         reference = None
     judged = judge(result, measurements, model, settings, reference, half_plane=init.half_plane is not None)
+    checked = None  # the primary covariances without the enclosure built from the reference's track
     if isinstance(settings, SampledCovarianceSettings) and settings.sampled_covariance:
-        judged = _with_sampled_covariances(judged, measurements, model, settings, reference)
+        judged, checked = _with_sampled_covariances(judged, measurements, model, settings, reference)
     if (offsets is not None and np.any(offsets > 0)) or (clocks is not None and np.any(clocks > 0)):
+        before = judged.primary.covariances
         judged = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings, offsets, clocks,
                                prefixed(progress, "calibration and clock offsets"))
-    if reference is not None:  # on the covariances reported, after the sampled check and the offsets
-        judged = replace(judged, reasons=(*judged.reasons, *track_reference(judged.primary, reference.primary)))
+        if checked is not None:  # the offsets' share is added to both
+            checked = checked + (judged.primary.covariances - before)
+    if reference is not None:
+        # after the sampled check and the offsets, but not on covariances widened towards the reference's own
+        # track: those cannot disagree with it, and where the reference is wrong the disagreement is the evidence
+        own = judged.primary if checked is None else replace(judged.primary, covariances=checked)
+        judged = replace(judged, reasons=(*judged.reasons, *track_reference(own, reference.primary)))
     return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
 
 
@@ -349,7 +356,7 @@ def _solve(info: EstimatorInfo, measurements: Measurements, model: TrackingModel
 
 def _with_sampled_covariances(result: TrackResult, measurements: Measurements, model: TrackingModel,
                               settings: SampledCovarianceSettings, reference: TrackResult | None = None
-                              ) -> TrackResult:
+                              ) -> tuple[TrackResult, NDArray[np.float64] | None]:
     """The primary covariances widened to posterior samples of the data the estimates have read (:func:`~fgdoppler.estimators.spread.filtered_spread`).
 
     A filter's estimates have read the data so far; a fixed-lag smoother's
@@ -366,7 +373,9 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
     estimate, after the checks — the covariances are widened towards
     the posterior of the data the estimates have read linearised about
     ``reference``'s track, the offline smoother's (``filtered_spread``'s
-    ``reference``).
+    ``reference``).  Returns the result and, where that enclosure widened
+    any, the primary covariances of the sampled checks alone (``None``
+    otherwise), which the whole-track ``reference`` finding reads.
     """
     e = result.primary
     rejected = result.nis[result.nis[:, 3] == 0] if result.nis.size else np.zeros((0, 4))
@@ -382,9 +391,10 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
                               reference=None if reference is None or not len(reference.primary)
                               else (reference.primary.times, reference.primary.states))
     if widened is None:
-        return result
-    primary = replace(e, covariances=widened[0])
-    return replace(result, estimates=(primary, *result.estimates[1:]), reasons=(*result.reasons, widened[1]))
+        return result, None
+    primary = replace(e, covariances=widened.covariances)
+    return (replace(result, estimates=(primary, *result.estimates[1:]), reasons=(*result.reasons, widened.reason)),
+            widened.checked)
 
 
 def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, measurements: Measurements,

@@ -258,7 +258,7 @@ class SampledCovarianceSettings(GaussianSumSettings):
 
     sampled_covariance: bool = True
     sampling_interval: float = 5.0
-    linearised_everywhere: bool = False
+    linearised_everywhere: bool = True
     bias_sigma: float | tuple[float, ...] = 0.0
     clock_sigma: float | tuple[float, ...] = 0.0
 

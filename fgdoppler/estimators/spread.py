@@ -238,7 +238,7 @@ from fgdoppler.models.robust import huber_weights
 from fgdoppler.models.tracking import TrackingModel
 
 __all__ = ["FILTER_MOVES", "FILTER_SAMPLES", "MAX_SPAN", "MEAN_SHIFT_MIN", "SAMPLES", "SAMPLING_LIMIT", "TRUST_LIMIT",
-           "PosteriorSpread", "filtered_spread", "posterior_spread"]
+           "FilteredSpread", "PosteriorSpread", "filtered_spread", "posterior_spread"]
 
 FloatArray = NDArray[np.float64]
 
@@ -283,6 +283,30 @@ FILTER_BACKOFF = 3
 #: longer describes the filter's posterior (on a slow 600 s track it widened consistent covariances, NEES 3.52
 #: -> 2.73, by the noise term alone).
 FILTER_NOISE_MAX = 1.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class FilteredSpread:
+    """What :func:`filtered_spread` widened.
+
+    Parameters
+    ----------
+    covariances
+        ``(n, 2d, 2d)``: the covariances widened by the sampled checks and
+        the linearised enclosure.
+    checked
+        The covariances widened by the sampled checks alone, where the
+        linearised enclosure widened any (else ``None``: ``covariances``).
+        The enclosure is built from the reference track; a finding that
+        compares the estimates with that track reads these.
+    reason
+        The informational ``nonlinear`` finding: what was widened, by how
+        much, and where most.
+    """
+
+    covariances: FloatArray
+    checked: FloatArray | None
+    reason: Reason
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -502,7 +526,7 @@ def filtered_spread(measurements: Measurements, model: TrackingModel, times: Flo
                     covariances: FloatArray, usable: NDArray[np.bool_], *, interval: float, lag: float = 0.0,
                     huber_k: float | None = None, seed: int = 0,
                     reference: tuple[FloatArray, FloatArray] | None = None,
-                    linearised_everywhere: bool = False) -> tuple[FloatArray, Reason] | None:
+                    linearised_everywhere: bool = False) -> FilteredSpread | None:
     r"""A filter's covariances widened to enclose the posterior mean-square error sampled from the data so far.
 
     At a check at time :math:`t_c` (the module docstring, "Filtered
@@ -562,30 +586,30 @@ def filtered_spread(measurements: Measurements, model: TrackingModel, times: Flo
 
     Returns
     -------
-    tuple or None
-        ``(covariances, reason)``, the reason an informational ``nonlinear``
-        finding with what was widened, by how much, and where most; ``None``
-        when no check widened anything.
+    FilteredSpread or None
+        The widened covariances, those of the sampled checks alone and the
+        finding; ``None`` when nothing was widened.
     """
     if not (np.isfinite(lag) and lag >= 0.0):
         raise ValueError(f"lag must be a finite number >= 0, got {lag!r}")
     if len(measurements) == 0 or len(times) == 0:
         return None
     linear = None if reference is None else _Linearised(measurements, model, reference, huber_k, lag)
-    out, widened, checks, worst = _check_along(measurements, model, times, states, covariances, usable, interval,
-                                               lag, huber_k, seed, linear, linearised_everywhere)
+    out, checked, widened, checks, worst = _check_along(measurements, model, times, states, covariances, usable,
+                                                        interval, lag, huber_k, seed, linear, linearised_everywhere)
     if widened == 0 and (linear is None or linear.widened == 0):
         return None
-    return out, _spread_reason(lag, widened, checks, interval, linear, worst, linearised_everywhere)
+    return FilteredSpread(covariances=out, checked=checked,
+                          reason=_spread_reason(lag, widened, checks, interval, linear, worst, linearised_everywhere))
 
 
 def _check_along(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
                  covariances: FloatArray, usable: NDArray[np.bool_], interval: float, lag: float,
                  huber_k: float | None, seed: int, linear: _Linearised | None, everywhere: bool = False
-                 ) -> tuple[FloatArray, int, int, tuple[float, float, float, float]]:
-    """The loop of :func:`filtered_spread`: (covariances, checks that widened, checks, the largest widening as
-    (sd ratio, time, sampled sd, filter sd)); the linearised widening at every usable estimate with
-    ``everywhere``, else beyond the samples' reach."""
+                 ) -> tuple[FloatArray, FloatArray | None, int, int, tuple[float, float, float, float]]:
+    """The loop of :func:`filtered_spread`: (covariances, those before the linearised widening where it widened
+    any, checks that widened, checks, the largest widening as (sd ratio, time, sampled sd, filter sd)); the
+    linearised widening at every usable estimate with ``everywhere``, else beyond the samples' reach."""
     out = np.array(covariances, dtype=float, copy=True)
     t0 = float(np.min(measurements.time))
     widening: FloatArray | None = None
@@ -615,10 +639,13 @@ def _check_along(measurements: Measurements, model: TrackingModel, times: FloatA
             outside.append(k)
         if not beyond and widening is not None:
             out[k] = _whitened_apply(P, widening)
+    checked = None
     if linear is not None and outside:
+        before = out.copy()
         first = int(np.flatnonzero(usable)[0])
         worst = max(worst, linear.widen(out, np.asarray(times, dtype=float), states, np.array(outside), first))
-    return out, widened, checks, worst
+        checked = before if linear.widened else None
+    return out, checked, widened, checks, worst
 
 
 def _spread_reason(lag: float, widened: int, checks: int, interval: float, linear: _Linearised | None,
