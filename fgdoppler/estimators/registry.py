@@ -369,8 +369,8 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
     (paper's case a 5 km, seed 2026, run 79: ``doubtful`` on the Gaussian
     covariance, ``ok`` on the widened one, 2.4 km off with a position
     sigma of 0.6 km).  Where the samples cannot describe the posterior (the
-    process noise) — and with ``settings.linearised_everywhere`` at every
-    estimate, after the checks — the covariances are widened towards
+    process noise) — and with ``settings.linearised_everywhere`` (default) at
+    every estimate, after the checks — the covariances are widened towards
     the posterior of the data the estimates have read linearised about
     ``reference``'s track, the offline smoother's (``filtered_spread``'s
     ``reference``).  Returns the result and, where that enclosure widened

@@ -198,14 +198,14 @@ class SampledCovarianceSettings(GaussianSumSettings):
         :mod:`~fgdoppler.estimators.linearized_posterior`): on 600 s
         recordings of the paper's pairs the EKF's NEES 9.2 → 4.3 and
         9.0 → 3.8, the fixed-lag smoother's 7.4 → 4.7 and 729 → 35
-        (``studies/long_filters.py``); with ``linearised_everywhere`` at
-        every estimate.
+        (``studies/long_filters.py``); by default at every estimate
+        (``linearised_everywhere``).
     sampling_interval : float, default 5.0
         Seconds between two checks; doubled after each check that widened
         nothing (up to 8 times), and never less than a tenth of the time
         since the first measurement, so a long recording costs a bounded
         number of samples per measurement.
-    linearised_everywhere : bool, default False
+    linearised_everywhere : bool, default True
         With ``sampled_covariance`` and a reference smoother (not with
         ``verify=False``): widen every covariance, not only those beyond
         the samples' reach, towards the posterior of the data it has read
@@ -216,17 +216,19 @@ class SampledCovarianceSettings(GaussianSumSettings):
         iSAM2 and the fixed-lag smoother whose NEES averages beyond the χ²₄
         99.9 % point and whose verdict is ``ok`` go from 10 to 6 (seed 2026)
         and from 6 to 1 (seed 7), the run-averaged NEES of case a 5 km from
-        5.27 / 6.39 / 4.63 to 3.80 / 4.48 / 4.42 (seed 2026), while in the
-        poorly observed scenarios some fall below the 95 % band
-        (conservative: 2.87–3.45 in case b 25 and 45 km with seed 2026).
-        Not the default: the verdict's whole-track ``reference`` finding
-        reads the reported covariances, and widened towards the reference's
-        own track they can no longer disagree with it — where the
-        reference smoother is wrong (an unmodelled manoeuvre) the filter's
-        disagreement with it was the evidence, and is lost
-        (docs/concepts.md, "The linearised enclosure at every estimate").
-        The estimates do not change; the covariances then depend on the
-        whole recording through the reference track.
+        5.27 / 6.39 / 4.63 to 3.80 / 4.48 / 4.42 (seed 2026); the cost: in
+        the poorly observed scenarios some fall below the 95 % band
+        (conservative, 2.87–3.45 with seed 2026, 3.09–3.43 with seed 7;
+        docs/concepts.md, "The linearised enclosure at every estimate").
+        The estimates do not change, and neither does the verdict: its
+        whole-track ``reference`` finding reads the covariances without this
+        enclosure, which is built from the reference's own track and could
+        not disagree with it.  The covariances then depend on the whole
+        recording through that track (its point of linearisation; each
+        posterior reads only the data its estimate has read); ``False``
+        applies the enclosure only beyond the samples' reach, so that on
+        recordings the samples cover no covariance reads data after its own
+        time.
     bias_sigma : float or tuple of float, default 0.0
         Each pair's Doppler calibration uncertainty (m/s, one standard
         deviation; one value for every pair or one per pair), as for

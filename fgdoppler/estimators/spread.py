@@ -193,7 +193,7 @@ fixed-lag smoother's NEES on the same recordings 7.4 and 729 → 4.7 and
 35, its runs beyond the point 3 → 1, that one judged ``doubtful``.
 
 With ``linearised_everywhere`` (``SampledCovarianceSettings.linearised_everywhere``,
-off by default) that linearised
+the registry's default) that linearised
 enclosure applies at every estimate, after the sampled checks: a check's
 widening is carried to the next check, and a covariance that changes shape
 between two checks (or after the checks have backed off) can understate
@@ -204,9 +204,10 @@ runs judged ``ok`` of the three estimators it applies to from 10 to 6
 (seed 2026) and 6 to 1 (seed 7); in case b 45 km (seed 2026) and case a
 5 km (seed 7) the NEES falls below the 95 % band (2.87–3.36): an enclosure
 of two covariances is wider than either.  Widened towards the reference's
-own track, the covariances can no longer disagree with it, which the
-verdict's whole-track ``reference`` finding reads: where the reference is
-wrong (an unmodelled manoeuvre) that disagreement was the evidence.
+own track, the covariances can no longer disagree with it: the verdict's
+whole-track ``reference`` finding reads :attr:`FilteredSpread.checked`,
+the covariances without that enclosure (where the reference is wrong, an
+unmodelled manoeuvre, the disagreement is the evidence).
 
 Lagged estimates
 ----------------

@@ -223,7 +223,9 @@ def test_a_track_confidently_elsewhere_for_a_while_is_doubtful_though_it_ends_we
     with a position sigma of 0.2-0.7 km from 12 to 25 s (truth NEES 1e5),
     restarted at 25 s and ended 0.24 km from the truth — 'ok' before, as its
     final state agrees with the smoother's.  The particle estimator, whose
-    whole track is consistent there (truth NEES 1.8), stays 'ok'.
+    whole track is consistent there (truth NEES 1.8), stays 'ok'.  The
+    finding reads the EKF's covariances without the enclosure built from the
+    smoother's track (``linearised_everywhere``), which hold the error.
     """
     from dataclasses import replace
 
@@ -264,6 +266,15 @@ def test_a_track_confidently_elsewhere_for_a_while_is_doubtful_though_it_ends_we
     assert ekf.status == "doubtful"
     assert [r.code for r in ekf.reasons if "lay on average" in r.message] == ["reference"], ekf.message
     assert particle.status == "ok", particle.message
+    # the reported covariances, widened towards the posterior linearised about the smoother's track
+    # (linearised_everywhere, the default), hold the error there (truth NEES 4.4 over t >= 10 s, 47,526 without)
+    # and so cannot disagree with that track: the finding reads them without that enclosure, and says the same
+    assert fd.EKFSettings().linearised_everywhere
+    plain = fd.run_estimator("ekf", sim.measurements, three, init, fd.EKFSettings(linearised_everywhere=False))
+    d = ekf.primary.states - sim.truth.at(ekf.primary.times)
+    nees = np.einsum("ki,ki->k", d, np.linalg.solve(ekf.primary.covariances, d[..., None])[..., 0])
+    assert float(nees[ekf.primary.times >= 10.0].mean()) < 10.0
+    assert [r for r in ekf.reasons if r.code == "reference"] == [r for r in plain.reasons if r.code == "reference"]
 
 
 def test_monte_carlo_records_every_verdict(tmp_path) -> None:
