@@ -199,7 +199,7 @@ class SampledCovarianceSettings(GaussianSumSettings):
         recordings of the paper's pairs the EKF's NEES 9.2 → 4.3 and
         9.0 → 3.8, the fixed-lag smoother's 7.4 → 4.7 and 729 → 35
         (``studies/long_filters.py``); by default at every estimate
-        (``linearised_everywhere``).
+        (``linearised_everywhere``; then 4.1 and 3.7, 4.7 and 4.4).
     sampling_interval : float, default 5.0
         Seconds between two checks; doubled after each check that widened
         nothing (up to 8 times), and never less than a tenth of the time

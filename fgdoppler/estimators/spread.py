@@ -190,7 +190,8 @@ beyond the χ²₄ 99.9 % point 3 → 0.  Lagged estimates (``lag > 0``) are
 widened the same way towards the posterior of the data up to one lag
 after their time (the linearised filter smoothed back from there): the
 fixed-lag smoother's NEES on the same recordings 7.4 and 729 → 4.7 and
-35, its runs beyond the point 3 → 1, that one judged ``doubtful``.
+35, its runs beyond the point 3 → 1, that one judged ``doubtful`` (with
+``linearised_everywhere``, below: 4.7 and 4.4, none beyond the point).
 
 With ``linearised_everywhere`` (``SampledCovarianceSettings.linearised_everywhere``,
 the registry's default) that linearised
