@@ -240,8 +240,13 @@ def track_reference(est: Estimates, ref: Estimates) -> list[Reason]:
     r"""The ``reference`` finding over the whole track: a ``"doubtful"`` one when the estimates strayed on average.
 
     Applied by :func:`~fgdoppler.estimators.registry.run_estimator` to the
-    covariances it reports, after the sampled check has widened them, so
-    that the finding is about what the user receives.
+    covariances after the sampled checks have widened them and the offsets'
+    share is added, so that the finding is about what the user receives —
+    but without the widening towards the posterior linearised about the
+    offline smoother's track (``linearised_everywhere``, and beyond the
+    samples' reach), which is built from ``ref`` and could not disagree
+    with it (where the smoother is wrong, that disagreement is the
+    evidence).
 
     At every time :math:`t_k` both report, :math:`m_k = \mathbf d_k^\top\mathbf P_k^{-1}\mathbf d_k` with
     :math:`\mathbf d_k` the estimate less the offline smoother's and :math:`\mathbf P_k` the estimate's
