@@ -212,16 +212,10 @@ def run_estimator(
     if isinstance(settings, SampledCovarianceSettings) and settings.sampled_covariance:
         judged, checked = _with_sampled_covariances(judged, measurements, model, settings, reference)
     if (offsets is not None and np.any(offsets > 0)) or (clocks is not None and np.any(clocks > 0)):
-        before = judged.primary.covariances
-        judged = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings, offsets, clocks,
-                               prefixed(progress, "calibration and clock offsets"))
-        if checked is not None:  # the offsets' share is added to both
-            checked = checked + (judged.primary.covariances - before)
+        judged, checked = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings, offsets,
+                                        clocks, prefixed(progress, "calibration and clock offsets"), checked=checked)
     if reference is not None:
-        # after the sampled check and the offsets, but not on covariances widened towards the reference's own
-        # track: those cannot disagree with it, and where the reference is wrong the disagreement is the evidence
-        own = judged.primary if checked is None else replace(judged.primary, covariances=checked)
-        judged = replace(judged, reasons=(*judged.reasons, *track_reference(own, reference.primary)))
+        judged = _with_track_reference(judged, checked, reference)
     return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
 
 
@@ -400,9 +394,11 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
 def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, measurements: Measurements,
                   model: TrackingModel, hyps: list[Initiation], weights: NDArray[np.float64] | None,
                   settings: TrackerSettings, offsets: NDArray[np.float64] | None,
-                  clocks: NDArray[np.float64] | None = None, progress: Progress | None = None) -> TrackResult:
+                  clocks: NDArray[np.float64] | None = None, progress: Progress | None = None, *,
+                  checked: NDArray[np.float64] | None = None) -> tuple[TrackResult, NDArray[np.float64] | None]:
     """Every estimate's covariances with the calibration offsets' share (``offsets``: σ per pair, m/s) and the
-    clock offsets' (``clocks``: σ per pair, s) added.
+    clock offsets' (``clocks``: σ per pair, s) added; and ``checked`` (other primary covariances, or ``None``)
+    with the primary's share added too.
 
     The share is what the offsets do to ``base`` — the tracker's run from
     ``hyps`` before any restart — run again on the data with one pair
@@ -436,7 +432,19 @@ def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, m
                 raise RuntimeError(f"{info.name}: the {e.kind} estimates' times changed after the first run")
             e = replace(e, covariances=e.covariances + by_kind[e.kind])
         estimates.append(e)
-    return replace(result, estimates=tuple(estimates))
+    share = by_kind.get(result.primary.kind)
+    return (replace(result, estimates=tuple(estimates)),
+            checked if checked is None or share is None else checked + share)
+
+
+def _with_track_reference(result: TrackResult, checked: NDArray[np.float64] | None,
+                          reference: TrackResult) -> TrackResult:
+    """``result`` with the whole-track ``reference`` finding (:func:`~fgdoppler.estimators.judge.track_reference`)
+    read on the primary covariances ``checked`` where given: those after the sampled checks and the offsets but
+    not widened towards the reference's own track, which could not disagree with it (where the reference is
+    wrong, the disagreement is the evidence)."""
+    own = result.primary if checked is None else replace(result.primary, covariances=checked)
+    return replace(result, reasons=(*result.reasons, *track_reference(own, reference.primary)))
 
 
 #: Initiation findings about its covariance only, which an offline smoother does not use: informational there.
