@@ -275,6 +275,11 @@ def test_the_reproduction_page_adds_up_goal_fours_second_clause() -> None:
              "judged ok: map 4; 4 of them in runs where the exact posterior is inconsistent too"),
             ("4: NEES <= 2 x band's upper edge", scenarios[0], True, "worst ekf 5 (limit 9)", "")]
     assert page.clause_two("\n".join(goal_table(rows))) == (11, 5, 5)
+    # a benchmark run without the exact posterior (--no-exact) counts no shared misses: none, not 0
+    plain = [(g, s, m, n, e.split(";")[0]) for g, s, m, n, e in rows]
+    assert page.clause_two("\n".join(goal_table(plain))) == (11, 5, None)
+    # and with nothing missed there is nothing to share
+    assert page.clause_two("\n".join(goal_table([rows[1]]))) == (2, 2, 0)
 
 
 def test_goal_four_names_the_shared_misses_only_when_the_exact_posterior_ran() -> None:
