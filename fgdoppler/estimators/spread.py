@@ -684,7 +684,7 @@ class _Linearised:
     def widen(self, out: FloatArray, times: FloatArray, states: FloatArray, at: NDArray[np.intp],
               first: int) -> tuple[float, float, float, float]:
         r"""Widen ``out[at]`` in place towards the posterior mean-square error of ``states[at]`` given the data up
-        to ``lag`` after their times (:func:`_whitened_widening` with :data:`FILTER_WIDEN_MIN`), the linearised
+        to ``lag`` after their times (:func:`_widened_stack` with :data:`FILTER_WIDEN_MIN`), the linearised
         filter started from estimate ``first`` and ``out[first]``.
 
         Nothing is widened where the model is undefined at the reference (a track through a sensor) or the
@@ -701,20 +701,14 @@ class _Linearised:
             return worst
         at = at[times[at] >= t_start]
         means, covs = post.at(times[at], times[at] + self.lag)
-        errors = mean_square_errors(states[at], means, covs)
-        pos = slice(0, self.model.dim)
         self.times += at.size
-        for k, S in zip(at, errors, strict=True):
-            P = out[k].copy()
-            try:
-                widening = _whitened_widening(P, S, FILTER_WIDEN_MIN)
-            except np.linalg.LinAlgError:
-                continue
-            if widening is not None:
-                self.widened += 1
-                out[k] = _whitened_apply(P, widening)
-                worst = max(worst, _sd_ratio(P, out[k], pos, float(times[k])))
-        return worst
+        P = out[at]
+        wide, grew = _widened_stack(P, mean_square_errors(states[at], means, covs), FILTER_WIDEN_MIN)
+        if not np.any(grew):
+            return worst
+        self.widened += int(np.count_nonzero(grew))
+        out[at[grew]] = wide[grew]
+        return max(worst, *_sd_ratios(P[grew], wide[grew], slice(0, self.model.dim), times[at[grew]]))
 
 
 def _samples_reach(model: TrackingModel, P: FloatArray, dt: float) -> bool | None:
@@ -747,16 +741,45 @@ def _widening(measurements: Measurements, model: TrackingModel, t0: float, t: fl
 
 def _sd_ratio(P: FloatArray, S: FloatArray, pos: slice, t: float) -> tuple[float, float, float, float]:
     """(ratio of the major-axis position sigmas, ``t``, sigma of ``S``, sigma of ``P``)."""
-    sd_s = float(np.sqrt(np.max(np.linalg.eigvalsh(S[pos, pos]))))
-    sd_p = float(np.sqrt(np.max(np.linalg.eigvalsh(P[pos, pos]))))
-    return sd_s / sd_p, t, sd_s, sd_p
+    return _sd_ratios(P[None], S[None], pos, np.array([t]))[0]
+
+
+def _sd_ratios(P: FloatArray, S: FloatArray, pos: slice, t: FloatArray) -> list[tuple[float, float, float, float]]:
+    """:func:`_sd_ratio` of stacks ``(n, d, d)`` at times ``(n,)``."""
+    sd_s = np.sqrt(np.max(np.linalg.eigvalsh(S[:, pos, pos]), axis=-1))
+    sd_p = np.sqrt(np.max(np.linalg.eigvalsh(P[:, pos, pos]), axis=-1))
+    return [(float(a / b), float(tk), float(a), float(b)) for a, b, tk in zip(sd_s, sd_p, t, strict=True)]
 
 
 def _whitened_apply(P: FloatArray, widening: FloatArray) -> FloatArray:
-    r""":math:`\mathbf L\mathbf W\mathbf L^\top` with :math:`\mathbf P = \mathbf L\mathbf L^\top`."""
+    r""":math:`\mathbf L\mathbf W\mathbf L^\top` with :math:`\mathbf P = \mathbf L\mathbf L^\top` (one matrix or a stack).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If a ``P`` is not positive definite.
+    """
     L = np.linalg.cholesky(P)
-    out = L @ widening @ L.T
-    return np.asarray(0.5 * (out + out.T), dtype=float)
+    out = L @ widening @ np.swapaxes(L, -1, -2)
+    return np.asarray(0.5 * (out + np.swapaxes(out, -1, -2)), dtype=float)
+
+
+def _widened_stack(P: FloatArray, S: FloatArray, min_ratio: float) -> tuple[FloatArray, NDArray[np.bool_]]:
+    r"""Each of the stack ``P`` ``(n, d, d)`` widened towards its ``S`` (:func:`_whitened_widenings`) and which were.
+
+    A ``P`` that is not positive definite (or whose whitened ``S`` has no
+    eigendecomposition) is left as it is; the stack is halved until the
+    failure is isolated, so one bad matrix costs :math:`O(\log n)` retries.
+    """
+    try:
+        widening, grew = _whitened_widenings(P, S, min_ratio)
+        return np.where(grew[:, None, None], _whitened_apply(P, widening), P), grew
+    except np.linalg.LinAlgError:
+        if len(P) == 1:
+            return P.copy(), np.zeros(1, dtype=bool)
+        half = len(P) // 2
+        (a, ga), (b, gb) = _widened_stack(P[:half], S[:half], min_ratio), _widened_stack(P[half:], S[half:], min_ratio)
+        return np.concatenate([a, b]), np.concatenate([ga, gb])
 
 
 def _enclosing(laplace: FloatArray, sampled: FloatArray) -> FloatArray:
@@ -777,20 +800,36 @@ def _enclosing(laplace: FloatArray, sampled: FloatArray) -> FloatArray:
 def _whitened_widening(P: FloatArray, S: FloatArray, min_ratio: float) -> FloatArray | None:
     r"""The whitened widening :math:`\mathbf V\mathbf\Lambda'\mathbf V^\top` of ``P`` towards ``S`` (``None``: none).
 
-    With :math:`\mathbf P = \mathbf L\mathbf L^\top` and
-    :math:`\mathbf L^{-1}\mathbf S\mathbf L^{-\top} = \mathbf V\mathbf\Lambda\mathbf V^\top`,
-    :math:`\lambda'_i = \lambda_i` where :math:`\lambda_i >` ``min_ratio`` and 1
-    elsewhere; ``min_ratio = 1`` gives :math:`\max(\mathbf\Lambda, \mathbf I)`.
+    One matrix of :func:`_whitened_widenings`.
 
     Raises
     ------
     numpy.linalg.LinAlgError
         If ``P`` is not positive definite.
     """
+    widening, grew = _whitened_widenings(P[None], S[None], min_ratio)
+    return widening[0] if grew[0] else None
+
+
+def _whitened_widenings(P: FloatArray, S: FloatArray, min_ratio: float) -> tuple[FloatArray, NDArray[np.bool_]]:
+    r"""The whitened widenings :math:`\mathbf V\mathbf\Lambda'\mathbf V^\top` of a stack ``P`` towards ``S``
+    ``(n, d, d)`` and which of them widen anything.
+
+    With :math:`\mathbf P = \mathbf L\mathbf L^\top` and
+    :math:`\mathbf L^{-1}\mathbf S\mathbf L^{-\top} = \mathbf V\mathbf\Lambda\mathbf V^\top`,
+    :math:`\lambda'_i = \lambda_i` where :math:`\lambda_i >` ``min_ratio`` and 1
+    elsewhere; ``min_ratio = 1`` gives :math:`\max(\mathbf\Lambda, \mathbf I)`.
+    NumPy's stacked factorisations run the same LAPACK routine on each
+    matrix, so a stack gives bit for bit what each matrix alone does.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If a ``P`` is not positive definite.
+    """
     Li = np.linalg.inv(np.linalg.cholesky(P))
-    M = Li @ S @ Li.T
-    lam, V = np.linalg.eigh(0.5 * (M + M.T))
+    M = Li @ S @ np.swapaxes(Li, -1, -2)
+    lam, V = np.linalg.eigh(0.5 * (M + np.swapaxes(M, -1, -2)))
     grow = np.isfinite(lam) & (lam > min_ratio)
-    if not np.any(grow):
-        return None
-    return np.asarray((V * np.where(grow, lam, 1.0)) @ V.T, dtype=float)
+    widening = (V * np.where(grow, lam, 1.0)[..., None, :]) @ np.swapaxes(V, -1, -2)
+    return np.asarray(widening, dtype=float), np.any(grow, axis=-1)

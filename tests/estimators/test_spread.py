@@ -21,6 +21,7 @@ from fgdoppler.estimators.spread import (
     _information,
     _noise_share,
     _posterior,
+    _widened_stack,
     filtered_spread,
     posterior_spread,
 )
@@ -38,6 +39,41 @@ def test_enclosing_is_the_larger_covariance_in_every_direction() -> None:
         E = _enclosing(P, S)
         assert np.linalg.eigvalsh(E - P).min() > -1e-9 * np.abs(E).max()
         assert np.linalg.eigvalsh(E - S).min() > -1e-9 * np.abs(E).max()
+
+
+def test_a_stack_is_widened_as_the_generalised_eigenproblem_says_and_a_bad_matrix_is_left() -> None:
+    """Against scipy's generalised eigenvectors (another factorisation of ``P``), one matrix at a time.
+
+    With :math:`\mathbf S\mathbf u = \lambda\mathbf P\mathbf u`,
+    :math:`\mathbf U^\top\mathbf P\mathbf U = \mathbf I`, the widened covariance is
+    :math:`(\mathbf P\mathbf U)\,\mathrm{diag}(\lambda'_i)\,(\mathbf P\mathbf U)^\top` with
+    :math:`\lambda'_i = \lambda_i` above the threshold and 1 elsewhere, whatever the square root of
+    ``P`` the whitening uses.  A ``P`` that is not positive definite, placed among good ones, is left and
+    not counted, and the good ones come out as they do alone (the stack is halved around it).
+    """
+    from scipy.linalg import eigh
+
+    rng = np.random.default_rng(3)
+    n = 37
+    A, B = rng.standard_normal((2, n, 4, 4))
+    scale = np.array([1e3, 1e3, 10.0, 10.0])[:, None]
+    P = (scale * A) @ (scale * A).transpose(0, 2, 1) + 1e-3 * np.eye(4)
+    # S near c P with c on both sides of the threshold, so some matrices widen and some do not
+    S = rng.uniform(0.2, 2.5, (n, 1, 1)) * (P + 0.05 * (scale * B) @ (scale * B).transpose(0, 2, 1))
+    wide, grew = _widened_stack(P, S, FILTER_WIDEN_MIN)
+    assert 0 < np.count_nonzero(grew) < n
+    for k in range(n):
+        lam, U = eigh(S[k], P[k])
+        PU = P[k] @ U
+        expected = (PU * np.where(lam > FILTER_WIDEN_MIN, lam, 1.0)) @ PU.T
+        assert grew[k] == bool(np.any(lam > FILTER_WIDEN_MIN))
+        np.testing.assert_allclose(wide[k], expected, rtol=1e-8, atol=1e-8 * np.abs(expected).max())
+    bad = P.copy()
+    bad[11] = np.diag([1.0, -1.0, 1.0, 1.0])
+    wide_bad, grew_bad = _widened_stack(bad, S, FILTER_WIDEN_MIN)
+    assert not grew_bad[11] and np.array_equal(wide_bad[11], bad[11])
+    keep = np.arange(n) != 11
+    assert np.array_equal(grew_bad[keep], grew[keep]) and np.array_equal(wide_bad[keep], wide[keep])
 
 
 def _run(s: int, r: int, seed: int = 2026) -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation]:
