@@ -18,11 +18,13 @@ from benchmarks import (
     bench_particle,
     bench_scaling,
     bench_shared_reference,
+    bench_widening,
 )
 
 BENCHES = {"grid": bench_grid, "ekf": bench_ekf, "scaling": bench_scaling, "montecarlo": bench_montecarlo,
            "long": bench_long, "particle": bench_particle, "modes": bench_mode_search,
-           "motion": bench_motion_check, "shared": bench_shared_reference, "accuracy": bench_accuracy}
+           "motion": bench_motion_check, "shared": bench_shared_reference, "widening": bench_widening,
+           "accuracy": bench_accuracy}
 
 
 def main() -> None:

@@ -23,7 +23,9 @@ alone negated, pairs 0 and 1 swapped, pair 1's clock late.  For each: whether th
 ``sign`` or a ``swapped`` finding (:func:`fgdoppler.estimators.initiation.mistake_reasons`) and
 what it names, and (``--track 1``, the default) the offline smoother's verdict from that
 initiation, with its position error at the last time of the truth against its own sigma along
-the major axis (wrong: beyond 3 sigma).
+the major axis (wrong: beyond 3 sigma), and the ``sign`` or ``swapped`` finding the smoother adds
+from windows later in the recording where the track fails its residual test and the initiation
+named nothing (:mod:`fgdoppler.estimators.later_mistakes`).
 
 Recordings: the accuracy benchmark's runs of the paper's six scenarios (``--runs`` each, ``--seed``)
 and as many random layouts of ``studies/random_layouts.py`` (draw ``100 s + r``: two to four
@@ -77,6 +79,10 @@ VERSIONS: dict[str, tuple[Callable[[fd.Measurements, float], fd.Measurements], s
 }
 
 
+#: What a ``sign`` or ``swapped`` finding names, in its message.
+_NAMED = r"with the (?:Doppler|labels) of (.+?) (?:negated|exchanged)"
+
+
 def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float, clock_sigma: float
             ) -> dict[str, Any]:
     out: dict[str, Any] = {}
@@ -84,8 +90,7 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
         m = version(sim.measurements, late)
         init = fd.initiate(m.first_per_pair(10), model)
         found = [r for r in init.reasons if r.code in ("sign", "swapped")]
-        named = re.match(r"with the (?:Doppler|labels) of (.+?) (?:negated|exchanged)", found[0].message) if found \
-            else None
+        named = re.search(_NAMED, found[0].message) if found else None
         row: dict[str, Any] = {"finding": found[0].code if found else "",
                                "names": named.group(1) if named else ""}
         if track:
@@ -95,7 +100,10 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
             j = int(np.flatnonzero(e.times <= sim.truth.times[-1])[-1])  # a late clock's last times are not truth's
             err = float(np.linalg.norm(e.states[j, :k] - sim.truth.at(e.times[j:j + 1])[0][:k]))
             sd = float(np.sqrt(np.max(np.linalg.eigvalsh(e.covariances[j][:k, :k])))) if e.cov_ok[j] else np.nan
-            row.update(status=str(r.status), error=round(err, 1), sigma=round(sd, 1))
+            later = [x for x in r.reasons if x.code in ("sign", "swapped")]
+            named_later = re.search(_NAMED, later[0].message) if later else None
+            row.update(status=str(r.status), error=round(err, 1), sigma=round(sd, 1),
+                       later=named_later.group(1) if named_later else "")
         out[name] = row
     return out
 
@@ -117,8 +125,8 @@ def one(task: tuple[int, int, int], track: int = 1, late: float = 0.5, clock_sig
 
 def _table(rows: list[dict[str, Any]], where: str, track: bool) -> list[str]:
     lines = [f"### {where}", "", "| data | recordings | sign / swapped finding | names the change made | "
-             + ("smoother ok | ok and beyond 3 sigma |" if track else ""),
-             "|---|---|---|---|" + ("---|---|" if track else "")]
+             + ("smoother ok | ok and beyond 3 sigma | named later by the smoother (rightly) |" if track else ""),
+             "|---|---|---|---|" + ("---|---|---|" if track else "")]
     for name, (_, want) in VERSIONS.items():
         got = [r[where][name] for r in rows if where in r]
         right = str(sum(g["names"] == want for g in got)) if want else "—"
@@ -127,7 +135,8 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool) -> list[str]:
         if track:
             ok = [g for g in got if g["status"] == "ok"]
             wrong = sum(g["error"] > 3.0 * g["sigma"] for g in ok)
-            line += f" {len(ok)} | {wrong} |"
+            later = [g["later"] for g in got if g.get("later")]
+            line += f" {len(ok)} | {wrong} | {len(later)} ({sum(x == want for x in later) if want else '—'}) |"
         lines.append(line)
     return [*lines, ""]
 

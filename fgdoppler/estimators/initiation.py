@@ -87,8 +87,9 @@ from fgdoppler.models.doppler import StackedTimes, cv_doppler, cv_doppler_jacobi
 from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
 
-__all__ = ["EVIDENCE_DRAWS", "METHODS", "Candidate", "Initiation", "InitiationSettings", "initiate", "inlier_statistic",
-           "lm_params", "residual_landscape", "window_grid", "window_log_evidence"]
+__all__ = ["EVIDENCE_DRAWS", "METHODS", "Candidate", "Initiation", "InitiationSettings", "Mistake", "find_mistake",
+           "initiate", "inlier_statistic", "lm_params", "mistake_reason", "mistake_reasons", "residual_landscape",
+           "window_grid", "window_log_evidence"]
 
 FloatArray = NDArray[np.float64]
 Method = Literal["grid", "ils", "lm"]
@@ -559,6 +560,25 @@ SIGN_CONVENTION = ("fgdoppler's doppler is the bistatic range rate, negative for
                    "from a Doppler shift f_D in Hz, doppler = -wavelength * f_D")
 
 
+@dataclass(frozen=True, kw_only=True)
+class Mistake:
+    """A change of a window's data, as a common mistake in writing a measurement file makes, under which it fits.
+
+    Parameters
+    ----------
+    code
+        ``"sign"`` (Doppler negated) or ``"swapped"`` (two pairs' labels exchanged).
+    which
+        What was changed: ``"every pair"``, ``"pair 1"``, ``"pairs 0 and 1"``.
+    cost
+        The changed window's cost (it passes the χ² test at the settings' confidence).
+    """
+
+    code: Literal["sign", "swapped"]
+    which: str
+    cost: float
+
+
 def mistake_reasons(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
                     result: Initiation) -> list[Reason]:
     r"""A ``sign`` or ``swapped`` finding where the window fits only with its data changed as a common mistake
@@ -589,10 +609,18 @@ def mistake_reasons(measurements: Measurements, model: TrackingModel, settings: 
     more initiations of the window (two pairs: 4; four: 11; one pair: 1),
     made only for a window that fails.
     """
+    found = find_mistake(measurements, model, settings, result)
+    return [] if found is None else [mistake_reason(found, result.cost, settings.confidence)]
+
+
+def find_mistake(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
+                 result: Initiation) -> Mistake | None:
+    """The change of :func:`mistake_reasons` whose window passes with the least cost (``None``: none, or
+    ``result`` passes the verdict's χ² test)."""
     if result.cost <= float(chi2.ppf(VERDICT_LEVEL, max(result.dof, 1))):
-        return []
+        return None
     pairs = [int(k) for k in np.unique(measurements.pair)]
-    changes: list[tuple[str, str, Measurements]] = []  # (finding's code, what changed, the changed window)
+    changes: list[tuple[Literal["sign", "swapped"], str, Measurements]] = []  # (code, what changed, the window)
     for flipped in [pairs] + ([[k] for k in pairs] if len(pairs) > 1 else []):
         sign = np.where(np.isin(measurements.pair, flipped), -1.0, 1.0)
         changes.append(("sign", "every pair" if flipped == pairs else f"pair {flipped[0]}",
@@ -609,18 +637,24 @@ def mistake_reasons(measurements: Measurements, model: TrackingModel, settings: 
         if again.passes_chi2:
             passing.append((again.cost, k, code, which))
     if not passing:
-        return []
+        return None
     cost, _, code, which = min(passing)
-    fits = (f"the window fits (cost {cost:.2f}, passing the {settings.confidence:.0%} chi-square test, against "
-            f"{result.cost:.2f} as given)")
-    if code == "swapped":
-        return [Reason(code="swapped", status="doubtful", message=(
-            f"with the labels of {which} exchanged {fits}: the measurement file and the geometry may list those "
-            "pairs in different orders; if so, exchange them in one of the two, or name the pairs in the "
-            "geometry (name = ...) and give the names in the file's pair column"))]
-    return [Reason(code="sign", status="doubtful", message=(
-        f"with the Doppler of {which} negated {fits}: the data likely follow the opposite sign convention "
-        f"({SIGN_CONVENTION}); if so, negate the doppler column" + ("" if which == "every pair" else f" of {which}")))]
+    return Mistake(code=code, which=which, cost=float(cost))
+
+
+def mistake_reason(found: Mistake, cost: float, confidence: float) -> Reason:
+    """The ``doubtful`` finding that names ``found``, against the window's ``cost`` as given."""
+    fits = (f"the window fits (cost {found.cost:.2f}, passing the {confidence:.0%} chi-square test, against "
+            f"{cost:.2f} as given)")
+    if found.code == "swapped":
+        return Reason(code="swapped", status="doubtful", message=(
+            f"with the labels of {found.which} exchanged {fits}: the measurement file and the geometry may list "
+            "those pairs in different orders; if so, exchange them in one of the two, or name the pairs in the "
+            "geometry (name = ...) and give the names in the file's pair column"))
+    return Reason(code="sign", status="doubtful", message=(
+        f"with the Doppler of {found.which} negated {fits}: the data likely follow the opposite sign convention "
+        f"({SIGN_CONVENTION}); if so, negate the doppler column"
+        + ("" if found.which == "every pair" else f" of {found.which}")))
 
 
 def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: tuple[Candidate, ...],

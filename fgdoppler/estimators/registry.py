@@ -34,6 +34,7 @@ from fgdoppler.estimators.fixed_lag import run_fixed_lag
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate
 from fgdoppler.estimators.isam2 import run_isam2
 from fgdoppler.estimators.judge import judge, track_reference
+from fgdoppler.estimators.later_mistakes import later_mistakes
 from fgdoppler.estimators.particle import run_map, run_particle
 from fgdoppler.estimators.restart import with_restarts
 from fgdoppler.estimators.results import TrackResult
@@ -216,7 +217,16 @@ def run_estimator(
                                         clocks, prefixed(progress, "calibration and clock offsets"), checked=checked)
     if reference is not None:
         judged = _with_track_reference(judged, checked, reference)
-    return _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
+    judged = _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
+    return _with_later_mistakes(judged, measurements, model, init, settings)
+
+
+def _with_later_mistakes(result: TrackResult, measurements: Measurements, model: TrackingModel, init: Initiation,
+                         settings: TrackerSettings) -> TrackResult:
+    """The result with a ``sign`` or ``swapped`` finding from windows later in the recording where the track
+    does not fit and the initiation named no mistake (:func:`~fgdoppler.estimators.later_mistakes.later_mistakes`)."""
+    found = later_mistakes(measurements, model, init, result.reasons, huber_k=settings.huber_k)
+    return replace(result, reasons=(*result.reasons, *found)) if found else result
 
 
 def _declared_offsets(settings: TrackerSettings, model: TrackingModel

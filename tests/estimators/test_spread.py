@@ -11,6 +11,7 @@ from scipy.stats import chi2
 import fgdoppler as fd
 import fgdoppler.estimators.registry as registry
 from benchmarks._exact import exact_posterior
+from benchmarks.bench_widening import pairs
 from fgdoppler.estimators.curvature import probe_axis
 from fgdoppler.estimators.linearized_posterior import linearized_filter, mean_square_errors
 from fgdoppler.estimators.spread import (
@@ -42,7 +43,7 @@ def test_enclosing_is_the_larger_covariance_in_every_direction() -> None:
 
 
 def test_a_stack_is_widened_as_the_generalised_eigenproblem_says_and_a_bad_matrix_is_left() -> None:
-    """Against scipy's generalised eigenvectors (another factorisation of ``P``), one matrix at a time.
+    r"""Against scipy's generalised eigenvectors (another factorisation of ``P``), one matrix at a time.
 
     With :math:`\mathbf S\mathbf u = \lambda\mathbf P\mathbf u`,
     :math:`\mathbf U^\top\mathbf P\mathbf U = \mathbf I`, the widened covariance is
@@ -53,13 +54,8 @@ def test_a_stack_is_widened_as_the_generalised_eigenproblem_says_and_a_bad_matri
     """
     from scipy.linalg import eigh
 
-    rng = np.random.default_rng(3)
     n = 37
-    A, B = rng.standard_normal((2, n, 4, 4))
-    scale = np.array([1e3, 1e3, 10.0, 10.0])[:, None]
-    P = (scale * A) @ (scale * A).transpose(0, 2, 1) + 1e-3 * np.eye(4)
-    # S near c P with c on both sides of the threshold, so some matrices widen and some do not
-    S = rng.uniform(0.2, 2.5, (n, 1, 1)) * (P + 0.05 * (scale * B) @ (scale * B).transpose(0, 2, 1))
+    P, S = pairs(n, seed=3)  # S near c P with c on both sides of the threshold
     wide, grew = _widened_stack(P, S, FILTER_WIDEN_MIN)
     assert 0 < np.count_nonzero(grew) < n
     for k in range(n):

@@ -1,0 +1,124 @@
+r"""Mistakes in a measurement file that the initiation window did not show, looked for later in the recording.
+
+The initiation names two common mistakes where its window fails the χ²
+test and fits with the data changed (:func:`~fgdoppler.estimators.initiation.mistake_reasons`):
+the opposite sign convention (the Doppler of every pair, or of one pair,
+negated: a ``sign`` finding) and two pairs' labels exchanged (``swapped``).
+A short window can fit a wrong track with the wrong data as well — near
+the paper's baseline the likelihood has long valleys — and then the
+initiation says nothing; the whole track fails its residual test later
+(the verdict's ``fit`` finding), which says that the data and the model
+disagree but not why, and a mistaken sign can read as a manoeuvre.
+
+So where a track's ``fit`` finding is not ``ok`` and the initiation named
+no mistake, :func:`later_mistakes` initiates :data:`LATER_WINDOWS` windows
+of the initiation window's span spread over the rest of the recording
+(:func:`~fgdoppler.estimators.initiation.initiate`, which tries the
+changes itself where a window fails), and turns the change that the most
+of them name into a ``doubtful`` finding of the track.  A window that fits
+as given, or fails for another reason (an outlier, a manoeuvre inside it,
+a target that has left the zone, which bounds each window's start), names
+nothing.  The track's status does not change (the ``fit`` finding is
+already ``doubtful``); the finding says what to check.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import replace
+
+import numpy as np
+
+from fgdoppler.estimators.initiation import (
+    Initiation,
+    InitiationSettings,
+    Mistake,
+    find_mistake,
+    initiate,
+    mistake_reason,
+)
+from fgdoppler.estimators.verdict import Reason
+from fgdoppler.measurements import Measurements
+from fgdoppler.models.tracking import TrackingModel
+
+__all__ = ["LATER_WINDOWS", "MISTAKE_CODES", "later_mistakes"]
+
+#: Windows initiated after the initiation window where a track fails its residual test.
+LATER_WINDOWS = 3
+
+#: The findings of a mistake in the measurement file (:func:`~fgdoppler.estimators.initiation.mistake_reasons`).
+MISTAKE_CODES = ("sign", "swapped")
+
+
+def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initiation, reasons: tuple[Reason, ...],
+                   *, huber_k: float | None = None, windows: int = LATER_WINDOWS) -> list[Reason]:
+    r"""A ``sign`` or ``swapped`` finding from windows later in the recording, where the track does not fit.
+
+    Only where ``reasons`` (the track's) hold a ``fit`` finding that is not
+    ``ok`` and ``init`` has no ``sign`` or ``swapped`` finding.  Window
+    :math:`i` of :math:`n` holds every measurement in
+    :math:`[s_i, s_i + \Delta]`, :math:`\Delta` the initiation window's span
+    and :math:`s_i` evenly spaced from the initiation window's end to
+    :math:`t_\mathrm{last} - \Delta`; each is initiated with the model's zone
+    and ``init``'s half plane, and its own ``sign`` or ``swapped`` finding
+    (the change whose window passes the χ² test at 95 % with the least
+    cost) counts as its vote.  The change named most often (the earliest
+    window first among equals) is reported, with the window that named it
+    first and the count.  Costs nothing on a track that fits; on one that
+    does not, :math:`n` initiations and, for each window that fails,
+    :math:`1 + P + P(P-1)/2` more with :math:`P` pairs.
+
+    Parameters
+    ----------
+    measurements, model
+        The recording and model the track was estimated with.
+    init
+        The initiation the track started from (its window's span and findings).
+    reasons
+        The track's findings so far.
+    huber_k
+        Huber threshold of the windows' fits (``None``: Gaussian), as the track's.
+    windows
+        Windows to initiate (>= 1).
+
+    Returns
+    -------
+    list of Reason
+        At most one ``doubtful`` finding.
+
+    Raises
+    ------
+    ValueError
+        If ``windows`` < 1.
+    """
+    if windows < 1:
+        raise ValueError(f"windows must be >= 1, got {windows}")
+    if not any(r.code == "fit" and r.status != "ok" for r in reasons) \
+            or any(r.code in MISTAKE_CODES for r in init.reasons) or len(measurements) == 0:
+        return []
+    span = init.t_end - init.t_start
+    last = float(np.max(measurements.time))
+    if not (span > 0 and last - span > init.t_end):
+        return []
+    settings = InitiationSettings(half_plane=init.half_plane, huber_k=huber_k)
+    quiet = replace(settings, mistake_check=False)
+    votes: list[tuple[Mistake, float, float]] = []  # (the change, the window's cost as given, its start)
+    for start in np.unique(np.linspace(init.t_end, last - span, windows)):
+        window = measurements.between(float(start), float(start) + span)
+        try:
+            given = initiate(window, model, quiet)
+        except ValueError:  # too few measurements, or no start in the zone explains them
+            continue
+        found = find_mistake(window, model, settings, given)
+        if found is not None:
+            votes.append((found, given.cost, float(start)))
+    if not votes:
+        return []
+    counts = Counter((m.code, m.which) for m, _, _ in votes)
+    best = max(counts.values())
+    found, cost, start = next(v for v in votes if counts[(v[0].code, v[0].which)] == best)
+    named = mistake_reason(found, cost, settings.confidence)
+    return [replace(named, message=(
+        f"the track fails its residual test and the initiation window named no mistake, but later in the "
+        f"recording {best} of {windows} windows of {span:g} s name one (first at t = {start:.1f}-{start + span:.1f} "
+        f"s): {named.message}"))]

@@ -1,0 +1,74 @@
+"""Mistakes in a measurement file named from windows later in the recording (fgdoppler.estimators.later_mistakes)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import fgdoppler as fd
+from fgdoppler.estimators.later_mistakes import MISTAKE_CODES, later_mistakes
+from fgdoppler.estimators.verdict import Reason
+
+#: A track's finding that its residuals fail the whole-track chi-square test, as the verdict writes it.
+MISFIT = (Reason(code="fit", status="doubtful", message="the residuals fail the chi-square test"),)
+
+
+def _paper(s: int, r: int) -> tuple[fd.Simulation, fd.TrackingModel]:
+    scen = fd.paper_scenarios()[s]
+    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([2026, s, r])))
+    return sim, fd.TrackingModel.of(scen.geometry)
+
+
+def _negated(m: fd.Measurements) -> fd.Measurements:
+    return fd.Measurements(time=m.time, pair=m.pair, doppler=-m.doppler, sigma=m.sigma)
+
+
+def test_a_sign_the_initiation_window_fits_is_named_from_later_windows() -> None:
+    """Case a 25 km, run 0 (seed 2026) with every pair's Doppler negated.
+
+    The initiation window of 10 measurements per pair is explained by a wrong
+    track well enough that no negation makes it fit better (it names no
+    mistake); 4.5 s windows later in the recording fit only with every pair
+    negated, and the track that fails its residual test gets the finding.
+    Through the registry (the EKF, its innovations failing the whole-track
+    test) the finding is added and the status stays what the misfit made it.
+    """
+    sim, model = _paper(1, 0)
+    m = _negated(sim.measurements)
+    init = fd.initiate(m.first_per_pair(10), model)
+    assert not [r for r in init.reasons if r.code in MISTAKE_CODES]
+    found = later_mistakes(m, model, init, MISFIT)
+    assert [(r.code, r.status) for r in found] == [("sign", "doubtful")]
+    assert "with the Doppler of every pair negated the window fits" in found[0].message
+    assert "negate the doppler column" in found[0].message and "of 3 windows" in found[0].message
+    # a track that fits, or whose misfit is only informational, costs nothing and names nothing
+    assert later_mistakes(m, model, init, ()) == []
+    assert later_mistakes(m, model, init, (Reason(code="fit", status="ok", message="scale 0.3"),)) == []
+    result = fd.run_estimator("ekf", m, model, init, verify=False)
+    assert any(r.code == "fit" and r.status != "ok" for r in result.reasons)
+    assert [r.code for r in result.reasons if r.code in MISTAKE_CODES] == ["sign"]
+    without = [r for r in result.reasons if r.code not in MISTAKE_CODES]
+    assert result.status == fd.estimators.verdict.status_of(without)
+
+
+@pytest.mark.parametrize("s", range(6))
+def test_data_as_simulated_get_no_mistake_named_even_where_the_track_misfits(s: int) -> None:
+    """The six paper scenarios, runs 0 and 1 as simulated, each told its track fails the residual test: the
+    windows later in the recording fit as given, or fail with no change of sign or labels making them fit, so
+    no mistake is named (a false finding would send the user to change correct data)."""
+    for r in (0, 1):
+        sim, model = _paper(s, r)
+        init = fd.initiate(sim.measurements.first_per_pair(10), model)
+        assert later_mistakes(sim.measurements, model, init, MISFIT) == []
+
+
+def test_where_the_initiation_named_the_mistake_or_there_is_no_room_nothing_more_is_done() -> None:
+    sim, model = _paper(2, 0)
+    m = _negated(sim.measurements)
+    init = fd.initiate(m.first_per_pair(10), model)
+    assert [r.code for r in init.reasons if r.code in MISTAKE_CODES] == ["sign"]
+    assert later_mistakes(m, model, init, MISFIT) == []
+    short = m.between(0.0, init.t_end + 1.0)  # less than one window's span after the initiation window
+    assert later_mistakes(short, model, init, MISFIT) == []
+    with pytest.raises(ValueError, match="windows must be >= 1"):
+        later_mistakes(m, model, init, MISFIT, windows=0)
