@@ -33,7 +33,8 @@ pairs anywhere, the target anywhere in the default zone).
 
 Run: python studies/data_mistakes.py [--runs 10] [--seed 2026] [--track 1] [--late 0.5] [--clock-sigma 0]
 [--workers 2] [--out DIR]
-(``--runs 10``: about 7 min on 2 cores; ``--track 0``: the initiations alone, 2 min for ``--runs 20``)
+(``--runs 10``: about 7 min on 2 cores before the later windows were looked at, 41 min with them on one
+core beside a benchmark, 2026-11-27; ``--track 0``: the initiations alone, 2 min for ``--runs 20``)
 """
 
 from __future__ import annotations
