@@ -162,7 +162,8 @@ def run_estimator(
     The estimator runs in the model's computation frame (the geometry's own,
     :attr:`~fgdoppler.models.tracking.TrackingModel.frame`) and the result is
     reported in the user's coordinates, with its verdict
-    (:func:`~fgdoppler.estimators.judge.judge` and the initiation's findings).
+    (:func:`~fgdoppler.estimators.judge.judge` and the initiation's findings;
+    on a track that misfits, :mod:`~fgdoppler.estimators.later_mistakes`).
     With ``verify`` (default) a filter's final state is checked against the
     offline smoother's, which costs a smoother run unless ``reference`` — the
     result of ``run_estimator("smoother", ...)`` on the same data and
