@@ -37,6 +37,7 @@ from fgdoppler.estimators.initiation import (
     initiate,
     mistake_reason,
 )
+from fgdoppler.estimators.results import TrackResult
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
@@ -51,7 +52,8 @@ MISTAKE_CODES = ("sign", "swapped")
 
 
 def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initiation, reasons: tuple[Reason, ...],
-                   *, huber_k: float | None = None, windows: int = LATER_WINDOWS) -> list[Reason]:
+                   *, huber_k: float | None = None, windows: int = LATER_WINDOWS,
+                   reference: TrackResult | None = None) -> list[Reason]:
     r"""A ``sign`` or ``swapped`` finding from windows later in the recording, where the track does not fit.
 
     Only where ``reasons`` (the track's) hold a ``fit`` finding that is not
@@ -66,7 +68,11 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     window first among equals) is reported, with the window that named it
     first and the count.  Costs nothing on a track that fits; on one that
     does not, :math:`n` initiations and, for each window that fails,
-    :math:`1 + P + P(P-1)/2` more with :math:`P` pairs.
+    :math:`1 + P + P(P-1)/2` more with :math:`P` pairs — unless
+    ``reference``, a track on the same data and initiation whose own
+    ``fit`` finding is not ``ok`` either and whose settings have the same
+    ``huber_k``, made the same check already: its ``sign`` or ``swapped``
+    finding (or its lack of one) is then the answer.
 
     Parameters
     ----------
@@ -80,6 +86,11 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
         Huber threshold of the windows' fits (``None``: Gaussian), as the track's.
     windows
         Windows to initiate (>= 1).
+    reference
+        A track on the same ``measurements``, ``model`` and ``init`` that has
+        been through this check with :data:`LATER_WINDOWS` windows (the
+        registry's result for the offline smoother a filter is held
+        against), or ``None``.
 
     Returns
     -------
@@ -93,9 +104,23 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     """
     if windows < 1:
         raise ValueError(f"windows must be >= 1, got {windows}")
-    if not any(r.code == "fit" and r.status != "ok" for r in reasons) \
-            or any(r.code in MISTAKE_CODES for r in init.reasons) or len(measurements) == 0:
+    if not _misfits(reasons) or any(r.code in MISTAKE_CODES for r in init.reasons) or len(measurements) == 0:
         return []
+    if reference is not None and windows == LATER_WINDOWS and _misfits(reference.reasons) \
+            and getattr(reference.settings, "huber_k", None) == huber_k:
+        # the same windows, fits and votes: the answer depends on nothing else
+        return [r for r in reference.reasons if r.code in MISTAKE_CODES]
+    return _from_windows(measurements, model, init, huber_k, windows)
+
+
+def _misfits(reasons: tuple[Reason, ...]) -> bool:
+    """Whether a track's findings say its residuals fail the whole-track test."""
+    return any(r.code == "fit" and r.status != "ok" for r in reasons)
+
+
+def _from_windows(measurements: Measurements, model: TrackingModel, init: Initiation, huber_k: float | None,
+                  windows: int) -> list[Reason]:
+    """The change most of ``windows`` later windows need to fit, as a finding (:func:`later_mistakes`)."""
     span = init.t_end - init.t_start
     last = float(np.max(measurements.time))
     if not (span > 0 and last - span > init.t_end):

@@ -219,14 +219,15 @@ def run_estimator(
     if reference is not None:
         judged = _with_track_reference(judged, checked, reference)
     judged = _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
-    return _with_later_mistakes(judged, measurements, model, init, settings)
+    return _with_later_mistakes(judged, measurements, model, init, settings, reference)
 
 
 def _with_later_mistakes(result: TrackResult, measurements: Measurements, model: TrackingModel, init: Initiation,
-                         settings: TrackerSettings) -> TrackResult:
+                         settings: TrackerSettings, reference: TrackResult | None) -> TrackResult:
     """The result with a ``sign`` or ``swapped`` finding from windows later in the recording where the track
-    does not fit and the initiation named no mistake (:func:`~fgdoppler.estimators.later_mistakes.later_mistakes`)."""
-    found = later_mistakes(measurements, model, init, result.reasons, huber_k=settings.huber_k)
+    does not fit and the initiation named no mistake (:func:`~fgdoppler.estimators.later_mistakes.later_mistakes`;
+    taken from the reference smoother where it made the same check)."""
+    found = later_mistakes(measurements, model, init, result.reasons, huber_k=settings.huber_k, reference=reference)
     return replace(result, reasons=(*result.reasons, *found)) if found else result
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -72,3 +74,37 @@ def test_where_the_initiation_named_the_mistake_or_there_is_no_room_nothing_more
     assert later_mistakes(short, model, init, MISFIT) == []
     with pytest.raises(ValueError, match="windows must be >= 1"):
         later_mistakes(m, model, init, MISFIT, windows=0)
+
+
+def test_a_reference_that_made_the_same_check_gives_its_finding_and_saves_the_windows(monkeypatch: pytest.MonkeyPatch
+                                                                                     ) -> None:
+    """Case a 25 km run 0 negated, as above.  A reference track that misfits too, with the same ``huber_k``, has
+    been through the same windows: its finding (here a planted one, to tell it from a recomputed one) is taken
+    and no window is initiated.  With another ``huber_k``, another number of windows or a reference whose track
+    fits, the windows are initiated and the answer is the one computed without a reference.  Through the
+    registry a filter held against such a reference initiates no window either."""
+    import fgdoppler.estimators.later_mistakes as module
+
+    sim, model = _paper(1, 0)
+    m = _negated(sim.measurements)
+    init = fd.initiate(m.first_per_pair(10), model)
+    direct = later_mistakes(m, model, init, MISFIT)
+    assert [r.code for r in direct] == ["sign"]
+    windows: list[float] = []
+    initiate = module.initiate
+    monkeypatch.setattr(module, "initiate", lambda w, *a, **k: windows.append(float(w.time[0])) or initiate(w, *a, **k))
+    track = fd.run_estimator("ekf", m, model, init, verify=False)
+    assert len(windows) == 3  # the track misfits, and nothing was there to take the answer from
+    windows.clear()
+    planted = Reason(code="swapped", status="doubtful", message="planted")
+    reference = replace(track, estimator="smoother", settings=fd.SmootherSettings(), reasons=(*MISFIT, planted))
+    assert later_mistakes(m, model, init, MISFIT, reference=reference) == [planted] and windows == []
+    for other in (replace(reference, settings=fd.SmootherSettings(huber_k=1.5)),
+                  replace(reference, reasons=(planted,))):
+        assert later_mistakes(m, model, init, MISFIT, reference=other) == direct and len(windows) == 3
+        windows.clear()
+    assert later_mistakes(m, model, init, MISFIT, windows=2, reference=reference)[0].code == "sign"
+    assert len(windows) == 2
+    windows.clear()
+    result = fd.run_estimator("ekf", m, model, init, reference=reference)
+    assert windows == [] and [r for r in result.reasons if r.code in MISTAKE_CODES] == [planted]
