@@ -167,7 +167,8 @@ def run_estimator(
     With ``verify`` (default) a filter's final state is checked against the
     offline smoother's, which costs a smoother run unless ``reference`` — the
     result of ``run_estimator("smoother", ...)`` on the same data and
-    initiation — is given.  With ``settings.bias_sigma`` a filter's
+    initiation — is given (without ``verify`` a given ``reference`` serves
+    only the later windows' check, whose answer it may already hold).  With ``settings.bias_sigma`` a filter's
     covariances include what calibration offsets of that size would do to
     it (:func:`~fgdoppler.estimators.calibration.offset_shares`, added last;
     the smoother adds its own; the particle estimators integrate the
@@ -205,21 +206,20 @@ def run_estimator(
             h, w = _hypotheses(info, measurements, model, new, settings)
             return _solve(info, measurements, model, h, settings, prefixed(progress, "restart"), w)
         result = with_restarts(measurements, model, init, settings, result, again)
-    if verify and result.primary.kind != "smoothed":
-        reference = _reference(measurements, model, init, settings, reference, per_pair, resolve_ambiguity, progress)
-    else:
-        reference = None
-    judged = judge(result, measurements, model, settings, reference, half_plane=init.half_plane is not None)
+    held = (_reference(measurements, model, init, settings, reference, per_pair, resolve_ambiguity, progress)
+            if verify and result.primary.kind != "smoothed" else None)
+    judged = judge(result, measurements, model, settings, held, half_plane=init.half_plane is not None)
     checked = None  # the primary covariances without the enclosure built from the reference's track
     if isinstance(settings, SampledCovarianceSettings) and settings.sampled_covariance:
-        judged, checked = _with_sampled_covariances(judged, measurements, model, settings, reference)
+        judged, checked = _with_sampled_covariances(judged, measurements, model, settings, held)
     if (offsets is not None and np.any(offsets > 0)) or (clocks is not None and np.any(clocks > 0)):
         judged, checked = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings, offsets,
                                         clocks, prefixed(progress, "calibration and clock offsets"), checked=checked)
-    if reference is not None:
-        judged = _with_track_reference(judged, checked, reference)
+    if held is not None:
+        judged = _with_track_reference(judged, checked, held)
     judged = _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
-    return _with_later_mistakes(judged, measurements, model, init, settings, reference)
+    return _with_later_mistakes(judged, measurements, model, init, settings,
+                                held if held is not None else reference)
 
 
 def _with_later_mistakes(result: TrackResult, measurements: Measurements, model: TrackingModel, init: Initiation,
@@ -315,7 +315,7 @@ def run_estimators(
             references[own] = out["smoother"]
     for name, s in chosen.items():
         if name not in out:  # a filter: its primary estimate is not the smoothed one
-            ref = reference(s) if verify else None
+            ref = reference(s) if verify else out.get("smoother")  # without verify: for the later windows alone
             out[name] = run_estimator(name, measurements, model, init, s, resolve_ambiguity=resolve_ambiguity,
                                       verify=verify, reference=ref, progress=progress)
     return {n: out[n] for n in chosen}

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import fgdoppler as fd
-from fgdoppler.estimators.later_mistakes import MISTAKE_CODES, later_mistakes
+from fgdoppler.estimators.later_mistakes import MISTAKE_CODES, _misfits, later_mistakes
 from fgdoppler.estimators.verdict import Reason
 
 #: A track's finding that its residuals fail the whole-track chi-square test, as the verdict writes it.
@@ -91,7 +91,8 @@ def test_a_reference_that_made_the_same_check_gives_its_finding_and_saves_the_wi
     been through the same windows: its finding (here a planted one, to tell it from a recomputed one) is taken
     and no window is initiated.  With another ``huber_k``, another number of windows or a reference whose track
     fits, the windows are initiated again (here each refused, as a window no start explains, so that nothing
-    is named).  Through the registry a filter held against such a reference initiates no window either."""
+    is named).  Through the registry a filter held against such a reference initiates no window either, nor
+    one given it without ``verify``; several estimators run together share the smoother's windows."""
     import fgdoppler.estimators.later_mistakes as module
 
     m, model, init, _, track = negated
@@ -112,3 +113,8 @@ def test_a_reference_that_made_the_same_check_gives_its_finding_and_saves_the_wi
     quick = fd.EKFSettings(sampled_covariance=False)  # its covariances do not matter here
     result = fd.run_estimator("ekf", m, model, init, quick, reference=reference)
     assert windows == [] and [r for r in result.reasons if r.code in MISTAKE_CODES] == [planted]
+    # without verify a given reference serves the later windows alone, and several estimators share the smoother's
+    result = fd.run_estimator("ekf", m, model, init, quick, verify=False, reference=reference)
+    assert windows == [] and [r for r in result.reasons if r.code in MISTAKE_CODES] == [planted]
+    both = fd.run_estimators(["smoother", "ekf"], m, model, init, {"ekf": quick}, verify=False)
+    assert all(_misfits(r.reasons) for r in both.values()) and len(windows) == 3
