@@ -107,7 +107,7 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     if not _misfits(reasons) or any(r.code in MISTAKE_CODES for r in init.reasons) or len(measurements) == 0:
         return []
     if reference is not None and windows == LATER_WINDOWS and _misfits(reference.reasons) \
-            and getattr(reference.settings, "huber_k", None) == huber_k:
+            and reference.settings.huber_k == huber_k:
         # the same windows, fits and votes: the answer depends on nothing else
         return [r for r in reference.reasons if r.code in MISTAKE_CODES]
     return _from_windows(measurements, model, init, huber_k, windows)

@@ -168,9 +168,9 @@ def run_estimator(
     offline smoother's, which costs a smoother run unless ``reference`` — the
     result of ``run_estimator("smoother", ...)`` on the same data and
     initiation — is given (without ``verify`` a given ``reference`` serves
-    only the later windows' check, whose answer it may already hold).  With ``settings.bias_sigma`` a filter's
-    covariances include what calibration offsets of that size would do to
-    it (:func:`~fgdoppler.estimators.calibration.offset_shares`, added last;
+    only the later windows' check, whose answer it may already hold).
+    With ``settings.bias_sigma`` a filter's covariances include what
+    calibration offsets of that size would do to it (:func:`~fgdoppler.estimators.calibration.offset_shares`, added last;
     the smoother adds its own; the particle estimators integrate the
     offsets out of their likelihood, :mod:`~fgdoppler.estimators.offset_posterior`),
     and with ``settings.clock_sigma`` what clock offsets of that size would
