@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -22,7 +21,6 @@ from fgdoppler.cli.common import (
     offset_sigma_error,
     per_pair,
     scenario,
-    taking,
 )
 
 __all__ = ["add_montecarlo"]
@@ -52,9 +50,9 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
                         "size would do; particle and map integrate such offsets out (default 0; simulate offsets "
                         "with --bias)")
     p.add_argument("--clock-sigma", type=float, nargs="+", default=None, metavar="S",
-                   help="clock uncertainty per pair in s (1 sigma; one value or one per pair): the covariances of "
-                        "the smoother, ekf, isam2 and fixed-lag include what a pair's times all off by that much "
-                        "would do (particle and map do not model it; default 0; simulate errors with --clock-error)")
+                   help="clock uncertainty per pair in s (1 sigma; one value or one per pair): every estimator's "
+                        "covariances include what a pair's times all off by that much would do (default 0; "
+                        "simulate errors with --clock-error)")
     p.add_argument("--estimate-offsets", action="store_true",
                    help="with --bias-sigma: the smoother estimates each pair's offset with the track instead")
     p.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS),
@@ -152,18 +150,11 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _with_clock_sigma(args: argparse.Namespace, scen: list[Any], settings: dict[str, Any]) -> dict[str, Any]:
-    """``settings`` with ``--clock-sigma`` in those of the study's estimators that take it (a note on stderr names
-    the study's estimators that do not)."""
+    """``settings`` with ``--clock-sigma`` in those of the study's estimators (every estimator takes it)."""
     for sc in scen:  # every geometry of the study must take the count given
         clock_sigma = per_pair(args.clock_sigma, sc.geometry.n_pairs, "--clock-sigma", f" in {sc.name}")
     chosen = {"fixed-lag" if e.startswith("lag:") else e for e in args.estimators}
-    takes = taking("clock_sigma")
-    left = sorted(chosen & set(settings) - set(takes))
-    if left:
-        print(f"note: --clock-sigma applies to {', '.join(takes)}; {', '.join(left)} run without it",
-              file=sys.stderr)
     try:
-        return {n: replace(s, clock_sigma=clock_sigma) if n in takes and n in chosen else s
-                for n, s in settings.items()}
+        return {n: replace(s, clock_sigma=clock_sigma) if n in chosen else s for n, s in settings.items()}
     except ValueError as exc:
         raise offset_sigma_error(exc) from None

@@ -79,10 +79,9 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                         "of that size would do to the track; particle and map integrate such offsets out of their "
                         "likelihood (default 0)")
     p.add_argument("--clock-sigma", type=float, nargs="+", default=None, metavar="S",
-                   help="each pair's clock uncertainty in s (1 sigma; one value or one per pair): the smoother's, "
-                        "ekf's, isam2's and fixed-lag's covariances include what a pair's measurement times all late "
-                        "or early by that much would do to the track (default 0: every pair's times from one "
-                        "clock)")
+                   help="each pair's clock uncertainty in s (1 sigma; one value or one per pair): every "
+                        "estimator's covariances include what a pair's measurement times all late or early by that "
+                        "much would do to the track (default 0: every pair's times from one clock)")
     p.add_argument("--estimate-offsets", action="store_true",
                    help="smoother, with --bias-sigma: estimate each pair's offset with the track (the track moves, "
                         "the offsets are reported) instead of only widening the covariances")

@@ -16,7 +16,8 @@ offline smoother said ``ok`` on 55 of 60 paper recordings, 36 of them
 --runs 10``, seed 2026), and no residual test can see it.  What the user
 can say is how well each receiver's clock is known:
 :math:`\tau_p \sim N(0, \sigma_{\tau,p}^2)`, independent per pair
-(``clock_sigma`` of the smoother's and the filters' settings).
+(``clock_sigma`` of the smoother's, the filters' and the particle estimators'
+settings).
 
 As for calibration offsets (:mod:`~fgdoppler.estimators.calibration`) the
 track is not changed and its covariances grow by the mean square of what

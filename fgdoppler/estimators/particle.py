@@ -89,7 +89,11 @@ out of every particle's likelihood in closed form
 per-pair sums :math:`s_p` of its whitened residuals, the gate predicts with
 the offsets' conditional mean and variance, the mode's climb solves for
 the state and the offsets together, and a re-anchoring summarises the
-offsets jointly with the state.
+offsets jointly with the state.  A clock offset does not integrate out so:
+with ``settings.clock_sigma`` the registry adds what such offsets would do
+to the track to its covariances, from reruns with the same random numbers
+(:func:`~fgdoppler.estimators.clock_offsets.clock_shares`), as for the
+filters.
 
 Random numbers come from ``numpy.random.default_rng(settings.seed)``: the
 same input and settings give the same track.

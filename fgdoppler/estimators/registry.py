@@ -173,8 +173,8 @@ def run_estimator(
     calibration offsets of that size would do to it (:func:`~fgdoppler.estimators.calibration.offset_shares`, added last;
     the smoother adds its own; the particle estimators integrate the
     offsets out of their likelihood, :mod:`~fgdoppler.estimators.offset_posterior`),
-    and with ``settings.clock_sigma`` what clock offsets of that size would
-    (:func:`~fgdoppler.estimators.clock_offsets.clock_shares`).
+    and with ``settings.clock_sigma`` a filter's or particle estimator's what
+    clock offsets would (:func:`~fgdoppler.estimators.clock_offsets.clock_shares`).
     ``progress`` (:mod:`fgdoppler.progress`) is told of every task: each
     hypothesis's run, the reference smoother's, the runs on offset (or delayed) data.
 
@@ -234,13 +234,17 @@ def _with_later_mistakes(result: TrackResult, measurements: Measurements, model:
 def _declared_offsets(settings: TrackerSettings, model: TrackingModel
                       ) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None, NDArray[np.float64] | None]:
     """The calibration uncertainty per pair (``None`` where the settings have none), and those of it and of the
-    clocks whose share the registry adds (a filter's; the smoother and the particle estimators account for theirs
-    themselves).  Their counts are said here, before any work."""
+    clocks whose share the registry adds (a filter's both; the particle estimators' clocks, since they integrate
+    calibration offsets out themselves; the smoother accounts for both itself).  Their counts are said here,
+    before any work."""
     declared = getattr(settings, "bias_sigma", None)
-    per_pair = None if declared is None else bias_sigmas(declared, model.observation.n_channels)
+    n_pairs = model.observation.n_channels
+    per_pair = None if declared is None else bias_sigmas(declared, n_pairs)
+    if isinstance(settings, ParticleSettings):
+        return per_pair, None, clock_sigmas(settings.clock_sigma, n_pairs)
     if not isinstance(settings, SampledCovarianceSettings):
         return per_pair, None, None
-    return per_pair, per_pair, clock_sigmas(settings.clock_sigma, model.observation.n_channels)
+    return per_pair, per_pair, clock_sigmas(settings.clock_sigma, n_pairs)
 
 
 def _reference(measurements: Measurements, model: TrackingModel, init: Initiation, settings: TrackerSettings,
