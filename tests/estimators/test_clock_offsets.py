@@ -130,7 +130,7 @@ def test_the_clock_share_makes_tracks_from_off_clocks_consistent(name: str) -> N
 def test_the_particle_estimators_take_the_clock_share_with_their_own_random_numbers(name: str) -> None:
     # Case a 45 km with pair 1's clock 0.5 s late: the particle estimators' track does not change with
     # clock_sigma (the share is a consider covariance), every covariance grows, and the final position's NEES
-    # goes from beyond chi-square(2)'s 99.9 % level (measured 51-63 over four recordings) to inside its 99 %
+    # goes from beyond chi-square(2)'s 99.9 % level (measured 45-63 over four recordings) to inside its 99 %
     # (0.76-0.88).  The reruns on delayed data use the estimator's own random numbers, so a clock known to
     # 0.1 ms adds next to nothing (measured 0.04-0.5 % of the position variance at 4,096 particles): reruns
     # with other random numbers would add their Monte Carlo spread instead.
