@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 from pathlib import Path
 from types import ModuleType
 
@@ -303,3 +304,44 @@ def test_goal_four_names_the_shared_misses_only_when_the_exact_posterior_ran() -
 
     assert evidence(1).endswith("judged ok: ekf 2; 1 of them in runs where the exact posterior is inconsistent too")
     assert evidence(None) == "judged ok: ekf 2"
+
+
+def test_compare_outputs_leaves_out_run_times_and_names_every_other_difference(tmp_path: Path,
+                                                                               capsys: pytest.CaptureFixture[str]
+                                                                               ) -> None:
+    # Two folders as a reproduction writes them: the same results, other run times.  Equal folders exit 0;
+    # a changed result anywhere (one array element, a NaN where a number was, a nested JSON value, a dtype,
+    # a file on one side only) exits 1 and is named, while run times and the load never are.
+    from benchmarks.compare_outputs import main
+
+    old, new = tmp_path / "old", tmp_path / "new"
+    for folder, seconds in ((old, 1.5), (new, 9.0)):
+        folder.mkdir()
+        np.savez(folder / "montecarlo.npz", pos_0_ekf=np.array([1.0, np.nan, 3.0]), times_0=np.arange(3.0),
+                 seconds_0_ekf=np.array([seconds]), wall_0_ekf=np.array([seconds]))
+        (folder / "montecarlo.json").write_text(json.dumps(
+            {"summary": {"rows": [{"rmse": 2.0, "status": ["ok", "doubtful"]}], "timing_per_run": {"ekf": seconds}},
+             "wall_time": seconds, "load": {"average_15_min": seconds}}))
+    assert main([str(old), str(new)]) == 0
+    said = capsys.readouterr().out
+    assert "same    montecarlo.npz: 2 arrays" in said and "DIFFERS" not in said
+
+    def changed(**arrays: np.ndarray) -> str:
+        np.savez(new / "montecarlo.npz", **{"pos_0_ekf": np.array([1.0, np.nan, 3.0]), "times_0": np.arange(3.0),
+                                           **arrays})
+        assert main([str(old), str(new)]) == 1
+        return capsys.readouterr().out
+
+    assert "pos_0_ekf" in changed(pos_0_ekf=np.array([1.0, np.nan, 3.0000000000000004]))
+    assert "pos_0_ekf" in changed(pos_0_ekf=np.array([1.0, 2.0, 3.0]))
+    assert "times_0" in changed(times_0=np.arange(3))  # the same values as integers
+    assert "1 of 3 arrays: extra" in changed(extra=np.zeros(1))
+    np.savez(new / "montecarlo.npz", pos_0_ekf=np.array([1.0, np.nan, 3.0]), times_0=np.arange(3.0))
+    (new / "montecarlo.json").write_text(json.dumps(
+        {"summary": {"rows": [{"rmse": 2.0, "status": ["ok", "ok"]}], "timing_per_run": {"ekf": 3.0}},
+         "wall_time": 3.0, "load": {}}))
+    assert main([str(old), str(new)]) == 1
+    assert "/summary/rows[0]/status[1]: 'doubtful' vs 'ok'" in capsys.readouterr().out
+    (new / "montecarlo.json").unlink()
+    assert main([str(old), str(new)]) == 1
+    assert "DIFFERS montecarlo.json: only in" in capsys.readouterr().out
