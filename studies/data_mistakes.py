@@ -15,24 +15,26 @@ Three mistakes, each checked on the same recordings:
   rule the mistake out.
 * **A receiver's clock off.**  Pair 1's times ``--late`` seconds late (default 0.5; one clock for
   every pair is assumed).  Not looked for: where such data fit another track, no finding can tell.
-  With ``--clock-sigma S`` the smoother is told each pair's clock may be off by S (1 sigma;
-  ``SmootherSettings(clock_sigma=S)``, a consider covariance), on every version of the data.
+  With ``--clock-sigma S`` the estimator is told each pair's clock may be off by S (1 sigma;
+  ``clock_sigma=S`` of its settings, a consider covariance), on every version of the data.
 
 Per recording, five versions of the data: as simulated, every pair's Doppler negated, pair 0's
 alone negated, pairs 0 and 1 swapped, pair 1's clock late.  For each: whether the initiation has a
 ``sign`` or a ``swapped`` finding (:func:`fgdoppler.estimators.initiation.mistake_reasons`) and
-what it names, and (``--track 1``, the default) the offline smoother's verdict from that
-initiation, with its position error at the last time of the truth against its own sigma along
-the major axis (wrong: beyond 3 sigma), and the ``sign`` or ``swapped`` finding the smoother adds
-from windows later in the recording where the track fails its residual test and the initiation
-named nothing (:mod:`fgdoppler.estimators.later_mistakes`).
+what it names, and (``--track 1``, the default) the verdict of ``--estimator`` (default the
+offline smoother) from that initiation, with its position error at the last time of the truth
+against its own sigma along the major axis (wrong: beyond 3 sigma), and the ``sign`` or
+``swapped`` finding it adds from windows later in the recording where the track fails its
+residual test and the initiation named nothing (:mod:`fgdoppler.estimators.later_mistakes`).
+``--late-only 1`` runs the late clock's version alone (the check of ``--clock-sigma`` for an
+estimator whose every run is slow).
 
 Recordings: the accuracy benchmark's runs of the paper's six scenarios (``--runs`` each, ``--seed``)
 and as many random layouts of ``studies/random_layouts.py`` (draw ``100 s + r``: two to four
 pairs anywhere, the target anywhere in the default zone).
 
 Run: python studies/data_mistakes.py [--runs 10] [--seed 2026] [--track 1] [--late 0.5] [--clock-sigma 0]
-[--workers 2] [--out DIR]
+[--estimator smoother] [--late-only 0] [--workers 2] [--out DIR]
 (``--runs 10``: about 7 min on 2 cores before the later windows were looked at, 41 min with them on one
 core beside a benchmark, 2026-11-27; ``--track 0``: the initiations alone, 2 min for ``--runs 20``)
 """
@@ -49,6 +51,7 @@ from _common import each_run, paper_run
 from random_layouts import draw, one_blas_thread, recorded
 
 import fgdoppler as fd
+from fgdoppler.estimators.registry import estimator_info
 
 
 def _negated(m: fd.Measurements, pairs: list[int] | None) -> fd.Measurements:
@@ -69,6 +72,8 @@ def _late(m: fd.Measurements, seconds: float) -> fd.Measurements:
                                        sort=True)
 
 
+#: The late clock's version (``--late-only``).
+LATE = "pair 1's clock late"
 #: The versions of each recording: name -> (the data given the clock's lateness in s, what a ``sign`` or
 #: ``swapped`` finding should name).
 VERSIONS: dict[str, tuple[Callable[[fd.Measurements, float], fd.Measurements], str]] = {
@@ -76,7 +81,7 @@ VERSIONS: dict[str, tuple[Callable[[fd.Measurements, float], fd.Measurements], s
     "every pair negated": (lambda m, _: _negated(m, None), "every pair"),
     "pair 0 negated": (lambda m, _: _negated(m, [0]), "pair 0"),
     "pairs 0 and 1 swapped": (lambda m, _: _swapped(m), "pairs 0 and 1"),
-    "pair 1's clock late": (_late, ""),
+    LATE: (_late, ""),
 }
 
 
@@ -84,10 +89,11 @@ VERSIONS: dict[str, tuple[Callable[[fd.Measurements, float], fd.Measurements], s
 _NAMED = r"with the (?:Doppler|labels) of (.+?) (?:negated|exchanged)"
 
 
-def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float, clock_sigma: float
-            ) -> dict[str, Any]:
+def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float, clock_sigma: float,
+            estimator: str, versions: list[str]) -> dict[str, Any]:
     out: dict[str, Any] = {}
-    for name, (version, _) in VERSIONS.items():
+    for name in versions:
+        version = VERSIONS[name][0]
         m = version(sim.measurements, late)
         init = fd.initiate(m.first_per_pair(10), model)
         found = [r for r in init.reasons if r.code in ("sign", "swapped")]
@@ -95,7 +101,7 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
         row: dict[str, Any] = {"finding": found[0].code if found else "",
                                "names": named.group(1) if named else ""}
         if track:
-            r = fd.run_estimator("smoother", m, model, init, fd.SmootherSettings(clock_sigma=clock_sigma))
+            r = fd.run_estimator(estimator, m, model, init, estimator_info(estimator).settings(clock_sigma=clock_sigma))
             e = r.primary
             k = e.states.shape[1] // 2
             j = int(np.flatnonzero(e.times <= sim.truth.times[-1])[-1])  # a late clock's last times are not truth's
@@ -110,26 +116,32 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
 
 
 @one_blas_thread
-def one(task: tuple[int, int, int], track: int = 1, late: float = 0.5, clock_sigma: float = 0.0) -> dict[str, Any]:
+def one(task: tuple[int, int, int], track: int = 1, late: float = 0.5, clock_sigma: float = 0.0,
+        estimator: str = "smoother", late_only: int = 0) -> dict[str, Any]:
     s, r, seed = task
     sim, model, _ = paper_run(s, r, seed)
-    out: dict[str, Any] = {"scenario": s, "run": r, "paper": _judged(sim, model, track, late, clock_sigma)}
+    versions = [LATE] if late_only else list(VERSIONS)
+    out: dict[str, Any] = {"scenario": s, "run": r,
+                           "paper": _judged(sim, model, track, late, clock_sigma, estimator, versions)}
     i = 100 * s + r
     record, layout_sim, init = recorded(i, *draw(i))
     if init is not None:
         out["layout"] = _judged(layout_sim, fd.TrackingModel.of(layout_sim.scenario.geometry), track, late,
-                                clock_sigma)
+                                clock_sigma, estimator, versions)
     else:
         out["layout refused"] = record.get("refused", "")
     return out
 
 
-def _table(rows: list[dict[str, Any]], where: str, track: bool) -> list[str]:
+def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) -> list[str]:
     lines = [f"### {where}", "", "| data | recordings | sign / swapped finding | names the change made | "
-             + ("smoother ok | ok and beyond 3 sigma | named later by the smoother (rightly) |" if track else ""),
+             + (f"{estimator} ok | ok and beyond 3 sigma | named later by the {estimator} (rightly) |"
+                if track else ""),
              "|---|---|---|---|" + ("---|---|---|" if track else "")]
     for name, (_, want) in VERSIONS.items():
-        got = [r[where][name] for r in rows if where in r]
+        got = [r[where][name] for r in rows if where in r and name in r[where]]
+        if not got:
+            continue
         right = str(sum(g["names"] == want for g in got)) if want else "—"
         said = [g["finding"] for g in got if g["finding"]]
         line = f"| {name} | {len(got)} | {said.count('sign')} / {said.count('swapped')} | {right} |"
@@ -146,10 +158,13 @@ def main() -> None:
     args, rows = each_run(one, "data_mistakes.py", "studies",
                           options={"--track": {"type": int, "default": 1},
                                    "--late": {"type": float, "default": 0.5},
-                                   "--clock-sigma": {"type": float, "default": 0.0}})
+                                   "--clock-sigma": {"type": float, "default": 0.0},
+                                   "--estimator": {"choices": list(fd.ESTIMATORS), "default": "smoother"},
+                                   "--late-only": {"type": int, "default": 0}})
+    track = bool(args.track)
     text = "\n".join([f"{args.runs} runs per paper scenario and as many random layouts, seed {args.seed}; "
-                       f"a late clock {args.late:g} s; the smoother's clock_sigma {args.clock_sigma:g} s", "",
-                      *_table(rows, "paper", bool(args.track)), *_table(rows, "layout", bool(args.track))])
+                       f"a late clock {args.late:g} s; the {args.estimator}'s clock_sigma {args.clock_sigma:g} s", "",
+                      *_table(rows, "paper", track, args.estimator), *_table(rows, "layout", track, args.estimator)])
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "data_mistakes.md").write_text(text)
     (args.out / "data_mistakes.json").write_text(json.dumps(rows, indent=1))

@@ -255,7 +255,10 @@ class SampledCovarianceSettings(GaussianSumSettings):
         the tracker's own primary track
         (:func:`~fgdoppler.estimators.clock_offsets.clock_shares`; four runs
         per pair, added with the calibration offsets' share, last).  The
-        track and the verdict do not change.
+        track does not change, nor does the verdict but for its whole-track
+        comparison with the reference smoother, which reads the grown
+        covariances: a track confidently elsewhere than the smoother's may
+        be so no longer.
     """
 
     sampled_covariance: bool = True
@@ -668,8 +671,9 @@ class ParticleSettings(TrackerSettings):
         Each pair's clock uncertainty (s, one standard deviation; one value
         for every pair or one per pair), as for the filters
         (:class:`SampledCovarianceSettings`): a time offset does not
-        integrate out of the likelihood in closed form, so the track and the
-        verdict do not change and the covariances grow by what such offsets
+        integrate out of the likelihood in closed form, so the track does not
+        change (nor the verdict, but for its whole-track comparison with the
+        reference smoother, as for the filters) and the covariances grow by what such offsets
         would do to the track — the estimator run again, with the same
         random numbers, on the data as a clock late or early by each of the
         four outer points of a five-point Gauss–Hermite rule would give
