@@ -32,8 +32,10 @@ def _end_rmse_and_bound(scen: fd.Scenario, geometry: fd.Geometry, runs: int, see
     fd.BistaticPair(tx=(40e3, 0.0), rx=(0.0, 0.0)),
     # The first pair a monostatic radar at the origin instead (its bistatic range twice its range), which
     # also sets the sensors' frame (axis towards the next pair's transmitter).  Measured: RMSE 129 m against
-    # a CRLB of 110 m (1.17x), every run "ok".
-    fd.BistaticPair(tx=(0.0, 0.0), rx=(0.0, 0.0)),
+    # a CRLB of 110 m (1.17x), every run "ok".  A second 30 s study, run with -m slow to keep the default run
+    # inside the CI budget (9 min 32 s with the install on a fresh clone, 2026-11-27); the frame a monostatic
+    # first pair sets is checked by default in test_invariance's "monostatic" cases (every estimator).
+    pytest.param(fd.BistaticPair(tx=(0.0, 0.0), rx=(0.0, 0.0)), marks=pytest.mark.slow),
 ], ids=["bistatic", "monostatic"])
 def test_three_asynchronous_pairs_reach_the_bound_at_the_end_of_a_minute(first: fd.BistaticPair) -> None:
     # Pairs sampled 0.2 and 0.35 s apart; 20 seeded 60 s recordings.  With 20 runs the RMSE's relative standard
