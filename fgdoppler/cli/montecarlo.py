@@ -72,11 +72,7 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
 def _run(args: argparse.Namespace) -> int:
     from fgdoppler.analysis.montecarlo import MonteCarloSpec, run_monte_carlo
     from fgdoppler.estimators.initiation import InitiationSettings
-    from fgdoppler.estimators.settings import (
-        ParticleSettings,
-        SampledCovarianceSettings,
-        SmootherSettings,
-    )
+    from fgdoppler.estimators.settings import SmootherSettings
     from fgdoppler.models.motion import ConstantVelocity
     from fgdoppler.simulation import PAPER_START_X
 
@@ -101,22 +97,14 @@ def _run(args: argparse.Namespace) -> int:
         raise CLIError("--estimate-offsets needs --bias-sigma (each pair's offset prior)")
     if args.estimate_offsets and "smoother" not in args.estimators:
         raise CLIError("--estimate-offsets applies to the smoother, which is not among --estimators")
-    if args.bias_sigma is not None:
-        for sc in scen:  # every geometry of the study must take the count given
-            bias_sigma = per_pair(args.bias_sigma, sc.geometry.n_pairs, "--bias-sigma", f" in {sc.name}")
-        takes = (SmootherSettings, SampledCovarianceSettings, ParticleSettings)
-        # the study's estimators only (lag:S is the fixed-lag smoother): another's refusal must not stop it
-        chosen = {"fixed-lag" if e.startswith("lag:") else e for e in args.estimators}
+    settings = _with_per_pair_sigma(args, scen, settings, "bias_sigma", args.bias_sigma)
+    settings = _with_per_pair_sigma(args, scen, settings, "clock_sigma", args.clock_sigma)
+    smoother = settings["smoother"]
+    if args.estimate_offsets and isinstance(smoother, SmootherSettings):
         try:
-            settings = {n: replace(s, bias_sigma=bias_sigma) if isinstance(s, takes) and n in chosen else s
-                        for n, s in settings.items()}
-            smoother = settings["smoother"]
-            if args.estimate_offsets and isinstance(smoother, SmootherSettings):
-                settings["smoother"] = replace(smoother, estimate_offsets=True)
+            settings["smoother"] = replace(smoother, estimate_offsets=True)
         except ValueError as exc:
             raise offset_sigma_error(exc) from None
-    if args.clock_sigma is not None:
-        settings = _with_clock_sigma(args, scen, settings)
     try:
         spec = MonteCarloSpec(scenarios=tuple(scen), estimators=tuple(args.estimators), runs=args.runs, seed=args.seed,
                               initiation=InitiationSettings(grid=grid_spec(args), huber_k=k), settings=settings,
@@ -149,12 +137,18 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _with_clock_sigma(args: argparse.Namespace, scen: list[Any], settings: dict[str, Any]) -> dict[str, Any]:
-    """``settings`` with ``--clock-sigma`` in those of the study's estimators (every estimator takes it)."""
+def _with_per_pair_sigma(args: argparse.Namespace, scen: list[Any], settings: dict[str, Any], field: str,
+                         values: list[float] | None) -> dict[str, Any]:
+    """``settings`` with ``field`` (``bias_sigma`` or ``clock_sigma``, every estimator's) set to ``values`` in those
+    of the study's estimators (``settings`` itself where ``values`` is ``None``)."""
+    if values is None:
+        return settings
+    option = "--" + field.replace("_", "-")
     for sc in scen:  # every geometry of the study must take the count given
-        clock_sigma = per_pair(args.clock_sigma, sc.geometry.n_pairs, "--clock-sigma", f" in {sc.name}")
+        sigma = per_pair(values, sc.geometry.n_pairs, option, f" in {sc.name}")
+    # the study's estimators only (lag:S is the fixed-lag smoother): another's refusal must not stop it
     chosen = {"fixed-lag" if e.startswith("lag:") else e for e in args.estimators}
     try:
-        return {n: replace(s, clock_sigma=clock_sigma) if n in chosen else s for n, s in settings.items()}
+        return {n: replace(s, **{field: sigma}) if n in chosen else s for n, s in settings.items()}
     except ValueError as exc:
         raise offset_sigma_error(exc) from None
