@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fgdoppler.frames import SENSOR_EPS, Frame, sensor_frame
+from fgdoppler.frames import AXIS_MIN_SHARE, SENSOR_EPS, Frame, sensor_frame
 from fgdoppler.zone import DEFAULT_SPEED_MAX, Zone, ZoneLimits, default_zone
 
 __all__ = [
@@ -290,6 +290,22 @@ class Geometry:
         tx.setflags(write=False)
         rx.setflags(write=False)
         return tx, rx
+
+    @cached_property
+    def radars(self) -> tuple[int, ...]:
+        r"""The pairs that are radars: Tx and Rx at one place, or nearly so.
+
+        Pair :math:`p` is one where its baseline :math:`L_p \le \max(\epsilon,\ a\,D)`, :math:`D` the
+        largest distance between two sensors of the geometry, :math:`a` =
+        :data:`~fgdoppler.frames.AXIS_MIN_SHARE` and :math:`\epsilon` =
+        :data:`~fgdoppler.frames.SENSOR_EPS` (the rule that keeps such a pair from setting the sensors'
+        frame; it scales with the layout).  Its bistatic range rate is then twice the radar's radial
+        velocity to second order in :math:`L_p / r` (:math:`r` its range), and a file may give that velocity instead.
+        """
+        s = self.sensors()
+        extent = float(np.max(np.linalg.norm(s[:, None, :] - s[None, :, :], axis=-1))) if len(s) > 1 else 0.0
+        cut = max(SENSOR_EPS, AXIS_MIN_SHARE * extent)
+        return tuple(int(k) for k in np.flatnonzero(np.linalg.norm(self._tx - self._rx, axis=1) <= cut))
 
     def sensors(self) -> NDArray[np.float64]:
         """Distinct sensor positions (Tx and Rx), shape ``(n_sensors, dim)``."""

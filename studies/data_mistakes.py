@@ -13,30 +13,38 @@ Three mistakes, each checked on the same recordings:
   truth's; where the window fails, the initiation's ``swapped`` finding should name the pairs.
   Pair names (``name`` in the geometry's ``[[pair]]`` tables, used in the file's ``pair`` column)
   rule the mistake out.
+* **A radar's radial velocity.**  For a radar (Tx and Rx at one place) fgdoppler's ``doppler`` is
+  the rate of change of twice its range; a file may give its radial velocity (half of it), or the
+  radial velocity positive for an approaching target (minus half of it: ``wavelength * f_D / 2``).
+  The initiation's ``radial`` finding should name the radars.  Checked on the radar layouts alone
+  (the others have no radar).
 * **A receiver's clock off.**  Pair 1's times ``--late`` seconds late (default 0.5; one clock for
   every pair is assumed).  Not looked for: where such data fit another track, no finding can tell.
   With ``--clock-sigma S`` the estimator is told each pair's clock may be off by S (1 sigma;
   ``clock_sigma=S`` of its settings, a consider covariance), on every version of the data.
 
-Per recording, five versions of the data: as simulated, every pair's Doppler negated, pair 0's
-alone negated, pairs 0 and 1 swapped, pair 1's clock late.  For each: whether the initiation has a
-``sign`` or a ``swapped`` finding (:func:`fgdoppler.estimators.initiation.mistake_reasons`) and
+Per recording, up to seven versions of the data: as simulated, every pair's Doppler negated, pair 0's
+alone negated, pairs 0 and 1 swapped, pair 1's clock late, and where the geometry has radars their
+Doppler halved and halved and negated.  For each: whether the initiation has a ``sign``,
+``swapped`` or ``radial`` finding (:func:`fgdoppler.estimators.initiation.mistake_reasons`) and
 what it names, and (``--track 1``, the default) the verdict of ``--estimator`` (default the
 offline smoother) from that initiation, with its position error at the last time of the truth
-against its own sigma along the major axis (wrong: beyond 3 sigma), and the ``sign`` or
-``swapped`` finding it adds from windows later in the recording where the track fails its
-residual test and the initiation named nothing (:mod:`fgdoppler.estimators.later_mistakes`).
+against its own sigma along the major axis (wrong: beyond 3 sigma), and the mistake finding it
+adds from windows later in the recording where the track fails its residual test and the
+initiation named nothing (:mod:`fgdoppler.estimators.later_mistakes`).
 ``--late-only 1`` runs the late clock's version alone (the check of ``--clock-sigma`` for an
 estimator whose every run is slow).
 
-Recordings: the accuracy benchmark's runs of the paper's six scenarios (``--runs`` each, ``--seed``)
-and as many random layouts of ``studies/random_layouts.py`` (draw ``100 s + r``: two to four
-pairs anywhere, the target anywhere in the default zone).
+Recordings: the accuracy benchmark's runs of the paper's six scenarios (``--runs`` each, ``--seed``),
+as many random layouts of ``studies/random_layouts.py`` (draw ``100 s + r``: two to four
+pairs anywhere, the target anywhere in the default zone) and as many radar layouts of
+``studies/monostatic_layouts.py`` (draw ``100 s + r``: a radar and one to three pairs, the last a
+second radar in half of them).
 
 Run: python studies/data_mistakes.py [--runs 10] [--seed 2026] [--track 1] [--late 0.5] [--clock-sigma 0]
 [--estimator smoother] [--late-only 0] [--workers 2] [--out DIR]
-(``--runs 10``: about 7 min on 2 cores before the later windows were looked at, 41 min with them on one
-core beside a benchmark, 2026-11-27; ``--track 0``: the initiations alone, 2 min for ``--runs 20``)
+(with the radar layouts, 2026-11-27, on 2 cores shared with other work: ``--runs 10`` 43 min; ``--track 0``,
+the initiations alone, 15 min for ``--runs 20``)
 """
 
 from __future__ import annotations
@@ -48,9 +56,11 @@ from typing import Any
 
 import numpy as np
 from _common import each_run, paper_run
+from monostatic_layouts import draw as radar_draw
 from random_layouts import draw, one_blas_thread, recorded
 
 import fgdoppler as fd
+from fgdoppler.estimators.later_mistakes import MISTAKE_CODES
 from fgdoppler.estimators.registry import estimator_info
 
 
@@ -66,6 +76,20 @@ def _swapped(m: fd.Measurements) -> fd.Measurements:
     return fd.Measurements.from_arrays(m.time, pair, m.doppler, m.sigma, sort=True)
 
 
+def _radial(m: fd.Measurements, g: fd.Geometry, factor: float) -> fd.Measurements:
+    """``m`` with the Doppler of ``g``'s radars multiplied by ``factor``."""
+    return fd.Measurements(time=m.time, pair=m.pair, doppler=np.where(np.isin(m.pair, g.radars), factor, 1.0) * m.doppler,
+                           sigma=m.sigma)
+
+
+def _radars(g: fd.Geometry) -> str:
+    """How a mistake finding names ``g``'s radars (``find_mistake``'s wording)."""
+    r = list(g.radars)
+    if len(r) == g.n_pairs:
+        return "every pair"
+    return f"pair {r[0]}" if len(r) == 1 else f"pairs {', '.join(map(str, r[:-1]))} and {r[-1]}"
+
+
 def _late(m: fd.Measurements, seconds: float) -> fd.Measurements:
     """``m`` with pair 1's times ``seconds`` late (its receiver's clock off)."""
     return fd.Measurements.from_arrays(np.where(m.pair == 1, m.time + seconds, m.time), m.pair, m.doppler, m.sigma,
@@ -74,32 +98,50 @@ def _late(m: fd.Measurements, seconds: float) -> fd.Measurements:
 
 #: The late clock's version (``--late-only``).
 LATE = "pair 1's clock late"
-#: The versions of each recording: name -> (the data given the clock's lateness in s, what a ``sign`` or
-#: ``swapped`` finding should name).
-VERSIONS: dict[str, tuple[Callable[[fd.Measurements, float], fd.Measurements], str]] = {
-    "as given": (lambda m, _: m, ""),
-    "every pair negated": (lambda m, _: _negated(m, None), "every pair"),
-    "pair 0 negated": (lambda m, _: _negated(m, [0]), "pair 0"),
-    "pairs 0 and 1 swapped": (lambda m, _: _swapped(m), "pairs 0 and 1"),
-    LATE: (_late, ""),
+#: The versions of each recording: name -> (the data given the geometry and the clock's lateness in s, the change
+#: of the data that a mistake finding should name given the geometry, as it words it — "" for none —, whether the
+#: version needs radars).
+VERSIONS: dict[str, tuple[Callable[[fd.Measurements, fd.Geometry, float], fd.Measurements],
+                          Callable[[fd.Geometry], str], bool]] = {
+    "as given": (lambda m, g, _: m, lambda g: "", False),
+    "every pair negated": (lambda m, g, _: _negated(m, None), lambda g: "the Doppler of every pair negated", False),
+    "pair 0 negated": (lambda m, g, _: _negated(m, [0]), lambda g: "the Doppler of pair 0 negated", False),
+    "pairs 0 and 1 swapped": (lambda m, g, _: _swapped(m), lambda g: "the labels of pairs 0 and 1 exchanged", False),
+    LATE: (lambda m, g, late: _late(m, late), lambda g: "", False),
+    "radars' radial velocity": (lambda m, g, _: _radial(m, g, 0.5), lambda g: f"the Doppler of {_radars(g)} doubled",
+                                True),
+    "radars' approach speed": (lambda m, g, _: _radial(m, g, -0.5),
+                               lambda g: f"the Doppler of {_radars(g)} doubled and negated", True),
 }
 
+#: The change a mistake finding names first, and the other changes it names (``mistake_reason``'s wording).
+_FIRST = re.compile(r"^(?:.*: )?with (the (?:Doppler|labels) of .+?) the window fits")
+_OTHERS = re.compile(r"passes the same test with (.+?) too: check")
+_CHANGE = re.compile(r"(the (?:Doppler|labels) of .+?) \(cost ")
 
-#: What a ``sign`` or ``swapped`` finding names, in its message.
-_NAMED = r"with the (?:Doppler|labels) of (.+?) (?:negated|exchanged)"
+
+def _changes(reason: fd.Reason | None) -> tuple[str, list[str]]:
+    """The change a mistake finding names first and the others it names ("" and [] without a finding)."""
+    if reason is None:
+        return "", []
+    first, others = _FIRST.search(reason.message), _OTHERS.search(reason.message)
+    return (first.group(1) if first else "?"), (_CHANGE.findall(others.group(1)) if others else [])
 
 
 def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float, clock_sigma: float,
             estimator: str, versions: list[str]) -> dict[str, Any]:
     out: dict[str, Any] = {}
+    g = sim.scenario.geometry
     for name in versions:
-        version = VERSIONS[name][0]
-        m = version(sim.measurements, late)
+        version, want, radars = VERSIONS[name]
+        if radars and not g.radars:
+            continue
+        m = version(sim.measurements, g, late)
         init = fd.initiate(m.first_per_pair(10), model)
-        found = [r for r in init.reasons if r.code in ("sign", "swapped")]
-        named = re.search(_NAMED, found[0].message) if found else None
-        row: dict[str, Any] = {"finding": found[0].code if found else "",
-                               "names": named.group(1) if named else ""}
+        found = [r for r in init.reasons if r.code in MISTAKE_CODES]
+        first, others = _changes(found[0] if found else None)
+        row: dict[str, Any] = {"finding": found[0].code if found else "", "names": first, "others": others,
+                               "right": want(g)}
         if track:
             r = fd.run_estimator(estimator, m, model, init, estimator_info(estimator).settings(clock_sigma=clock_sigma))
             e = r.primary
@@ -107,10 +149,9 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
             j = int(np.flatnonzero(e.times <= sim.truth.times[-1])[-1])  # a late clock's last times are not truth's
             err = float(np.linalg.norm(e.states[j, :k] - sim.truth.at(e.times[j:j + 1])[0][:k]))
             sd = float(np.sqrt(np.max(np.linalg.eigvalsh(e.covariances[j][:k, :k])))) if e.cov_ok[j] else np.nan
-            later = [x for x in r.reasons if x.code in ("sign", "swapped")]
-            named_later = re.search(_NAMED, later[0].message) if later else None
+            later = [x for x in r.reasons if x.code in MISTAKE_CODES]
             row.update(status=str(r.status), error=round(err, 1), sigma=round(sd, 1),
-                       later=named_later.group(1) if named_later else "")
+                       later=_changes(later[0] if later else None)[0])
         out[name] = row
     return out
 
@@ -124,32 +165,35 @@ def one(task: tuple[int, int, int], track: int = 1, late: float = 0.5, clock_sig
     out: dict[str, Any] = {"scenario": s, "run": r,
                            "paper": _judged(sim, model, track, late, clock_sigma, estimator, versions)}
     i = 100 * s + r
-    record, layout_sim, init = recorded(i, *draw(i))
-    if init is not None:
-        out["layout"] = _judged(layout_sim, fd.TrackingModel.of(layout_sim.scenario.geometry), track, late,
-                                clock_sigma, estimator, versions)
-    else:
-        out["layout refused"] = record.get("refused", "")
+    for where, drawn in (("layout", draw(i)), ("radar layout", radar_draw(i))):
+        record, layout_sim, init = recorded(i, *drawn)
+        if init is not None:
+            out[where] = _judged(layout_sim, fd.TrackingModel.of(layout_sim.scenario.geometry), track, late,
+                                 clock_sigma, estimator, versions)
+        else:
+            out[f"{where} refused"] = record.get("refused", "")
     return out
 
 
 def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) -> list[str]:
-    lines = [f"### {where}", "", "| data | recordings | sign / swapped finding | names the change made | "
-             + (f"{estimator} ok | ok and beyond 3 sigma | named later by the {estimator} (rightly) |"
-                if track else ""),
+    lines = [f"### {where}", "", "| data | recordings | sign / swapped / radial finding | names the change made "
+             "(first / among the others) | " + (f"{estimator} ok | ok and beyond 3 sigma | named later by the "
+                                                 f"{estimator} (rightly) |" if track else ""),
              "|---|---|---|---|" + ("---|---|---|" if track else "")]
-    for name, (_, want) in VERSIONS.items():
+    for name in VERSIONS:
         got = [r[where][name] for r in rows if where in r and name in r[where]]
         if not got:
             continue
-        right = str(sum(g["names"] == want for g in got)) if want else "—"
+        wanted = any(g["right"] for g in got)
+        right = f"{sum(g['names'] == g['right'] for g in got)} / {sum(g['right'] in g['others'] for g in got)}" \
+            if wanted else "—"
         said = [g["finding"] for g in got if g["finding"]]
-        line = f"| {name} | {len(got)} | {said.count('sign')} / {said.count('swapped')} | {right} |"
+        line = f"| {name} | {len(got)} | {' / '.join(str(said.count(c)) for c in MISTAKE_CODES)} | {right} |"
         if track:
             ok = [g for g in got if g["status"] == "ok"]
             wrong = sum(g["error"] > 3.0 * g["sigma"] for g in ok)
-            later = [g["later"] for g in got if g.get("later")]
-            line += f" {len(ok)} | {wrong} | {len(later)} ({sum(x == want for x in later) if want else '—'}) |"
+            later = [(g["later"], g["right"]) for g in got if g.get("later")]
+            line += f" {len(ok)} | {wrong} | {len(later)} ({sum(x == w for x, w in later) if wanted else '—'}) |"
         lines.append(line)
     return [*lines, ""]
 
@@ -162,9 +206,11 @@ def main() -> None:
                                    "--estimator": {"choices": list(fd.ESTIMATORS), "default": "smoother"},
                                    "--late-only": {"type": int, "default": 0}})
     track = bool(args.track)
-    text = "\n".join([f"{args.runs} runs per paper scenario and as many random layouts, seed {args.seed}; "
-                       f"a late clock {args.late:g} s; the {args.estimator}'s clock_sigma {args.clock_sigma:g} s", "",
-                      *_table(rows, "paper", track, args.estimator), *_table(rows, "layout", track, args.estimator)])
+    text = "\n".join([f"{args.runs} runs per paper scenario and as many random layouts and radar layouts, seed "
+                       f"{args.seed}; a late clock {args.late:g} s; the {args.estimator}'s clock_sigma "
+                       f"{args.clock_sigma:g} s", "",
+                      *(line for where in ("paper", "layout", "radar layout")
+                        for line in _table(rows, where, track, args.estimator))])
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "data_mistakes.md").write_text(text)
     (args.out / "data_mistakes.json").write_text(json.dumps(rows, indent=1))

@@ -53,6 +53,23 @@ def test_a_monostatic_radar_is_a_pair_and_one_site_alone_is_refused() -> None:
             fd.Geometry(pairs=pairs)
 
 
+def test_the_radars_are_the_pairs_whose_tx_and_rx_are_at_one_place_at_the_layouts_scale() -> None:
+    """A pair is a radar where its baseline is at most 1 % of the largest distance between two sensors (the rule
+    that keeps it from setting the frame): a monostatic pair and one with its antennas 50 m apart in a 60 km
+    layout are, a 1 km baseline (1.4 %) is not; the paper's pairs are none.  The rule scales with the layout
+    (the same pairs in kilometres) and does not depend on where the layout is or how it is turned."""
+    P = fd.BistaticPair
+    layout = [P(tx=(0.0, 0.0), rx=(0.0, 0.0)), P(tx=(40e3, 0.0), rx=(-20e3, 30e3)),
+              P(tx=(10e3, 20e3), rx=(10e3, 20.05e3)), P(tx=(-30e3, -10e3), rx=(-29e3, -10e3))]
+    g = fd.Geometry(pairs=tuple(layout))
+    assert g.radars == (0, 2)
+    assert fd.paper_geometry("a").radars == () and fd.paper_geometry("b").radars == ()
+    angle, shift = 1.1, np.array([5e5, -3e5])
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    for f in (lambda p: np.asarray(p) / 1e3, lambda p: rot @ np.asarray(p) + shift):
+        assert fd.Geometry(pairs=tuple(P(tx=f(p.tx), rx=f(p.rx)) for p in layout)).radars == (0, 2)
+
+
 def test_geometry_validation() -> None:
     with pytest.raises(ValueError, match="at least one"):
         fd.Geometry(pairs=())

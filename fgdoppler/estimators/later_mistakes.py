@@ -1,9 +1,11 @@
 r"""Mistakes in a measurement file that the initiation window did not show, looked for later in the recording.
 
-The initiation names two common mistakes where its window fails the χ²
+The initiation names common mistakes where its window fails the χ²
 test and fits with the data changed (:func:`~fgdoppler.estimators.initiation.mistake_reasons`):
 the opposite sign convention (the Doppler of every pair, or of one pair,
-negated: a ``sign`` finding) and two pairs' labels exchanged (``swapped``).
+negated: a ``sign`` finding), two pairs' labels exchanged (``swapped``)
+and a radar's radial velocity given for its bistatic range rate
+(``radial``).
 A short window can fit a wrong track with the wrong data as well — near
 the paper's baseline the likelihood has long valleys — and then the
 initiation says nothing; the whole track fails its residual test later
@@ -14,8 +16,11 @@ So where a track's ``fit`` finding is not ``ok`` and the initiation named
 no mistake, :func:`later_mistakes` initiates :data:`LATER_WINDOWS` windows
 of the initiation window's span spread over the rest of the recording
 (:func:`~fgdoppler.estimators.initiation.initiate`, which tries the
-changes itself where a window fails), and turns the change that the most
-of them name into a ``doubtful`` finding of the track.  A window that fits
+changes itself where a window fails), and turns the change that makes the
+most of them pass into a ``doubtful`` finding of the track.  Not the change
+each window finds likeliest: a short window often passes under two changes
+(on radar layouts, a radar's Doppler negated as well as halved back), while
+the right change passes in every window that needs one.  A window that fits
 as given, or fails for another reason (an outlier, a manoeuvre inside it,
 a target that has left the zone, which bounds each window's start), names
 nothing.  The track's status does not change (the ``fit`` finding is
@@ -24,7 +29,6 @@ already ``doubtful``); the finding says what to check.
 
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import replace
 
 import numpy as np
@@ -48,30 +52,32 @@ __all__ = ["LATER_WINDOWS", "MISTAKE_CODES", "later_mistakes"]
 LATER_WINDOWS = 3
 
 #: The findings of a mistake in the measurement file (:func:`~fgdoppler.estimators.initiation.mistake_reasons`).
-MISTAKE_CODES = ("sign", "swapped")
+MISTAKE_CODES = ("sign", "swapped", "radial")
 
 
 def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initiation, reasons: tuple[Reason, ...],
                    *, huber_k: float | None = None, windows: int = LATER_WINDOWS,
                    reference: TrackResult | None = None) -> list[Reason]:
-    r"""A ``sign`` or ``swapped`` finding from windows later in the recording, where the track does not fit.
+    r"""A ``sign``, ``swapped`` or ``radial`` finding from windows later in the recording, where the track does
+    not fit.
 
     Only where ``reasons`` (the track's) hold a ``fit`` finding that is not
-    ``ok`` and ``init`` has no ``sign`` or ``swapped`` finding.  Window
+    ``ok`` and ``init`` has none of :data:`MISTAKE_CODES`.  Window
     :math:`i` of :math:`n` holds every measurement in
     :math:`[s_i, s_i + \Delta]`, :math:`\Delta` the initiation window's span
     and :math:`s_i` evenly spaced from the initiation window's end to
     :math:`t_\mathrm{last} - \Delta`; each is initiated with the model's zone
-    and ``init``'s half plane, and its own ``sign`` or ``swapped`` finding
-    (the change whose window passes the χ² test at 95 % with the least
-    cost) counts as its vote.  The change named most often (the earliest
-    window first among equals) is reported, with the window that named it
-    first and the count.  Costs nothing on a track that fits; on one that
+    and ``init``'s half plane, and every change under which a window that
+    fails passes the χ² test at 95 % counts as its vote.  The change with
+    the most votes (among equals, the least total cost in the windows that
+    pass with it) is reported, with the first window it makes pass, the
+    count and the other changes under which that window passes.  Costs nothing on a track that fits; on one that
     does not, :math:`n` initiations and, for each window that fails,
-    :math:`1 + P + P(P-1)/2` more with :math:`P` pairs — unless
+    :math:`1 + P + P(P-1)/2` more with :math:`P` pairs (and more with radars,
+    :func:`~fgdoppler.estimators.initiation.mistake_reasons`) — unless
     ``reference``, a track on the same data and initiation whose own
     ``fit`` finding is not ``ok`` either and whose settings have the same
-    ``huber_k``, made the same check already: its ``sign`` or ``swapped``
+    ``huber_k``, made the same check already: its mistake
     finding (or its lack of one) is then the answer.
 
     Parameters
@@ -127,7 +133,9 @@ def _from_windows(measurements: Measurements, model: TrackingModel, init: Initia
         return []
     settings = InitiationSettings(half_plane=init.half_plane, huber_k=huber_k)
     quiet = replace(settings, mistake_check=False)
-    votes: list[tuple[Mistake, float, float]] = []  # (the change, the window's cost as given, its start)
+    # each window's changes that make it pass, in the window's order: (the change with the others that pass
+    # there, the window's cost as given, its start)
+    passed: dict[tuple[str, str, float], list[tuple[Mistake, float, float]]] = {}
     for start in np.unique(np.linspace(init.t_end, last - span, windows)):
         window = measurements.between(float(start), float(start) + span)
         try:
@@ -135,15 +143,26 @@ def _from_windows(measurements: Measurements, model: TrackingModel, init: Initia
         except ValueError:  # too few measurements, or no start in the zone explains them
             continue
         found = find_mistake(window, model, settings, given)
-        if found is not None:
-            votes.append((found, given.cost, float(start)))
-    if not votes:
+        if found is None:
+            continue
+        for m in (found, *found.others):
+            passed.setdefault((m.code, m.which, m.factor), []).append((found, given.cost, float(start)))
+    if not passed:
         return []
-    counts = Counter((m.code, m.which) for m, _, _ in votes)
-    best = max(counts.values())
-    found, cost, start = next(v for v in votes if counts[(v[0].code, v[0].which)] == best)
-    named = mistake_reason(found, cost, settings.confidence)
+    best = max(len(v) for v in passed.values())
+    # among the changes that pass in the most windows, the least total cost there (dict order: first seen)
+    key = min((k for k, v in passed.items() if len(v) == best),
+              key=lambda k: sum(_cost_of(k, found) for found, _, _ in passed[k]))
+    found, cost, start = passed[key][0]
+    chosen = next(m for m in (found, *found.others) if (m.code, m.which, m.factor) == key)
+    others = tuple(m for m in (found, *found.others) if m is not chosen)
+    named = mistake_reason(replace(chosen, others=others), cost, settings.confidence)
     return [replace(named, message=(
         f"the track fails its residual test and the initiation window named no mistake, but later in the "
-        f"recording {best} of {windows} windows of {span:g} s name one (first at t = {start:.1f}-{start + span:.1f} "
-        f"s): {named.message}"))]
+        f"recording {best} of {windows} windows of {span:g} s fit with a change of the data (first at t = "
+        f"{start:.1f}-{start + span:.1f} s): {named.message}"))]
+
+
+def _cost_of(key: tuple[str, str, float], found: Mistake) -> float:
+    """The cost of the change ``key`` in the window whose passing changes ``found`` lists."""
+    return next(m.cost for m in (found, *found.others) if (m.code, m.which, m.factor) == key)

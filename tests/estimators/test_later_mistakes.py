@@ -119,3 +119,32 @@ def test_a_reference_that_made_the_same_check_gives_its_finding_and_saves_the_wi
     both = fd.run_estimators(["smoother", "ekf"], m, model, init, {"ekf": quick}, verify=False)
     assert all(any(x.code == "fit" and x.status != "ok" for x in r.reasons) for r in both.values())
     assert len(windows) == 3
+
+
+def test_the_change_that_makes_the_most_windows_pass_is_named_not_the_likeliest_in_one(
+        negated: tuple[fd.Measurements, fd.TrackingModel, fd.Initiation, list[Reason], fd.TrackResult],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Planted per-window answers (case a 25 km run 0 negated gives the windows): the first window passes with
+    pair 0 negated (cost 10) or pairs 0 and 1 exchanged (12), the second with every pair negated (9) or the same
+    exchange (11), the third with none.  The likeliest change differs between the two windows, the exchange
+    passes in both: it is named, from its first window, with that window's other change and its cost.  Among
+    changes that pass in as many windows the least total cost wins."""
+    import fgdoppler.estimators.later_mistakes as module
+    from fgdoppler.estimators.initiation import Mistake
+
+    m, model, init, _, _ = negated
+    sign0 = Mistake(code="sign", which="pair 0", cost=10.0, factor=-1.0)
+    swap = Mistake(code="swapped", which="pairs 0 and 1", cost=12.0, factor=1.0)
+    every = Mistake(code="sign", which="every pair", cost=9.0, factor=-1.0)
+    answers = [replace(sign0, others=(swap,)), replace(every, others=(replace(swap, cost=11.0),)), None]
+    monkeypatch.setattr(module, "find_mistake", lambda *args: answers.pop(0))
+    found = later_mistakes(m, model, init, MISFIT)
+    assert [r.code for r in found] == ["swapped"] and "2 of 3 windows" in found[0].message
+    assert "with the labels of pairs 0 and 1 exchanged the window fits (cost 12.00" in found[0].message
+    assert found[0].message.endswith("the window passes the same test with the Doppler of pair 0 negated "
+                                     "(cost 10.00) too: check that change as well")
+    # the exchange costs more in total than every pair negated when both pass in both windows
+    answers[:] = [replace(every, cost=8.0, others=(swap,)), replace(swap, cost=11.0, others=(every,)), None]
+    found = later_mistakes(m, model, init, MISFIT)
+    assert [r.code for r in found] == ["sign"] and "with the Doppler of every pair negated the window fits (cost " \
+        "8.00" in found[0].message
