@@ -300,7 +300,8 @@ class Geometry:
         :data:`~fgdoppler.frames.AXIS_MIN_SHARE` and :math:`\epsilon` =
         :data:`~fgdoppler.frames.SENSOR_EPS` (the rule that keeps such a pair from setting the sensors'
         frame; it scales with the layout).  Its bistatic range rate is then twice the radar's radial
-        velocity to second order in :math:`L_p / r` (:math:`r` its range), and a file may give that velocity instead.
+        velocity to second order in :math:`L_p / r` (:math:`r` its range), and a file may give that
+        velocity instead.
         """
         s = self.sensors()
         extent = float(np.max(np.linalg.norm(s[:, None, :] - s[None, :, :], axis=-1))) if len(s) > 1 else 0.0

@@ -71,8 +71,9 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     fails passes the χ² test at 95 % counts as its vote.  The change with
     the most votes (among equals, the least total cost in the windows that
     pass with it) is reported, with the first window it makes pass, the
-    count and the other changes under which that window passes.  Costs nothing on a track that fits; on one that
-    does not, :math:`n` initiations and, for each window that fails,
+    count and the other changes under which that window passes.  Costs
+    nothing on a track that fits; on one that does not, :math:`n`
+    initiations and, for each window that fails,
     :math:`1 + P + P(P-1)/2` more with :math:`P` pairs (and more with radars,
     :func:`~fgdoppler.estimators.initiation.mistake_reasons`) — unless
     ``reference``, a track on the same data and initiation whose own
@@ -133,9 +134,9 @@ def _from_windows(measurements: Measurements, model: TrackingModel, init: Initia
         return []
     settings = InitiationSettings(half_plane=init.half_plane, huber_k=huber_k)
     quiet = replace(settings, mistake_check=False)
-    # each window's changes that make it pass, in the window's order: (the change with the others that pass
-    # there, the window's cost as given, its start)
-    passed: dict[tuple[str, str, float], list[tuple[Mistake, float, float]]] = {}
+    # for each change, the windows it makes pass, in order: (the change there, every change that passes there,
+    # the window's cost as given, its start)
+    passed: dict[tuple[str, str, float], list[tuple[Mistake, tuple[Mistake, ...], float, float]]] = {}
     for start in np.unique(np.linspace(init.t_end, last - span, windows)):
         window = measurements.between(float(start), float(start) + span)
         try:
@@ -145,24 +146,18 @@ def _from_windows(measurements: Measurements, model: TrackingModel, init: Initia
         found = find_mistake(window, model, settings, given)
         if found is None:
             continue
-        for m in (found, *found.others):
-            passed.setdefault((m.code, m.which, m.factor), []).append((found, given.cost, float(start)))
+        there = (found, *found.others)
+        for m in there:
+            passed.setdefault((m.code, m.which, m.factor), []).append((m, there, given.cost, float(start)))
     if not passed:
         return []
     best = max(len(v) for v in passed.values())
     # among the changes that pass in the most windows, the least total cost there (dict order: first seen)
-    key = min((k for k, v in passed.items() if len(v) == best),
-              key=lambda k: sum(_cost_of(k, found) for found, _, _ in passed[k]))
-    found, cost, start = passed[key][0]
-    chosen = next(m for m in (found, *found.others) if (m.code, m.which, m.factor) == key)
-    others = tuple(m for m in (found, *found.others) if m is not chosen)
-    named = mistake_reason(replace(chosen, others=others), cost, settings.confidence)
+    votes = min((v for v in passed.values() if len(v) == best), key=lambda v: sum(m.cost for m, *_ in v))
+    chosen, there, cost, start = votes[0]
+    named = mistake_reason(replace(chosen, others=tuple(m for m in there if m is not chosen)), cost,
+                           settings.confidence)
     return [replace(named, message=(
         f"the track fails its residual test and the initiation window named no mistake, but later in the "
         f"recording {best} of {windows} windows of {span:g} s fit with a change of the data (first at t = "
         f"{start:.1f}-{start + span:.1f} s): {named.message}"))]
-
-
-def _cost_of(key: tuple[str, str, float], found: Mistake) -> float:
-    """The cost of the change ``key`` in the window whose passing changes ``found`` lists."""
-    return next(m.cost for m in (found, *found.others) if (m.code, m.which, m.factor) == key)
