@@ -203,11 +203,16 @@ class CostStages(Generic[_D]):
         from one hypothesis.
     finish
         ``finish(measurements, model, draft, *, progress=None, memo=None) -> TrackResult``: the draft's
-        reported track with every finding; the same as one run from its hypothesis.
+        reported track with every finding; the same as one run from its hypothesis but for what ``join``
+        adds.
+    join
+        ``join(best, drafts) -> Draft``: the draft of lowest cost told of every hypothesis's draft before it
+        is finished (what the others found that bears on the reported track), or ``None``.
     """
 
     draft: Callable[..., _D]
     finish: Callable[..., TrackResult]
+    join: Callable[[_D, list[_D]], _D] | None = None
 
 
 def resolve_staged(stages: CostStages[_D], measurements: Measurements, model: TrackingModel, hyps: list[Initiation],
@@ -222,7 +227,11 @@ def resolve_staged(stages: CostStages[_D], measurements: Measurements, model: Tr
     their full runs would give too, but where a full run reports the
     posterior mean (a skewed posterior,
     :mod:`fgdoppler.estimators.spread`): there the draft's end is the
-    mode's, which the cost compared is the cost of.
+    mode's, which the cost compared is the cost of.  With ``stages.join``
+    the chosen draft first hears of the others' (the smoother: the tracks
+    the zone wall held in any hypothesis, :meth:`SmootherDraft.joined
+    <fgdoppler.estimators.smoother.SmootherDraft.joined>`), which a whole
+    run from its hypothesis alone does not.
     """
     t_begin = time.perf_counter()
     n = len(hyps)
@@ -231,8 +240,10 @@ def resolve_staged(stages: CostStages[_D], measurements: Measurements, model: Tr
               for i, h in enumerate(hyps)]
     costs = _costs([d.cost for d in drafts])
     best = int(np.argmin(costs))
+    chosen = drafts[best] if stages.join is None else stages.join(drafts[best], drafts)
     results = [d.result() if i != best else
-               stages.finish(measurements, model, d, progress=prefixed(progress, f"hypothesis {i + 1}/{n}"), memo=memo)
+               stages.finish(measurements, model, chosen, progress=prefixed(progress, f"hypothesis {i + 1}/{n}"),
+                             memo=memo)
                for i, d in enumerate(drafts)]
     return _lowest_cost(results, costs, best, t_begin)
 

@@ -50,6 +50,7 @@ from fgdoppler.estimators.settings import (
     TrackerSettings,
 )
 from fgdoppler.estimators.smoother import (
+    SmootherDraft,
     draft_smoother,
     finish_smoother,
     run_smoother,
@@ -112,7 +113,8 @@ ESTIMATORS: Mapping[str, EstimatorInfo] = MappingProxyType({
                                summary="fixed-lag smoother: each state estimated lag seconds after its time"),
     "smoother": EstimatorInfo(name="smoother", run=run_smoother, settings=SmootherSettings, resolution="cost",
                               online=False, summary="offline smoother: the whole recording by Levenberg-Marquardt",
-                              stages=CostStages(draft=draft_smoother, finish=finish_smoother)),
+                              stages=CostStages(draft=draft_smoother, finish=finish_smoother,
+                                                join=SmootherDraft.joined)),
     "particle": EstimatorInfo(name="particle", run=run_particle, settings=ParticleSettings, resolution="native",
                               online=True,
                               summary="particle filter: the posterior by sequential Monte Carlo (resample-move)"),

@@ -133,6 +133,10 @@ class SmootherSolution(Judged):
         The verdict's findings (:mod:`fgdoppler.estimators.verdict`).
     notes
         Messages of what happened (failed linear solves, ...).
+    released
+        Where the zone wall holds the first state: the track the solver
+        reaches without the wall from there (the ``boundary`` test's), as
+        (states, cost); ``None`` where the wall does not hold.
     """
 
     times: FloatArray
@@ -142,6 +146,7 @@ class SmootherSolution(Judged):
     iterations: int
     reasons: tuple[Reason, ...] = ()
     notes: tuple[str, ...] = ()
+    released: tuple[FloatArray, float] | None = None
 
 
 
@@ -374,7 +379,8 @@ def solve_smoother(
     start_task(progress, "Levenberg-Marquardt", None)
     x, cost, it, stop, notes = _levenberg_marquardt(prob, x, settings.max_iterations, progress)
     reasons = [] if stop is None else [Reason(code="not-converged", status="doubtful", message=stop)]
-    reasons += _boundary_reasons(prob, x, settings.max_iterations)
+    boundary, released = _boundary_test(prob, x, settings.max_iterations)
+    reasons += boundary
     covs = None
     if settings.covariances:
         covs, problem = _covariances(prob, x)
@@ -382,7 +388,7 @@ def solve_smoother(
             reasons.append(Reason(code="covariance", status="doubtful",
                                   message=f"marginal covariances indeterminate: {problem}"))
     return SmootherSolution(times=prob.times, states=x, covariances=covs, cost=cost, iterations=it,
-                            reasons=tuple(reasons), notes=tuple(notes))
+                            reasons=tuple(reasons), notes=tuple(notes), released=released)
 
 
 def _levenberg_marquardt(prob: _Problem, x: FloatArray, max_iterations: int, progress: Progress | None = None
@@ -428,17 +434,21 @@ def _levenberg_marquardt(prob: _Problem, x: FloatArray, max_iterations: int, pro
     return x, cost, it, f"LM reached {max_iterations} iterations without converging", notes
 
 
-def _boundary_reasons(prob: _Problem, x: FloatArray, max_iterations: int) -> list[Reason]:
+def _boundary_test(prob: _Problem, x: FloatArray, max_iterations: int
+                   ) -> tuple[list[Reason], tuple[FloatArray, float] | None]:
     """A ``boundary`` finding when the zone wall holds the first state: a likelihood-ratio test of the wall.
 
     As in the initiation: the solution is re-solved without the wall from
     where it stopped; ``"doubtful"`` when that lowers the objective by more
     than the χ²₁ 95 % quantile (the data prefer a start outside the zone),
     informational otherwise.  In 2-D :func:`run_smoother` also searches the
-    data's modes beyond the wall (:func:`_beyond_wall_2d`).
+    data's modes beyond the wall (:func:`_beyond_wall_2d`).  Returns the
+    findings and the released track (states, cost; ``None`` where the wall
+    does not hold), which a track that replaces this one is tested against
+    (:func:`_released_reason`).
     """
     if prob.wall_cost(x) == 0.0:
-        return []
+        return [], None
     inside = prob.data_cost(x)
     wall, prob.wall = prob.wall, None
     try:
@@ -446,7 +456,7 @@ def _boundary_reasons(prob: _Problem, x: FloatArray, max_iterations: int) -> lis
     finally:
         prob.wall = wall
     assert wall is not None
-    return [_wall_reason(wall[0], x, inside, free, free_cost)]
+    return [_wall_reason(wall[0], x, inside, free, free_cost)], (free, free_cost)
 
 
 def _wall_reason(zone: Zone, x: FloatArray, inside: float, free: FloatArray, free_cost: float,
@@ -1243,6 +1253,12 @@ class SmootherDraft:
         The findings so far (the solve's and the searches').
     started
         ``time.perf_counter()`` when the run began.
+    released
+        The tracks (states, cost) reached without the zone wall from the
+        solutions it held — those replaced on the way and the final one —,
+        and after :meth:`joined` those of the other hypotheses' drafts: the
+        final findings test the solution against them
+        (:func:`_released_reason`).
     """
 
     init: Initiation
@@ -1251,6 +1267,13 @@ class SmootherDraft:
     notes: tuple[str, ...]
     reasons: tuple[Reason, ...]
     started: float
+    released: tuple[tuple[FloatArray, float], ...] = ()
+
+    def joined(self, drafts: Sequence[SmootherDraft]) -> SmootherDraft:
+        """This draft, chosen among ``drafts`` (the hypotheses' of an ambiguous initiation, this one included),
+        with their released tracks: a hypothesis held at the zone's wall that lost by cost still says where
+        the data lead without the wall."""
+        return replace(self, released=tuple(r for d in drafts for r in d.released))
 
     @property
     def cost(self) -> float:
@@ -1336,14 +1359,17 @@ def draft_smoother(
     notes = list(sol.notes)
     searchable = settings.reinitiate and isinstance(model.observation, DopplerModel)
     misfit = _misfit(measurements, model, settings, sol) if searchable else None
+    discarded: list[SmootherSolution] = []
     if misfit is not None:
         # The solution cannot explain the data (a wrong basin inherited from the window):
         # offline, every measurement is available, so initiate again from all of them.
         notes.append(f"{misfit}: re-initiated from the whole recording")
         again = _reinitiate(measurements, model, settings, progress, memo=memo)
         if again is not None and again.cost < sol.cost:
+            discarded.append(sol)
             sol = again
             notes += list(again.notes)
+    searched = sol
     if model.dim == 3:
         sol, more_notes, mode_reasons = _restarts_3d(measurements, model, settings, sol, progress, memo)
     elif settings.mode_search:
@@ -1351,8 +1377,62 @@ def draft_smoother(
                                                   half_plane=init.half_plane, memo=memo)
     else:
         more_notes, mode_reasons = [], []
+    if sol is not searched:
+        discarded.append(searched)
     return SmootherDraft(init=init, settings=settings, solution=sol, notes=(*notes, *more_notes),
-                         reasons=(*sol.reasons, *mode_reasons), started=t_begin)
+                         reasons=(*sol.reasons, *mode_reasons), started=t_begin,
+                         released=tuple(d.released for d in (*discarded, sol) if d.released is not None))
+
+
+def _released_reason(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
+                     sol: SmootherSolution, released: Sequence[tuple[FloatArray, float]]) -> list[Reason]:
+    r"""A ``boundary`` finding, ``doubtful``, where a track the zone wall held gave way to ``sol`` and,
+    released from the wall, fits the data better than ``sol`` from a start outside the zone.
+
+    The ``boundary`` test (:func:`_boundary_test`) is a likelihood-ratio
+    test of the wall for the track it holds.  When the re-initiation or the
+    mode search replaces that track by one of lower cost inside the zone,
+    or the hypothesis it came from loses to another of an ambiguous
+    initiation (:meth:`SmootherDraft.joined`), its finding went with it,
+    though the constrained optimum is now ``sol`` and the unconstrained one
+    may still be the released track.  Measured on a random layout
+    (``studies/random_layouts.py --first 300 --speed-max 250``, draw 317:
+    two pairs, a target at 212 m/s, the zone's bound 200 m/s): the first
+    track was held at the bound 1.9 km from the truth's start (cost 520.1;
+    released, 127.5 at 213 m/s), failed the χ² check and was replaced by
+    the re-initiation's track inside the zone, 33.8 km from the truth with
+    σ 182 m and cost 132.1, which the wall does not hold and which fits
+    below the 90 % level of the search outside the zone
+    (:func:`_outside_zone_2d`): ``ok``.  On the same layout with seeds 0–7
+    an initiation hypothesis sits at the bound in 7; its track, held and
+    released, fits better than the reported one in 6 (by 4.1–11.7), while
+    the lowest-cost hypothesis, the same 33.5 km wrong track, was reported
+    ``ok`` in all 8.  So the released tracks are tested against ``sol`` at
+    the ``boundary`` test's level, :math:`\chi^2_{1,0.95}`: a released
+    track lies in a basin the wall cut (reached from the bound by descent),
+    not in a mode found by a search beyond the zone, whose threshold is
+    :data:`OUTSIDE_GAIN`.  Nothing where ``sol`` holds a ``boundary``
+    finding of its own or no track was held.
+    """
+    zone = model.zone
+    if zone is None or not released or any(r.code == "boundary" for r in sol.reasons):
+        return []
+    free, free_cost = min(released, key=lambda r: r[1])
+    excess, _ = zone.excess(free[0])
+    inside = _Problem(model, measurements, settings.huber_k, model.prior(), sol.times).data_cost(sol.states)
+    gain = inside - free_cost
+    limit = float(chi2.ppf(0.95, 1))
+    if gain <= limit or not np.any(excess != 0.0):
+        return []
+    d = zone.dim
+    text, advised = _held_start(zone.reaching(free[0]))
+    return [Reason(code="boundary", status="doubtful", zone=advised.box(), message=(
+        f"a track held at the zone's boundary was replaced by this one (cost {inside:.2f}), but released from the "
+        f"bound it fits the data better: cost {free_cost:.2f}, lower by {gain:.1f} > {limit:.2f}, starting "
+        f"{np.linalg.norm(free[0, :d] - sol.states[0, :d]) / 1e3:.1f} km away at "
+        f"{np.linalg.norm(free[0, d:]):.0f} m/s (excess along, across"
+        + (", altitude" if d == 3 else "") + ", speed: " + ", ".join(f"{v:.3g}" for v in excess)
+        + f"): the data prefer a start outside the zone; widen the zone to hold that start, {text}"))]
 
 
 def finish_smoother(measurements: Measurements, model: TrackingModel, draft: SmootherDraft, *,
@@ -1365,8 +1445,9 @@ def finish_smoother(measurements: Measurements, model: TrackingModel, draft: Smo
     progress = prefixed(progress, "smoother")
     notes = list(draft.notes)
     joint = _joint(measurements, model, settings, sol)
-    reasons = _final_findings(measurements, model, settings, sol, draft.init, list(draft.reasons), progress,
-                              memo, joint)
+    released = _released_reason(measurements, model, settings, sol, draft.released)
+    reasons = _final_findings(measurements, model, settings, sol, draft.init, [*draft.reasons, *released],
+                              progress, memo, joint)
     states, covs, offsets = _reported(measurements, model, settings, sol, reasons, notes,
                                       joint if settings.estimate_offsets else None)
     return _track(draft, states, covs, reasons, notes, offsets)
