@@ -17,7 +17,9 @@ reported covariances (:func:`~fgdoppler.estimators.ambiguity.resolve_staged`);
 resolved by :func:`~fgdoppler.estimators.ambiguity.resolve` each runs whole
 and repeats the searches.  Process time of the two, one after the other
 per recording, and whether every track, covariance, cost and finding is
-the same.
+the same (it may not be where a hypothesis that lost held its track at the
+zone's wall: only the staged run tests the reported track against that one
+released, :meth:`~fgdoppler.estimators.smoother.SmootherDraft.joined`).
 
 Run alone: ``python -m benchmarks --only modes`` (about two minutes).
 """

@@ -1415,14 +1415,17 @@ def _released_reason(measurements: Measurements, model: TrackingModel, settings:
     finding of its own or no track was held.
     """
     zone = model.zone
-    if zone is None or not released or any(r.code == "boundary" for r in sol.reasons):
+    if zone is None or any(r.code == "boundary" for r in sol.reasons):
         return []
-    free, free_cost = min(released, key=lambda r: r[1])
+    outside = [r for r in released if np.any(zone.excess(r[0][0])[0] != 0.0)]
+    if not outside:
+        return []
+    free, free_cost = min(outside, key=lambda r: r[1])
     excess, _ = zone.excess(free[0])
     inside = _Problem(model, measurements, settings.huber_k, model.prior(), sol.times).data_cost(sol.states)
     gain = inside - free_cost
     limit = float(chi2.ppf(0.95, 1))
-    if gain <= limit or not np.any(excess != 0.0):
+    if gain <= limit:
         return []
     d = zone.dim
     text, advised = _held_start(zone.reaching(free[0]))
@@ -1474,8 +1477,12 @@ def run_smoother(
     in any case (:func:`_modes_2d`): a distinct mode of lower cost replaces
     the track, and one that explains the data about as well is a
     ``competing`` finding; where the zone wall holds the track, the
-    ``boundary`` test also looks beyond the wall (:func:`_beyond_wall_2d`),
-    and where it does not but the track fits poorly (cost, or under the
+    ``boundary`` test also looks beyond the wall (:func:`_beyond_wall_2d`);
+    where the wall held a track that gave way to the reported one, that
+    track released from the wall is tested against it (:func:`_released_reason`,
+    a ``boundary`` finding; with an ambiguous initiation the held tracks of
+    every hypothesis, :meth:`SmootherDraft.joined`); and without a
+    ``boundary`` finding, where the track fits poorly (cost, or under the
     Huber loss the inliers' χ² statistic, above the :data:`OUTSIDE_LEVEL`
     χ² level), the smoother looks outside
     the zone on every side (:func:`_outside_zone_2d`, a ``zone`` finding).
