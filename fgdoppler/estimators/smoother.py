@@ -94,6 +94,9 @@ OUTSIDE_LEVEL = 0.90
 #: How much lower the cost of a track starting outside the zone must be for the ``zone`` finding of
 #: :func:`_outside_zone_2d`: χ²₁ at 99.9 %, the verdict's level.
 OUTSIDE_GAIN = float(chi2.ppf(0.999, 1))
+#: How much lower the cost of a track without the zone wall must be than that of the track the wall holds (or
+#: that a held track gave way to) for a ``doubtful`` ``boundary`` finding: χ²₁ at 95 %.
+WALL_GAIN = float(chi2.ppf(0.95, 1))
 #: A start found by the searches outside the zone nearer a bound of the searched box than this share of that
 #: side (or of the speed bound), or past it, is said to lie at the search's edge.
 EDGE_SHARE = 0.01
@@ -465,13 +468,11 @@ def _wall_reason(zone: Zone, x: FloatArray, inside: float, free: FloatArray, fre
     found without it (``free``, cost ``free_cost``; ``searched`` says where it was looked for, and whether the
     start found lies at its edge; ``advise`` gives the zone to try, asked only when the finding is
     ``doubtful`` — by default the one that holds ``free``'s start)."""
-    excess, _ = zone.excess(x[0])
     gain = inside - free_cost
-    limit = float(chi2.ppf(0.95, 1))
+    limit = WALL_GAIN
     d = zone.dim
-    axes = "along, across, altitude" if d == 3 else "along, across"
-    held = (f"the track's first state is held at the zone's boundary (excess {axes}, speed: "
-            + ", ".join(f"{v:.3g}" for v in excess) + f"); without the bound{searched} the cost is {free_cost:.2f} "
+    held = (f"the track's first state is held at the zone's boundary ({_excess_words(zone, x[0])}); without the "
+            f"bound{searched} the cost is {free_cost:.2f} "
             f"instead of {inside:.2f}, {np.linalg.norm(free[0, :d] - x[0, :d]) / 1e3:.1f} km away"
             f" (speed {np.linalg.norm(free[0, d:]):.0f} m/s)")
     if gain > limit:
@@ -480,6 +481,19 @@ def _wall_reason(zone: Zone, x: FloatArray, inside: float, free: FloatArray, fre
             f"{held}: the data prefer a start outside the zone (lower by {gain:.1f} > {limit:.2f}); widen the "
             f"zone to hold that start, {text}"), zone=advised.box())
     return Reason(code="boundary", status="ok", message=f"{held}: the data do not prefer a start outside it")
+
+
+def _excess_words(zone: Zone, x0: FloatArray) -> str:
+    """How far the start ``x0`` lies outside ``zone`` on each axis and in speed, in a finding's words."""
+    excess, _ = zone.excess(x0)
+    axes = "along, across, altitude" if zone.dim == 3 else "along, across"
+    return f"excess {axes}, speed: " + ", ".join(f"{v:.3g}" for v in excess)
+
+
+def _data_cost(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
+               sol: SmootherSolution) -> float:
+    """``sol``'s cost without the zone wall (data, motion and the model's weak prior)."""
+    return _Problem(model, measurements, settings.huber_k, model.prior(), sol.times).data_cost(sol.states)
 
 
 def _widened(zone: Zone, x0: FloatArray | None) -> Zone:
@@ -568,7 +582,7 @@ def _best_outside_2d(measurements: Measurements, model: TrackingModel, settings:
     if not free:
         return None
     best = min(free, key=lambda s: s.cost)
-    inside = _Problem(model, measurements, settings.huber_k, model.prior(), sol.times).data_cost(sol.states)
+    inside = _data_cost(measurements, model, settings, sol)
     w = wide.zone
     # a start on the searched box's edge (or past it) was found only as far as the search reached
     edge = "; the start found lies at the edge of the search: the target may start farther out still" \
@@ -1408,7 +1422,7 @@ def _released_reason(measurements: Measurements, model: TrackingModel, settings:
     released, fits better than the reported one in 6 (by 4.1–11.7), while
     the lowest-cost hypothesis, the same 33.5 km wrong track, was reported
     ``ok`` in all 8.  So the released tracks are tested against ``sol`` at
-    the ``boundary`` test's level, :math:`\chi^2_{1,0.95}`: a released
+    the ``boundary`` test's level, :data:`WALL_GAIN`: a released
     track lies in a basin the wall cut (reached from the bound by descent),
     not in a mode found by a search beyond the zone, whose threshold is
     :data:`OUTSIDE_GAIN`.  Nothing where ``sol`` holds a ``boundary``
@@ -1421,21 +1435,18 @@ def _released_reason(measurements: Measurements, model: TrackingModel, settings:
     if not outside:
         return []
     free, free_cost = min(outside, key=lambda r: r[1])
-    excess, _ = zone.excess(free[0])
-    inside = _Problem(model, measurements, settings.huber_k, model.prior(), sol.times).data_cost(sol.states)
+    inside = _data_cost(measurements, model, settings, sol)
     gain = inside - free_cost
-    limit = float(chi2.ppf(0.95, 1))
-    if gain <= limit:
+    if gain <= WALL_GAIN:
         return []
     d = zone.dim
     text, advised = _held_start(zone.reaching(free[0]))
     return [Reason(code="boundary", status="doubtful", zone=advised.box(), message=(
         f"a track held at the zone's boundary was replaced by this one (cost {inside:.2f}), but released from the "
-        f"bound it fits the data better: cost {free_cost:.2f}, lower by {gain:.1f} > {limit:.2f}, starting "
+        f"bound it fits the data better: cost {free_cost:.2f}, lower by {gain:.1f} > {WALL_GAIN:.2f}, starting "
         f"{np.linalg.norm(free[0, :d] - sol.states[0, :d]) / 1e3:.1f} km away at "
-        f"{np.linalg.norm(free[0, d:]):.0f} m/s (excess along, across"
-        + (", altitude" if d == 3 else "") + ", speed: " + ", ".join(f"{v:.3g}" for v in excess)
-        + f"): the data prefer a start outside the zone; widen the zone to hold that start, {text}"))]
+        f"{np.linalg.norm(free[0, d:]):.0f} m/s ({_excess_words(zone, free[0])}): the data prefer a start outside "
+        f"the zone; widen the zone to hold that start, {text}"))]
 
 
 def finish_smoother(measurements: Measurements, model: TrackingModel, draft: SmootherDraft, *,
