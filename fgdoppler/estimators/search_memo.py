@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from fgdoppler.measurements import Measurements
 
 if TYPE_CHECKING:
-    from fgdoppler.estimators.smoother import SmootherSolution
+    from fgdoppler.estimators.smoother_solve import SmootherSolution
 
 __all__ = ["SearchMemo"]
 

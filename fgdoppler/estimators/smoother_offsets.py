@@ -66,7 +66,7 @@ from fgdoppler.estimators.calibration import bias_sigmas
 from fgdoppler.estimators.marginals import bordered_chain_solve, check_covariances
 from fgdoppler.estimators.results import OffsetEstimate
 from fgdoppler.estimators.settings import SmootherSettings
-from fgdoppler.estimators.smoother import _levenberg_marquardt, _Problem
+from fgdoppler.estimators.smoother_solve import _levenberg_marquardt, _Problem
 from fgdoppler.geometry import mirrored
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
@@ -112,7 +112,7 @@ class JointSolution:
 
 
 class _JointProblem(_Problem):
-    """:class:`~fgdoppler.estimators.smoother._Problem` over the packed point ``[states.ravel(), offsets]``."""
+    """:class:`~fgdoppler.estimators.smoother_solve._Problem` over the packed point ``[states.ravel(), offsets]``."""
 
     def __init__(self, model: TrackingModel, meas: Measurements, settings: SmootherSettings,
                  times: FloatArray, sigmas: FloatArray, *, bare: bool = False, cut: int | None = None) -> None:

@@ -7,7 +7,7 @@ import pytest
 
 import fgdoppler as fd
 import fgdoppler.estimators.ambiguity as amb
-from fgdoppler.estimators.smoother import MODES_PER_PAIR
+from fgdoppler.estimators.smoother_modes import MODES_PER_PAIR
 
 
 def _case(s: int, r: int) -> tuple[fd.Measurements, fd.TrackingModel, fd.Initiation]:

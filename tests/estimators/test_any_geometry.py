@@ -113,7 +113,8 @@ def test_a_rival_mode_is_reported_by_its_cost_and_its_share_of_the_error() -> No
     # w / (1 + w) d^2 of the mean-square error above (3 sigma)^2 = 900 m^2: delta = 20 gives
     # 4.5e-5 * 1e6 = 45 m^2, not a rival; delta = 10 gives 6.7e-3 * 1e6 = 6,700 m^2, a rival.  A track
     # 20 m away (within 50 m) is the same mode.
-    from fgdoppler.estimators.smoother import SmootherSolution, _rival_reason
+    from fgdoppler.estimators.smoother_modes import _rival_reason
+    from fgdoppler.estimators.smoother_solve import SmootherSolution
 
     P = np.diag([100.0, 100.0, 1.0, 1.0])
 
@@ -156,18 +157,22 @@ def test_the_mode_search_keeps_to_the_half_plane_the_user_gave() -> None:
 def test_recordings_longer_than_the_sampled_span_are_not_searched(monkeypatch) -> None:
     # Over more than spread.MAX_SPAN (300 s) a deterministic constant-velocity fit of the whole recording
     # no longer describes a track with process noise: the search is not run there (and on a 30 s one it is).
-    import fgdoppler.estimators.smoother as smoother
+    import fgdoppler.estimators.smoother_modes as modes
+    import fgdoppler.estimators.smoother_zone as zone
+    from fgdoppler.estimators.spread import MAX_SPAN
 
     calls: list[int] = []
-    real = smoother._recording_starts
+    real = modes._recording_starts
 
     def counting(*args, **kwargs):  # type: ignore[no-untyped-def]
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(smoother, "_recording_starts", counting)
+    # the mode search and the searches outside the zone both start from the recording's initiation
+    for searcher in (modes, zone):
+        monkeypatch.setattr(searcher, "_recording_starts", counting)
     scen = fd.paper_scenarios()[3]  # case b 5 km, well observed
-    for duration, searched in ((30.0, True), (smoother.MAX_SPAN + 10.0, False)):
+    for duration, searched in ((30.0, True), (MAX_SPAN + 10.0, False)):
         calls.clear()
         m = fd.simulate(fd.Scenario(geometry=scen.geometry, x0=scen.x0, duration=duration, dt=scen.dt),
                         np.random.default_rng(0)).measurements
@@ -286,7 +291,7 @@ def test_the_search_beyond_the_wall_widens_only_the_bounds_that_hold() -> None:
     # A rotated, moved zone: the excess is measured in its own frame.  Beyond the box's far end along its
     # first axis by 1 km and 50 m/s over the speed bound: that end moves out by half the box's length
     # (WIDEN - 1 = 0.5 of 10 km) and the bound to 1.5 x 200 m/s; the near end and the across sides stay.
-    from fgdoppler.estimators.smoother import WIDEN, _widened
+    from fgdoppler.estimators.smoother_zone import WIDEN, _widened
 
     frame = fd.Frame(origin=(3e3, -2e3), basis=((0.6, 0.8), (-0.8, 0.6)))
     zone = fd.Zone(frame=frame, along=(0.0, 10e3), across=(-4e3, 4e3), speed_max=200.0)
@@ -358,8 +363,9 @@ def test_a_mode_outside_the_zone_is_found_when_the_track_fits_poorly(monkeypatch
     # find nothing better.  Gaussian loss, seed 5: its cost (153.2, chi-square p = 0.016) passes the
     # verdict's 99.9 % test.  Huber loss, seed 0, 5 % of the measurements +-100 m/s outliers: the robust
     # cost is no chi-square statistic; the inliers' (159.7, 6 outliers left out) is above the 90 % level.
-    import fgdoppler.estimators.smoother as smoother
+    import fgdoppler.estimators.smoother_zone as smoother_zone
     from fgdoppler.estimators.smoother import solve_smoother
+    from fgdoppler.estimators.smoother_zone import OUTSIDE_GAIN
 
     pairs = (fd.BistaticPair(tx=(10886.4, 21009.1), rx=(15300.2, 9875.2)),
              fd.BistaticPair(tx=(34369.1, 8539.3), rx=(-25773.7, 10075.6)))
@@ -381,7 +387,7 @@ def test_a_mode_outside_the_zone_is_found_when_the_track_fits_poorly(monkeypatch
         return r, err, float(np.sqrt(np.max(np.linalg.eigvalsh(e.covariances[-1][:2, :2]))))
 
     with monkeypatch.context() as mp:
-        mp.setattr(smoother, "OUTSIDE_LEVEL", 1.0)  # the search outside the zone never runs
+        mp.setattr(smoother_zone, "OUTSIDE_LEVEL", 1.0)  # the search outside the zone never runs
         # nor the split test of the motion model, which flags this wrong track too with the Gaussian loss
         # (its parts disagree: `manoeuvre`): what the zone search alone does is shown here
         before, err, sd = run(motion_check=False)
@@ -395,4 +401,4 @@ def test_a_mode_outside_the_zone_is_found_when_the_track_fits_poorly(monkeypatch
     model = fd.TrackingModel.of(g)
     free = solve_smoother(m, model, sim.truth.at(m.scans().times), fd.SmootherSettings(region_bound=False,
                           covariances=False, huber_k=k), prior=model.prior())
-    assert before.cost - free.cost > smoother.OUTSIDE_GAIN and np.hypot(*free.states[0, 2:]) > g.zone.speed_max
+    assert before.cost - free.cost > OUTSIDE_GAIN and np.hypot(*free.states[0, 2:]) > g.zone.speed_max

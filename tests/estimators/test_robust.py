@@ -94,7 +94,8 @@ def test_the_robust_linear_model_meets_the_cost_where_it_is_built() -> None:
     # The smoother's measurement rows carry the IRLS weights: at the linearisation point the model holds
     # w r^2 = k|r| for an outlier where the Huber cost holds 2k|r| - k^2.  The cost less model_gap is the
     # model's value at a zero step, for any states (here the truth-free initial trajectory) and damping.
-    from fgdoppler.estimators.smoother import _Problem, initial_trajectory
+    from fgdoppler.estimators.smoother import initial_trajectory
+    from fgdoppler.estimators.smoother_solve import _Problem
 
     m, model, init = _with_outliers(5, 0)
     settings = fd.SmootherSettings(huber_k=1.345)
@@ -116,7 +117,8 @@ def test_with_the_huber_loss_levenberg_marquardt_stops_at_a_minimum(s: int) -> N
     # from its own value (model_gap): LM, its damping raised at every step, stopped where such a step still
     # predicted 13 (case a 5 km) and 34 (case b 45 km), and 1.4-40 in cost above where it stops now in runs
     # 0-2 of case b 45 km, 7.6-16 in case a 5 km.
-    from fgdoppler.estimators.smoother import _Problem, initial_trajectory, solve_smoother
+    from fgdoppler.estimators.smoother import initial_trajectory
+    from fgdoppler.estimators.smoother_solve import _Problem, solve_smoother
 
     m, model, init = _with_outliers(s, 0)
     settings = fd.SmootherSettings(huber_k=1.345)
