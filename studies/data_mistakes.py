@@ -26,7 +26,7 @@ Three mistakes, each checked on the same recordings:
 Per recording, up to seven versions of the data: as simulated, every pair's Doppler negated, pair 0's
 alone negated, pairs 0 and 1 swapped, pair 1's clock late, and where the geometry has radars their
 Doppler halved and halved and negated.  For each: whether the initiation has a ``sign``,
-``swapped`` or ``radial`` finding (:func:`fgdoppler.estimators.initiation.mistake_reasons`) and
+``swapped`` or ``radial`` finding (:func:`fgdoppler.estimators.window_mistakes.mistake_reasons`) and
 what it names, and (``--track 1``, the default) the verdict of ``--estimator`` (default the
 offline smoother) from that initiation, with its position error at the last time of the truth
 against its own sigma along the major axis (wrong: beyond 3 sigma), and the mistake finding it

@@ -87,9 +87,8 @@ from fgdoppler.models.doppler import StackedTimes, cv_doppler, cv_doppler_jacobi
 from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
 
-__all__ = ["EVIDENCE_DRAWS", "METHODS", "OTHERS_NAMED", "Candidate", "Initiation", "InitiationSettings", "Mistake",
-           "find_mistake", "initiate", "inlier_statistic", "lm_params", "mistake_reason", "mistake_reasons",
-           "residual_landscape", "window_grid", "window_log_evidence"]
+__all__ = ["EVIDENCE_DRAWS", "METHODS", "Candidate", "Initiation", "InitiationSettings", "initiate", "inlier_statistic",
+           "lm_params", "residual_landscape", "window_grid", "window_log_evidence"]
 
 FloatArray = NDArray[np.float64]
 Method = Literal["grid", "ils", "lm"]
@@ -179,7 +178,7 @@ class InitiationSettings:
     mistake_check : bool, default True
         Where the window fails the verdict's χ² test, initiate again with the
         data as two common mistakes in a measurement file would have them
-        (:func:`mistake_reasons`): the Doppler of every pair, or of one pair,
+        (:func:`~fgdoppler.estimators.window_mistakes.mistake_reasons`): the Doppler of every pair, or of one pair,
         negated (a ``sign`` finding), or two pairs' labels exchanged (a
         ``swapped`` finding); a finding names the change that makes the
         window fit.  Costs nothing on a window that fits.
@@ -551,183 +550,11 @@ def initiate(
     result = _assemble(w, settings, fit, candidates, time.perf_counter() - t_begin)
     if not settings.mistake_check:
         return result
+    # the mistakes' module initiates changed windows itself
+    from fgdoppler.estimators.window_mistakes import mistake_reasons
+
     found = mistake_reasons(measurements, model, settings, result)
     return replace(result, reasons=(*result.reasons, *found)) if found else result
-
-
-#: The data's sign convention, as a ``sign`` finding states it (docs/data-formats.md says the same).
-SIGN_CONVENTION = ("fgdoppler's doppler is the bistatic range rate, negative for a target closing on the pair; "
-                   "from a Doppler shift f_D in Hz, doppler = -wavelength * f_D")
-
-
-#: Other changes under which a window fits that a mistake finding names (the rest it counts).
-OTHERS_NAMED = 2
-
-#: The mistakes in a measurement file that :func:`find_mistake` tries.
-MistakeCode = Literal["sign", "swapped", "radial"]
-
-
-@dataclass(frozen=True, kw_only=True)
-class Mistake:
-    """A change of a window's data, as a common mistake in writing a measurement file makes, under which it fits.
-
-    Parameters
-    ----------
-    code
-        ``"sign"`` (Doppler negated), ``"swapped"`` (two pairs' labels exchanged) or ``"radial"`` (radars'
-        Doppler doubled, or doubled and negated: a radial velocity given for twice it).
-    which
-        What was changed: ``"every pair"``, ``"pair 1"``, ``"pairs 0 and 1"``.
-    cost
-        The changed window's cost (it passes the χ² test at the settings' confidence).
-    factor
-        What the named pairs' Doppler was multiplied by: −1 (``sign``), 1 (``swapped``), 2 or −2
-        (``radial``).
-    others
-        The other changes under which the window passes the same test, by increasing cost.
-    """
-
-    code: MistakeCode
-    which: str
-    cost: float
-    factor: float
-    others: tuple[Mistake, ...] = ()
-
-    def change(self) -> str:
-        """The change in words: ``"the Doppler of pair 1 negated"``."""
-        if self.code == "swapped":
-            return f"the labels of {self.which} exchanged"
-        verb = {"sign": "negated", "radial": "doubled" if self.factor > 0 else "doubled and negated"}[self.code]
-        return f"the Doppler of {self.which} {verb}"
-
-
-def mistake_reasons(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
-                    result: Initiation) -> list[Reason]:
-    r"""A ``sign``, ``swapped`` or ``radial`` finding where the window fits only with its data changed as a
-    common mistake in writing a measurement file would have changed them.
-
-    * **Sign.**  Negating a pair's Doppler is not a change of the target's
-      state: the bistatic range rate :math:`\dot r = \mathbf v \cdot
-      (\mathbf u_T + \mathbf u_R)` changes sign with :math:`\mathbf v`,
-      but a track flown backwards visits its positions in the reverse
-      order, so a window with the opposite sign convention fits no
-      constant-velocity track (on the paper's six scenarios, 20 windows
-      each, the negated windows cost 48–442 at the median against the
-      99.9 % level 39.3, and a single pair negated 81–3,120).  Tried: every
-      pair's Doppler negated and, with more than one pair, each pair's
-      alone.
-    * **Swapped.**  Two pairs' labels exchanged (a geometry file listing the
-      receivers in another order than the recording).  Tried: each pair of
-      pairs.  Where the exchanged data fit another track, no window can
-      tell (the paper's closely spaced pairs: ``studies/data_mistakes.py``);
-      pair names in the geometry and the file rule that mistake out.
-    * **Radial.**  A radar's (a pair whose Tx and Rx are at one place or
-      nearly so, :attr:`~fgdoppler.geometry.Geometry.radars`) radial
-      velocity :math:`\dot r` given where fgdoppler reads its bistatic
-      range rate :math:`2\dot r` — or the radial velocity positive for an
-      approaching target, :math:`\lambda f_D / 2`, the radar formula
-      without the minus sign.  Tried: the Doppler of every radar, and with
-      more than one radar each radar's alone, multiplied by 2 and by −2.
-      Halved data are not those of a slower target (the positions would
-      follow the halved velocity, and the directions to the sensors would
-      change otherwise), yet a short window often fits them with another
-      track.
-
-    Only where ``result`` fails the verdict's χ² test
-    (:data:`VERDICT_LEVEL`); the change whose window passes the χ² test at
-    ``settings.confidence`` with the least cost is reported as a
-    ``doubtful`` finding, which also names the other changes that pass
-    (on radar layouts a short window often fits two of them:
-    ``studies/data_mistakes.py``).  A window that fails for another reason
-    (outliers, a manoeuvre, a wrong sigma) is mended by none of these and
-    gets no finding.  With :math:`P \ge 2` pairs that is :math:`1 + P + P(P-1)/2`
-    more initiations of the window (two pairs: 4; four: 11; one pair: 1),
-    and :math:`2(1 + R)` more with :math:`R \ge 2` radars among them (one
-    radar: 2), made only for a window that fails.
-    """
-    found = find_mistake(measurements, model, settings, result)
-    return [] if found is None else [mistake_reason(found, result.cost, settings.confidence)]
-
-
-def find_mistake(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
-                 result: Initiation) -> Mistake | None:
-    """The change of :func:`mistake_reasons` whose window passes with the least cost (``None``: none, or
-    ``result`` passes the verdict's χ² test)."""
-    if result.cost <= float(chi2.ppf(VERDICT_LEVEL, max(result.dof, 1))):
-        return None
-    pairs = [int(k) for k in np.unique(measurements.pair)]
-    changes: list[tuple[MistakeCode, str, float, Measurements]] = []  # (code, what changed, factor, the window)
-
-    def scaled(code: MistakeCode, which: list[int], factor: float) -> None:
-        gain = np.where(np.isin(measurements.pair, which), factor, 1.0)
-        changes.append((code, _named(which, pairs), factor, replace(measurements, doppler=gain * measurements.doppler)))
-
-    for flipped in [pairs] + ([[k] for k in pairs] if len(pairs) > 1 else []):
-        scaled("sign", flipped, -1.0)
-    geometry = getattr(model.observation, "geometry", None)
-    radars = [k for k in (geometry.radars if isinstance(geometry, Geometry) else ()) if k in pairs]
-    for group in [radars] + ([[k] for k in radars] if len(radars) > 1 else []) if radars else []:
-        for factor in (2.0, -2.0):
-            scaled("radial", group, factor)
-    for i, a in enumerate(pairs):
-        for b in pairs[i + 1:]:
-            label = np.where(measurements.pair == a, b, np.where(measurements.pair == b, a, measurements.pair))
-            changes.append(("swapped", f"pairs {a} and {b}", 1.0, Measurements.from_arrays(
-                measurements.time, label, measurements.doppler, measurements.sigma, sort=True)))
-    quiet = replace(settings, mistake_check=False)
-    passing = []
-    for k, (code, which, factor, changed) in enumerate(changes):
-        try:
-            again = initiate(changed, model, quiet)
-        except ValueError:  # doubled data may need a speed the zone does not allow: no fit in it
-            continue
-        if again.passes_chi2:
-            passing.append((again.cost, k, Mistake(code=code, which=which, cost=float(again.cost), factor=factor)))
-    if not passing:
-        return None
-    ranked = [m for *_, m in sorted(passing, key=lambda p: (p[0], p[1]))]
-    return replace(ranked[0], others=tuple(ranked[1:]))
-
-
-def _named(which: list[int], pairs: list[int]) -> str:
-    """``"every pair"``, ``"pair 1"`` or ``"pairs 0, 2 and 3"``."""
-    if which == pairs:
-        return "every pair"
-    if len(which) == 1:
-        return f"pair {which[0]}"
-    return f"pairs {', '.join(map(str, which[:-1]))} and {which[-1]}"
-
-
-def mistake_reason(found: Mistake, cost: float, confidence: float) -> Reason:
-    """The ``doubtful`` finding that names ``found``, against the window's ``cost`` as given, and the other
-    changes under which the window passes the same test (at most :data:`OTHERS_NAMED` of them by name, with
-    their costs: the least cost is the likeliest change, not the only one the data allow)."""
-    fits = (f"with {found.change()} the window fits (cost {found.cost:.2f}, passing the {confidence:.0%} chi-square "
-            f"test, against {cost:.2f} as given)")
-    column = "" if found.which == "every pair" else f" of {found.which}"
-    if found.code == "swapped":
-        advice = ("the measurement file and the geometry may list those pairs in different orders; if so, exchange "
-                  "them in one of the two, or name the pairs in the geometry (name = ...) and give the names in the "
-                  "file's pair column")
-    elif found.code == "radial" and found.factor > 0:
-        advice = ("the file likely gives the radar's radial velocity (the rate of change of its range) where "
-                  "fgdoppler reads the bistatic range rate, for a radar the rate of change of twice its range; if "
-                  f"so, double the doppler column{column}")
-    elif found.code == "radial":
-        advice = ("the file likely gives the radar's radial velocity positive for an approaching target (from a "
-                  "Doppler shift f_D in Hz, wavelength * f_D / 2) where fgdoppler reads the bistatic range rate, for "
-                  "a radar the rate of change of twice its range, negative for a closing target (doppler = "
-                  f"-wavelength * f_D); if so, multiply the doppler column{column} by -2")
-    else:
-        advice = (f"the data likely follow the opposite sign convention ({SIGN_CONVENTION}); if so, negate the "
-                  f"doppler column{column}")
-    named = [f"{m.change()} (cost {m.cost:.2f})" for m in found.others[:OTHERS_NAMED]]
-    more = len(found.others) - len(named)
-    also = "" if not named else (
-        f"; the window passes the same test with {', '.join(named[:-1]) + ' or ' if len(named) > 1 else ''}"
-        f"{named[-1]}" + (f" and {more} more such change{'s' if more > 1 else ''}" if more else "")
-        + " too: check " + ("that change" if len(found.others) == 1 else "those changes") + " as well")
-    return Reason(code=found.code, status="doubtful", message=f"{fits}: {advice}{also}")
 
 
 def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: tuple[Candidate, ...],

@@ -1,7 +1,7 @@
 r"""Mistakes in a measurement file that the initiation window did not show, looked for later in the recording.
 
 The initiation names common mistakes where its window fails the χ²
-test and fits with the data changed (:func:`~fgdoppler.estimators.initiation.mistake_reasons`):
+test and fits with the data changed (:func:`~fgdoppler.estimators.window_mistakes.mistake_reasons`):
 the opposite sign convention (the Doppler of every pair, or of one pair,
 negated: a ``sign`` finding), two pairs' labels exchanged (``swapped``)
 and a radar's radial velocity given for its bistatic range rate
@@ -33,16 +33,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from fgdoppler.estimators.initiation import (
-    Initiation,
-    InitiationSettings,
-    Mistake,
-    find_mistake,
-    initiate,
-    mistake_reason,
-)
+from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate
 from fgdoppler.estimators.results import TrackResult
 from fgdoppler.estimators.verdict import Reason
+from fgdoppler.estimators.window_mistakes import Mistake, find_mistake, mistake_reason
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
@@ -51,7 +45,7 @@ __all__ = ["LATER_WINDOWS", "MISTAKE_CODES", "later_mistakes"]
 #: Windows initiated after the initiation window where a track fails its residual test.
 LATER_WINDOWS = 3
 
-#: The findings of a mistake in the measurement file (:func:`~fgdoppler.estimators.initiation.mistake_reasons`).
+#: The findings of a mistake in the measurement file (:func:`~fgdoppler.estimators.window_mistakes.mistake_reasons`).
 MISTAKE_CODES = ("sign", "swapped", "radial")
 
 
@@ -75,7 +69,7 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     nothing on a track that fits; on one that does not, :math:`n`
     initiations and, for each window that fails,
     :math:`1 + P + P(P-1)/2` more with :math:`P` pairs (and more with radars,
-    :func:`~fgdoppler.estimators.initiation.mistake_reasons`) — unless
+    :func:`~fgdoppler.estimators.window_mistakes.mistake_reasons`) — unless
     ``reference``, a track on the same data and initiation whose own
     ``fit`` finding is not ``ok`` either and whose settings have the same
     ``huber_k``, made the same check already: its mistake

@@ -390,7 +390,7 @@ def test_a_mistake_finding_names_the_other_changes_that_pass_with_their_costs() 
     the 95 % test when initiated (checked by initiating it)."""
     from dataclasses import replace
 
-    from fgdoppler.estimators.initiation import Mistake, find_mistake, mistake_reason
+    from fgdoppler.estimators.window_mistakes import Mistake, find_mistake, mistake_reason
 
     def m(code: str, which: str, cost: float, factor: float) -> Mistake:
         return Mistake(code=code, which=which, cost=cost, factor=factor)  # type: ignore[arg-type]

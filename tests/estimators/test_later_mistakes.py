@@ -130,7 +130,7 @@ def test_the_change_that_makes_the_most_windows_pass_is_named_not_the_likeliest_
     passes in both: it is named, from its first window, with that window's other change and its cost.  Among
     changes that pass in as many windows the least total cost wins."""
     import fgdoppler.estimators.later_mistakes as module
-    from fgdoppler.estimators.initiation import Mistake
+    from fgdoppler.estimators.window_mistakes import Mistake
 
     m, model, init, _, _ = negated
     sign0 = Mistake(code="sign", which="pair 0", cost=10.0, factor=-1.0)
