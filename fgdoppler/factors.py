@@ -105,10 +105,14 @@ def _measurement_error(
     jacobians: list[FloatArray] | None,
 ) -> FloatArray:
     state = values.atVector(this.keys()[0])
-    x = np.broadcast_to(state, (channels.size, state.size))
+    at_state = getattr(model, "at_state", None)
+    if at_state is not None:  # the channels were checked when the factor was built
+        h, H = at_state(state, channels, jacobian=jacobians is not None)
+    else:
+        x = np.broadcast_to(state, (channels.size, state.size))
+        h, H = (model.predict(x, channels), None) if jacobians is None else model.predict_and_jacobian(x, channels)
     if jacobians is None:
-        return _robust(model.predict(x, channels) - z, None, sigma, huber_k)[0]
-    h, H = model.predict_and_jacobian(x, channels)
+        return _robust(h - z, None, sigma, huber_k)[0]
     e, J = _robust(h - z, H, sigma, huber_k)
     assert J is not None
     jacobians[0] = _checked(J, channels.size, state.size, "measurement factor")

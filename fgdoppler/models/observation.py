@@ -114,6 +114,40 @@ class DopplerModel:
         assert dp is not None and dv is not None
         return h, np.concatenate([dp, dv], axis=-1)
 
+    def at_state(self, state: FloatArray, channels: NDArray[np.intp], *, jacobian: bool
+                 ) -> tuple[FloatArray, FloatArray | None]:
+        """Doppler ``(n,)`` of the pairs ``channels`` at one ``state`` ``(state_dim,)``, and with ``jacobian`` its
+        Jacobian ``(n, state_dim)``: :meth:`predict` and :meth:`predict_and_jacobian` of ``state`` repeated, to
+        the bit, without their checks of ``channels``.
+
+        For the graphs' measurement factors, which check their channels once
+        when built and are then called at every linearisation and every
+        trial step: the checks and the repeated state cost more than the
+        arithmetic of a scan's few pairs.
+        """
+        if state.shape != (self.geometry.state_dim,):
+            raise ValueError(f"a {self.geometry.dim}-D geometry takes states of {self.geometry.state_dim} numbers, "
+                             f"got shape {state.shape}")
+        if channels.size <= _SMALL:
+            row = state.tolist()
+            n = channels.size
+            h = np.empty(n)
+            H = np.empty((n, self.geometry.state_dim)) if jacobian else None
+            for i, k in enumerate(channels.tolist()):
+                hv, Hrow = self.scalar(row, k)
+                h[i] = hv
+                if H is not None:
+                    H[i] = Hrow
+            return h, H
+        d = self.geometry.dim
+        x = np.broadcast_to(state, (channels.size, state.size))
+        h, dp, dv, _ = _terms(x[:, :d], x[:, d:], self.geometry.tx[channels], self.geometry.rx[channels],
+                              jacobian=jacobian)
+        if not jacobian:
+            return h, None
+        assert dp is not None and dv is not None
+        return h, np.concatenate([dp, dv], axis=-1)
+
     def predict_along(self, x0: ArrayLike, times: ArrayLike, channels: ArrayLike) -> FloatArray:
         r"""Doppler ``(n, m)`` of constant-velocity tracks from states ``x0`` ``(n, state_dim)`` at ``times`` ``(m,)``.
 

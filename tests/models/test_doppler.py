@@ -211,3 +211,35 @@ def test_doppler_along_tracks_is_the_per_state_model_to_the_bit(rng: np.random.G
     start = np.concatenate([g.rx[0] - v, v])
     h = model.predict_along(start[None], np.array([0.0, 1.0, 2.0]), np.array([0, 0, 0]))
     assert np.isnan(h[0, 1]) and np.all(np.isfinite(h[0, [0, 2]]))
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_one_states_pairs_are_the_checked_model_to_the_bit(rng: np.random.Generator, dim: int) -> None:
+    """``at_state`` (the graphs' measurement factors, which check their pairs once) is ``predict`` and
+    ``predict_and_jacobian`` of the state repeated, exactly — with a scan's few pairs (plain floats) and with
+    more than four (the vectorised path) — and refuses a state of the wrong length or at a sensor as they do."""
+    from fgdoppler.models.observation import DopplerModel
+
+    g2 = random_geometry(rng, 6)
+    g = g2 if dim == 2 else fd.Geometry(pairs=tuple(
+        fd.BistaticPair(tx=(*p.tx, float(rng.uniform(0, 50))), rx=(*p.rx, 0.0)) for p in g2.pairs))
+    model = DopplerModel(geometry=g)
+    x2 = random_states(rng, g2, 20, min_dist=3e3)
+    states = x2 if dim == 2 else np.c_[x2[:, :2], rng.uniform(500, 3e3, 20), x2[:, 2:], rng.uniform(-20, 20, 20)]
+    for x in states:
+        for n in (1, 2, 4, 5, 9):
+            c = rng.integers(0, 6, n).astype(np.intp)
+            xs = np.broadcast_to(x, (n, x.size))
+            h, H = model.at_state(x, c, jacobian=True)
+            h_ref, H_ref = model.predict_and_jacobian(xs, c)
+            np.testing.assert_array_equal(h, h_ref)
+            np.testing.assert_array_equal(H, H_ref)
+            h_only, none = model.at_state(x, c, jacobian=False)
+            np.testing.assert_array_equal(h_only, model.predict(xs, c))
+            assert none is None
+    with pytest.raises(ValueError, match="states of"):
+        model.at_state(states[0][:-1], np.array([0], dtype=np.intp), jacobian=False)
+    at_rx = np.concatenate([g.rx[1], np.ones(dim)])
+    for n in (1, 5):
+        with pytest.raises(ValueError, match="coincide with a sensor"):
+            model.at_state(at_rx, np.ones(n, dtype=np.intp), jacobian=True)
