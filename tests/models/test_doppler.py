@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import fgdoppler as fd
+from fgdoppler.models.observation import DopplerModel
 from tests.conftest import random_geometry, random_states
 
 
@@ -170,7 +171,6 @@ def test_bad_inputs() -> None:
 
 
 def test_measurement_model_small_and_vectorised_paths_agree(rng: np.random.Generator) -> None:
-    from fgdoppler.models.observation import DopplerModel
 
     g = random_geometry(rng, 3)
     model = DopplerModel(geometry=g)
@@ -186,18 +186,23 @@ def test_measurement_model_small_and_vectorised_paths_agree(rng: np.random.Gener
         model.predict(np.array([[*g.rx[0], 1.0, 1.0]]), [0])
 
 
+def _model_and_states(rng: np.random.Generator, dim: int, pairs: int, n: int
+                      ) -> tuple[fd.Geometry, DopplerModel, np.ndarray]:
+    """A random geometry of ``pairs`` pairs (3-D: transmitters 0-50 m up, receivers on the ground), its model,
+    and ``n`` states 3 km or more from every sensor (3-D: 0.5-3 km up, climbing or sinking at up to 20 m/s)."""
+    g2 = random_geometry(rng, pairs)
+    g = g2 if dim == 2 else fd.Geometry(pairs=tuple(
+        fd.BistaticPair(tx=(*p.tx, float(rng.uniform(0, 50))), rx=(*p.rx, 0.0)) for p in g2.pairs))
+    x2 = random_states(rng, g2, n, min_dist=3e3)
+    x = x2 if dim == 2 else np.c_[x2[:, :2], rng.uniform(500, 3e3, n), x2[:, 2:], rng.uniform(-20, 20, n)]
+    return g, DopplerModel(geometry=g), x
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 def test_doppler_along_tracks_is_the_per_state_model_to_the_bit(rng: np.random.Generator, dim: int) -> None:
     """``predict_along`` and ``cv_doppler`` evaluate coordinate by coordinate; the per-state model, on the
     propagated states, does the same arithmetic in another layout: the numbers must agree exactly."""
-    from fgdoppler.models.observation import DopplerModel
-
-    g2 = random_geometry(rng, 3)
-    g = g2 if dim == 2 else fd.Geometry(pairs=tuple(
-        fd.BistaticPair(tx=(*p.tx, float(rng.uniform(0, 50))), rx=(*p.rx, 0.0)) for p in g2.pairs))
-    model = DopplerModel(geometry=g)
-    x2 = random_states(rng, g2, 40, min_dist=3e3)
-    x = x2 if dim == 2 else np.c_[x2[:, :2], rng.uniform(500, 3e3, 40), x2[:, 2:], rng.uniform(-20, 20, 40)]
+    g, model, x = _model_and_states(rng, dim, 3, 40)
     t = np.sort(rng.uniform(0.0, 30.0, 25))
     c = rng.integers(0, 3, 25)
     along = model.predict_along(x, t, c)
@@ -218,14 +223,7 @@ def test_one_states_pairs_are_the_checked_model_to_the_bit(rng: np.random.Genera
     """``at_state`` (the graphs' measurement factors, which check their pairs once) is ``predict`` and
     ``predict_and_jacobian`` of the state repeated, exactly — with a scan's few pairs (plain floats) and with
     more than four (the vectorised path) — and refuses a state of the wrong length or at a sensor as they do."""
-    from fgdoppler.models.observation import DopplerModel
-
-    g2 = random_geometry(rng, 6)
-    g = g2 if dim == 2 else fd.Geometry(pairs=tuple(
-        fd.BistaticPair(tx=(*p.tx, float(rng.uniform(0, 50))), rx=(*p.rx, 0.0)) for p in g2.pairs))
-    model = DopplerModel(geometry=g)
-    x2 = random_states(rng, g2, 20, min_dist=3e3)
-    states = x2 if dim == 2 else np.c_[x2[:, :2], rng.uniform(500, 3e3, 20), x2[:, 2:], rng.uniform(-20, 20, 20)]
+    g, model, states = _model_and_states(rng, dim, 6, 20)
     for x in states:
         for n in (1, 2, 4, 5, 9):
             c = rng.integers(0, 6, n).astype(np.intp)
