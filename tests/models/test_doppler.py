@@ -171,7 +171,6 @@ def test_bad_inputs() -> None:
 
 
 def test_measurement_model_small_and_vectorised_paths_agree(rng: np.random.Generator) -> None:
-
     g = random_geometry(rng, 3)
     model = DopplerModel(geometry=g)
     x = random_states(rng, g, 200)
