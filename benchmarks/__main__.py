@@ -10,6 +10,7 @@ from pathlib import Path
 from benchmarks import (
     bench_accuracy,
     bench_ekf,
+    bench_factors,
     bench_grid,
     bench_long,
     bench_mode_search,
@@ -24,7 +25,7 @@ from benchmarks import (
 BENCHES = {"grid": bench_grid, "ekf": bench_ekf, "scaling": bench_scaling, "montecarlo": bench_montecarlo,
            "long": bench_long, "particle": bench_particle, "modes": bench_mode_search,
            "motion": bench_motion_check, "shared": bench_shared_reference, "widening": bench_widening,
-           "accuracy": bench_accuracy}
+           "accuracy": bench_accuracy, "factors": bench_factors}
 
 
 def main() -> None:
