@@ -98,9 +98,7 @@ class DopplerModel:
         x, c = self._check(states, channels)
         if c.size <= _SMALL:
             return self._small(x, c, jacobian=False)[0]
-        d = self.geometry.dim
-        h, _, _, _ = _terms(x[:, :d], x[:, d:], self.geometry.tx[c], self.geometry.rx[c], jacobian=False)
-        return h
+        return self._vectorised(x, c, jacobian=False)[0]
 
     def predict_and_jacobian(self, states: ArrayLike, channels: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Doppler ``(n,)`` and Jacobian ``(n, state_dim)``."""
@@ -109,8 +107,17 @@ class DopplerModel:
             h, H = self._small(x, c, jacobian=True)
             assert H is not None
             return h, H
+        h, H = self._vectorised(x, c, jacobian=True)
+        assert H is not None
+        return h, H
+
+    def _vectorised(self, x: FloatArray, c: NDArray[np.intp], *, jacobian: bool
+                    ) -> tuple[FloatArray, FloatArray | None]:
+        """Doppler of the rows ``x`` on the pairs ``c`` (and their Jacobian) in numpy: many rows."""
         d = self.geometry.dim
-        h, dp, dv, _ = _terms(x[:, :d], x[:, d:], self.geometry.tx[c], self.geometry.rx[c], jacobian=True)
+        h, dp, dv, _ = _terms(x[:, :d], x[:, d:], self.geometry.tx[c], self.geometry.rx[c], jacobian=jacobian)
+        if not jacobian:
+            return h, None
         assert dp is not None and dv is not None
         return h, np.concatenate([dp, dv], axis=-1)
 
@@ -139,14 +146,7 @@ class DopplerModel:
                 if H is not None:
                     H[i] = Hrow
             return h, H
-        d = self.geometry.dim
-        x = np.broadcast_to(state, (channels.size, state.size))
-        h, dp, dv, _ = _terms(x[:, :d], x[:, d:], self.geometry.tx[channels], self.geometry.rx[channels],
-                              jacobian=jacobian)
-        if not jacobian:
-            return h, None
-        assert dp is not None and dv is not None
-        return h, np.concatenate([dp, dv], axis=-1)
+        return self._vectorised(np.broadcast_to(state, (channels.size, state.size)), channels, jacobian=jacobian)
 
     def predict_along(self, x0: ArrayLike, times: ArrayLike, channels: ArrayLike) -> FloatArray:
         r"""Doppler ``(n, m)`` of constant-velocity tracks from states ``x0`` ``(n, state_dim)`` at ``times`` ``(m,)``.
