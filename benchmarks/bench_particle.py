@@ -33,7 +33,7 @@ _SCRIPT = r"""
 import hashlib, json, sys, time
 import numpy as np
 import fgdoppler as fd
-import fgdoppler.estimators.particle as particle
+import fgdoppler.estimators.particle_posterior as particle_posterior
 import fgdoppler.models.observation as observation
 from fgdoppler.models.doppler import _along, _terms
 
@@ -47,7 +47,7 @@ def strided(x, t, tx, rx, *, singular="raise"):
 before = sys.argv[1] == "before"
 fn = strided if before else _along
 if before:
-    particle.CHUNK_ROWS, observation._along = 1 << 20, strided
+    particle_posterior.CHUNK_ROWS, observation._along = 1 << 20, strided
 
 def cpu(f, repeat):
     out = []

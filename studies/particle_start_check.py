@@ -34,7 +34,7 @@ import fgdoppler as fd
 from benchmarks.bench_accuracy import _on_grid
 from fgdoppler.analysis.metrics import compare_rmse, errors, time_averaged_rmse
 from fgdoppler.analysis.workers import one_blas_thread
-from fgdoppler.estimators.particle import WindowPosterior, window_posterior
+from fgdoppler.estimators.window_posterior import WindowPosterior, window_posterior
 
 SCENARIO = 1  # case a, start 25 km, in fd.paper_scenarios()
 VARIANTS = {"tempered 4096": (True, 4096), "one-step 4096": (False, 4096),

@@ -136,7 +136,7 @@ def posterior_hypotheses(init: Initiation, measurements: Measurements, model: Tr
     ValueError
         If no start inside the zone explains the window.
     """
-    from fgdoppler.estimators.particle import window_posterior
+    from fgdoppler.estimators.window_posterior import window_posterior
     from fgdoppler.estimators.settings import ParticleSettings
 
     # One-step importance sampling, not the particle estimator's tempered start: eight terms of the

@@ -116,7 +116,7 @@ smoother: the probe's quadratic model is that cost's own,
 (against :math:`\mathbf P_0^{-1}`, whose freedom along the axis the
 constant-velocity track does not have, a quadratic cost looks
 :math:`1/\text{share}` times steeper), and the skewness check measures the
-samples' mean from the sampled posterior's own mode (:meth:`_Posterior.mode`,
+samples' mean from the sampled posterior's own mode (:meth:`~fgdoppler.estimators.particle_posterior._Posterior.mode`,
 Levenberg–Marquardt from the estimate), from which the smoother's estimate
 differs by what the process noise lets the track do.  With σ = 0.1 and
 0.2 m/s (case a 45 km, shares 0.32 and 0.81) comparing with the smoother
@@ -232,7 +232,7 @@ from numpy.typing import NDArray
 
 from fgdoppler.estimators.curvature import probe_axis, probe_rises
 from fgdoppler.estimators.linearized_posterior import linearized_filter, mean_square_errors
-from fgdoppler.estimators.particle import _Data, _Posterior, _weighted_cov
+from fgdoppler.estimators.particle_posterior import _Data, _Posterior, _weighted_cov
 from fgdoppler.estimators.settings import ParticleSettings
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.measurements import Measurements
@@ -415,7 +415,7 @@ def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
             P0: FloatArray, info: FloatArray, ratio: float, rng: np.random.Generator) -> PosteriorSpread | None:
     """The posterior mean's track and covariance where the mean lies beyond :data:`MEAN_SHIFT_MIN` of the mode.
 
-    The mode is the sampled posterior's own (:meth:`_Posterior.mode`, from
+    The mode is the sampled posterior's own (:meth:`~fgdoppler.estimators.particle_posterior._Posterior.mode`, from
     ``x0``); the reported track is the estimate moved by the mean's shift
     from ``x0``.  Importance sampling alone (no moves) decides; only then are the samples
     moved, so a track whose posterior is Gaussian costs one evaluation of

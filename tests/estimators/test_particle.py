@@ -11,16 +11,14 @@ from scipy.stats import chi2
 import fgdoppler as fd
 from fgdoppler.estimators.ambiguity import _mixture
 from fgdoppler.estimators.initiation import InitiationSettings
-from fgdoppler.estimators.particle import (
+from fgdoppler.estimators.particle import run_map, run_particle
+from fgdoppler.estimators.particle_posterior import (
     MIN_TEMPER_STEP,
     _Data,
     _next_temperature,
     _Posterior,
-    _window_posterior,
-    run_map,
-    run_particle,
-    window_posterior,
 )
+from fgdoppler.estimators.window_posterior import _window_posterior, window_posterior
 
 
 def _case(case: str, x: float, seed: int) -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation]:

@@ -1,0 +1,590 @@
+r"""The particle estimator's posterior: weighted samples of the anchor state and the target they follow.
+
+The samples are of the state :math:`\mathbf x_a` at an anchor time
+:math:`t_a`; after the measurements :math:`z_{1:k}` since the anchor their
+target is
+
+.. math::
+
+    \pi_k(\mathbf x_a) \propto p(\mathbf x_a)\,
+        \exp\!\Big(-\tfrac12\sum_{j\le k}\rho\big((z_j - h_j(\mathbf F(t_j - t_a)\mathbf x_a))/\sigma_j\big)\Big),
+
+with :math:`\rho` the squared or Huber loss and :math:`p(\mathbf x_a)` the
+zone (and the initiation's half plane) as support times the model's weak
+prior, or after a re-anchoring the moment-matched Gaussian of the older
+data.  ``_Posterior`` holds the samples, their weights and log-posteriors,
+and the operations of iterated batch importance sampling on them: the
+tempered start from a Gaussian mixture (``sample_from``), reweighting,
+systematic resampling, random-walk Metropolis moves per cluster, the
+re-anchoring test and step, the moments, and the climb to the posterior's
+mode.  :mod:`fgdoppler.estimators.particle` runs them over a recording
+(the algorithm, the re-anchoring rule and the calibration offsets are
+described there); :mod:`fgdoppler.estimators.window_posterior` samples the
+initiation window with them, and :mod:`fgdoppler.estimators.spread` samples
+a smoothed track's posterior.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.special import logsumexp
+
+from fgdoppler.estimators.grid import HalfPlane
+from fgdoppler.estimators.offset_posterior import OffsetPrior
+from fgdoppler.estimators.settings import ParticleSettings
+from fgdoppler.models.observation import predict_along
+from fgdoppler.models.robust import huber_rho, huber_weights
+from fgdoppler.models.tracking import TrackingModel
+
+__all__: list[str] = []
+
+FloatArray = NDArray[np.float64]
+
+#: (Particle, measurement) entries of the likelihood evaluated at once: bounds the memory of a move and keeps
+#: its arrays small (the Doppler inside is blocked further, :data:`fgdoppler.models.doppler.ALONG_BLOCK`).
+CHUNK_ROWS = 1 << 15
+#: Smallest tempering step of the start (:meth:`_Posterior.sample_from`): at most 100 stages.
+MIN_TEMPER_STEP = 0.01
+#: Random-walk Metropolis scale per state dimension (Roberts, Gelman & Gilks: 2.38²/d for d unknowns).
+RW_SCALE_NUMERATOR = 2.38**2
+#: Levenberg–Marquardt iterations of one climb to the posterior mode (:meth:`_Posterior.mode`); a climb from the
+#: previous scan's mode usually ends after one to three.
+MODE_ITERATIONS = 30
+#: Damping increases tried per iteration before a climb gives up.
+MODE_DAMPING_TRIES = 12
+#: A climb stops when a step raises the log posterior by less than this (then it lies about
+#: :math:`\sqrt{2\cdot 10^{-6}}` ≈ 0.0014 standard deviations from the optimum).
+MODE_TOLERANCE = 1e-6
+
+
+@dataclass
+class _Data:
+    """The measurements since the anchor (times relative to it)."""
+
+    t: FloatArray
+    pair: NDArray[np.intp]
+    z: FloatArray
+    sigma: FloatArray
+
+    def add(self, t: FloatArray, pair: NDArray[np.intp], z: FloatArray, sigma: FloatArray) -> None:
+        self.t = np.concatenate([self.t, t])
+        self.pair = np.concatenate([self.pair, pair])
+        self.z = np.concatenate([self.z, z])
+        self.sigma = np.concatenate([self.sigma, sigma])
+
+
+class _Posterior:
+    """The particles of :math:`\\mathbf x_a`, their weights and log-posteriors, and the target they follow."""
+
+    def __init__(self, model: TrackingModel, settings: ParticleSettings, t_anchor: float, data: _Data, *,
+                 half_plane: HalfPlane | None = None) -> None:
+        self.model = model
+        self.half_plane = half_plane  # the start's side, given by the user: part of the prior's support
+        self.settings = settings
+        self.t_anchor = t_anchor
+        self.data = data
+        self.gauss: tuple[FloatArray, FloatArray] | None = None  # moment-matched prior after re-anchoring
+        self.x = np.empty((0, model.n))
+        self.logw = np.empty(0)
+        self.logpost = np.empty(0)
+        self.label = np.empty(0, dtype=np.intp)
+        # calibration offsets integrated out (None: calibrated): each particle's per-pair statistics s and the
+        # data's information a since the anchor (:mod:`fgdoppler.estimators.offset_posterior`)
+        self.offsets = OffsetPrior.independent(settings.bias_sigma, model.observation.n_channels, model.n)
+        n_off = 0 if self.offsets is None else self.offsets.size
+        self.s = np.empty((0, n_off))
+        self.a = np.zeros(n_off) if self.offsets is None else self._info(data.pair, data.sigma)
+
+    def _info(self, pair: NDArray[np.intp], sigma: FloatArray) -> FloatArray:
+        """The offsets' information :math:`a_p` of the given measurements."""
+        assert self.offsets is not None
+        E = self.offsets.incidence(pair, sigma)
+        return np.asarray(np.sum(E * E, axis=0), dtype=float)
+
+    # -- target -------------------------------------------------------------------------
+    def log_prior(self, x: FloatArray) -> FloatArray:
+        if self.gauss is not None:
+            m, Li = self.gauss
+            e = (x - m) @ Li.T
+            return -0.5 * np.einsum("ij,ij->i", e, e)
+        out = np.where(self.supported(x), 0.0, -np.inf)
+        prior = self.model.prior()
+        if prior is not None:
+            Li = np.linalg.inv(np.linalg.cholesky(prior[1]))
+            e = (x - prior[0]) @ Li.T
+            out -= 0.5 * np.einsum("ij,ij->i", e, e)
+        return out
+
+    def supported(self, x: FloatArray) -> NDArray[np.bool_]:
+        """Whether each anchor state lies in the first anchor's prior support (the zone, the half plane)."""
+        ok = np.ones(x.shape[0], dtype=bool)
+        if self.gauss is not None:  # after a re-anchoring the prior is the Gaussian summary alone
+            return ok
+        if self.model.zone is not None:
+            ok &= self.model.zone.contains(x)
+        if self.half_plane is not None:
+            ok &= self.half_plane.contains(x)
+        return ok
+
+    def loglik(self, x: FloatArray, t: FloatArray, pair: NDArray[np.intp], z: FloatArray,
+               sigma: FloatArray) -> FloatArray:
+        """:math:`-\\tfrac12\\sum\\rho` of the given measurements for every row of ``x`` (``-inf`` if undefined)."""
+        return self.loglik_and_sums(x, t, pair, z, sigma)[0]
+
+    def loglik_and_sums(self, x: FloatArray, t: FloatArray, pair: NDArray[np.intp], z: FloatArray,
+                        sigma: FloatArray) -> tuple[FloatArray, FloatArray]:
+        r""":meth:`loglik`, and with offsets their statistics :math:`\mathbf s` ``(N, P)`` for every row of ``x``.
+
+        :math:`s_p = \sum_{j\in p}(z_j - h_j)/\sigma_j^2` (:mod:`fgdoppler.estimators.offset_posterior`;
+        ``(N, 0)`` without offsets).  The offsets' own terms are not added here.
+        """
+        out = np.empty(x.shape[0])
+        E = None if self.offsets is None else self.offsets.incidence(pair, sigma)
+        sums = np.zeros((x.shape[0], 0 if E is None else E.shape[1]))
+        step = max(1, CHUNK_ROWS // max(t.size, 1))
+        for a in range(0, x.shape[0], step):
+            h = predict_along(self.model.observation, x[a:a + step], t, pair)
+            r = (z - h) / sigma
+            with np.errstate(invalid="ignore"):
+                ll = -0.5 * huber_rho(r, self.settings.huber_k).sum(axis=1)
+            out[a:a + step] = np.where(np.isfinite(ll), ll, -np.inf)
+            if E is not None:
+                sums[a:a + step] = np.where(np.isfinite(r), r, 0.0) @ E
+        return out, sums
+
+    def log_target(self, x: FloatArray) -> FloatArray:
+        return self.log_target_and_stats(x)[0]
+
+    def log_target_and_stats(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        r"""The log target of every row of ``x`` and, with offsets, their statistics :math:`\mathbf s` ``(N, P)``."""
+        lp = self.log_prior(x)
+        ok = np.isfinite(lp)
+        out = np.full(x.shape[0], -np.inf)
+        s = np.zeros((x.shape[0], self.s.shape[1]))
+        if np.any(ok):
+            d = self.data
+            ll, s[ok] = self.loglik_and_sums(x[ok], d.t, d.pair, d.z, d.sigma)
+            out[ok] = lp[ok] + ll
+            if self.offsets is not None:
+                out[ok] += self.offsets.extra(x[ok], s[ok], self.a)
+        return out, s
+
+    # -- particle operations -------------------------------------------------------------
+    def sample_from(self, comps: list[tuple[FloatArray, FloatArray]], n: int, moves: int,
+                    rng: np.random.Generator, *, tempered: bool = True) -> float | None:
+        r"""Sample the target by adaptive tempering from an equal-weight Gaussian mixture, then move.
+
+        The proposal :math:`q` is the mixture with each covariance inflated
+        4× (doubled standard deviations: it must cover a valley's
+        curvature).  ``n`` draws of :math:`q` on the target's support are
+        carried through the tempered targets
+        :math:`\pi_\beta \propto q^{1-\beta}\,\pi^{\beta}`,
+        :math:`0 = \beta_0 < \beta_1 < \dots < \beta_m = 1`: each next
+        :math:`\beta` is the largest whose incremental weights
+        :math:`\exp\big((\beta_{j+1} - \beta_j)(\log\pi - \log q)\big)`
+        keep the effective sample size at ``ess_threshold`` × ``n``
+        (bisection), after which the particles are resampled and moved by
+        ``move_steps`` Metropolis steps on :math:`\pi_{\beta_{j+1}}`
+        (sequential Monte Carlo samplers, Del Moral, Doucet & Jasra 2006).
+        Then ``moves`` steps on :math:`\pi`.  Importance sampling from
+        :math:`q` in one step left an effective sample size of 15–100 of
+        4,096 on the paper's windows, and with sensors on one line it put
+        all the mass on one of two mirror modes of equal mass.
+        ``tempered=False`` keeps that one step (importance weights
+        :math:`\pi/q`, resampled).  Returns the last moves' acceptance rate,
+        or ``None`` when no draw has a finite posterior (the particles are
+        then left unchanged).
+        """
+        inflate = 4.0
+        chols = np.array([_safe_cholesky(inflate * P, inflate * P) for _, P in comps])
+        means = np.array([m for m, _ in comps])
+        k = len(comps)
+        half_logdet = np.array([np.sum(np.log(np.diag(c))) for c in chols])
+
+        def log_q(y: FloatArray) -> FloatArray:
+            logq = np.empty((k, y.shape[0]))
+            for c in range(k):
+                sol = np.linalg.solve(chols[c], (y - means[c]).T).T
+                logq[c] = -0.5 * np.sum(sol * sol, axis=1) - half_logdet[c]
+            return np.asarray(logsumexp(logq, axis=0), dtype=float)
+
+        label = rng.integers(0, k, n)
+        x = means[label] + np.einsum("nij,nj->ni", chols[label], rng.standard_normal((n, means.shape[1])))
+        logpost, s = self.log_target_and_stats(x)
+        if not np.any(np.isfinite(logpost)):
+            return None
+        self.x, self.label, self.logpost, self.s = x, label, logpost, s
+        if not tempered:
+            self.logw = logpost - log_q(x)
+            self.resample(rng)
+            return self.move(moves, rng)
+        self.logw = np.where(np.isfinite(logpost), 0.0, -np.inf)
+        self.resample(rng)  # q on the target's support
+        lq = log_q(self.x)
+        beta = 0.0
+        while beta < 1.0:
+            delta = self.logpost - lq
+            nxt = _next_temperature(delta, beta, self.settings.ess_threshold * n)
+            self.logw = (nxt - beta) * delta
+            beta = nxt
+            lq = lq[self.resample(rng)]
+            self.move(self.settings.move_steps, rng, tempering=(beta, log_q, lq))
+        return self.move(moves, rng)
+
+    def weights(self) -> FloatArray:
+        return np.exp(self.logw - logsumexp(self.logw))
+
+    def ess(self) -> float:
+        w = self.weights()
+        return float(1.0 / np.sum(w * w))
+
+    def resample(self, rng: np.random.Generator) -> NDArray[np.intp]:
+        """Systematic resampling to equal weights; returns the indices drawn."""
+        n = self.x.shape[0]
+        c = np.cumsum(self.weights())
+        c[-1] = 1.0
+        idx = np.searchsorted(c, (rng.random() + np.arange(n)) / n)
+        self.x, self.logpost, self.label, self.s = self.x[idx], self.logpost[idx], self.label[idx], self.s[idx]
+        self.logw = np.zeros(n)
+        return idx
+
+    def move(self, steps: int, rng: np.random.Generator, *,
+             tempering: tuple[float, Callable[[FloatArray], FloatArray], FloatArray] | None = None) -> float:
+        r"""Random-walk Metropolis on the target, each cluster with its own covariance; mean acceptance.
+
+        ``tempering = (β, log q, log q of the particles)`` targets
+        :math:`q^{1-\beta}\pi^\beta` instead (:meth:`sample_from`); the
+        last array is updated in place.
+        """
+        if steps == 0:
+            return float("nan")
+        chol = self._cluster_chol()
+        scale = RW_SCALE_NUMERATOR / self.model.n
+        accepted = []
+        for _ in range(steps):
+            eps = rng.standard_normal(self.x.shape)
+            prop = self.x + np.sqrt(scale) * np.einsum("nij,nj->ni", chol[self.label], eps)
+            lt, s_prop = self.log_target_and_stats(prop)
+            if tempering is None:
+                ratio = lt - self.logpost
+            else:
+                beta, log_q, lq = tempering
+                lq_prop = log_q(prop)
+                with np.errstate(invalid="ignore"):  # -inf - -inf where both lie off the support
+                    ratio = beta * (lt - self.logpost) + (1.0 - beta) * (lq_prop - lq)
+            accept = np.log(rng.random(self.x.shape[0])) < ratio
+            self.x[accept], self.logpost[accept], self.s[accept] = prop[accept], lt[accept], s_prop[accept]
+            if tempering is not None:
+                lq[accept] = lq_prop[accept]
+            rate = float(np.mean(accept))
+            accepted.append(rate)
+            # keep the acceptance in the efficient range (a curved valley wants smaller steps)
+            scale *= 0.5 if rate < 0.15 else (1.5 if rate > 0.5 else 1.0)
+        return float(np.mean(accepted))
+
+    def _cluster_chol(self) -> FloatArray:
+        """Cholesky factor per cluster label ``(n_labels, n, n)`` of the particles' covariance in it."""
+        n_labels = int(self.label.max()) + 1
+        out = np.empty((n_labels, self.model.n, self.model.n))
+        w = self.weights()
+        everyone = _weighted_cov(self.x, w)
+        for k in range(n_labels):
+            sel = self.label == k
+            cov = _weighted_cov(self.x[sel], w[sel]) if np.count_nonzero(sel) >= 20 else everyone
+            out[k] = _safe_cholesky(cov, everyone)
+        return out
+
+    def moments(self, t: float) -> tuple[FloatArray, FloatArray]:
+        """Mean and covariance of the state at ``t``."""
+        m = self.model.motion
+        dt = t - self.t_anchor
+        xs = m.propagate(self.x, dt) if dt != 0 else self.x
+        w = self.weights()
+        mean = w @ xs
+        cov = _weighted_cov(xs, w)
+        if dt > 0:
+            cov = cov + m.Q(dt)
+        return mean, cov
+
+    def noise_share(self, t: float) -> float:
+        r"""How much process noise the likelihood since the anchor leaves out: :math:`\lambda_{\max}`.
+
+        The particles follow the track :math:`\mathbf F(t - t_a)\mathbf x_a`
+        without the noise the motion model adds over the span, whose
+        covariance is :math:`\mathbf Q(t - t_a)`.  Measured against the
+        particles' own covariance at :math:`t`, :math:`\mathbf P_t = \mathbf L\mathbf L^\top`
+        (without that noise), the share is the largest eigenvalue of
+        :math:`\mathbf L^{-1}\mathbf Q(t - t_a)\mathbf L^{-\top}`, the largest
+        generalised eigenvalue of :math:`(\mathbf Q, \mathbf P_t)`: the
+        variance the noise adds, as a fraction of the posterior's variance,
+        in the direction where that fraction is largest.
+        """
+        m = self.model.motion
+        dt = t - self.t_anchor
+        if dt <= 0:
+            return 0.0
+        Li = np.linalg.inv(_scaled_cholesky(_weighted_cov(m.propagate(self.x, dt), self.weights())))
+        return float(np.max(np.linalg.eigvalsh(Li @ m.Q(dt) @ Li.T)))
+
+    def misfit(self) -> float:
+        r"""How far the particles' target is from the Gaussian of their moments: :math:`\operatorname{Var}_\pi[r]`.
+
+        With :math:`\boldsymbol\mu`, :math:`\mathbf P` the particles'
+        weighted mean and covariance and :math:`d_i^2` each particle's squared
+        Mahalanobis distance from them,
+        :math:`r_i = \log\pi(\mathbf x_i) + \tfrac12 d_i^2` is the log ratio of
+        the target to that Gaussian up to a constant, so its weighted variance
+        is 0 for a Gaussian target and, for a small departure, twice the
+        Kullback–Leibler divergence :math:`\mathrm{KL}(\pi\,\|\,N(\boldsymbol\mu, \mathbf P))`:
+        what a re-anchoring's Gaussian summary would lose.
+        """
+        w = self.weights()
+        ok = np.isfinite(self.logpost) & (w > 0)
+        w = w[ok] / np.sum(w[ok])
+        x = self.x[ok]
+        z = np.linalg.solve(_scaled_cholesky(_weighted_cov(x, w)), (x - w @ x).T).T
+        r = self.logpost[ok] + 0.5 * np.sum(z * z, axis=1)
+        return float(w @ (r - w @ r) ** 2)
+
+    def should_reanchor(self, t: float) -> bool:
+        r"""Whether to move the anchor to ``t`` (module docstring, "Re-anchoring").
+
+        After ``max_span`` seconds (the moves' cost); before that when the
+        process noise the likelihood leaves out exceeds ``max_noise_share``
+        (:meth:`noise_share`, :math:`\lambda`) and costs more than a Gaussian
+        summary would: :math:`\lambda^2/4 \ge \operatorname{Var}_\pi[r]/2`
+        (:meth:`misfit`), the two Kullback–Leibler divergences to second
+        order — of :math:`N(0, 1+\lambda)` from :math:`N(0, 1)` along the
+        direction the noise affects most, and of the Gaussian summary from
+        the particles' target.  So a curved or multimodal posterior keeps
+        its anchor while the noise left out is small against its spread.
+        """
+        st = self.settings
+        if t - self.t_anchor > st.max_span:
+            return True
+        share = self.noise_share(t)
+        return share > st.max_noise_share and share**2 >= 2.0 * self.misfit()
+
+    def spread_about(self, x_anchor: FloatArray, t: float) -> tuple[FloatArray, FloatArray]:
+        r"""The state at ``t`` of the track from anchor state ``x_anchor``, and the particles' second moment about it.
+
+        :math:`\hat{\mathbf x}_t = \mathbf F(t - t_a)\,\mathbf x_a` and
+        :math:`\sum_i w_i(\mathbf x_{i,t} - \hat{\mathbf x}_t)(\mathbf x_{i,t} - \hat{\mathbf x}_t)^\top
+        + \mathbf Q(t - t_a)`: the posterior mean-square error of reporting :math:`\hat{\mathbf x}_t`, which is
+        the posterior covariance plus the outer product of the point's distance from the posterior mean.
+        """
+        m = self.model.motion
+        dt = t - self.t_anchor
+        xs = m.propagate(self.x, dt) if dt != 0 else self.x
+        point = m.propagate(x_anchor, dt) if dt != 0 else np.array(x_anchor, dtype=float)
+        cov = _weighted_cov(xs, self.weights(), centre=point)
+        if dt > 0:
+            cov = cov + m.Q(dt)
+        return point, cov
+
+    def mode(self, previous: FloatArray | None = None) -> FloatArray:
+        r"""The posterior mode (an anchor state) by Levenberg–Marquardt, warm-started from ``previous``.
+
+        Each climb minimises :math:`-\log\pi_k`: Gauss–Newton on the
+        whitened residuals :math:`r_j = (h_j(\mathbf F(t_j - t_a)\mathbf x) - z_j)/\sigma_j`
+        (rows :func:`_along_jacobian`, Huber by its IRLS weights) and the
+        prior's quadratic term, each step damped by
+        :math:`\lambda\,\mathrm{diag}(\mathbf A)` and kept only if it raises
+        :math:`\log\pi_k` itself — so a step off the prior's support (the zone,
+        the half plane: both convex) is never kept.  Stops when a step gains
+        less than :data:`MODE_TOLERANCE` or after :data:`MODE_ITERATIONS`.
+
+        The climb from ``previous`` (the last report's mode, which the new data
+        move a little) ends on a local maximum of value :math:`v`; a particle
+        standing higher than :math:`v` lies in another basin, and only then is
+        a second climb run from the highest particle, the higher end kept.
+        Without ``previous`` the climb starts from the highest particle.  Either
+        way the mode stands at least as high as every particle.
+        """
+        return self.mode_and_switch(previous)[0]
+
+    def mode_and_switch(self, previous: FloatArray | None = None) -> tuple[FloatArray, float | None]:
+        r""":meth:`mode`, and by how much the new basin's peak stands higher (log density) when it left ``previous``'s.
+
+        The second element is ``None`` when the mode stayed in the basin of
+        ``previous`` (or there was none); otherwise the gain
+        :math:`\log\pi_k(\text{new}) - \log\pi_k(\text{old})`, so
+        :math:`e^{\text{gain}}` is how much more probable the new peak is: a
+        small gain means two peaks the data barely tell apart.
+        """
+        best = self.x[int(np.argmax(self.logpost))]
+        if previous is None:
+            return self._climb(np.array(best, dtype=float))[0], None
+        x, value = self._climb(np.array(previous, dtype=float))
+        if float(np.max(self.logpost)) > value:
+            y, other = self._climb(np.array(best, dtype=float))
+            if other > value:
+                return y, other - value
+        return x, None
+
+    def _prior_quadratic(self) -> tuple[FloatArray, FloatArray] | None:
+        """``(m, L^{-1})`` of the prior's Gaussian factor (the re-anchored summary or the weak prior), if any."""
+        if self.gauss is not None:
+            return self.gauss
+        prior = self.model.prior()
+        if prior is None:
+            return None
+        return prior[0], np.asarray(np.linalg.inv(np.linalg.cholesky(prior[1])), dtype=float)
+
+    def _linearised(self, x: FloatArray, quad: tuple[FloatArray, FloatArray] | None
+                    ) -> tuple[float, FloatArray, FloatArray]:
+        r""":math:`\log\pi_k(\mathbf x)` (``-inf`` off the support), whitened residuals and their Jacobian."""
+        d = self.data
+        empty = np.empty(0), np.empty((0, self.model.n))
+        if not self.supported(x[None])[0]:
+            return -np.inf, *empty
+        try:
+            h, J = _along_jacobian(self.model, x, d.t, d.pair)
+        except ValueError:  # the track passes through a sensor
+            return -np.inf, *empty
+        r = (h - d.z) / d.sigma
+        Jw = J / d.sigma[:, None]
+        if self.offsets is not None:  # the joint problem in (x, b) at the offsets' conditional mode
+            r, Jw = self.offsets.profile(x, r, Jw, self.offsets.incidence(d.pair, d.sigma))
+        value = -0.5 * float(np.sum(huber_rho(r, self.settings.huber_k)))
+        if quad is not None:
+            e = quad[1] @ (x - quad[0])
+            value -= 0.5 * float(e @ e)
+        return (value if np.isfinite(value) else -np.inf), r, Jw
+
+    def _climb(self, x: FloatArray) -> tuple[FloatArray, float]:
+        # each trial is scored by the evaluation that also linearises there: one model call per step
+        quad = self._prior_quadratic()
+        value, r, Jw = self._linearised(x, quad)
+        if not np.isfinite(value):
+            return x, value
+        lam = 1e-3
+        for _ in range(MODE_ITERATIONS):
+            wr = huber_weights(r, self.settings.huber_k)
+            A = Jw.T @ (wr[:, None] * Jw)
+            g = Jw.T @ (wr * r)
+            if quad is not None:
+                m, Li = quad
+                n = x.size  # with offsets the offsets' columns follow the state's
+                A[:n, :n] += Li.T @ Li
+                g[:n] += Li.T @ (Li @ (x - m))
+            D = np.diag(np.maximum(np.diag(A), 1e-12 * max(float(np.max(np.diag(A))), 1e-300)))
+            gain = 0.0
+            for _ in range(MODE_DAMPING_TRIES):
+                try:
+                    # with offsets only the state's step is taken: the trial re-profiles the offsets
+                    trial = x - np.linalg.solve(A + lam * D, g)[:x.size]
+                except np.linalg.LinAlgError:
+                    lam *= 4.0
+                    continue
+                v, r_t, J_t = self._linearised(trial, quad)
+                if v > value:
+                    gain = v - value
+                    x, value, r, Jw = trial, v, r_t, J_t
+                    lam = max(lam / 3.0, 1e-9)
+                    break
+                lam *= 4.0
+            if gain < MODE_TOLERANCE:
+                break
+        return x, value
+
+    def reanchor(self, t: float, rng: np.random.Generator) -> None:
+        """Move the anchor to ``t``: propagate with process noise, summarise the older data by a Gaussian."""
+        m = self.model.motion
+        dt = t - self.t_anchor
+        L = np.linalg.cholesky(m.Q(dt))
+        x_old = self.x
+        self.x = m.propagate(self.x, dt) + rng.standard_normal(self.x.shape) @ L.T
+        w = self.weights()
+        mean = w @ self.x
+        cov = _weighted_cov(self.x, w)
+        self.gauss = (mean, np.asarray(np.linalg.inv(_scaled_cholesky(cov)), dtype=float))
+        if self.offsets is not None:  # the offsets' joint Gaussian with the new anchor states, conditioned on them
+            self.offsets = self.offsets.reanchored(x_old, self.x, self.s, self.a, w)
+            self.s = np.zeros_like(self.s)
+            self.a = np.zeros_like(self.a)
+        self.t_anchor = t
+        self.data = _Data(t=np.empty(0), pair=np.empty(0, dtype=np.intp), z=np.empty(0), sigma=np.empty(0))
+        # no data since the anchor: the offsets add nothing (OffsetPrior.extra is 0 at s = a = 0)
+        self.logpost = self.log_prior(self.x)
+
+
+def _next_temperature(delta: FloatArray, beta: float, target_ess: float) -> float:
+    r"""The largest :math:`\beta' \in (\beta, 1]` whose weights :math:`e^{(\beta'-\beta)\delta}` keep ``target_ess``.
+
+    The effective sample size :math:`(\sum w)^2/\sum w^2` falls
+    monotonically in :math:`\beta'`; bisection to 1e-6, and a step of at
+    least :data:`MIN_TEMPER_STEP`, so that the schedule ends.
+    """
+    def ess(b: float) -> float:
+        w = np.exp((b - beta) * (delta - np.max(delta)))
+        return float(np.sum(w) ** 2 / np.sum(w * w))
+
+    if ess(1.0) >= target_ess:
+        return 1.0
+    lo, hi = beta, 1.0
+    while hi - lo > 1e-6:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if ess(mid) >= target_ess else (lo, mid)
+    return min(1.0, max(lo, beta + MIN_TEMPER_STEP))
+
+
+def _weighted_cov(x: FloatArray, w: FloatArray, centre: FloatArray | None = None) -> FloatArray:
+    """Weighted second moment of the rows of ``x`` about ``centre`` (default: their weighted mean, the covariance)."""
+    s = float(np.sum(w))
+    if x.shape[0] == 0 or s <= 0:
+        return np.eye(x.shape[1])
+    d = x - (w @ x / s if centre is None else centre)
+    return (d * (w / s)[:, None]).T @ d
+
+
+def _safe_cholesky(cov: FloatArray, fallback: FloatArray) -> FloatArray:
+    for c in (cov, fallback):
+        c = 0.5 * (c + c.T)
+        scale = max(float(np.max(np.abs(np.diag(c)))), 1e-12)
+        try:
+            return np.linalg.cholesky(c + 1e-10 * scale * np.eye(c.shape[0]))
+        except np.linalg.LinAlgError:
+            continue
+    return np.diag(np.sqrt(np.maximum(np.abs(np.diag(fallback)), 1e-6)))
+
+
+def _scaled_cholesky(cov: FloatArray) -> FloatArray:
+    r"""Cholesky factor of ``cov`` regularised relative to each variance: :math:`\mathbf D^{1/2}\mathbf L`.
+
+    :math:`\mathbf L` factors the correlation matrix (plus :math:`10^{-10}`
+    on its diagonal), :math:`\mathbf D` the variances.  A posterior known to
+    hundreds of metres along the track and to millimetres per second in some
+    velocity has variances ten orders of magnitude apart: a regularisation
+    relative to the largest (:func:`_safe_cholesky`) would swamp the smallest
+    and halve the shares measured against it.
+    """
+    d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+    return d[:, None] * _safe_cholesky(cov / np.outer(d, d), np.eye(d.size))
+
+
+def _along_jacobian(model: TrackingModel, x: FloatArray, t: FloatArray, pair: NDArray[np.intp]
+                    ) -> tuple[FloatArray, FloatArray]:
+    r"""Doppler :math:`h_j` along the constant-velocity track from ``x`` and its Jacobian with respect to ``x``.
+
+    Along the track :math:`\mathbf x(t) = \mathbf F(t)\mathbf x`, so the row of a measurement at
+    :math:`t_j` is :math:`\mathbf H(\mathbf x(t_j))\,\mathbf F(t_j)`: with
+    :math:`\mathbf H = [\mathbf H_p\ \mathbf H_v]`, :math:`[\mathbf H_p\ \ t_j\mathbf H_p + \mathbf H_v]`.
+    Returns ``(h (m,), J (m, 2d))``.
+
+    Raises
+    ------
+    ValueError
+        If the track passes through a sensor (the model's Jacobian is undefined there).
+    """
+    n = model.n
+    states = model.motion.propagate(np.broadcast_to(x, (t.size, n)), t)
+    h, H = model.observation.predict_and_jacobian(states, pair)
+    H = np.asarray(H, dtype=float).reshape(t.size, n)
+    d = n // 2
+    return np.asarray(h, dtype=float).reshape(t.size), np.concatenate([H[:, :d], H[:, :d] * t[:, None] + H[:, d:]],
+                                                                       axis=1)
