@@ -132,7 +132,7 @@ def measurement_factor(
 
     Error ``h(x)[channels] - z``; one Python callback per state.  With
     ``huber_k`` each row is robust on its own
-    (:func:`~fgdoppler.estimators.gating.huber_residuals`).
+    (:func:`~fgdoppler.models.robust.huber_residuals`).
     """
     c = np.asarray(channels, dtype=np.intp).reshape(-1)
     z = np.asarray(values, dtype=float).reshape(-1)

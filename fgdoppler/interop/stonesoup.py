@@ -273,7 +273,7 @@ def from_track(track: Track, epoch: dt.datetime, *, estimator: str | None = None
     (defaults otherwise: ``"stonesoup"``, ``"filtered"``).  A covariance
     with NaN is marked indeterminate; particle states contribute their
     weighted mean and covariance.  The result carries no verdict findings:
-    :func:`fgdoppler.judge` or the metrics apply to it like to any other.
+    :func:`~fgdoppler.estimators.judge.judge` or the metrics apply to it like to any other.
     """
     times, xs, Ps = [], [], []
     for s in track.states:
