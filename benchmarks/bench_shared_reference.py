@@ -3,8 +3,10 @@
 Each of the six paper scenarios, ``RUNS`` recordings simulated as the
 accuracy benchmark does (seed ``SEED``), one initiation; the process time
 of ``fd.run_estimators(fd.ESTIMATORS, ...)`` (the filters' verdicts share one
-reference smoother) and of ``fd.run_estimator(name, ...)`` for every name
-(each filter runs its own), one after the other per recording so that load
+reference smoother, their restart checks their fits of the data so far,
+:class:`~fgdoppler.estimators.restart.FreshFits`) and of
+``fd.run_estimator(name, ...)`` for every name (each filter runs its own
+smoother and its own fits), one after the other per recording so that load
 affects both alike; and whether every status, finding and estimate is the
 same.
 
@@ -47,7 +49,7 @@ def run() -> list[Row]:
             count += 1
             differ += sum(not _same(together[n], alone[n]) for n in fd.ESTIMATORS)
     return [Row(name=f"every estimator ({len(fd.ESTIMATORS)}) on one recording with its verdict: fd.run_estimators "
-                     f"(one reference smoother) vs run_estimator per name; paper scenarios, {RUNS} runs each; "
+                     f"(one reference smoother, the restart checks' fits shared) vs run_estimator per name; paper scenarios, {RUNS} runs each; "
                      f"answers differing in anything: {differ} of {count * len(fd.ESTIMATORS)}",
                 value=f"{shared:.1f} s vs {each:.1f} s CPU", ratio=shared / each,
                 target="< 1 (the same answers)", met=shared < each and differ == 0)]

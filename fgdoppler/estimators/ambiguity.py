@@ -136,8 +136,8 @@ def posterior_hypotheses(init: Initiation, measurements: Measurements, model: Tr
     ValueError
         If no start inside the zone explains the window.
     """
-    from fgdoppler.estimators.window_posterior import window_posterior
     from fgdoppler.estimators.settings import ParticleSettings
+    from fgdoppler.estimators.window_posterior import window_posterior
 
     # One-step importance sampling, not the particle estimator's tempered start: eight terms of the
     # faithful (wider) posterior resolve its valley more coarsely, and a tracker stays near its term;

@@ -36,7 +36,7 @@ from fgdoppler.estimators.isam2 import run_isam2
 from fgdoppler.estimators.judge import judge, track_reference
 from fgdoppler.estimators.later_mistakes import later_mistakes
 from fgdoppler.estimators.particle import run_map, run_particle
-from fgdoppler.estimators.restart import with_restarts
+from fgdoppler.estimators.restart import FreshFits, with_restarts
 from fgdoppler.estimators.results import TrackResult
 from fgdoppler.estimators.search_memo import SearchMemo
 from fgdoppler.estimators.settings import (
@@ -187,6 +187,15 @@ def run_estimator(
     TypeError
         If ``settings`` belong to another estimator.
     """
+    return _run_estimator(name, measurements, model, init, settings, resolve_ambiguity=resolve_ambiguity,
+                          verify=verify, reference=reference, progress=progress, fits=None)
+
+
+def _run_estimator(name: str, measurements: Measurements, model: TrackingModel | Geometry, init: Initiation,
+                   settings: TrackerSettings | None, *, resolve_ambiguity: bool, verify: bool,
+                   reference: TrackResult | None, progress: Progress | None, fits: FreshFits | None
+                   ) -> TrackResult:
+    """:func:`run_estimator`, the restart checks' fresh fits shared through ``fits`` (:func:`run_estimators`)."""
     info = estimator_info(name)
     model = as_tracking_model(model)
     settings = settings if settings is not None else info.settings()
@@ -195,9 +204,10 @@ def run_estimator(
     frame = model.computation_frame
     if not model.canonical:  # solve in the geometry's own frame, answer in the user's
         local_ref = None if reference is None else reference.transformed(frame, to_world=False)
-        local = run_estimator(info.name, measurements, model.in_frame(frame), init.in_frame_of(frame),
-                              settings, resolve_ambiguity=resolve_ambiguity, verify=verify, reference=local_ref,
-                              progress=progress)
+        local_model = model.in_frame(frame) if fits is None else fits.local_model(model)
+        local = _run_estimator(info.name, measurements, local_model, init.in_frame_of(frame), settings,
+                               resolve_ambiguity=resolve_ambiguity, verify=verify, reference=local_ref,
+                               progress=progress, fits=fits)
         return local.transformed(frame, to_world=True)
     per_pair, offsets, clocks = _declared_offsets(settings, model)
     hyps, weights = _hypotheses(info, measurements, model, init, settings) if resolve_ambiguity else ([init], None)
@@ -207,7 +217,7 @@ def run_estimator(
         def again(new: Initiation) -> TrackResult:
             h, w = _hypotheses(info, measurements, model, new, settings)
             return _solve(info, measurements, model, h, settings, prefixed(progress, "restart"), w)
-        result = with_restarts(measurements, model, init, settings, result, again)
+        result = with_restarts(measurements, model, init, settings, result, again, fits=fits)
     held = (_reference(measurements, model, init, settings, reference, per_pair, resolve_ambiguity, progress)
             if verify and result.primary.kind != "smoothed" else None)
     judged = judge(result, measurements, model, settings, held, half_plane=init.half_plane is not None)
@@ -284,7 +294,9 @@ def run_estimators(
     huber_k=...)``); :func:`run_estimator` runs it once per filter.  Here it
     runs once per distinct gate and loss and is shared — the smoother's own
     result where its settings are those — so comparing every estimator costs
-    one smoother run, not one per filter, with the same results.
+    one smoother run, not one per filter, with the same results.  The
+    filters' restart checks share their fits of the data so far
+    (:class:`~fgdoppler.estimators.restart.FreshFits`) the same way.
     ``settings`` maps a name to its settings (default: the estimator's
     defaults); ``names`` may be aliases, and the result is keyed by the
     canonical names, in the order given.
@@ -303,27 +315,29 @@ def run_estimators(
     chosen = {i.name: given.get(i.name, i.settings()) for i in infos}
     model = as_tracking_model(model)
     references: dict[SmootherSettings, TrackResult] = {}
+    fits = FreshFits(measurements)
 
     def reference(s: TrackerSettings) -> TrackResult:
         key = SmootherSettings(gate_probability=s.gate_probability, huber_k=s.huber_k)
         if key not in references:
-            references[key] = run_estimator("smoother", measurements, model, init, key,
-                                            resolve_ambiguity=resolve_ambiguity,
-                                            progress=prefixed(progress, "reference"))
+            references[key] = _run_estimator("smoother", measurements, model, init, key,
+                                             resolve_ambiguity=resolve_ambiguity, verify=True, reference=None,
+                                             progress=prefixed(progress, "reference"), fits=fits)
         return references[key]
 
     out: dict[str, TrackResult] = {}
     if "smoother" in chosen:  # first: it may be the filters' reference
-        out["smoother"] = run_estimator("smoother", measurements, model, init, chosen["smoother"],
-                                        resolve_ambiguity=resolve_ambiguity, verify=verify, progress=progress)
+        out["smoother"] = _run_estimator("smoother", measurements, model, init, chosen["smoother"],
+                                         resolve_ambiguity=resolve_ambiguity, verify=verify, reference=None,
+                                         progress=progress, fits=fits)
         own = chosen["smoother"]
         if own == SmootherSettings(gate_probability=own.gate_probability, huber_k=own.huber_k):
             references[own] = out["smoother"]
     for name, s in chosen.items():
         if name not in out:  # a filter: its primary estimate is not the smoothed one
             ref = reference(s) if verify else out.get("smoother")  # without verify: for the later windows alone
-            out[name] = run_estimator(name, measurements, model, init, s, resolve_ambiguity=resolve_ambiguity,
-                                      verify=verify, reference=ref, progress=progress)
+            out[name] = _run_estimator(name, measurements, model, init, s, resolve_ambiguity=resolve_ambiguity,
+                                       verify=verify, reference=ref, progress=progress, fits=fits)
     return {n: out[n] for n in chosen}
 
 def hypotheses_of(name: str, measurements: Measurements, model: TrackingModel, init: Initiation,

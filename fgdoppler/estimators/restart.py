@@ -58,12 +58,18 @@ stay as they were (they were the online answer then), those from
 :math:`t_c` on are the new run's.  Everything uses only data up to
 :math:`t_c`: the tracker stays online.  ``restarts=False`` in the
 settings turns this off.
+
+Step 1 depends on the recording, the model, the loss and the half plane,
+never on the tracker or its estimate: the EKF, iSAM2 and the fixed-lag
+smoother run on one recording would each compute the same fits.
+:func:`~fgdoppler.estimators.registry.run_estimators` shares them through
+a :class:`FreshFits` (each fit once; the tracks the same to the bit).
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Hashable, Iterator
 from dataclasses import replace
 
 import numpy as np
@@ -73,6 +79,7 @@ from scipy.stats import chi2
 from fgdoppler.estimators.grid import GridResult, HalfPlane
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate, window_grid
 from fgdoppler.estimators.results import Estimates, TrackResult
+from fgdoppler.estimators.search_memo import RecordingMemo
 from fgdoppler.estimators.settings import TrackerSettings
 from fgdoppler.estimators.verdict import Event
 from fgdoppler.measurements import Measurements
@@ -80,8 +87,8 @@ from fgdoppler.models.observation import predict_along
 from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["DISAGREEMENT", "GROWTH", "MODE_MARGIN", "PER_PAIR", "checkpoint_counts", "checkpoints", "fresh_start",
-           "with_restarts"]
+__all__ = ["DISAGREEMENT", "GROWTH", "MODE_MARGIN", "PER_PAIR", "FreshFits", "checkpoint_counts", "checkpoints",
+           "fresh_start", "with_restarts"]
 
 FloatArray = NDArray[np.float64]
 #: A checkpoint each time the number of measurements since the start has grown by this factor.
@@ -146,21 +153,17 @@ def _state_at(result: TrackResult, t: float) -> tuple[FloatArray, FloatArray] | 
     return e.states[i], e.covariances[i]
 
 
-def fresh_start(measurements: Measurements, model: TrackingModel, settings: TrackerSettings,
-                old: tuple[FloatArray, FloatArray] | None, tc: float, *,
-                half_plane: HalfPlane | None = None) -> tuple[Initiation, str] | None:
-    """The initiation to restart from at checkpoint ``tc``, and why; ``None`` when the running estimate stands.
+#: Step 1 of a check: the data up to the checkpoint, the initiation settings, the grid and the fresh initiation.
+_Fit = tuple[Measurements, InitiationSettings, GridResult, Initiation]
 
-    ``old`` is the tracker's filtered ``(x, P)`` at ``tc`` (``None``: nothing
-    to test); only the measurements up to ``tc`` are used (module docstring,
-    steps 1-3).  ``half_plane`` (the first initiation's, in the model's
-    coordinates) holds the fresh start and the running estimate's basin to
-    the side the user gave: a restart never jumps to the mirror image.
-    """
+
+def _fresh_fit(measurements: Measurements, model: TrackingModel, huber_k: float | None,
+               half_plane: HalfPlane | None, tc: float) -> _Fit | None:
+    """Step 1 of the check at ``tc`` (module docstring); ``None`` where there is nothing to restart from."""
     data = measurements.subset(measurements.time <= tc)
-    if old is None or len(data) < model.n + 1:
+    if len(data) < model.n + 1:
         return None
-    isets = InitiationSettings(window="cv", huber_k=settings.huber_k, half_plane=half_plane, mistake_check=False)
+    isets = InitiationSettings(window="cv", huber_k=huber_k, half_plane=half_plane, mistake_check=False)
     try:
         grid = window_grid(data.spread(PER_PAIR), model, isets)
     except ValueError:  # the data so far need a speed above the zone's bound: nothing in the zone to restart from
@@ -168,6 +171,81 @@ def fresh_start(measurements: Measurements, model: TrackingModel, settings: Trac
     new = initiate(data, model, isets, grid_result=grid)
     if new.P_end is None or abs(new.t_end - tc) > 1e-9:
         return None
+    return data, isets, grid, new
+
+
+class FreshFits(RecordingMemo):
+    """The restart checks' fits of all the data up to each checkpoint (step 1), for the trackers of one call.
+
+    A fit depends on the recording, the model, the loss (``huber_k``), the
+    half plane and the checkpoint, and nothing else (module docstring); the
+    keys name those.  Models are told apart by identity (the memo keeps a
+    reference to each, so an identity is never reused), and
+    :meth:`local_model` gives every tracker of one model the same model in
+    its computation frame, so that trackers of a model that is moved into
+    its own frame share their fits too.  The fits are the ones each
+    tracker would compute alone, to the bit.
+
+    Parameters
+    ----------
+    measurements
+        The recording the trackers share; a check on another is refused.
+    """
+
+    def __init__(self, measurements: Measurements) -> None:
+        super().__init__(measurements)
+        self._models: dict[int, TrackingModel] = {}
+        self._local: dict[int, TrackingModel] = {}
+        self._fits: dict[Hashable, _Fit | None] = {}
+        self.computed = 0  # fits computed, not taken from the memo (how much was shared)
+
+    def local_model(self, model: TrackingModel) -> TrackingModel:
+        """``model.in_frame(model.computation_frame)``, the same object for every call with ``model``."""
+        key = id(model)
+        if key not in self._local:
+            self._models[key] = model
+            self._local[key] = model.in_frame(model.computation_frame)
+        return self._local[key]
+
+    def fit(self, measurements: Measurements, model: TrackingModel, huber_k: float | None,
+            half_plane: HalfPlane | None, tc: float) -> _Fit | None:
+        """Step 1 of the check at ``tc``: computed the first time, then the same objects.
+
+        Raises
+        ------
+        ValueError
+            If ``measurements`` is not the recording the memo was made for.
+        """
+        self._models.setdefault(id(model), model)
+        side = None if half_plane is None else (tuple(map(float, half_plane.point)),
+                                                tuple(map(float, half_plane.normal)))
+
+        def compute() -> _Fit | None:
+            self.computed += 1
+            return _fresh_fit(measurements, model, huber_k, half_plane, tc)
+
+        return self._once(self._fits, measurements, (id(model), huber_k, side, tc), compute)
+
+
+def fresh_start(measurements: Measurements, model: TrackingModel, settings: TrackerSettings,
+                old: tuple[FloatArray, FloatArray] | None, tc: float, *,
+                half_plane: HalfPlane | None = None, fits: FreshFits | None = None) -> tuple[Initiation, str] | None:
+    """The initiation to restart from at checkpoint ``tc``, and why; ``None`` when the running estimate stands.
+
+    ``old`` is the tracker's filtered ``(x, P)`` at ``tc`` (``None``: nothing
+    to test); only the measurements up to ``tc`` are used (module docstring,
+    steps 1-3).  ``half_plane`` (the first initiation's, in the model's
+    coordinates) holds the fresh start and the running estimate's basin to
+    the side the user gave: a restart never jumps to the mirror image.
+    ``fits`` shares step 1 with the other trackers of a call.
+    """
+    if old is None:
+        return None
+    fit = (_fresh_fit(measurements, model, settings.huber_k, half_plane, tc) if fits is None
+           else fits.fit(measurements, model, settings.huber_k, half_plane, tc))
+    if fit is None:
+        return None
+    data, isets, grid, new = fit
     x_old, P_old = old
     # the running estimate's own basin on the same data, by the same solver
     x_back = model.motion.propagate(x_old, new.t_start - tc)
@@ -220,16 +298,18 @@ def _splice(old: TrackResult, new: TrackResult, tc: float, message: str) -> Trac
 
 
 def with_restarts(measurements: Measurements, model: TrackingModel, init: Initiation, settings: TrackerSettings,
-                  first: TrackResult, solve: Solver) -> TrackResult:
+                  first: TrackResult, solve: Solver, *, fits: FreshFits | None = None) -> TrackResult:
     """Test ``first`` (the tracker run from ``init``) at every checkpoint and restart where it fails (module doc).
 
     ``solve`` runs the tracker from an initiation (with its hypotheses);
     the returned result's ``wall_time`` covers the checks and the restarts.
+    ``fits`` shares the checks' fresh fits with the other trackers of a call.
     """
     t_begin = time.perf_counter()
     result = first
     for tc in checkpoints(measurements, init):
-        fresh = fresh_start(measurements, model, settings, _state_at(result, tc), tc, half_plane=init.half_plane)
+        fresh = fresh_start(measurements, model, settings, _state_at(result, tc), tc, half_plane=init.half_plane,
+                            fits=fits)
         if fresh is None:
             continue
         new_init, message = fresh

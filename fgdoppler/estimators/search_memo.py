@@ -10,7 +10,10 @@ smoother's settings and the half plane, never on the hypothesis: every
 hypothesis's run would repeat the same grid, the same refinements and the
 same Levenberg–Marquardt runs from the same starts, to the same numbers.
 A :class:`SearchMemo` makes each happen once per call; the runs' results
-are the same to the bit as without it.
+are the same to the bit as without it.  :class:`RecordingMemo` is what it
+shares with the restart checks' memo
+(:class:`~fgdoppler.estimators.restart.FreshFits`): one recording, results
+by key, each computed once.
 """
 
 from __future__ import annotations
@@ -26,13 +29,41 @@ from fgdoppler.measurements import Measurements
 if TYPE_CHECKING:
     from fgdoppler.estimators.smoother_solve import SmootherSolution
 
-__all__ = ["SearchMemo"]
+__all__ = ["RecordingMemo", "SearchMemo"]
 
 FloatArray = NDArray[np.float64]
 _T = TypeVar("_T")
 
 
-class SearchMemo:
+class RecordingMemo:
+    """Results computed once for the runs of one recording, each under a key naming what it depends on.
+
+    Parameters
+    ----------
+    measurements
+        The recording the runs share; a look-up for another is refused.
+    """
+
+    def __init__(self, measurements: Measurements) -> None:
+        self._measurements = measurements
+
+    def _once(self, store: dict[Hashable, _T], measurements: Measurements, key: Hashable,
+              compute: Callable[[], _T]) -> _T:
+        """``store[key]``, from ``compute()`` the first time.
+
+        Raises
+        ------
+        ValueError
+            If ``measurements`` is not the recording the memo was made for.
+        """
+        if measurements is not self._measurements:
+            raise ValueError(f"a {type(self).__name__} serves the runs of one recording: it was made for another")
+        if key not in store:
+            store[key] = compute()
+        return store[key]
+
+
+class SearchMemo(RecordingMemo):
     """Start trajectories of the whole-recording searches and the smoother's solutions from them, for one call.
 
     One memo serves the smoother runs of one recording and one model (the
@@ -48,7 +79,7 @@ class SearchMemo:
     """
 
     def __init__(self, measurements: Measurements) -> None:
-        self._measurements = measurements
+        super().__init__(measurements)
         self._starts: dict[Hashable, list[FloatArray]] = {}
         self._solutions: dict[Hashable, SmootherSolution | None] = {}
 
@@ -67,11 +98,3 @@ class SearchMemo:
                  solve: Callable[[], SmootherSolution | None]) -> SmootherSolution | None:
         """The smoother's solution from the start named ``key`` (``None``: it cannot start from there)."""
         return self._once(self._solutions, measurements, key, solve)
-
-    def _once(self, store: dict[Hashable, _T], measurements: Measurements, key: Hashable,
-              compute: Callable[[], _T]) -> _T:
-        if measurements is not self._measurements:
-            raise ValueError("a SearchMemo serves the runs of one recording: it was made for another")
-        if key not in store:
-            store[key] = compute()
-        return store[key]

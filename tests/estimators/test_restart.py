@@ -10,6 +10,7 @@ import pytest
 import fgdoppler as fd
 from benchmarks.bench_long import THREE_PAIRS
 from fgdoppler.analysis.metrics import errors
+from fgdoppler.estimators import restart
 from fgdoppler.estimators.restart import DISAGREEMENT, GROWTH, MODE_MARGIN, checkpoints, fresh_start
 
 
@@ -155,3 +156,56 @@ def test_a_restart_keeps_to_the_users_half_plane() -> None:
     assert new.x_end[1] > 0 and np.hypot(*(new.x_end[:2] - truth[:2])) < 1e3
     # a running estimate on the user's side stands
     assert fresh_start(m, model, fd.EKFSettings(), (truth, P), tc, half_plane=north) is None
+
+
+def _rotated(g: fd.Geometry, angle: float, shift: tuple[float, float]) -> fd.Geometry:
+    c, s = np.cos(angle), np.sin(angle)
+    R = np.array([[c, -s], [s, c]])
+    return fd.Geometry(pairs=tuple(fd.BistaticPair(tx=R @ np.array(p.tx) + shift, rx=R @ np.array(p.rx) + shift)
+                                   for p in g.pairs), name=g.name)
+
+
+def test_the_trackers_of_one_call_share_their_fresh_fits(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Step 1 of a check (the fit of all data up to the checkpoint) does not depend on the tracker: in
+    # run_estimators the EKF and the fixed-lag smoother (iSAM2 alike) compute each checkpoint's fit once,
+    # and their tracks are those of one run_estimator call each, to the bit.  Run 32 of case a 5 km (the EKF
+    # restarts there), with the geometry rotated and moved 830 km, so that every tracker computes in the
+    # geometry's own frame and the fits are shared through one local model.
+    sim, _, _ = _benchmark_run(0, 32)
+    m = sim.measurements
+    g = _rotated(sim.scenario.geometry, 0.37, (3.2e5, -7.7e5))
+    init = fd.initiate(m.first_per_pair(10), g)
+    calls: list[float] = []
+    fit = restart._fresh_fit
+
+    def counted(*args: object) -> object:
+        calls.append(float(args[-1]))  # type: ignore[arg-type]
+        return fit(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(restart, "_fresh_fit", counted)
+    names = ("ekf", "fixed-lag")
+    alone = {n: fd.run_estimator(n, m, g, init, verify=False) for n in names}
+    alone_calls = list(calls)
+    calls.clear()
+    shared = fd.run_estimators(names, m, g, init, verify=False)
+    assert any("online re-initiation" in e.message for e in alone["ekf"].events)
+    assert sorted(calls) == sorted(set(alone_calls)) and len(alone_calls) == 2 * len(calls) > 0
+    for n in names:
+        a, b = alone[n], shared[n]
+        assert [e.kind for e in a.estimates] == [e.kind for e in b.estimates]
+        for ea, eb in zip(a.estimates, b.estimates, strict=True):
+            np.testing.assert_array_equal(eb.states, ea.states)
+            np.testing.assert_array_equal(eb.covariances, ea.covariances)
+        assert b.status == a.status and [e.message for e in b.events] == [e.message for e in a.events], n
+
+
+def test_fresh_fits_serve_one_recording() -> None:
+    sim, model, _ = _benchmark_run(0, 0)
+    fits = restart.FreshFits(sim.measurements)
+    other = sim.measurements.subset(sim.measurements.time <= 20.0)
+    with pytest.raises(ValueError, match="one recording"):
+        fits.fit(other, model, None, None, 10.0)
+    first = fits.fit(sim.measurements, model, None, None, 10.0)
+    assert first is not None and fits.fit(sim.measurements, model, None, None, 10.0) is first
+    assert fits.computed == 1
+    assert fits.local_model(model) is fits.local_model(model)
