@@ -174,3 +174,35 @@ def test_region_factor_is_zero_inside(rng: np.random.Generator) -> None:
 def test_region_factor_validation() -> None:
     with pytest.raises(ValueError, match="wall_sigma"):
         factors.region_factor(X(0), ZONE, wall_sigma=(0.0, 1.0))
+
+
+class _GivenJacobian:
+    """A one-channel measurement model whose Jacobian is given: what does a factor make of it?"""
+
+    n_channels = 1
+
+    def __init__(self, jacobian: np.ndarray) -> None:
+        self.jacobian = jacobian
+
+    def predict(self, states: object, channels: object) -> np.ndarray:
+        return np.zeros(1)
+
+    def predict_and_jacobian(self, states: object, channels: object) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros(1), self.jacobian
+
+
+@pytest.mark.parametrize(("jacobian", "refused"), [
+    (np.array([[1e308, 1e308, 1e308, 0.0]]), None),  # every entry finite, though their sum overflows
+    (np.array([[0.0, np.nan, 0.0, 0.0]]), "non-finite Jacobian"),
+    (np.array([[np.inf, -np.inf, 0.0, 0.0]]), "non-finite Jacobian"),  # sums to NaN
+    (np.array([[0.0, 0.0, -np.inf, 1.0]]), "non-finite Jacobian"),
+    (np.zeros((1, 3)), "Jacobian shape"),  # handed to GTSAM it would crash the interpreter
+], ids=["large-finite", "nan", "inf-minus-inf", "minus-inf", "shape"])
+def test_a_factor_refuses_a_non_finite_or_misshapen_jacobian(jacobian: np.ndarray, refused: str | None) -> None:
+    f = factors.measurement_factor(X(0), _GivenJacobian(jacobian), [0], [0.0], [1.0])
+    v = _values(x0=np.zeros(4))
+    if refused is None:
+        np.testing.assert_array_equal(f.linearize(v).jacobian()[0], jacobian)
+    else:
+        with pytest.raises(RuntimeError, match=refused):
+            f.linearize(v)

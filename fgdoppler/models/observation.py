@@ -137,15 +137,7 @@ class DopplerModel:
                              f"got shape {state.shape}")
         if channels.size <= _SMALL:
             row = state.tolist()
-            n = channels.size
-            h = np.empty(n)
-            H = np.empty((n, self.geometry.state_dim)) if jacobian else None
-            for i, k in enumerate(channels.tolist()):
-                hv, Hrow = self.scalar(row, k)
-                h[i] = hv
-                if H is not None:
-                    H[i] = Hrow
-            return h, H
+            return self._plain([(row, k) for k in channels.tolist()], jacobian=jacobian)
         return self._vectorised(np.broadcast_to(state, (channels.size, state.size)), channels, jacobian=jacobian)
 
     def predict_along(self, x0: ArrayLike, times: ArrayLike, channels: ArrayLike) -> FloatArray:
@@ -184,13 +176,23 @@ class DopplerModel:
         """
         return self._scalar2 if self.geometry.dim == 2 else self._scalar3
 
+    @cached_property
+    def _sensor_floats(self) -> tuple[tuple[tuple[float, ...], tuple[float, ...]], ...]:
+        """Each pair's transmitter and receiver coordinates as plain floats, for :meth:`scalar`.
+
+        Converted once: reading them from the geometry's arrays at every call
+        cost more than the arithmetic they enter.
+        """
+        return tuple((tuple(float(v) for v in tx), tuple(float(v) for v in rx))
+                     for tx, rx in zip(self.geometry.tx, self.geometry.rx, strict=True))
+
     def _scalar3(self, state: list[float], channel: int) -> tuple[float, list[float]]:
         pos, vel = state[:3], state[3:]
         hv = 0.0
         dp = [0.0, 0.0, 0.0]
         dv = [0.0, 0.0, 0.0]
-        for sensor in (self.geometry.tx[channel], self.geometry.rx[channel]):
-            delta = [pos[i] - float(sensor[i]) for i in range(3)]
+        for sensor in self._sensor_floats[channel]:
+            delta = [pos[i] - sensor[i] for i in range(3)]
             r = math.sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2])
             if r <= SENSOR_EPS:
                 raise ValueError(
@@ -207,10 +209,8 @@ class DopplerModel:
 
     def _scalar2(self, state: list[float], channel: int) -> tuple[float, list[float]]:
         px, py, vx, vy = state
-        tx = self.geometry.tx[channel]
-        rx = self.geometry.rx[channel]
         dpx = dpy = dvx = dvy = hv = 0.0
-        for sx, sy in ((float(tx[0]), float(tx[1])), (float(rx[0]), float(rx[1]))):
+        for sx, sy in self._sensor_floats[channel]:
             dx = px - sx
             dy = py - sy
             r = math.sqrt(dx * dx + dy * dy)
@@ -231,15 +231,17 @@ class DopplerModel:
 
     def _small(self, x: FloatArray, c: NDArray[np.intp], *, jacobian: bool) -> tuple[FloatArray, FloatArray | None]:
         # Few rows: plain floats beat numpy's per-call overhead (see :meth:`scalar`).
-        n = c.size
-        h = np.empty(n)
-        H = np.empty((n, self.geometry.state_dim)) if jacobian else None
-        for i, (row, k) in enumerate(zip(x.tolist(), c.tolist(), strict=True)):
-            hv, Hrow = self.scalar(row, k)
-            h[i] = hv
-            if H is not None:
-                H[i] = Hrow
-        return h, H
+        return self._plain(list(zip(x.tolist(), c.tolist(), strict=True)), jacobian=jacobian)
+
+    def _plain(self, rows: list[tuple[list[float], int]], *, jacobian: bool) -> tuple[FloatArray, FloatArray | None]:
+        """:meth:`scalar` of each (state, channel) in ``rows``, made arrays once: for a few rows numpy's per-row
+        assignments would cost more than the arithmetic."""
+        scalar = self.scalar
+        values = [scalar(row, k) for row, k in rows]
+        h = np.array([v[0] for v in values], dtype=float)
+        if not jacobian:
+            return h, None
+        return h, np.array([v[1] for v in values], dtype=float).reshape(len(values), self.geometry.state_dim)
 
 
 def check_channels(model: MeasurementModel, measurements: Measurements) -> None:
