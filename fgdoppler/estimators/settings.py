@@ -57,7 +57,8 @@ def _count(value: int, name: str) -> None:
 
 @dataclass(frozen=True, kw_only=True)
 class TrackerSettings:
-    """Base of every tracker's settings: the measurement gate and the robust loss.
+    """Base of every tracker's settings: the measurement gate, the robust loss and the pairs' declared
+    calibration and clock uncertainty.
 
     Parameters
     ----------
@@ -71,10 +72,20 @@ class TrackerSettings:
         efficiency on Gaussian data) on every Doppler residual: quadratic up
         to ``k``, linear beyond, so a few gross outliers cannot drag the
         estimate.  ``None`` for the Gaussian loss.
+    bias_sigma : float or tuple of float, default 0.0
+        Each pair's Doppler calibration uncertainty (m/s, one standard
+        deviation; one value for every pair or one per pair); what each
+        estimator does with it is said in its own settings.
+    clock_sigma : float or tuple of float, default 0.0
+        Each pair's clock uncertainty (s, one standard deviation; one value
+        for every pair or one per pair); what each estimator does with it is
+        said in its own settings.
     """
 
     gate_probability: float | None = 0.9999
     huber_k: float | None = None
+    bias_sigma: float | tuple[float, ...] = 0.0
+    clock_sigma: float | tuple[float, ...] = 0.0
 
     def __post_init__(self) -> None:
         p = self.gate_probability
@@ -82,6 +93,8 @@ class TrackerSettings:
             raise ValueError(f"gate_probability must be in (0, 1) or None, got {p!r}")
         if self.huber_k is not None:
             _positive(self.huber_k, "huber_k")
+        object.__setattr__(self, "bias_sigma", _bias_sigma(self.bias_sigma))
+        object.__setattr__(self, "clock_sigma", _clock_sigma(self.clock_sigma))
 
     @property
     def gate(self) -> float:
@@ -264,13 +277,9 @@ class SampledCovarianceSettings(GaussianSumSettings):
     sampled_covariance: bool = True
     sampling_interval: float = 5.0
     linearised_everywhere: bool = True
-    bias_sigma: float | tuple[float, ...] = 0.0
-    clock_sigma: float | tuple[float, ...] = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        object.__setattr__(self, "bias_sigma", _bias_sigma(self.bias_sigma))
-        object.__setattr__(self, "clock_sigma", _clock_sigma(self.clock_sigma))
         _positive(self.sampling_interval, "sampling_interval")
         _flag(self.sampled_covariance, "sampled_covariance")
         _flag(self.linearised_everywhere, "linearised_everywhere")
@@ -590,14 +599,10 @@ class SmootherSettings(TrackerSettings):
     mode_search: bool = True
     mode_candidates: int = 20
     motion_check: bool = True
-    bias_sigma: float | tuple[float, ...] = 0.0
     estimate_offsets: bool = False
-    clock_sigma: float | tuple[float, ...] = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        object.__setattr__(self, "bias_sigma", _bias_sigma(self.bias_sigma))
-        object.__setattr__(self, "clock_sigma", _clock_sigma(self.clock_sigma))
         _flag(self.estimate_offsets, "estimate_offsets")
         sigmas = self.bias_sigma if isinstance(self.bias_sigma, tuple) else (self.bias_sigma,)
         if self.estimate_offsets and max(sigmas) == 0.0:
@@ -692,13 +697,9 @@ class ParticleSettings(TrackerSettings):
     max_span: float = 300.0
     max_noise_share: float = 0.1
     tempered_start: bool = True
-    bias_sigma: float | tuple[float, ...] = 0.0
-    clock_sigma: float | tuple[float, ...] = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        object.__setattr__(self, "bias_sigma", _bias_sigma(self.bias_sigma))
-        object.__setattr__(self, "clock_sigma", _clock_sigma(self.clock_sigma))
         declared = self.bias_sigma if isinstance(self.bias_sigma, tuple) else (self.bias_sigma,)
         if self.huber_k is not None and max(declared) > 0:
             raise ValueError("bias_sigma > 0 needs the squared loss in the particle estimators (huber_k=None): "
