@@ -91,8 +91,14 @@ def _checked(jac: FloatArray, rows: int, cols: int, what: str) -> FloatArray:
     if out.shape != (rows, cols):
         raise RuntimeError(f"{what}: Jacobian shape {out.shape}, expected {(rows, cols)}")
     # The entries' sum is finite exactly when every entry is, unless it overflows, where the entry-wise test
-    # rules; for a factor's few rows the sum of plain floats costs a fraction of numpy's test.
-    if not math.isfinite(sum(out.ravel().tolist())) and not np.all(np.isfinite(out)):
+    # rules.  Summed as plain floats for a scan's few rows, by numpy for a window's: either costs a fraction of
+    # the entry-wise test.
+    if out.size <= 64:
+        total = sum(out.ravel().tolist())
+    else:
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflow or inf - inf is what is tested for
+            total = float(out.sum())
+    if not math.isfinite(total) and not np.all(np.isfinite(out)):
         raise RuntimeError(f"{what}: non-finite Jacobian")
     return out
 

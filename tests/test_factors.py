@@ -185,10 +185,10 @@ class _GivenJacobian:
         self.jacobian = jacobian
 
     def predict(self, states: object, channels: object) -> np.ndarray:
-        return np.zeros(1)
+        return np.zeros(len(self.jacobian))
 
     def predict_and_jacobian(self, states: object, channels: object) -> tuple[np.ndarray, np.ndarray]:
-        return np.zeros(1), self.jacobian
+        return np.zeros(len(self.jacobian)), self.jacobian
 
 
 @pytest.mark.parametrize(("jacobian", "refused"), [
@@ -198,11 +198,14 @@ class _GivenJacobian:
     (np.array([[0.0, 0.0, -np.inf, 1.0]]), "non-finite Jacobian"),
     (np.zeros((1, 3)), "Jacobian shape"),  # handed to GTSAM it would crash the interpreter
 ], ids=["large-finite", "nan", "inf-minus-inf", "minus-inf", "shape"])
-def test_a_factor_refuses_a_non_finite_or_misshapen_jacobian(jacobian: np.ndarray, refused: str | None) -> None:
-    f = factors.measurement_factor(X(0), _GivenJacobian(jacobian), [0], [0.0], [1.0])
+@pytest.mark.parametrize("rows", [1, 20])  # a scan's few rows and a window's many are tested apart
+def test_a_factor_refuses_a_non_finite_or_misshapen_jacobian(jacobian: np.ndarray, refused: str | None,
+                                                              rows: int) -> None:
+    J = np.repeat(jacobian, rows, axis=0)
+    f = factors.measurement_factor(X(0), _GivenJacobian(J), [0] * rows, [0.0] * rows, [1.0] * rows)
     v = _values(x0=np.zeros(4))
     if refused is None:
-        np.testing.assert_array_equal(f.linearize(v).jacobian()[0], jacobian)
+        np.testing.assert_array_equal(f.linearize(v).jacobian()[0], J)
     else:
         with pytest.raises(RuntimeError, match=refused):
             f.linearize(v)
