@@ -244,14 +244,12 @@ def _with_later_mistakes(result: TrackResult, measurements: Measurements, model:
 
 
 def _declared_offsets(settings: TrackerSettings, model: TrackingModel
-                      ) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None, NDArray[np.float64] | None]:
-    """The calibration uncertainty per pair (``None`` where the settings have none), and those of it and of the
-    clocks whose share the registry adds (a filter's both; the particle estimators' clocks, since they integrate
-    calibration offsets out themselves; the smoother accounts for both itself).  Their counts are said here,
-    before any work."""
-    declared = getattr(settings, "bias_sigma", None)
+                      ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """The calibration uncertainty per pair, and those of it and of the clocks whose share the registry adds (a
+    filter's both; the particle estimators' clocks, since they integrate calibration offsets out themselves; the
+    smoother accounts for both itself).  Their counts are said here, before any work."""
     n_pairs = model.observation.n_channels
-    per_pair = None if declared is None else bias_sigmas(declared, n_pairs)
+    per_pair = bias_sigmas(settings.bias_sigma, n_pairs)
     if isinstance(settings, ParticleSettings):
         return per_pair, None, clock_sigmas(settings.clock_sigma, n_pairs)
     if not isinstance(settings, SampledCovarianceSettings):
@@ -260,7 +258,7 @@ def _declared_offsets(settings: TrackerSettings, model: TrackingModel
 
 
 def _reference(measurements: Measurements, model: TrackingModel, init: Initiation, settings: TrackerSettings,
-               given: TrackResult | None, per_pair: NDArray[np.float64] | None, resolve_ambiguity: bool,
+               given: TrackResult | None, per_pair: NDArray[np.float64], resolve_ambiguity: bool,
                progress: Progress | None) -> TrackResult:
     """The offline smoother a tracker is held against: ``given``, or run here with the tracker's gate and loss;
     with calibration offsets declared (``per_pair``), its findings read with them in the model
@@ -270,8 +268,6 @@ def _reference(measurements: Measurements, model: TrackingModel, init: Initiatio
         ref_settings = SmootherSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k)
         reference = run_estimator("smoother", measurements, model, init, ref_settings,
                                   resolve_ambiguity=resolve_ambiguity, progress=prefixed(progress, "reference"))
-    if per_pair is None:
-        return reference
     return with_offset_findings(reference, measurements, model, tuple(float(v) for v in per_pair),
                                 half_plane=init.half_plane is not None)
 
