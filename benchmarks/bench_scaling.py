@@ -71,6 +71,23 @@ def _native_isam2(n: int) -> float:
     return float(np.median(lat[min(20, n // 2):]))
 
 
+def _gtsam_lm_per_iteration(sim: fd.Simulation, model: fd.TrackingModel) -> float:
+    """Seconds per scan and iteration of GTSAM's LM over the chain of ``CustomFactor`` s (the window re-solve's
+    solver before it took the smoother's): every callback copies the whole ``Values`` into Python."""
+    import gtsam
+
+    from fgdoppler.estimators.initiation import lm_params
+    from fgdoppler.graphs import chain_graph, chain_values
+
+    m = sim.measurements
+    graph, _ = chain_graph(m, model.observation, model.motion, prior=model.prior())
+    guesses = model.motion.propagate(sim.truth.states[0], m.scans().times - m.scans().times[0])
+    opt = gtsam.LevenbergMarquardtOptimizer(graph, chain_values(guesses), lm_params(3))
+    t = time.perf_counter()
+    opt.optimize()
+    return (time.perf_counter() - t) / len(guesses) / max(opt.iterations(), 1)
+
+
 def run() -> list[Row]:
     rows = []
     # lag 1 s = 20 states at dt = 0.05 s, so even the 60-scan run reaches steady state.  Streamed
@@ -109,6 +126,14 @@ def run() -> list[Row]:
         results["smoother"][n] = per_it
         detail["smoother"][n] = (f"{dt / n * 1e3:.2f} ms/scan total ({sol.iterations} LM iterations), "
                                  f"{per_it * 1e6:.1f} us/scan/iteration")
+    # not at 7,200 scans: quadratic, it would take minutes there
+    gtsam_lm = {n: _gtsam_lm_per_iteration(fd.simulate(long_scenario(n), np.random.default_rng(0)),
+                                           fd.TrackingModel.of(fd.paper_geometry("a"))) for n in SIZES[:2]}
+    rows.append(Row(name="reference: GTSAM LM over the chain's CustomFactors, cost per scan and iteration",
+                    value="; ".join(f"{n}: {gtsam_lm[n] * 1e6:.1f} us/scan/iteration" for n in gtsam_lm),
+                    ratio=gtsam_lm[SIZES[1]] / gtsam_lm[SIZES[0]],
+                    target="(why the smoother and the trackers' window re-solve use their own LM; 600 vs 60 scans)",
+                    met=None))
     native = {n: _native_isam2(n) for n in SIZES}
     ratio = native[SIZES[-1]] / native[SIZES[0]]
     rows.append(Row(name="reference: GTSAM iSAM2 alone, native factors only, same chain",

@@ -29,6 +29,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler._text import first_line
 from fgdoppler.estimators.initiation import Initiation, lm_params
+from fgdoppler.estimators.settings import SmootherSettings
+from fgdoppler.estimators.smoother_solve import solve_smoother
 from fgdoppler.estimators.verdict import Event
 from fgdoppler.factors import X
 from fgdoppler.graphs import chain_graph, chain_values
@@ -50,7 +52,7 @@ def window_start(model: TrackingModel, window: Measurements, init: Initiation, *
                  max_iterations: int = 100) -> tuple[FloatArray, str | None]:
     r"""States at the window's scan times from which a tracker re-solves the window.
 
-    Minimises the window's :func:`~fgdoppler.graphs.chain_graph` (with the
+    Minimises the window's chain graph (:func:`solve_window`, with the
     model's weak prior) by Levenberg–Marquardt from
     :math:`\mathbf F(t_k - t_0)\,\hat{\mathbf x}_0`.
 
@@ -64,21 +66,54 @@ def window_start(model: TrackingModel, window: Measurements, init: Initiation, *
     return solve_window(model, window, guesses, prior=model.prior(), huber_k=huber_k, max_iterations=max_iterations)
 
 
+#: Windows of more scans than this are re-solved by the offline smoother's O(N) solver, smaller ones by GTSAM's LM.
+LARGE_WINDOW = 256
+
+
 def solve_window(model: TrackingModel, window: Measurements, guesses: ArrayLike, *,
                  prior: tuple[ArrayLike, ArrayLike] | None, huber_k: float | None = None,
                  max_iterations: int = 100) -> tuple[FloatArray, str | None]:
-    """Levenberg–Marquardt (QR) on the window's chain graph with ``prior`` on its first state.
+    r"""Levenberg–Marquardt (QR) on the window's chain graph with ``prior`` on its first state.
+
+    Minimises the offline smoother's objective over the window alone,
+
+    .. math::
+
+        \sum_k \rho\big(\|\mathbf z_k - \mathbf h(\mathbf x_k)\|^2_{\mathbf R_k}\big)
+        + \sum_k \|\mathbf x_{k+1} - \mathbf F_k \mathbf x_k\|^2_{\mathbf Q_k}
+        + \|\mathbf x_0 - \bar{\mathbf x}\|^2_{\bar{\mathbf P}}.
+
+    Up to :data:`LARGE_WINDOW` scans (every initiation window, every
+    recording of the paper) by GTSAM's optimiser over the graph's
+    ``CustomFactor`` s (:func:`~fgdoppler.graphs.chain_graph`).  GTSAM
+    copies the whole ``Values`` into Python at every factor's callback, so
+    an iteration costs O(N²) in the window's N scans (measured by
+    ``python -m benchmarks --only scaling``: 64 µs per scan and iteration at
+    60 scans, 478 at 600); a larger window — a restart's, which holds
+    everything up to its checkpoint — is solved by the offline smoother's
+    O(N) solver instead (:func:`~fgdoppler.estimators.smoother_solve.solve_smoother`,
+    no zone wall, no covariances; 16.6 instead of 33.9 s for the fixed-lag
+    smoother on a 600 s recording restarted at 288 and 432 s).  The two
+    minimise the same objective but count iterations differently (an
+    iteration of GTSAM's holds all its damping trials, the smoother's
+    counts each), so in a long flat valley that neither finishes in
+    ``max_iterations`` they stop at different points.
 
     ``guesses`` holds one state per scan of ``window``.  Returns the states
     and ``None``, or the guesses and the reason LM failed.
     """
     g = np.asarray(guesses, dtype=float).reshape(-1, model.n)
-    graph, _ = chain_graph(window, model.observation, model.motion, prior=prior, huber_k=huber_k)
     try:
-        result = gtsam.LevenbergMarquardtOptimizer(graph, chain_values(g), lm_params(max_iterations)).optimize()
-    except (RuntimeError, ValueError) as exc:  # ValueError: a state on a sensor
+        if len(g) > LARGE_WINDOW:
+            settings = SmootherSettings(huber_k=huber_k, max_iterations=max_iterations, covariances=False,
+                                        region_bound=False, sampled_covariance=False)
+            states = solve_smoother(window, model, g, settings, prior=prior).states
+        else:
+            graph, _ = chain_graph(window, model.observation, model.motion, prior=prior, huber_k=huber_k)
+            result = gtsam.LevenbergMarquardtOptimizer(graph, chain_values(g), lm_params(max_iterations)).optimize()
+            states = np.array([result.atVector(X(k)) for k in range(len(g))])
+    except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:  # ValueError: a state on a sensor
         return g, f"window start: LM failed ({first_line(exc)}); starting on the CV track"
-    states = np.array([result.atVector(X(k)) for k in range(len(g))])
     if not np.all(np.isfinite(states)):
         return g, "window start: LM gave non-finite states; starting on the CV track"
     return states, None
