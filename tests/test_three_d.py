@@ -149,9 +149,12 @@ HILL = fd.Geometry(pairs=(fd.BistaticPair(tx=(0, 0, 0), rx=(L, 0, 150.0)), fd.Bi
                           fd.BistaticPair(tx=(0, 0, 0), rx=(L, L, 400.0))), name="hill")
 
 
+# the oblique axis and far shift by default; the other two motions (10 s each) with -m slow, for the CI budget
 @pytest.mark.parametrize(("axis", "angle", "shift"), [((0.3, -0.5, 0.8), 0.7, (3e5, -2e5, 4e3)),
-                                                      ((1.0, 0.2, 0.0), 2.5, (-7e5, 1e5, -9e3)),
-                                                      ((0.0, 0.0, 1.0), -1.1, (1e3, 2e3, 0.0))])
+                                                      pytest.param((1.0, 0.2, 0.0), 2.5, (-7e5, 1e5, -9e3),
+                                                                   marks=pytest.mark.slow),
+                                                      pytest.param((0.0, 0.0, 1.0), -1.1, (1e3, 2e3, 0.0),
+                                                                   marks=pytest.mark.slow)])
 def test_rigid_motions_in_space_move_every_answer_with_them(axis: tuple[float, ...], angle: float,
                                                              shift: tuple[float, ...]) -> None:
     R, t = _rotation(np.array(axis), angle), np.array(shift)
@@ -186,9 +189,10 @@ def test_batch_smoother_reaches_the_3d_bound_on_an_aircraft_over_ground_sensors(
     for r in range(runs):
         sim = fd.simulate(AIRCRAFT, np.random.default_rng(100 + r))
         init = fd.initiate(sim.measurements.first_per_pair(10), GROUND)
-        # the estimate only: the sampled covariance (1.3 of the 1.4 s per run here) does not change it
+        # the estimate only: neither the sampled covariance (1.3 of the 1.4 s per run here) nor the verdict's
+        # checks (verify: the later windows' initiations, 60-70 % of the rest) change it
         track = fd.run_estimator("smoother", sim.measurements, GROUND, init,
-                                 SmootherSettings(sampled_covariance=False)).primary
+                                 SmootherSettings(sampled_covariance=False), verify=False).primary
         d = track.states[-1, :3] - sim.truth.states[-1, :3]
         err2.append(float(d @ d))
     bound = crlb_deterministic(GROUND, AIRCRAFT.x0, sim.measurements, [sim.truth.times[-1]], smoothing=True)[0]

@@ -19,8 +19,14 @@ def _same(a: MonteCarloResult, b: MonteCarloResult) -> bool:
     )
 
 
-def test_same_seed_same_results_with_1_and_2_workers(tmp_path) -> None:
-    one = run_monte_carlo(SPEC, workers=1, progress=False)
+@pytest.fixture(scope="module")
+def serial() -> MonteCarloResult:
+    """SPEC in one process: what every other way of running it must give."""
+    return run_monte_carlo(SPEC, workers=1, progress=False)
+
+
+def test_same_seed_same_results_with_1_and_2_workers(serial: MonteCarloResult, tmp_path) -> None:
+    one = serial
     two = run_monte_carlo(SPEC, workers=2, progress=False)
     assert _same(one, two)
     # different seeds differ
@@ -43,12 +49,12 @@ def test_initiation_estimators_have_values_before_the_trackers() -> None:
     assert np.all(np.isnan(ekf[t < 4.5])) and np.all(np.isfinite(ekf[t >= 4.5]))
 
 
-def test_dask_local_cluster_gives_identical_results() -> None:
+def test_dask_local_cluster_gives_identical_results(serial: MonteCarloResult) -> None:
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
             distributed.Client(cl) as client:
         res = run_monte_carlo(SPEC, executor=client.get_executor(), progress=False)
-    assert _same(res, run_monte_carlo(SPEC, workers=1, progress=False))
+    assert _same(res, serial)
 
 
 def test_spec_validation() -> None:

@@ -508,7 +508,19 @@ def test_the_whole_track_finding_reads_the_covariances_without_the_linearised_en
     np.testing.assert_allclose(offsets, runs["checks"] + share, rtol=1e-9, atol=1e-9 * np.abs(runs["checks"]).max())
 
 
-def test_on_a_long_recording_the_filters_covariances_hold_its_error() -> None:
+@pytest.fixture(scope="module")
+def long_recording() -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation, fd.TrackResult]:
+    """600 s of case b's pairs with the model's own process noise (seed 7), its initiation and offline smoother
+    (the reference a filter with the default gate and loss runs: given to the EKF below, not run twice)."""
+    scen = fd.Scenario(geometry=fd.paper_geometry("b"), x0=(20e3, 3e3, 30.0, -40.0), duration=600.0,
+                       time_offsets=(0.0, PAPER_CASE_B_OFFSET), process_noise=fd.ConstantVelocity(q=1e-3))
+    sim = fd.simulate(scen, np.random.default_rng(7))
+    model = fd.TrackingModel.of(scen.geometry)
+    init = fd.initiate(sim.measurements.first_per_pair(10), model)
+    return sim, model, init, fd.run_estimator("smoother", sim.measurements, model, init)
+
+
+def test_on_a_long_recording_the_filters_covariances_hold_its_error(long_recording: tuple) -> None:
     """600 s of case b's pairs with the model's own process noise (seed 7): the EKF linearised at its own
     predictions claimed a covariance its error does not fit (run-averaged NEES 49 in 4 dimensions over
     t >= 30 s, beyond the chi-square(4) 99.9 % point 18.5).
@@ -517,20 +529,16 @@ def test_on_a_long_recording_the_filters_covariances_hold_its_error() -> None:
     (``run_estimator``'s reference) the reported covariances hold the error
     (measured 4.3, below the point); the estimates are the filter's.
     """
-    scen = fd.Scenario(geometry=fd.paper_geometry("b"), x0=(20e3, 3e3, 30.0, -40.0), duration=600.0,
-                       time_offsets=(0.0, PAPER_CASE_B_OFFSET), process_noise=fd.ConstantVelocity(q=1e-3))
-    sim = fd.simulate(scen, np.random.default_rng(7))
-    model = fd.TrackingModel.of(scen.geometry)
-    init = fd.initiate(sim.measurements.first_per_pair(10), model)
+    sim, model, init, ref = long_recording
     own = fd.run_estimator("ekf", sim.measurements, model, init, verify=False).primary
-    checked = fd.run_estimator("ekf", sim.measurements, model, init).primary
+    checked = fd.run_estimator("ekf", sim.measurements, model, init, reference=ref).primary
     np.testing.assert_array_equal(checked.states, own.states)
     limit = float(chi2.ppf(0.999, 4))
     assert _truth_nees(sim, own, 30.0) > limit
     assert _truth_nees(sim, checked, 30.0) < limit
 
 
-def test_on_a_long_recording_the_fixed_lag_smoothers_covariances_hold_its_error() -> None:
+def test_on_a_long_recording_the_fixed_lag_smoothers_covariances_hold_its_error(long_recording: tuple) -> None:
     """The same 600 s recording: the fixed-lag smoother's lagged covariances, even after the sampled check,
     put the truth at a run-averaged NEES of 124 (t >= 30 s; the check's samples stop reaching after the
     first minutes).
@@ -539,15 +547,11 @@ def test_on_a_long_recording_the_fixed_lag_smoothers_covariances_hold_its_error(
     one lag after each estimate (``reference``) they hold the error
     (measured 4.0, below the chi-square(4) 99.9 % point 18.5; at 300 s both are below it, 2.7 and 2.3).
     """
-    scen = fd.Scenario(geometry=fd.paper_geometry("b"), x0=(20e3, 3e3, 30.0, -40.0), duration=600.0,
-                       time_offsets=(0.0, PAPER_CASE_B_OFFSET), process_noise=fd.ConstantVelocity(q=1e-3))
-    sim = fd.simulate(scen, np.random.default_rng(7))
+    sim, model, init, reference = long_recording
     m = sim.measurements
-    model = fd.TrackingModel.of(scen.geometry)
-    init = fd.initiate(m.first_per_pair(10), model)
     settings = fd.FixedLagSettings(sampled_covariance=False)
     e = fd.run_estimator("fixed-lag", m, model, init, settings, verify=False).primary
-    ref = fd.run_estimator("smoother", m, model, init, verify=False).primary
+    ref = reference.primary
     check = {"interval": fd.FixedLagSettings().sampling_interval, "lag": settings.lag}
     own = filtered_spread(m, model, e.times, e.states, e.covariances, e.cov_ok, **check)
     checked = filtered_spread(m, model, e.times, e.states, e.covariances, e.cov_ok, **check,
