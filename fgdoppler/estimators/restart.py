@@ -52,10 +52,14 @@ than its own basin's, and to a fit over 192 s that was itself uncertain to
 4.9 km — and its RMSE went from 454 m to 1,306 m; with them it does not jump.
 
 A restart runs the tracker again from the new initiation (its Gaussian sum
-when the new window is itself non-Gaussian, :mod:`fgdoppler.estimators.ambiguity`)
-over the measurements after :math:`t_c`; the estimates before :math:`t_c`
-stay as they were (they were the online answer then), those from
-:math:`t_c` on are the new run's.  Everything uses only data up to
+when the new window is itself non-Gaussian, :mod:`fgdoppler.estimators.ambiguity`):
+the EKF from the initiation's state at :math:`t_c`, iSAM2 and the
+fixed-lag smoother by re-solving its window — every measurement up to
+:math:`t_c`, with their process noise — as their first update
+(:func:`~fgdoppler.estimators.window.solve_window`, O(N) in the window's
+scans), then the measurements after :math:`t_c`.  The estimates before
+:math:`t_c` stay as they were (they were the online answer then), those
+from :math:`t_c` on are the new run's.  Everything uses only data up to
 :math:`t_c`: the tracker stays online.  ``restarts=False`` in the
 settings turns this off.
 
