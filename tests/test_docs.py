@@ -157,7 +157,7 @@ def test_api_reference_has_one_page_per_object(site: Path) -> None:
         listing = (site / "api" / "generated" / f"{name}.html").read_text(encoding="utf-8")
         for obj in module.__all__:
             value = getattr(module, obj)
-            if not (inspect.isclass(value) or inspect.isfunction(value)):
+            if not (inspect.isclass(value) or inspect.isroutine(value)):
                 continue
             target = f"{name}.{obj}.html"
             if not (site / "api" / "generated" / target).exists() or f'href="{target}' not in listing:
