@@ -88,8 +88,8 @@ def solve_window(model: TrackingModel, window: Measurements, guesses: ArrayLike,
     ``CustomFactor`` s (:func:`~fgdoppler.graphs.chain_graph`).  GTSAM
     copies the whole ``Values`` into Python at every factor's callback, so
     an iteration costs O(N²) in the window's N scans (measured by
-    ``python -m benchmarks --only scaling``: 64 µs per scan and iteration at
-    60 scans, 478 at 600); a larger window — a restart's, which holds
+    ``python -m benchmarks --only scaling``: 64–76 µs per scan and iteration
+    at 60 scans, 308–478 at 600, two runs); a larger window — a restart's, which holds
     everything up to its checkpoint — is solved by the offline smoother's
     O(N) solver instead (:func:`~fgdoppler.estimators.smoother_solve.solve_smoother`,
     no zone wall, no covariances; 16.6 instead of 33.9 s for the fixed-lag
