@@ -107,7 +107,7 @@ def altitude_section(out: Path, settings: ReproduceSettings) -> tuple[list[str],
     atomic_write_text(out / "altitude.json", json.dumps(study.to_dict(), indent=1))
     fig = study.figure(out / "altitude.png")
     lines = ["## Beyond the paper: the scenarios at altitude (3-D)", "",
-             f"{_count_words(len(study.scenarios))} flown level at "
+             f"{'The scenario' if len(study.scenarios) == 1 else f'The {len(study.scenarios)} scenarios'} flown level at "
              f"{', '.join(f'{a / 1e3:g}' for a in study.altitudes)} km over the "
              f"same ground sensors, {runs} run(s) per cell ({study.wall_time:.0f} s; "
              "`fgdoppler.analysis.altitude.altitude_study`, `studies/altitude_study.py` for more runs).  O of the "
@@ -117,12 +117,6 @@ def altitude_section(out: Path, settings: ReproduceSettings) -> tuple[list[str],
              "the horizontal RMSE of the paper's 2-D model run on the same recordings.", "",
              study.table_markdown(), ""]
     return lines, fig
-
-
-def _count_words(n: int) -> str:
-    """Words for ``n`` scenarios opening a sentence: "The scenario", "The six scenarios", "The 7 scenarios"."""
-    words = {1: "", 2: "two ", 3: "three ", 4: "four ", 5: "five ", 6: "six "}
-    return "The scenario" if n == 1 else f"The {words.get(n, f'{n} ')}scenarios"
 
 
 def _bounds(scen: Scenario) -> tuple[np.ndarray, np.ndarray]:
