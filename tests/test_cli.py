@@ -116,6 +116,11 @@ def test_track_every_estimator_json_out_and_plot(tmp_path: Path, capsys: pytest.
     assert n > 10 and len(d["states"]) == n and len(d["covariances"]) == n
     assert all(len(s) == 4 for s in d["states"])
     assert all(c is None or (len(c) == 4 and all(len(r) == 4 for r in c)) for c in d["covariances"])
+    if estimator == "smoother":  # the default: `track FILE` with no --estimator reconstructs the whole track
+        default = [a for a in args if a not in ("--estimator", estimator)]
+        assert main([*default, "--json"]) == 0
+        d_default = json.loads(capsys.readouterr().out)
+        assert d_default["estimator"] == "smoother" and d_default["states"] == d["states"]
     out = tmp_path / "track.csv"
     assert main([*args, "--out", str(out), "--truth", str(sim / "truth.csv"), "--plot", str(tmp_path / "t.png")]) == 0
     assert "position RMSE vs truth" in capsys.readouterr().out
@@ -171,7 +176,7 @@ def test_zone_options_and_the_zone_table_are_used(tmp_path: Path, capsys: pytest
                  "--zone", "2000", "48000", "-5000", "12000", "--out", str(sim)]) == 0
     assert fd.Geometry.from_toml(sim / "geometry.toml").zone.across == (-5e3, 12e3)
     capsys.readouterr()
-    args = ["track", str(sim / "measurements.csv"), "--json"]
+    args = ["track", str(sim / "measurements.csv"), "--estimator", "init", "--json"]
     assert main(args) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["zone"]["across"] == [-5000.0, 12000.0] and d["zone"]["speed_max"] == 200.0
@@ -187,11 +192,11 @@ def test_a_fast_target_needs_and_gets_a_higher_speed_bound(tmp_path: Path, capsy
     assert main(["simulate", "--start-x", "20000", "--velocity", "1400", "-1400", "--duration", "10",
                  "--out", str(sim)]) == 0
     capsys.readouterr()
-    assert main(["track", str(sim / "measurements.csv"), "--out", str(tmp_path / "t.csv")]) == 2
+    assert main(["track", str(sim / "measurements.csv"), "--estimator", "init", "--out", str(tmp_path / "t.csv")]) == 2
     err = capsys.readouterr().err
     assert "--speed-max" in err and err.count("\n") == 1 and str(sim / "measurements.csv") in err
     assert _files(tmp_path) == ["sim"]
-    assert main(["track", str(sim / "measurements.csv"), "--speed-max", "2500", "--json"]) == 0
+    assert main(["track", str(sim / "measurements.csv"), "--estimator", "init", "--speed-max", "2500", "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert np.hypot(*d["x_start"][2:]) > 1500
 
@@ -301,7 +306,8 @@ def test_track_particle_options(tmp_path: Path, capsys: pytest.CaptureFixture[st
     for bad, msg in ((["--estimator", "particle", "--particles", "10"], "n_particles must be >= 64"),
                      (["--estimator", "map", "--particle-seed", "-1"], "seed must be a whole number"),
                      (["--estimator", "ekf", "--particles", "512"], "not to ekf"),
-                     (["--particles", "512"], "not to init")):
+                     (["--estimator", "init", "--particles", "512"], "not to init"),
+                     (["--particles", "512"], "not to smoother")):
         assert main([*base[:-1], *bad]) == 2  # without --json the initiation would print the geometry first
         captured = capsys.readouterr()
         assert msg in captured.err and "geometry" not in captured.out  # refused before any work
@@ -352,7 +358,8 @@ def test_track_mode_candidates_reach_the_smoothers_settings(tmp_path: Path, caps
         assert (settings["mode_search"], settings["mode_candidates"]) == (search, candidates)
     for bad, msg in ((["--estimator", "ekf", "--mode-candidates", "5"], "--mode-candidates applies to the smoother"),
                      (["--estimator", "smoother", "--mode-candidates", "-1"], "--mode-candidates must be >= 0"),
-                     (["--mode-candidates", "5"], "--mode-candidates applies to the smoother, not to init")):
+                     (["--estimator", "init", "--mode-candidates", "5"],
+                      "--mode-candidates applies to the smoother, not to init")):
         assert main([*base[:-3], *bad]) == 2
         captured = capsys.readouterr()
         assert msg in captured.err and "geometry" not in captured.out

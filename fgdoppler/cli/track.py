@@ -43,10 +43,12 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p.add_argument("file", type=Path, metavar="FILE", help="measurement CSV")
     p.add_argument("--geometry", default=None,
                    help="the paper's a or b, or a geometry TOML file (default: geometry.toml beside FILE)")
-    p.add_argument("--estimator", choices=("init", *ESTIMATORS, *ALIASES), default="init",
+    # the offline smoother by default: a track of the whole recording, the most accurate and consistent
+    # answer (README "Results"); the initiation alone is asked for by name
+    p.add_argument("--estimator", choices=("init", *ESTIMATORS, *ALIASES), default="smoother",
                    help="what to run: init (initiation only), " + ", ".join(
                        f"{k} ({v.summary})" for k, v in ESTIMATORS.items())
-                   + "; batch is the old name of smoother (default init)")
+                   + "; batch is the old name of smoother (default smoother)")
     p.add_argument("--sigma", type=float, default=None, help="default Doppler sigma when FILE has no sigma column")
     p.add_argument("--init-method", choices=METHODS, default="lm", help="initiation refinement (default lm)")
     p.add_argument("--init-per-pair", type=int, default=10,
