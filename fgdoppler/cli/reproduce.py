@@ -19,7 +19,7 @@ def add_reproduce(sub: argparse._SubParsersAction) -> None:
         description="Reproduce Table 2, Figs 3-8 and 10-11 of the paper, the lag sweep, NEES and "
         "observability reports into --out, with report.md comparing the paper's values and ours.",
     )
-    p.add_argument("--quick", action="store_true", help="few runs (5 per scenario, 1 per cell of the altitude study): about 2.5 min on 2 cores")
+    p.add_argument("--quick", action="store_true", help="few runs (5 per scenario, 1 per cell of the altitude study): about 3 min on 2 idle cores")
     p.add_argument("--runs", type=int, default=None, help="runs per scenario (default 100; 5 with --quick)")
     p.add_argument("--altitude-runs", type=int, default=None, metavar="N",
                    help="runs per scenario and height of the 3-D altitude study (default: runs / 10, at least 1; "
