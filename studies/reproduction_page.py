@@ -154,7 +154,7 @@ python studies/reproduction_page.py output/reproduce   # rebuilds this page
 ```
 
 Wall time inside the run: {wall.group(1)} s (observability {wall.group(2)} s, Monte Carlo {wall.group(3)} s, the
-rest: the lag sweep, the 3-D altitude study, bounds and figures).  `fgdoppler reproduce --quick` (5 runs, the altitude study at 1 run per cell) takes 149 s (measured on a fresh clone, 2026-11-24, with `map`).
+rest: the lag sweep, the 3-D altitude study, bounds and figures).  `fgdoppler reproduce --quick` (5 runs, the altitude study at 1 run per cell) takes 149 s (measured on a fresh clone, 2026-11-24, with `map`; 190 s on 2026-11-28 on an idle 2-core machine, 4 min 49 s on a fresh clone beside other work).
 
 ## The paper's claims
 
