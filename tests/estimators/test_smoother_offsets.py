@@ -198,7 +198,7 @@ def test_the_command_line_estimates_the_offsets(tmp_path: Path, capsys: pytest.C
     out = json.loads(capsys.readouterr().out)
     assert out["offsets"]["pairs"] == [0, 1]
     assert any("calibration offsets estimated" in e["message"] for e in out["events"])
-    for args, message in ((["--estimate-offsets"], "applies to the smoother, not to init"),
+    for args, message in ((["--estimator", "init", "--estimate-offsets"], "applies to the smoother, not to init"),
                           (["--estimator", "smoother", "--estimate-offsets"], "needs --bias-sigma"),
                           (["--estimator", "ekf", "--bias-sigma", "1", "--estimate-offsets"], "not to ekf"),
                           (["--estimator", "smoother", "--bias-sigma", "0", "--estimate-offsets"], "needs bias_sigma > 0")):
