@@ -153,19 +153,18 @@ class Frame:
 
     def covariances_to_world(self, P: ArrayLike) -> FloatArray:
         """Local state covariances ``(..., 2d, 2d)`` in world coordinates: ``T P T'``."""
-        P = np.asarray(P, dtype=float)
-        if self.is_identity:
-            return P.copy()
-        T = self._state_map(True)
-        out = T @ P @ T.T
-        return 0.5 * (out + np.swapaxes(out, -1, -2))  # symmetric to the last bit, as it was
+        return self._covariances(P, to_world=True)
 
     def covariances_to_local(self, P: ArrayLike) -> FloatArray:
         """World state covariances ``(..., 2d, 2d)`` in local coordinates."""
+        return self._covariances(P, to_world=False)
+
+    def _covariances(self, P: ArrayLike, *, to_world: bool) -> FloatArray:
+        """``T P T'`` with the state map towards world or local coordinates, symmetrised."""
         P = np.asarray(P, dtype=float)
         if self.is_identity:
             return P.copy()
-        T = self._state_map(False)
+        T = self._state_map(to_world)
         out = T @ P @ T.T
         return 0.5 * (out + np.swapaxes(out, -1, -2))  # symmetric to the last bit, as it was
 
