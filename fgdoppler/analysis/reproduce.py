@@ -106,8 +106,9 @@ def altitude_section(out: Path, settings: ReproduceSettings) -> tuple[list[str],
                            scenarios=settings.altitude_scenarios)
     atomic_write_text(out / "altitude.json", json.dumps(study.to_dict(), indent=1))
     fig = study.figure(out / "altitude.png")
+    n = len(study.scenarios)
     lines = ["## Beyond the paper: the scenarios at altitude (3-D)", "",
-             f"{'The scenario' if len(study.scenarios) == 1 else f'The {len(study.scenarios)} scenarios'} flown level at "
+             f"{'The scenario' if n == 1 else f'The {n} scenarios'} flown level at "
              f"{', '.join(f'{a / 1e3:g}' for a in study.altitudes)} km over the "
              f"same ground sensors, {runs} run(s) per cell ({study.wall_time:.0f} s; "
              "`fgdoppler.analysis.altitude.altitude_study`, `studies/altitude_study.py` for more runs).  O of the "
