@@ -33,13 +33,14 @@ def test_reproduce_quick_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtur
 
 def test_altitude_section_of_the_report(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The 3-D altitude study's report section: its table, one row per scenario and height, and the figure.
-    The study itself runs at two of its four heights here (each height is a run of every estimator; the
-    heights and their bounds are test_three_d's)."""
+    The study itself runs at two of its four heights here, with the EKF as its only online estimator (each
+    height is then a run of the 3-D smoother, the EKF and the 2-D smoother; the heights and their bounds are
+    test_three_d's, the particle estimator in 3-D is its command-line test's)."""
     from fgdoppler.analysis import altitude
     from fgdoppler.analysis.reproduce import ReproduceSettings, altitude_section
 
     real = altitude.altitude_study
-    monkeypatch.setattr(altitude, "altitude_study", lambda **kw: real(altitudes=(0.0, 3e3), **kw))
+    monkeypatch.setattr(altitude, "altitude_study", lambda **kw: real(altitudes=(0.0, 3e3), online=("ekf",), **kw))
     lines, fig = altitude_section(tmp_path, ReproduceSettings(runs=2, workers=1, altitude_runs=1,
                                                               altitude_scenarios=(("b", 5e3),)))
     assert fig is not None and fig.stat().st_size > 0

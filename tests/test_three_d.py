@@ -8,7 +8,8 @@ What is checked, and why it can fail:
 * rigid motions of the whole problem in space (rotations about tilted axes, translations) move
   every estimator's answer with it;
 * on a well-observed 3-D scenario (three ground pairs, target at 3 km) the batch smoother's
-  end-of-track position RMSE over 20 seeded runs is within 1.3 times the 3-D Cramér–Rao bound;
+  end-of-track position RMSE over 5 seeded runs is below the 99.9 % level an efficient smoother
+  reaches (2.03 times the 3-D Cramér–Rao bound), and over 20 runs (-m slow) within 1.3 times it;
 * files: 3-D truth and track CSVs round-trip; bad input gets a clear error.
 """
 
@@ -182,9 +183,9 @@ def test_rigid_motions_in_space_move_every_answer_with_them(axis: tuple[float, .
                            atol=1e-9 * float(np.max(np.abs(a.covariances[ok])))), est
 
 
-def test_batch_smoother_reaches_the_3d_bound_on_an_aircraft_over_ground_sensors() -> None:
-    """20 seeded runs: end-of-track position RMSE within 1.3× the 3-D CRLB (measured: 208 m vs 212 m)."""
-    runs = 20
+def _end_errors_and_bound(runs: int) -> tuple[np.ndarray, float]:
+    """The batch smoother's squared end-of-track position errors over ``runs`` seeded recordings of the aircraft,
+    and the 3-D smoothing CRLB of that position (m, the root of the bound's trace)."""
     err2 = []
     for r in range(runs):
         sim = fd.simulate(AIRCRAFT, np.random.default_rng(100 + r))
@@ -197,8 +198,32 @@ def test_batch_smoother_reaches_the_3d_bound_on_an_aircraft_over_ground_sensors(
         err2.append(float(d @ d))
     bound = crlb_deterministic(GROUND, AIRCRAFT.x0, sim.measurements, [sim.truth.times[-1]], smoothing=True)[0]
     crlb = float(np.sqrt(np.trace(bound[:3, :3])))
-    rmse = float(np.sqrt(np.mean(err2)))
     assert 50.0 < crlb < 1e3  # a meaningful bound: height is observable from this site
+    return np.asarray(err2), crlb
+
+
+def test_batch_smoother_is_near_the_3d_bound_on_an_aircraft_over_ground_sensors() -> None:
+    """5 seeded runs: end-of-track position RMSE below the bound's 99.9 % level for an efficient smoother.
+
+    With the error Gaussian of covariance P (trace CRLB^2), a run's squared error is a sum of P's eigenvalues
+    times chi-square(1) variables; over N runs the mean is at most CRLB^2 chi2(N)/N in the tail (all of the trace
+    in one eigenvalue is the heaviest case), so RMSE <= CRLB sqrt(chi2_0.999(N)/N): 2.03 CRLB for N = 5.  A
+    smoother that is kilometres off, or in the wrong mode in one run of five, fails.  (Measured: 1.25 CRLB.)
+    The 20-run version with a 1.3 CRLB limit runs with -m slow.
+    """
+    from scipy.stats import chi2
+
+    runs = 5
+    err2, crlb = _end_errors_and_bound(runs)
+    limit = float(np.sqrt(chi2.ppf(0.999, runs) / runs))
+    assert float(np.sqrt(np.mean(err2))) <= limit * crlb, (np.sqrt(err2), crlb, limit)
+
+
+@pytest.mark.slow  # 20 runs of 2.3 s each
+def test_batch_smoother_reaches_the_3d_bound_on_an_aircraft_over_ground_sensors() -> None:
+    """20 seeded runs: end-of-track position RMSE within 1.3× the 3-D CRLB (measured: 208 m vs 212 m)."""
+    err2, crlb = _end_errors_and_bound(20)
+    rmse = float(np.sqrt(np.mean(err2)))
     assert rmse <= 1.3 * crlb, (rmse, crlb)
 
 

@@ -8,7 +8,7 @@ import pytest
 import fgdoppler as fd
 from fgdoppler.analysis.montecarlo import MonteCarloResult, MonteCarloSpec, run_monte_carlo
 
-SPEC = MonteCarloSpec(scenarios=(fd.paper_scenario("a", 45e3), fd.paper_scenario("b", 5e3)), runs=3,
+SPEC = MonteCarloSpec(scenarios=(fd.paper_scenario("a", 45e3), fd.paper_scenario("b", 5e3)), runs=2,
                       estimators=("grid", "lm", "ekf", "smoother"), seed=99)
 
 

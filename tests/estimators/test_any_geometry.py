@@ -28,7 +28,7 @@ def _end_rmse_and_bound(scen: fd.Scenario, geometry: fd.Geometry, runs: int, see
 
 # Two long studies (20 recordings of 60 s each, 50-70 s on two cores), run with -m slow to keep the default
 # run inside the CI budget; by default a layout of one's own is held to its bound by
-# test_three_d.py::test_batch_smoother_reaches_the_3d_bound_on_an_aircraft_over_ground_sensors and the
+# test_three_d.py::test_batch_smoother_is_near_the_3d_bound_on_an_aircraft_over_ground_sensors and the
 # target-outside-the-zone test below, and three pairs, asynchronous or not, by test_invariance's three-pair cases.
 @pytest.mark.slow
 @pytest.mark.parametrize("first", [

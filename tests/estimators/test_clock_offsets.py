@@ -97,9 +97,11 @@ def test_clock_sigmas_are_one_per_pair_and_refused_otherwise() -> None:
         fd.run_estimator("ekf", sim.measurements, model, init, fd.EKFSettings(clock_sigma=(0.1, 0.1, 0.1)))
 
 
-# the particle estimators' version reruns each of them eight times per recording (60-70 s each): -m slow
-@pytest.mark.parametrize("names", [("smoother", "ekf"), pytest.param(("particle",), marks=pytest.mark.slow),
-                                   pytest.param(("map",), marks=pytest.mark.slow)])
+# A study of 12 recordings (the smoother's and the EKF's version 40 s, the particle estimators' 60-70 s each,
+# rerunning each eight times per recording): -m slow.  By default test_cli's late-clock test checks that the share
+# widens the covariances and leaves the track, and the particle estimators' test below their NEES on one recording.
+@pytest.mark.slow
+@pytest.mark.parametrize("names", [("smoother", "ekf"), ("particle",), ("map",)])
 def test_the_clock_share_makes_tracks_from_off_clocks_consistent(names: tuple[str, ...]) -> None:
     # Case a 45 km (well observed: without the share the smoother is at its bound): each run's two clocks drawn
     # from N(0, 0.3 s^2).  The final position's NEES summed over 12 runs is chi-square with 24 degrees of
