@@ -158,6 +158,10 @@ def test_track_never_assumes_a_geometry(tmp_path: Path, capsys: pytest.CaptureFi
     err = capsys.readouterr().err
     assert "no geometry" in err and "--geometry" in err and err.count("\n") == 1
     assert _files(lone) == ["m.csv"]
+    # a mistyped file name is named as such, not as a missing geometry
+    assert main(["track", str(lone / "n.csv")]) == 2
+    err = capsys.readouterr().err
+    assert f"{lone / 'n.csv'}: cannot read: no such file" in err and "geometry" not in err
     # beside the file: found and named in the summary and the outputs
     assert main(["track", str(sim / "measurements.csv"), "--estimator", "ekf", "--out", str(tmp_path / "t.csv")]) == 0
     out = capsys.readouterr().out

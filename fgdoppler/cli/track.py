@@ -102,6 +102,8 @@ def _geometry_spec(args: argparse.Namespace) -> str:
     """The geometry to use: --geometry, else geometry.toml beside FILE; never a silent default."""
     if args.geometry is not None:
         return str(args.geometry)
+    if not args.file.is_file():  # a mistyped name is the mistake to report, not the missing geometry it implies
+        raise CLIError(f"{args.file}: cannot read: {'not a file' if args.file.exists() else 'no such file'}")
     beside = args.file.parent / "geometry.toml"
     if beside.is_file():
         return str(beside)
