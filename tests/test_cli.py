@@ -161,7 +161,12 @@ def test_track_never_assumes_a_geometry(tmp_path: Path, capsys: pytest.CaptureFi
     # a mistyped file name is named as such, not as a missing geometry
     assert main(["track", str(lone / "n.csv")]) == 2
     err = capsys.readouterr().err
-    assert f"{lone / 'n.csv'}: cannot read: no such file" in err and "geometry" not in err
+    assert f"{lone / 'n.csv'}: cannot read: No such file or directory" in err and "geometry" not in err
+    # a readable file's contents wait for the geometry: pairs given by name are not a mistake without it
+    (lone / "named.csv").write_text("time,pair,doppler,sigma\n0,north,10,1\n")
+    assert main(["track", str(lone / "named.csv")]) == 2
+    assert "no geometry" in capsys.readouterr().err
+    (lone / "named.csv").unlink()
     # beside the file: found and named in the summary and the outputs
     assert main(["track", str(sim / "measurements.csv"), "--estimator", "ekf", "--out", str(tmp_path / "t.csv")]) == 0
     out = capsys.readouterr().out

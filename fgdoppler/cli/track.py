@@ -102,11 +102,15 @@ def _geometry_spec(args: argparse.Namespace) -> str:
     """The geometry to use: --geometry, else geometry.toml beside FILE; never a silent default."""
     if args.geometry is not None:
         return str(args.geometry)
-    if not args.file.is_file():  # a mistyped name is the mistake to report, not the missing geometry it implies
-        raise CLIError(f"{args.file}: cannot read: {'not a file' if args.file.exists() else 'no such file'}")
     beside = args.file.parent / "geometry.toml"
     if beside.is_file():
         return str(beside)
+    # a file that cannot be opened (a mistyped name, a folder) is the mistake to report, as the CSV reader words it,
+    # not the missing geometry it implies; its contents wait for the geometry (pairs may be named in it)
+    try:
+        args.file.open("rb").close()
+    except OSError as exc:
+        raise CLIError(f"{args.file}: cannot read: {exc.strerror or exc}") from None
     raise CLIError(f"no geometry for {args.file}: pass --geometry a|b|FILE.toml, or put a geometry.toml "
                    "beside it (fgdoppler simulate writes one)")
 
