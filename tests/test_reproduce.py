@@ -29,6 +29,9 @@ def test_reproduce_quick_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtur
         assert name in report, name
     for section in ("Table 2", "Figs. 10–11", "Lag sweep", "NEES", "Observability report"):
         assert section in report
+    # the lag sweep takes a fifth of the runs, at least 4, but never more than the study was given
+    assert json.loads((out / "lag_sweep.json").read_text())["runs"] == 1
+    assert "## Lag sweep (case b, start 5 km, 1 run)" in report
 
 
 def test_altitude_section_of_the_report(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -50,7 +50,8 @@ class ReproduceSettings:
     seed
         Root seed of all Monte Carlo runs.
     lag_sweep_lags
-        Lags (s) of the lag sweep; the sweep uses ``max(4, runs // 5)`` runs.
+        Lags (s) of the lag sweep; the sweep uses ``max(min(4, runs), runs // 5)`` runs (a
+        fifth of ``runs``, at least 4, never more than ``runs``).
     altitude_runs
         Runs per scenario and height of the altitude study
         (:mod:`fgdoppler.analysis.altitude`); ``None``: ``max(1, runs // 10)``; 0 skips it.
@@ -85,10 +86,10 @@ def paper_monte_carlo(
 def lag_sweep(
     out: Path, settings: ReproduceSettings, *, executor: Executor | None = None, progress: bool | None = None,
 ) -> tuple[list[str], Path]:
-    """Lag sweep on case (b) at 5 km (``max(4, runs // 5)`` runs); saves ``lag_sweep.npz/json`` and the figure."""
+    """Lag sweep on case (b) at 5 km (``max(min(4, runs), runs // 5)`` runs); saves ``lag_sweep.npz/json`` and the figure."""
     out.mkdir(parents=True, exist_ok=True)
     scen = next(s for s in paper_scenarios() if s.name == "case b, start 5 km")
-    spec = MonteCarloSpec(scenarios=(scen,), runs=max(4, settings.runs // 5), seed=settings.seed + 1,
+    spec = MonteCarloSpec(scenarios=(scen,), runs=max(min(4, settings.runs), settings.runs // 5), seed=settings.seed + 1,
                           estimators=(*(f"lag:{lag:g}" for lag in settings.lag_sweep_lags), "ekf", "smoother"))
     sweep = run_monte_carlo(spec, executor=executor, workers=settings.workers, progress=progress)
     sweep.save(out / "lag_sweep")
@@ -365,7 +366,7 @@ def _lag_sweep_section(sweep: MonteCarloResult, out: Path) -> tuple[list[str], P
     t = sweep.times[0]
     lags = [e for e in sweep.estimators if e.startswith("lag:")]
     values = {e: _mean_after(sweep.pos_rmse(0, e), t, 4.75) for e in sweep.estimators}
-    lines = [f"## Lag sweep ({sweep.scenario_names[0]}, {sweep.runs} runs): position RMSE vs lag", "",
+    lines = [f"## Lag sweep ({sweep.scenario_names[0]}, {sweep.runs} run{'' if sweep.runs == 1 else 's'}): position RMSE vs lag", "",
              "| lag (s) | RMSE (m) |", "|---|---|"]
     lines += [f"| {e[4:]} | {values[e]:.1f} |" for e in lags]
     lines += [f"| EKF (lag 0) | {values['ekf']:.1f} |", f"| full smoother | {values['smoother']:.1f} |", ""]
