@@ -106,11 +106,11 @@ import time
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import logsumexp
 
 from fgdoppler.estimators.gating import NISGate
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.local import in_computation_frame
+from fgdoppler.estimators.log_sum_exp import log_sum_exp
 from fgdoppler.estimators.particle_posterior import _Posterior, _weighted_cov
 from fgdoppler.estimators.results import Estimates, OffsetEstimate, TrackResult
 from fgdoppler.estimators.settings import MapSettings, ParticleSettings
@@ -354,11 +354,11 @@ def _update(post: _Posterior, gate: NISGate, t: float, pair: NDArray[np.intp], z
         norm -= off.log_det(a_new) - off.log_det(post.a)
         post.s, post.a = s_new, a_new
     ll = np.where(np.isfinite(ll), ll, -np.inf)
-    before = logsumexp(post.logw)
+    before = log_sum_exp(post.logw)
     post.logw = post.logw + ll
     post.logpost = post.logpost + ll
     post.data.add(tr[keep], pair[keep], z[keep], sigma[keep])
-    return float(logsumexp(post.logw) - before) - norm
+    return float(log_sum_exp(post.logw) - before) - norm
 
 
 def _factor(log_gain: float) -> str:

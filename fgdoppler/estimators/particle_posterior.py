@@ -31,9 +31,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import logsumexp
 
 from fgdoppler.estimators.grid import HalfPlane
+from fgdoppler.estimators.log_sum_exp import log_sum_exp
 from fgdoppler.estimators.offset_posterior import OffsetPrior
 from fgdoppler.estimators.settings import ParticleSettings
 from fgdoppler.models.observation import predict_along
@@ -210,7 +210,7 @@ class _Posterior:
             for c in range(k):
                 sol = np.linalg.solve(chols[c], (y - means[c]).T).T
                 logq[c] = -0.5 * np.sum(sol * sol, axis=1) - half_logdet[c]
-            return np.asarray(logsumexp(logq, axis=0), dtype=float)
+            return np.asarray(log_sum_exp(logq, axis=0), dtype=float)
 
         label = rng.integers(0, k, n)
         x = means[label] + np.einsum("nij,nj->ni", chols[label], rng.standard_normal((n, means.shape[1])))
@@ -236,7 +236,7 @@ class _Posterior:
         return self.move(moves, rng)
 
     def weights(self) -> FloatArray:
-        return np.exp(self.logw - logsumexp(self.logw))
+        return np.exp(self.logw - log_sum_exp(self.logw))
 
     def ess(self) -> float:
         w = self.weights()

@@ -111,7 +111,7 @@ def _terms(
     return h, dh_dp, dh_dv, mask
 
 
-def _ranges(dT: Sequence[FloatArray], dR: Sequence[FloatArray], v: Sequence[FloatArray]
+def _ranges(dT: Sequence[FloatArray], dR: Sequence[FloatArray], v: Sequence[FloatArray], *, scratch: bool = False
             ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
     r"""The pieces of :math:`h = \Delta\mathbf p_T\cdot\mathbf v/r_T + \Delta\mathbf p_R\cdot\mathbf v/r_R`.
 
@@ -121,13 +121,27 @@ def _ranges(dT: Sequence[FloatArray], dR: Sequence[FloatArray], v: Sequence[Floa
     a placeholder where a target sits on a sensor (``singular``; the caller
     raises or masks).  Explicit component sums in a fixed order: the 3-D model
     at z = 0 is then the 2-D model to the bit, and every layout that calls
-    this gives the same numbers.
+    this gives the same numbers.  With ``scratch`` the arrays of ``dT`` and
+    ``dR`` are the caller's temporaries, each of the result's shape, and are
+    overwritten (the products with :math:`\mathbf v` are formed in them):
+    the same operations in the same order, on fewer fresh arrays
+    (:func:`_along`'s blocks).
     """
-    rT2, rR2, pT, pR = dT[0] * dT[0], dR[0] * dR[0], dT[0] * v[0], dR[0] * v[0]
-    for a, b, w in zip(dT[1:], dR[1:], v[1:], strict=True):
-        rT2, rR2, pT, pR = rT2 + a * a, rR2 + b * b, pT + a * w, pR + b * w
-    rT = np.sqrt(rT2)
-    rR = np.sqrt(rR2)
+    rT2, rR2 = dT[0] * dT[0], dR[0] * dR[0]
+    if scratch:
+        pT, pR = np.multiply(dT[0], v[0], out=dT[0]), np.multiply(dR[0], v[0], out=dR[0])
+        for a, b, w in zip(dT[1:], dR[1:], v[1:], strict=True):
+            rT2 += a * a
+            rR2 += b * b
+            pT += np.multiply(a, w, out=a)
+            pR += np.multiply(b, w, out=b)
+    else:
+        pT, pR = dT[0] * v[0], dR[0] * v[0]
+        for a, b, w in zip(dT[1:], dR[1:], v[1:], strict=True):
+            rT2, rR2, pT, pR = rT2 + a * a, rR2 + b * b, pT + a * w, pR + b * w
+    # the squares are this function's own, and with scratch of the result's shape (0-d ones are scalars)
+    rT = np.sqrt(rT2, out=rT2) if scratch else np.sqrt(rT2)
+    rR = np.sqrt(rR2, out=rR2) if scratch else np.sqrt(rR2)
     bad = (rT <= SENSOR_EPS) | (rR <= SENSOR_EPS)
     if np.any(bad):
         rT = np.where(rT <= SENSOR_EPS, 1.0, rT)
@@ -177,11 +191,18 @@ def _along_block(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray
                  ) -> tuple[FloatArray, NDArray[np.bool_]]:
     """:func:`_along` for one block of tracks ``(n, 2d)``: Doppler and where a track meets a sensor."""
     d = x.shape[-1] // 2
-    # contiguous (n, m) arrays per coordinate: p = p0 + t v, then its offsets from the sensors
-    p = [x[:, k, None] + t * x[:, d + k, None] for k in range(d)]
-    rT, rR, pT, pR, bad = _ranges([p[k] - tx[:, k] for k in range(d)], [p[k] - rx[:, k] for k in range(d)],
-                                  [x[:, d + k, None] for k in range(d)])
-    return pT / rT + pR / rR, bad
+    # contiguous (n, m) arrays per coordinate: p = p0 + t v, then its offsets from the sensors, each formed in
+    # place where the arithmetic allows (x + y and y + x are the same number): two fresh arrays a coordinate
+    dT, dR = [], []
+    for k in range(d):
+        p = t * x[:, d + k, None]
+        p += x[:, k, None]
+        dT.append(p - tx[:, k])
+        dR.append(np.subtract(p, rx[:, k], out=p))
+    rT, rR, pT, pR, bad = _ranges(dT, dR, [x[:, d + k, None] for k in range(d)], scratch=True)
+    pT /= rT
+    pT += np.divide(pR, rR, out=pR)
+    return pT, bad
 
 
 def bistatic_doppler(states: ArrayLike, geometry: Geometry) -> FloatArray:
