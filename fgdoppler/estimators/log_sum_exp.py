@@ -7,8 +7,9 @@ to the bit (test: ``tests/estimators/test_log_sum_exp.py``).  It exists for spee
 alone: SciPy's function dispatches through its array-API layer on every
 call, about 100 µs for 4,096 weights against about 30 µs here, and the
 particle estimators normalise their weights some 500 times per 30 s
-recording — 7 to 9 % of their CPU time (case b 25 and 45 km, measured
-by running both on the same recordings in one process).
+recording: 5 to 9 % of their CPU time (``python -m benchmarks --only
+particle``, each variant in a fresh process: 0.95×; case b 25 and 45 km
+alternated in one process beside other jobs: 0.91–0.93×).
 """
 
 from __future__ import annotations
