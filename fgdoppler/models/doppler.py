@@ -127,19 +127,16 @@ def _ranges(dT: Sequence[FloatArray], dR: Sequence[FloatArray], v: Sequence[Floa
     the same operations in the same order, on fewer fresh arrays
     (:func:`_along`'s blocks).
     """
+    # the sums are this function's own arrays (or scalars, for 0-d input), accumulated in place
     rT2, rR2 = dT[0] * dT[0], dR[0] * dR[0]
-    if scratch:
-        pT, pR = np.multiply(dT[0], v[0], out=dT[0]), np.multiply(dR[0], v[0], out=dR[0])
-        for a, b, w in zip(dT[1:], dR[1:], v[1:], strict=True):
-            rT2 += a * a
-            rR2 += b * b
-            pT += np.multiply(a, w, out=a)
-            pR += np.multiply(b, w, out=b)
-    else:
-        pT, pR = dT[0] * v[0], dR[0] * v[0]
-        for a, b, w in zip(dT[1:], dR[1:], v[1:], strict=True):
-            rT2, rR2, pT, pR = rT2 + a * a, rR2 + b * b, pT + a * w, pR + b * w
-    # the squares are this function's own, and with scratch of the result's shape (0-d ones are scalars)
+    pT = np.multiply(dT[0], v[0], out=dT[0] if scratch else None)
+    pR = np.multiply(dR[0], v[0], out=dR[0] if scratch else None)
+    for a, b, w in zip(dT[1:], dR[1:], v[1:], strict=True):
+        rT2 += a * a
+        rR2 += b * b
+        pT += np.multiply(a, w, out=a if scratch else None)
+        pR += np.multiply(b, w, out=b if scratch else None)
+    # with scratch the squares are arrays of the result's shape; without, 0-d input makes them scalars
     rT = np.sqrt(rT2, out=rT2) if scratch else np.sqrt(rT2)
     rR = np.sqrt(rR2, out=rR2) if scratch else np.sqrt(rR2)
     bad = (rT <= SENSOR_EPS) | (rR <= SENSOR_EPS)
