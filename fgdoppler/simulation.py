@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler._io import atomic_write_text
+from fgdoppler._text import time_text
 from fgdoppler.geometry import Geometry, paper_geometry
 from fgdoppler.measurements import MeasurementError, Measurements
 from fgdoppler.models.doppler import bistatic_doppler
@@ -68,12 +69,23 @@ class Trajectory:
 
     def at(self, times: ArrayLike) -> NDArray[np.float64]:
         """States at the given times (which must be among ``self.times``)."""
-        t = np.asarray(times, dtype=float)
-        idx = np.searchsorted(self.times, t)
-        idx = np.clip(idx, 0, self.times.size - 1)
-        if not np.allclose(self.times[idx], t, rtol=0, atol=1e-9):
+        idx, on = self._on_grid(times)
+        if not np.all(on):
             raise ValueError("requested times are not on the trajectory's time grid")
         return self.states[idx]
+
+    def _on_grid(self, times: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+        """The index of the truth time nearest to each of ``times``, and whether it is that time.
+
+        The same time to 1 ns, or to a few units in the last place where a clock's
+        seconds are large (Unix seconds: one unit is 0.24 µs at 1.7e9 s), so that
+        times written by another program with other rounding still match.
+        """
+        t = np.asarray(times, dtype=float)
+        right = np.clip(np.searchsorted(self.times, t), 0, self.times.size - 1)
+        left = np.clip(right - 1, 0, self.times.size - 1)
+        idx = np.where(np.abs(self.times[left] - t) < np.abs(self.times[right] - t), left, right)
+        return idx, np.abs(self.times[idx] - t) <= np.maximum(1e-9, 8.0 * np.spacing(np.abs(t)))
 
     @property
     def dim(self) -> int:
@@ -122,10 +134,9 @@ class Trajectory:
     def check_covers(self, times: ArrayLike, source: str) -> None:
         """Raise :class:`MeasurementError` naming ``source`` unless every one of ``times`` is a truth time."""
         t = np.asarray(times, dtype=float)
-        idx = np.clip(np.searchsorted(self.times, t), 0, self.times.size - 1)
-        missing = np.flatnonzero(np.abs(self.times[idx] - t) > 1e-9)
+        missing = np.flatnonzero(~self._on_grid(t)[1])
         if missing.size:
-            raise MeasurementError(f"{source}: no truth at t = {t[missing[0]]:g} s ({missing.size} measurement "
+            raise MeasurementError(f"{source}: no truth at t = {time_text(t[missing[0]])} s ({missing.size} measurement "
                                    "time(s) missing): the truth must have a row at every measurement time")
 
 

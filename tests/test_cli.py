@@ -682,15 +682,21 @@ def test_a_default_zone_is_said_to_be_an_assumption(tmp_path: Path, capsys: pyte
     assert "default rule" not in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("origin", [(0.0, 0.0), (503_210.5, 4_512_345.678)], ids=["paper", "utm"])
 def test_one_pairs_mirror_is_settled_by_the_half_plane_the_hint_gives(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], origin: tuple[float, float]) -> None:
     """One bistatic pair: a track and its mirror image across the baseline give the same Doppler.
 
     The ``data`` finding says so and the command prints the two half planes
     of that line; run with the one that holds the truth, the track is on the
-    truth's side (and the finding is gone).
+    truth's side (and the finding is gone).  The same with the sensors where
+    UTM coordinates put them (the Doppler does not change under a
+    translation): the hint gives the line's point to the millimetre, not as
+    ``4.51235e+06``, 4.3 m off.
     """
     import re
+
+    from fgdoppler.geometry_file import write_geometry
 
     sim = tmp_path / "sim"
     assert main(["simulate", "--case", "a", "--start-x", "25000", "--start-y", "2000", "--seed", "1",
@@ -698,7 +704,11 @@ def test_one_pairs_mirror_is_settled_by_the_half_plane_the_hint_gives(
     text = (sim / "measurements.csv").read_text().splitlines()
     one = tmp_path / "one.csv"
     one.write_text("\n".join([text[0], *(r for r in text[1:] if r.split(",")[1] == "0")]) + "\n")
-    args = ["track", str(one), "--geometry", str(sim / "geometry.toml"), "--estimator", "smoother", "--json"]
+    shift = np.array(origin)
+    paper = fd.paper_geometry("a")
+    write_geometry(fd.Geometry(pairs=tuple(fd.BistaticPair(tx=tuple(p.tx + shift), rx=tuple(p.rx + shift))
+                                           for p in paper.pairs)), tmp_path / "geometry.toml")
+    args = ["track", str(one), "--geometry", str(tmp_path / "geometry.toml"), "--estimator", "smoother", "--json"]
     capsys.readouterr()
     assert main(args) == 0
     captured = capsys.readouterr()
@@ -708,16 +718,16 @@ def test_one_pairs_mirror_is_settled_by_the_half_plane_the_hint_gives(
     assert hint is not None and first["status"] == "doubtful"
     assert [r["mirror"] for r in first["reasons"] if "lie on one line" in r["message"]] == ["reporting"]
     planes = np.array(hint.groups(), dtype=float).reshape(2, 4)
-    np.testing.assert_allclose(planes[0, 1], 0.0, atol=1e-9)  # the baseline y = 0 of pair 0
+    np.testing.assert_allclose(planes[0, 1], origin[1], rtol=0, atol=5e-4)  # the baseline y = 0 of pair 0, moved
     truth = fd.Trajectory.from_csv(sim / "truth.csv")
-    holds = [k for k in range(2) if planes[k, 2:] @ (truth.states[0, :2] - planes[k, :2]) > 0]
+    holds = [k for k in range(2) if planes[k, 2:] @ (truth.states[0, :2] + shift - planes[k, :2]) > 0]
     assert len(holds) == 1
     assert main([*args, "--half-plane", *hint.groups()[4 * holds[0]:4 * holds[0] + 4]]) == 0
     captured = capsys.readouterr()
     result = json.loads(captured.out)
     assert "hint" not in captured.err
     assert not any("lie on one line" in r["message"] for r in result["reasons"])
-    assert np.sign(result["states"][-1][1]) == np.sign(truth.states[-1, 1])
+    assert np.sign(result["states"][-1][1] - origin[1]) == np.sign(truth.states[-1, 1])
 
 
 def test_a_measurement_file_may_name_its_pairs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -739,3 +749,41 @@ def test_a_measurement_file_may_name_its_pairs(tmp_path: Path, capsys: pytest.Ca
         runs.append(json.loads(capsys.readouterr().out))
     assert runs[0]["x_start"] == runs[1]["x_start"] and runs[0]["cost"] == runs[1]["cost"]
     assert [p["name"] for p in runs[1]["geometry"]["pairs"]] == ["north", "south"]
+
+
+def test_a_recording_in_unix_seconds_is_reported_with_its_own_times(tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """Times of ~1.7e9 s are printed in full (``:g`` made every one "1.7e+09"), and a truth file whose times
+    another program rounded a unit in the last place the other way still matches the measurements' (that unit is
+    0.24 µs there, far above the 1 ns that used to be asked)."""
+    sim = tmp_path / "sim"
+    main(["simulate", "--case", "b", "--start-x", "5000", "--seed", "3", "--out", str(sim)])
+    capsys.readouterr()
+    m = fd.Measurements.from_csv(sim / "measurements.csv")
+    shifted = m.time + 1_764_115_201.1
+    fd.Measurements(time=shifted, pair=m.pair, doppler=m.doppler, sigma=m.sigma).to_csv(tmp_path / "m.csv")
+    lines = (sim / "truth.csv").read_text().splitlines()
+    rows = [ln.split(",", 1)[1] for ln in lines[1:]]
+    truth_times = np.unique(shifted)
+    truth_times[::2] = np.nextafter(truth_times[::2], np.inf)
+    assert len(rows) == truth_times.size
+    (tmp_path / "t.csv").write_text("\n".join([lines[0], *(f"{float(t)!r},{r}" for t, r in zip(truth_times, rows,
+                                                                                          strict=True))]))
+    args = ["track", str(tmp_path / "m.csv"), "--geometry", "b", "--truth", str(tmp_path / "t.csv")]
+    assert main([*args, "--estimator", "init"]) == 0
+    out = capsys.readouterr().out
+    first, last = fd.Measurements.from_csv(tmp_path / "m.csv").first_per_pair(10).time[[0, -1]]
+    assert f"t = {float(first)!r}..{float(last)!r} s" in out and "e+09" not in out and "error at t_end" in out
+    assert main([*args, "--estimator", "ekf"]) == 0
+    out = capsys.readouterr().out
+    assert f"..{float(shifted[-1])!r} s, " in out and "e+09" not in out  # filtered from the window's end
+    assert "position RMSE vs truth" in out
+
+
+@pytest.mark.parametrize("t", [0.0, 30.0, 12.25, 0.125, -3601.5, 2.5e-5, 1_764_115_201.1, 1_764_115_231.25, 1e12 + 0.5])
+def test_times_are_printed_positionally_and_read_back_exactly(t: float) -> None:
+    from fgdoppler._text import time_text
+
+    text = time_text(t)
+    assert "e" not in text.lower() and float(text) == t  # every time here has at most six decimals
+    assert len(text) <= len(repr(t)) + 1  # no padding: "30", not "30.000000"

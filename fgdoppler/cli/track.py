@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from fgdoppler._text import plain_number, time_text
 from fgdoppler.cli.common import (
     CLIError,
     add_huber_option,
@@ -259,9 +260,11 @@ def _print_half_plane_hint(reasons: Any, geom: Geometry, args: argparse.Namespac
     c, u, _ = principal_line(sensors[:, :2])
     c, u = c + 0.0, u + 0.0  # no "-0" printed
     n = np.array([-u[1], u[0]]) + 0.0
-    side = " ".join(f"{v:.6g}" for v in (*c, *n))
-    other = " ".join(f"{v:.6g}" for v in (*c, *(0.0 - n)))
-    print(f"  hint: the sensors' line passes through ({c[0]:.6g}, {c[1]:.6g}) along ({u[0]:.6g}, {u[1]:.6g}); "
+    # the point to the millimetre in full (a UTM northing with :g is "4.51235e+06"), the directions to 6 digits
+    at = [plain_number(v, 3) for v in c]
+    side = " ".join([*at, *(f"{v:.6g}" for v in n)])
+    other = " ".join([*at, *(f"{v:.6g}" for v in 0.0 - n)])
+    print(f"  hint: the sensors' line passes through ({at[0]}, {at[1]}) along ({u[0]:.6g}, {u[1]:.6g}); "
           f"--half-plane {side} puts the target on one side of it, --half-plane {other} on the other",
           file=sys.stderr)
 
@@ -291,10 +294,10 @@ def _print_events(events: Any, limit: int = 10) -> None:
     events = list(events)
     shown = events if len(events) <= limit else events[:limit - 1]
     for e in shown:
-        print(f"  event at t = {e.time:g}: {e.message}")
+        print(f"  event at t = {time_text(e.time)}: {e.message}")
     if len(events) > limit:
         print(f"  ... {len(events) - limit} more event(s): all are in the JSON (--json, or --out's .json) ...")
-        print(f"  event at t = {events[-1].time:g}: {events[-1].message}")
+        print(f"  event at t = {time_text(events[-1].time)}: {events[-1].message}")
 
 
 def _write(args: argparse.Namespace, csv_text: str, json_text: str, figure: bytes | None) -> None:
@@ -325,7 +328,7 @@ def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: A
         emit_json(payload)
         return str(init.status)
     print(f"initiation ({init.method}) from {init.n_measurements} measurements, "
-          f"t = {init.t_start:g}..{init.t_end:g} s, {init.wall_time * 1e3:.0f} ms")
+          f"t = {time_text(init.t_start)}..{time_text(init.t_end)} s, {init.wall_time * 1e3:.0f} ms")
     print(f"  state at t_end: {_state_text(init.x_end)}")
     if init.P_end is not None:
         print(f"  std: {_state_text(np.sqrt(np.diag(init.P_end)), names=False)}")
@@ -439,7 +442,7 @@ def _run_tracker(args: argparse.Namespace, settings: Any, init: Any, meas: Any, 
     if args.json:
         emit_json({**result.to_dict(all_estimates=False), **where})
         return str(result.status)
-    print(f"{name}: {len(e)} states ({e.kind}), t = {e.times[0]:g}..{e.times[-1]:g} s, "
+    print(f"{name}: {len(e)} states ({e.kind}), t = {time_text(e.times[0])}..{time_text(e.times[-1])} s, "
           f"{result.wall_time * 1e3:.0f} ms")
     print(f"  last state: {_state_text(e.states[-1])}")
     _print_events(result.events)

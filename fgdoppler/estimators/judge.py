@@ -84,6 +84,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.stats import chi2
 
+from fgdoppler._text import time_text
 from fgdoppler.estimators.calibration import shifted_by
 from fgdoppler.estimators.grid import speed_lower_bound
 from fgdoppler.estimators.initiation import OUTLIER_CUT, inlier_statistic
@@ -279,8 +280,8 @@ def track_reference(est: Estimates, ref: Estimates) -> list[Reason]:
     return [Reason(code="reference", status="doubtful", message=(
         f"the {est.kind} estimates lay on average {np.sqrt(mean):.1f} of their own sigma from the offline "
         f"smoother's track, which uses all the data (mean chi-square {mean:.1f} > {limit:.1f}, {n} dof; beyond it "
-        f"at {beyond.size} of {t.size} times between t = {beyond[0]:g} and {beyond[-1]:g} s, most at "
-        f"t = {t[worst]:g} s, {np.linalg.norm(d[worst, :n // 2]) / 1e3:.2f} km): for that while the track was "
+        f"at {beyond.size} of {t.size} times between t = {time_text(beyond[0])} and {time_text(beyond[-1])} s, most at "
+        f"t = {time_text(t[worst])} s, {np.linalg.norm(d[worst, :n // 2]) / 1e3:.2f} km): for that while the track was "
         "confidently where the whole recording does not put it"))]
 
 

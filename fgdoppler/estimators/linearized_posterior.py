@@ -73,6 +73,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fgdoppler._text import time_text
 from fgdoppler.estimators.linearized import linearize_rows
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.motion import ConstantVelocity
@@ -135,7 +136,7 @@ class LinearizedPosterior:
         t = np.atleast_1d(np.asarray(times, dtype=float))
         h = t if horizons is None else np.broadcast_to(np.asarray(horizons, dtype=float), t.shape)
         if np.any(~(t >= self.times[0])):
-            raise ValueError(f"times must not be before the start {self.times[0]:g} s")
+            raise ValueError(f"times must not be before the start {time_text(self.times[0])} s")
         if np.any(~(h >= t)):
             raise ValueError("each horizon must be at or after its time")
         j = np.searchsorted(self.times, t, side="right") - 1  # the last entry at or before each time

@@ -57,6 +57,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
+from fgdoppler._text import time_text
 from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.measurements import Measurements
@@ -155,7 +156,7 @@ def manoeuvre_reason(measurements: Measurements, model: TrackingModel, times: Fl
     q = getattr(model.motion, "q", None)
     shared = f" over {len(SPLITS)} split times" if len(SPLITS) > 1 else ""
     return Reason(code="manoeuvre", status="doubtful", message=(
-        f"the target does not move as the motion model says: the data up to t = {tc:g} s and after it, "
+        f"the target does not move as the motion model says: the data up to t = {time_text(tc)} s and after it, "
         f"each fitted with a track of its own, explain the data better than one track by {d:.1f} "
         f"(> {threshold:.1f}, the chi-square level for {model.n} degrees of freedom at "
         f"{LEVEL:.1%}{shared}): the target may manoeuvre, and a track that "

@@ -80,6 +80,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
+from fgdoppler._text import time_text
 from fgdoppler.estimators.grid import GridResult, HalfPlane
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate, window_grid
 from fgdoppler.estimators.results import Estimates, TrackResult
@@ -268,7 +269,7 @@ def fresh_start(measurements: Measurements, model: TrackingModel, settings: Trac
     if not m2 > chi2.ppf(DISAGREEMENT, model.n):
         return None
     where = "in its own basin" if best is basin else f"of lower cost ({new.cost:.1f} vs {basin.cost:.1f})"
-    return best, (f"online re-initiation over the {len(data)} measurements up to t = {tc:g} s: the running "
+    return best, (f"online re-initiation over the {len(data)} measurements up to t = {time_text(tc)} s: the running "
                   f"estimate is {np.sqrt(m2):.1f} sigma from the best fit of all the data so far, {where}; "
                   "the tracker restarts there")
 

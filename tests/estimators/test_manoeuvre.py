@@ -118,3 +118,17 @@ def test_the_switch_takes_only_true_or_false() -> None:
         with pytest.raises(ValueError, match="motion_check must be True or False"):
             fd.SmootherSettings(motion_check=bad)  # type: ignore[arg-type]
     assert fd.SmootherSettings(motion_check=False).motion_check is False
+
+
+def test_the_split_time_is_named_in_the_recordings_own_clock() -> None:
+    # The same recording timed in Unix seconds (a shift on the binary lattice: the same arithmetic, so the same
+    # statistic to the bit) names its split time in full, not as "1.76412e+09".
+    g, sim = _manoeuvring_two_pair_recording(4)
+    model = fd.TrackingModel.of(g)
+    m, shift = sim.measurements, 1_764_115_200.0
+    moved = fd.Measurements(time=m.time + shift, pair=m.pair, doppler=m.doppler, sigma=m.sigma)
+    here = manoeuvre_reason(m, model, sim.truth.times, sim.truth.states)
+    there = manoeuvre_reason(moved, model, sim.truth.times + shift, sim.truth.states)
+    assert here is not None and there is not None
+    assert "up to t = 15 s" in here.message and "up to t = 1764115215 s" in there.message
+    assert there.message.replace("1764115215", "15") == here.message
