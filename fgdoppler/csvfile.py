@@ -92,6 +92,17 @@ def _names(text: str) -> tuple[str, ...]:
     return tuple(h.strip().lower() for h in next(csv.reader([text])))
 
 
+def _layout_hint(header: str, comments: bool) -> str:
+    """Why a header line may not be one, where the cause is plain: another separator, or a comment line."""
+    if not comments and header.lstrip().startswith("#"):
+        return " (a comment line: this file has no comments, its first line must be the header)"
+    if "," not in header:
+        for sep, name in ((";", "semicolons"), ("\t", "tabs"), ("|", "bars")):
+            if sep in header:
+                return f" (this header separates its names with {name}: the columns must be separated by commas)"
+    return ""
+
+
 def header_names(path: str | Path, *, comments: bool = False) -> tuple[str, ...]:
     """The column names of a CSV's header (lower case; ``()`` for an empty file), read as :func:`read_table` reads them.
 
@@ -150,7 +161,7 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
     if problem:
         expected = ",".join(header) + (f" (and optionally {','.join(optional)})" if optional else "")
         raise CSVError(f"{path}:{line0}: bad header {','.join(names)!r}: {problem}; expected the columns "
-                       f"{expected}, in any order")
+                       f"{expected}, in any order{_layout_hint(text0, comments)}")
     if len(rows) == 1:
         raise CSVError(f"{path}: no data rows after the header")
     values = np.empty((len(rows) - 1, len(names)))

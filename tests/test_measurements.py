@@ -127,6 +127,11 @@ def test_a_pair_may_be_given_by_its_name(tmp_path: Path) -> None:
         ("time,pair,dopler,sigma\n0,0,1,1\n", 1, "no column 'doppler'; unknown column 'dopler'"),
         ("time,pair,doppler,snr\n0,0,1,1\n", 1, "unknown column 'snr'"),
         ("time,pair,doppler,sigma,sigma\n0,0,1,1,1\n", 1, "repeated column 'sigma'"),
+        # and why, where the cause is plain: another separator, a comment line
+        ("time;pair;doppler;sigma\n0;0;1;1\n", 1, "separates its names with semicolons: the columns must be "
+                                                   "separated by commas"),
+        ("time\tpair\tdoppler\n0\t0\t1\n", 1, "with tabs"),
+        ("# from receiver 2\ntime,pair,doppler\n0,0,1\n", 1, "a comment line: this file has no comments"),
         ("sigma,doppler,time,pair\n1,abc,0,0\n", 2, "doppler is not a number"),
         ("pair,time,doppler,sigma\n0,1,1,1\n0,0.5,1,1\n", 3, "time 0.5 is earlier than pair 0's previous row's 1.0 \\(line 2\\)"),
         ("time,pair,doppler,sigma\n0,0,abc,1\n", 2, "doppler is not a number"),
