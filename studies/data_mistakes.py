@@ -115,8 +115,8 @@ VERSIONS: dict[str, tuple[Callable[[fd.Measurements, fd.Geometry, float], fd.Mea
 }
 
 #: The change a mistake finding names first, and the other changes it names (``mistake_reason``'s wording).
-_FIRST = re.compile(r"^(?:.*: )?with (the (?:Doppler|labels) of .+?) the window fits")
-_OTHERS = re.compile(r"passes the same test with (.+?) too: check")
+_FIRST = re.compile(r"^(?:.*: )?with (the (?:Doppler|labels) of .+?) (?:the window fits|they fit)")
+_OTHERS = re.compile(r"(?:passes|pass) the same test with (.+?) too: check")
 _CHANGE = re.compile(r"(the (?:Doppler|labels) of .+?) \(cost ")
 
 

@@ -25,6 +25,17 @@ as given, or fails for another reason (an outlier, a manoeuvre inside it,
 a target that has left the zone, which bounds each window's start), names
 nothing.  The track's status does not change (the ``fit`` finding is
 already ``doubtful``); the finding says what to check.
+
+Where no window names a change and the geometry has radars, the last check
+takes :data:`WHOLE_PER_PAIR` measurements of every pair spread evenly over
+the whole recording: a radar's halved Doppler fits another track in a
+short window (its direction to the target barely turns in 4.5 s), but not
+over the whole recording, where the positions that a track's velocity
+carries it through no longer match.  If they fail the χ² test as given and
+pass with a radar's Doppler doubled, or doubled and negated, that change is
+named.  (The sign and swapped labels, which windows mostly name, are not
+tried there: that would cost :math:`1 + P + P(P-1)/2` more initiations on
+every track that misfits, a manoeuvring one included.)
 """
 
 from __future__ import annotations
@@ -32,11 +43,19 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from scipy.stats import chi2
 
-from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate
+from fgdoppler._text import time_text
+from fgdoppler.estimators.initiation import VERDICT_LEVEL, Initiation, InitiationSettings, initiate
 from fgdoppler.estimators.results import TrackResult
 from fgdoppler.estimators.verdict import Reason
-from fgdoppler.estimators.window_mistakes import Mistake, find_mistake, mistake_reason
+from fgdoppler.estimators.window_mistakes import (
+    Mistake,
+    MistakeCode,
+    find_mistake,
+    mistake_reason,
+    radar_pairs,
+)
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
@@ -44,6 +63,17 @@ __all__ = ["LATER_WINDOWS", "MISTAKE_CODES", "later_mistakes"]
 
 #: Windows initiated after the initiation window where a track fails its residual test.
 LATER_WINDOWS = 3
+
+#: Measurements per pair, spread evenly over the whole recording, of the last check (:func:`later_mistakes`).
+WHOLE_PER_PAIR = 20
+
+#: The changes the later windows name that the whole recording is asked to confirm, at most.
+CONFIRMED_AT_MOST = 3
+
+#: The changes the last check tries: a radar's Doppler, which a short window rarely tells (its halved data fit
+#: another track there); the sign and swapped pairs, which windows mostly name, would cost 1 + P + P(P-1)/2
+#: initiations more on every track that misfits.
+WHOLE_CODES: tuple[MistakeCode, ...] = ("radial",)
 
 #: The findings of a mistake in the measurement file (:func:`~fgdoppler.estimators.window_mistakes.mistake_reasons`).
 MISTAKE_CODES = ("sign", "swapped", "radial")
@@ -65,11 +95,19 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     fails passes the χ² test at 95 % counts as its vote.  The change with
     the most votes (among equals, the least total cost in the windows that
     pass with it) is reported, with the first window it makes pass, the
-    count and the other changes under which that window passes.  Costs
+    count and the other changes under which that window passes.  Where no
+    window names a change and the model's geometry has radars, the
+    :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole
+    recording are tried the same way with the changes of
+    :data:`WHOLE_CODES` (a radar's Doppler doubled, or doubled and negated),
+    and a change under which they pass is named.  Costs
     nothing on a track that fits; on one that does not, :math:`n`
     initiations and, for each window that fails,
     :math:`1 + P + P(P-1)/2` more with :math:`P` pairs (and more with radars,
-    :func:`~fgdoppler.estimators.window_mistakes.mistake_reasons`) — unless
+    :func:`~fgdoppler.estimators.window_mistakes.mistake_reasons`), and with
+    radars where the windows name nothing one initiation of the spread
+    measurements and, if they fail, :math:`2(1 + R)` more with
+    :math:`R \ge 2` radars (one radar: 2) — unless
     ``reference``, a track on the same data and initiation whose own
     ``fit`` finding is not ``ok`` either and whose settings have the same
     ``huber_k``, made the same check already: its mistake
@@ -111,7 +149,8 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
             and reference.settings.huber_k == huber_k:
         # the same windows, fits and votes: the answer depends on nothing else
         return [r for r in reference.reasons if r.code in MISTAKE_CODES]
-    return _from_windows(measurements, model, init, huber_k, windows)
+    whole = _Whole(measurements, model, init, huber_k)
+    return _from_windows(measurements, model, init, huber_k, windows, whole) or _from_whole(model, whole, WHOLE_CODES)
 
 
 def _misfits(reasons: tuple[Reason, ...]) -> bool:
@@ -120,13 +159,14 @@ def _misfits(reasons: tuple[Reason, ...]) -> bool:
 
 
 def _from_windows(measurements: Measurements, model: TrackingModel, init: Initiation, huber_k: float | None,
-                  windows: int) -> list[Reason]:
-    """The change most of ``windows`` later windows need to fit, as a finding (:func:`later_mistakes`)."""
+                  windows: int, whole: _Whole) -> list[Reason]:
+    """The change most of ``windows`` later windows need to fit and the whole recording fits with, as a finding
+    (:func:`later_mistakes`)."""
     span = init.t_end - init.t_start
     last = float(np.max(measurements.time))
     if not (span > 0 and last - span > init.t_end):
         return []
-    settings = InitiationSettings(half_plane=init.half_plane, huber_k=huber_k)
+    settings = whole.settings
     quiet = replace(settings, mistake_check=False)
     # for each change, the windows it makes pass, in order: (the change there, every change that passes there,
     # the window's cost as given, its start)
@@ -143,15 +183,93 @@ def _from_windows(measurements: Measurements, model: TrackingModel, init: Initia
         there = (found, *found.others)
         for m in there:
             passed.setdefault((m.code, m.which, m.factor), []).append((m, there, given.cost, float(start)))
-    if not passed:
+    # the most windows first, among equals the least total cost there (then the order first seen); the first
+    # that the whole recording's spread measurements confirm is named
+    ranked = sorted(passed.values(), key=lambda v: (-len(v), sum(m.cost for m, *_ in v)))
+    for votes in ranked[:CONFIRMED_AT_MOST]:
+        chosen, there, cost, start = votes[0]
+        confirmed = whole.confirms(chosen)
+        if confirmed is None:
+            continue
+        named = mistake_reason(replace(chosen, others=tuple(m for m in there if m is not chosen)), cost,
+                               settings.confidence)
+        return [replace(named, message=(
+            f"the track fails its residual test and the initiation window named no mistake, but later in the "
+            f"recording {len(votes)} of {windows} windows of {span:g} s fit with a change of the data (first at "
+            f"t = {start:.1f}-{start + span:.1f} s), and so do the {whole.describe()} ({confirmed}): "
+            f"{named.message}"))]
+    return []
+
+
+class _Whole:
+    """The :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole recording and their fit as given,
+    initiated once, where first asked for."""
+
+    def __init__(self, measurements: Measurements, model: TrackingModel, init: Initiation, huber_k: float | None
+                 ) -> None:
+        self.model = model
+        self.settings = InitiationSettings(half_plane=init.half_plane, huber_k=huber_k)
+        self.spread = measurements.spread(WHOLE_PER_PAIR)
+        # no more than the initiation window saw: nothing to learn from them
+        self._usable = len(self.spread) > init.n_measurements
+        self._given: Initiation | None = None
+        self._tried = False
+
+    def given(self) -> Initiation | None:
+        """Their fit as given (``None``: too few of them, or no start in the zone explains them)."""
+        if self._usable and not self._tried:
+            self._tried = True
+            try:
+                self._given = initiate(self.spread, self.model, replace(self.settings, mistake_check=False))
+            except ValueError:
+                self._given = None
+        return self._given
+
+    def fails(self) -> bool:
+        """Whether they fail the verdict's χ² test as given (:data:`~fgdoppler.estimators.initiation.VERDICT_LEVEL`)."""
+        given = self.given()
+        return given is not None and given.cost > _level(given.dof)
+
+    def confirms(self, change: Mistake) -> str | None:
+        """Where they fail as given and pass the verdict's χ² test with ``change``: the two costs in words
+        (``None``: they do not)."""
+        if not self.fails():
+            return None
+        given = self.given()
+        assert given is not None
+        changed = change.applied(self.spread)
+        try:
+            again = initiate(changed, self.model, replace(self.settings, mistake_check=False))
+        except ValueError:  # no start in the zone explains them
+            return None
+        if again.cost > _level(again.dof):
+            return None
+        return f"cost {again.cost:.2f} with it, {given.cost:.2f} as given, {_level(given.dof):.2f} the 99.9 % level"
+
+    def describe(self) -> str:
+        """``"60 measurements spread over the whole recording (t = 0-30 s)"``."""
+        t = self.spread.time
+        return (f"{len(self.spread)} measurements spread over the whole recording (t = {time_text(float(t.min()))}-"
+                f"{time_text(float(t.max()))} s)")
+
+
+def _level(dof: int) -> float:
+    """The verdict's χ² level for ``dof`` degrees of freedom."""
+    return float(chi2.ppf(VERDICT_LEVEL, max(dof, 1)))
+
+
+def _from_whole(model: TrackingModel, whole: _Whole, codes: tuple[MistakeCode, ...]) -> list[Reason]:
+    """The change of ``codes`` under which the whole recording's spread measurements fit where as given they
+    do not, as a finding (:func:`later_mistakes`)."""
+    if not codes or (set(codes) <= {"radial"} and not radar_pairs(model)):
+        return []  # nothing to try
+    given = whole.given()
+    if given is None:
         return []
-    best = max(len(v) for v in passed.values())
-    # among the changes that pass in the most windows, the least total cost there (dict order: first seen)
-    votes = min((v for v in passed.values() if len(v) == best), key=lambda v: sum(m.cost for m, *_ in v))
-    chosen, there, cost, start = votes[0]
-    named = mistake_reason(replace(chosen, others=tuple(m for m in there if m is not chosen)), cost,
-                           settings.confidence)
+    found = find_mistake(whole.spread, model, whole.settings, given, codes=codes)
+    if found is None:
+        return []
+    named = mistake_reason(found, given.cost, whole.settings.confidence, what="they")
     return [replace(named, message=(
-        f"the track fails its residual test and the initiation window named no mistake, but later in the "
-        f"recording {best} of {windows} windows of {span:g} s fit with a change of the data (first at t = "
-        f"{start:.1f}-{start + span:.1f} s): {named.message}"))]
+        f"the track fails its residual test and no window named a mistake, but the {whole.describe()} fail the "
+        f"chi-square test as given and fit with a change of the data: {named.message}"))]

@@ -23,7 +23,8 @@ from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["OTHERS_NAMED", "SIGN_CONVENTION", "Mistake", "find_mistake", "mistake_reason", "mistake_reasons"]
+__all__ = ["OTHERS_NAMED", "SIGN_CONVENTION", "Mistake", "find_mistake", "mistake_reason", "mistake_reasons",
+           "radar_pairs"]
 
 #: The data's sign convention, as a ``sign`` finding states it (docs/data-formats.md says the same).
 SIGN_CONVENTION = ("fgdoppler's doppler is the bistatic range rate, negative for a target closing on the pair; "
@@ -55,6 +56,8 @@ class Mistake:
         (``radial``).
     others
         The other changes under which the window passes the same test, by increasing cost.
+    pairs
+        The pairs changed (``swapped``: the two exchanged), as :meth:`applied` changes them.
     """
 
     code: MistakeCode
@@ -62,6 +65,19 @@ class Mistake:
     cost: float
     factor: float
     others: tuple[Mistake, ...] = ()
+    pairs: tuple[int, ...] = ()
+
+    def applied(self, measurements: Measurements) -> Measurements:
+        """``measurements`` changed as this mistake undone: the Doppler of :attr:`pairs` times :attr:`factor`,
+        or (``swapped``) the labels of the two :attr:`pairs` exchanged."""
+        if self.code == "swapped":
+            a, b = self.pairs
+            p = measurements.pair
+            label = np.where(p == a, b, np.where(p == b, a, p))
+            return Measurements.from_arrays(measurements.time, label, measurements.doppler, measurements.sigma,
+                                            sort=True)
+        gain = np.where(np.isin(measurements.pair, self.pairs), self.factor, 1.0)
+        return replace(measurements, doppler=gain * measurements.doppler)
 
     def change(self) -> str:
         """The change in words: ``"the Doppler of pair 1 negated"``."""
@@ -120,43 +136,47 @@ def mistake_reasons(measurements: Measurements, model: TrackingModel, settings: 
 
 
 def find_mistake(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
-                 result: Initiation) -> Mistake | None:
+                 result: Initiation, *, codes: tuple[MistakeCode, ...] = ("sign", "radial", "swapped")
+                 ) -> Mistake | None:
     """The change of :func:`mistake_reasons` whose window passes with the least cost (``None``: none, or
-    ``result`` passes the verdict's χ² test)."""
+    ``result`` passes the verdict's χ² test); only the changes of ``codes`` are tried."""
     if result.cost <= float(chi2.ppf(VERDICT_LEVEL, max(result.dof, 1))):
         return None
     pairs = [int(k) for k in np.unique(measurements.pair)]
-    changes: list[tuple[MistakeCode, str, float, Measurements]] = []  # (code, what changed, factor, the window)
+    changes: list[Mistake] = []  # cost filled in by the fit
 
     def scaled(code: MistakeCode, which: list[int], factor: float) -> None:
-        gain = np.where(np.isin(measurements.pair, which), factor, 1.0)
-        changes.append((code, _named(which, pairs), factor, replace(measurements, doppler=gain * measurements.doppler)))
+        changes.append(Mistake(code=code, which=_named(which, pairs), cost=np.nan, factor=factor, pairs=tuple(which)))
 
-    for flipped in [pairs] + ([[k] for k in pairs] if len(pairs) > 1 else []):
+    for flipped in [pairs] + ([[k] for k in pairs] if len(pairs) > 1 else []) if "sign" in codes else []:
         scaled("sign", flipped, -1.0)
-    geometry = getattr(model.observation, "geometry", None)
-    radars = [k for k in (geometry.radars if isinstance(geometry, Geometry) else ()) if k in pairs]
+    radars = [k for k in radar_pairs(model) if k in pairs] if "radial" in codes else []
     for group in [radars] + ([[k] for k in radars] if len(radars) > 1 else []) if radars else []:
         for factor in (2.0, -2.0):
             scaled("radial", group, factor)
-    for i, a in enumerate(pairs):
+    for i, a in enumerate(pairs if "swapped" in codes else []):
         for b in pairs[i + 1:]:
-            label = np.where(measurements.pair == a, b, np.where(measurements.pair == b, a, measurements.pair))
-            changes.append(("swapped", f"pairs {a} and {b}", 1.0, Measurements.from_arrays(
-                measurements.time, label, measurements.doppler, measurements.sigma, sort=True)))
+            changes.append(Mistake(code="swapped", which=f"pairs {a} and {b}", cost=np.nan, factor=1.0, pairs=(a, b)))
     quiet = replace(settings, mistake_check=False)
     passing = []
-    for k, (code, which, factor, changed) in enumerate(changes):
+    for k, change in enumerate(changes):
         try:
-            again = initiate(changed, model, quiet)
+            again = initiate(change.applied(measurements), model, quiet)
         except ValueError:  # doubled data may need a speed the zone does not allow: no fit in it
             continue
         if again.passes_chi2:
-            passing.append((again.cost, k, Mistake(code=code, which=which, cost=float(again.cost), factor=factor)))
+            passing.append((again.cost, k, replace(change, cost=float(again.cost))))
     if not passing:
         return None
     ranked = [m for *_, m in sorted(passing, key=lambda p: (p[0], p[1]))]
     return replace(ranked[0], others=tuple(ranked[1:]))
+
+
+def radar_pairs(model: TrackingModel) -> tuple[int, ...]:
+    """The pairs of ``model``'s geometry that are radars (:attr:`~fgdoppler.geometry.Geometry.radars`; none
+    for a model without a geometry)."""
+    geometry = getattr(model.observation, "geometry", None)
+    return tuple(int(k) for k in geometry.radars) if isinstance(geometry, Geometry) else ()
 
 
 def _named(which: list[int], pairs: list[int]) -> str:
@@ -168,12 +188,13 @@ def _named(which: list[int], pairs: list[int]) -> str:
     return f"pairs {', '.join(map(str, which[:-1]))} and {which[-1]}"
 
 
-def mistake_reason(found: Mistake, cost: float, confidence: float) -> Reason:
+def mistake_reason(found: Mistake, cost: float, confidence: float, *, what: str = "the window") -> Reason:
     """The ``doubtful`` finding that names ``found``, against the window's ``cost`` as given, and the other
     changes under which the window passes the same test (at most :data:`OTHERS_NAMED` of them by name, with
-    their costs: the least cost is the likeliest change, not the only one the data allow)."""
-    fits = (f"with {found.change()} the window fits (cost {found.cost:.2f}, passing the {confidence:.0%} chi-square "
-            f"test, against {cost:.2f} as given)")
+    their costs: the least cost is the likeliest change, not the only one the data allow); ``what`` says
+    what was fitted ("the window", "they")."""
+    fits = (f"with {found.change()} {what} fit{'s' if what == 'the window' else ''} (cost {found.cost:.2f}, "
+            f"passing the {confidence:.0%} chi-square test, against {cost:.2f} as given)")
     column = "" if found.which == "every pair" else f" of {found.which}"
     if found.code == "swapped":
         advice = ("the measurement file and the geometry may list those pairs in different orders; if so, exchange "
@@ -194,7 +215,8 @@ def mistake_reason(found: Mistake, cost: float, confidence: float) -> Reason:
     named = [f"{m.change()} (cost {m.cost:.2f})" for m in found.others[:OTHERS_NAMED]]
     more = len(found.others) - len(named)
     also = "" if not named else (
-        f"; the window passes the same test with {', '.join(named[:-1]) + ' or ' if len(named) > 1 else ''}"
+        f"; {what} pass{'es' if what == 'the window' else ''} the same test with "
+        f"{', '.join(named[:-1]) + ' or ' if len(named) > 1 else ''}"
         f"{named[-1]}" + (f" and {more} more such change{'s' if more > 1 else ''}" if more else "")
         + " too: check " + ("that change" if len(found.others) == 1 else "those changes") + " as well")
     return Reason(code=found.code, status="doubtful", message=f"{fits}: {advice}{also}")
