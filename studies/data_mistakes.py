@@ -23,15 +23,19 @@ Three mistakes, each checked on the same recordings:
   With ``--clock-sigma S`` the estimator is told each pair's clock may be off by S (1 sigma;
   ``clock_sigma=S`` of its settings, a consider covariance), on every version of the data.
 
-Per recording, up to seven versions of the data: as simulated, every pair's Doppler negated, pair 0's
-alone negated, pairs 0 and 1 swapped, pair 1's clock late, and where the geometry has radars their
-Doppler halved and halved and negated.  For each: whether the initiation has a ``sign``,
+Per recording, up to eight versions of the data: as simulated, every pair's Doppler negated, pair 0's
+alone negated, pairs 0 and 1 swapped, pair 1's clock late, where the geometry has radars their
+Doppler halved and halved and negated, and the recording simulated anew with its target manoeuvring
+(``target manoeuvres``: turning by up to 0.6 deg/s and changing speed by up to 1 m/s^2 from a time in
+0-20 s, drawn per recording; right data, so no mistake should be named).  ``--only`` runs the versions
+it lists (comma-separated names, as the tables give them).  For each: whether the initiation has a ``sign``,
 ``swapped`` or ``radial`` finding (:func:`fgdoppler.estimators.window_mistakes.mistake_reasons`) and
 what it names, and (``--track 1``, the default) the verdict of ``--estimator`` (default the
 offline smoother) from that initiation, with its position error at the last time of the truth
 against its own sigma along the major axis (wrong: beyond 3 sigma), and the mistake finding it
-adds from windows later in the recording where the track fails its residual test and the
-initiation named nothing (:mod:`fgdoppler.estimators.later_mistakes`).
+adds from windows later in the recording, or on radar layouts from measurements spread over the whole
+recording, where the track fails its residual test and the initiation named nothing
+(:mod:`fgdoppler.estimators.later_mistakes`).
 ``--late-only 1`` runs the late clock's version alone (the check of ``--clock-sigma`` for an
 estimator whose every run is slow).
 
@@ -42,9 +46,10 @@ pairs anywhere, the target anywhere in the default zone) and as many radar layou
 second radar in half of them).
 
 Run: python studies/data_mistakes.py [--runs 10] [--seed 2026] [--track 1] [--late 0.5] [--clock-sigma 0]
-[--estimator smoother] [--late-only 0] [--workers 2] [--out DIR]
+[--estimator smoother] [--late-only 0] [--only VERSION,...] [--workers 2] [--out DIR]
 (with the radar layouts, 2026-11-27, on 2 cores shared with other work: ``--runs 10`` 43 min; ``--track 0``,
-the initiations alone, 15 min for ``--runs 20``)
+the initiations alone, 15 min for ``--runs 20``; 2026-11-29, with the whole recording's check of
+:mod:`fgdoppler.estimators.later_mistakes`, on 2 idle cores: ``--runs 10`` 34 min)
 """
 
 from __future__ import annotations
@@ -52,6 +57,7 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -98,6 +104,8 @@ def _late(m: fd.Measurements, seconds: float) -> fd.Measurements:
 
 #: The late clock's version (``--late-only``).
 LATE = "pair 1's clock late"
+#: The version whose data are right but whose target manoeuvres (a recording simulated anew): nothing to name.
+MANOEUVRE = "target manoeuvres"
 #: The versions of each recording: name -> (the data given the geometry and the clock's lateness in s, the change
 #: of the data that a mistake finding should name given the geometry, as it words it — "" for none —, whether the
 #: version needs radars).
@@ -114,6 +122,19 @@ VERSIONS: dict[str, tuple[Callable[[fd.Measurements, fd.Geometry, float], fd.Mea
                                lambda g: f"the Doppler of {_radars(g)} doubled and negated", True),
 }
 
+#: Every version, in the tables' order.
+ALL_VERSIONS = [*VERSIONS, MANOEUVRE]
+
+
+def _manoeuvring(sim: fd.Simulation, key: int) -> fd.Simulation:
+    """``sim``'s recording simulated anew with its target turning by up to 0.6 deg/s and changing speed by up to
+    1 m/s^2 from a time in 0-20 s (``studies/manoeuvres.py``'s default rule), drawn from ``key``."""
+    pick = np.random.default_rng(7000 + key)
+    man = fd.Manoeuvre(turn_rate_deg=float(pick.uniform(-0.6, 0.6)), acceleration=float(pick.uniform(-1.0, 1.0)),
+                       onset=float(pick.uniform(0.0, 20.0)))
+    return fd.simulate(replace(sim.scenario, manoeuvre=man), np.random.default_rng(8000 + key))
+
+
 #: The change a mistake finding names first, and the other changes it names (``mistake_reason``'s wording).
 _FIRST = re.compile(r"^(?:.*: )?with (the (?:Doppler|labels) of .+?) (?:the window fits|they fit)")
 _OTHERS = re.compile(r"(?:passes|pass) the same test with (.+?) too: check")
@@ -129,15 +150,24 @@ def _changes(reason: fd.Reason | None) -> tuple[str, list[str]]:
 
 
 def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float, clock_sigma: float,
-            estimator: str, versions: list[str]) -> dict[str, Any]:
+            estimator: str, versions: list[str], key: int) -> dict[str, Any]:
     out: dict[str, Any] = {}
     g = sim.scenario.geometry
     for name in versions:
-        version, want, radars = VERSIONS[name]
-        if radars and not g.radars:
+        truth = sim.truth
+        if name == MANOEUVRE:
+            moved = _manoeuvring(sim, key)
+            m, truth, want = moved.measurements, moved.truth, (lambda g: "")
+        else:
+            version, want, radars = VERSIONS[name]
+            if radars and not g.radars:
+                continue
+            m = version(sim.measurements, g, late)
+        try:
+            init = fd.initiate(m.first_per_pair(10), model)
+        except ValueError as exc:  # a manoeuvre can take the target beyond the zone's speed bound
+            out[name] = {"refused": str(exc)}
             continue
-        m = version(sim.measurements, g, late)
-        init = fd.initiate(m.first_per_pair(10), model)
         found = [r for r in init.reasons if r.code in MISTAKE_CODES]
         first, others = _changes(found[0] if found else None)
         row: dict[str, Any] = {"finding": found[0].code if found else "", "names": first, "others": others,
@@ -146,8 +176,8 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
             r = fd.run_estimator(estimator, m, model, init, estimator_info(estimator).settings(clock_sigma=clock_sigma))
             e = r.primary
             k = e.states.shape[1] // 2
-            j = int(np.flatnonzero(e.times <= sim.truth.times[-1])[-1])  # a late clock's last times are not truth's
-            err = float(np.linalg.norm(e.states[j, :k] - sim.truth.at(e.times[j:j + 1])[0][:k]))
+            j = int(np.flatnonzero(e.times <= truth.times[-1])[-1])  # a late clock's last times are not truth's
+            err = float(np.linalg.norm(e.states[j, :k] - truth.at(e.times[j:j + 1])[0][:k]))
             sd = float(np.sqrt(np.max(np.linalg.eigvalsh(e.covariances[j][:k, :k])))) if e.cov_ok[j] else np.nan
             later = [x for x in r.reasons if x.code in MISTAKE_CODES]
             row.update(status=str(r.status), error=round(err, 1), sigma=round(sd, 1),
@@ -158,18 +188,18 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
 
 @one_blas_thread
 def one(task: tuple[int, int, int], track: int = 1, late: float = 0.5, clock_sigma: float = 0.0,
-        estimator: str = "smoother", late_only: int = 0) -> dict[str, Any]:
+        estimator: str = "smoother", late_only: int = 0, only: str = "") -> dict[str, Any]:
     s, r, seed = task
     sim, model, _ = paper_run(s, r, seed)
-    versions = [LATE] if late_only else list(VERSIONS)
-    out: dict[str, Any] = {"scenario": s, "run": r,
-                           "paper": _judged(sim, model, track, late, clock_sigma, estimator, versions)}
+    versions = [LATE] if late_only else [v for v in ALL_VERSIONS if not only or v in only.split(",")]
     i = 100 * s + r
+    out: dict[str, Any] = {"scenario": s, "run": r,
+                           "paper": _judged(sim, model, track, late, clock_sigma, estimator, versions, i)}
     for where, drawn in (("layout", draw(i)), ("radar layout", radar_draw(i))):
         record, layout_sim, init = recorded(i, *drawn)
         if init is not None:
             out[where] = _judged(layout_sim, fd.TrackingModel.of(layout_sim.scenario.geometry), track, late,
-                                 clock_sigma, estimator, versions)
+                                 clock_sigma, estimator, versions, i)
         else:
             out[f"{where} refused"] = record.get("refused", "")
     return out
@@ -180,8 +210,8 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) 
              "(first / among the others) | " + (f"{estimator} ok | ok and beyond 3 sigma | named later by the "
                                                  f"{estimator} (rightly) |" if track else ""),
              "|---|---|---|---|" + ("---|---|---|" if track else "")]
-    for name in VERSIONS:
-        got = [r[where][name] for r in rows if where in r and name in r[where]]
+    for name in ALL_VERSIONS:
+        got = [r[where][name] for r in rows if where in r and name in r[where] and "refused" not in r[where][name]]
         if not got:
             continue
         wanted = any(g["right"] for g in got)
@@ -204,7 +234,9 @@ def main() -> None:
                                    "--late": {"type": float, "default": 0.5},
                                    "--clock-sigma": {"type": float, "default": 0.0},
                                    "--estimator": {"choices": list(fd.ESTIMATORS), "default": "smoother"},
-                                   "--late-only": {"type": int, "default": 0}})
+                                   "--late-only": {"type": int, "default": 0},
+                                   "--only": {"default": "", "help": "comma-separated versions to run (default: "
+                                              "all of them)"}})
     track = bool(args.track)
     text = "\n".join([f"{args.runs} runs per paper scenario and as many random layouts and radar layouts, seed "
                        f"{args.seed}; a late clock {args.late:g} s; the {args.estimator}'s clock_sigma "

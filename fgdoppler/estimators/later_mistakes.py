@@ -17,7 +17,12 @@ no mistake, :func:`later_mistakes` initiates :data:`LATER_WINDOWS` windows
 of the initiation window's span spread over the rest of the recording
 (:func:`~fgdoppler.estimators.initiation.initiate`, which tries the
 changes itself where a window fails), and turns the change that makes the
-most of them pass into a ``doubtful`` finding of the track.  Not the change
+most of them pass into a ``doubtful`` finding of the track — if
+:data:`WHOLE_PER_PAIR` measurements of every pair spread evenly over the
+whole recording, which fail the verdict's χ² test as given, pass it with
+that change too (a window holding a manoeuvre fits no constant-velocity
+track, and one of the changes sometimes makes it fit; over the whole
+recording it does not).  Not the change
 each window finds likeliest: a short window often passes under two changes
 (on radar layouts, a radar's Doppler negated as well as halved back), while
 the right change passes in every window that needs one.  A window that fits
@@ -59,7 +64,7 @@ from fgdoppler.estimators.window_mistakes import (
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["LATER_WINDOWS", "MISTAKE_CODES", "later_mistakes"]
+__all__ = ["CONFIRMED_AT_MOST", "LATER_WINDOWS", "MISTAKE_CODES", "WHOLE_CODES", "WHOLE_PER_PAIR", "later_mistakes"]
 
 #: Windows initiated after the initiation window where a track fails its residual test.
 LATER_WINDOWS = 3
@@ -95,7 +100,10 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     fails passes the χ² test at 95 % counts as its vote.  The change with
     the most votes (among equals, the least total cost in the windows that
     pass with it) is reported, with the first window it makes pass, the
-    count and the other changes under which that window passes.  Where no
+    count and the other changes under which that window passes — where the
+    :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole
+    recording fail the verdict's χ² test as given and pass it with that
+    change (else the next, up to :data:`CONFIRMED_AT_MOST` changes).  Where no
     window names a change and the model's geometry has radars, the
     :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole
     recording are tried the same way with the changes of
@@ -107,7 +115,9 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     :func:`~fgdoppler.estimators.window_mistakes.mistake_reasons`), and with
     radars where the windows name nothing one initiation of the spread
     measurements and, if they fail, :math:`2(1 + R)` more with
-    :math:`R \ge 2` radars (one radar: 2) — unless
+    :math:`R \ge 2` radars (one radar: 2), or where windows name changes one
+    initiation of the spread measurements and one more per change asked to
+    confirm — unless
     ``reference``, a track on the same data and initiation whose own
     ``fit`` finding is not ``ok`` either and whose settings have the same
     ``huber_k``, made the same check already: its mistake
@@ -150,7 +160,7 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
         # the same windows, fits and votes: the answer depends on nothing else
         return [r for r in reference.reasons if r.code in MISTAKE_CODES]
     whole = _Whole(measurements, model, init, huber_k)
-    return _from_windows(measurements, model, init, huber_k, windows, whole) or _from_whole(model, whole, WHOLE_CODES)
+    return _from_windows(measurements, model, init, windows, whole) or _from_whole(model, whole, WHOLE_CODES)
 
 
 def _misfits(reasons: tuple[Reason, ...]) -> bool:
@@ -158,8 +168,8 @@ def _misfits(reasons: tuple[Reason, ...]) -> bool:
     return any(r.code == "fit" and r.status != "ok" for r in reasons)
 
 
-def _from_windows(measurements: Measurements, model: TrackingModel, init: Initiation, huber_k: float | None,
-                  windows: int, whole: _Whole) -> list[Reason]:
+def _from_windows(measurements: Measurements, model: TrackingModel, init: Initiation, windows: int, whole: _Whole
+                  ) -> list[Reason]:
     """The change most of ``windows`` later windows need to fit and the whole recording fits with, as a finding
     (:func:`later_mistakes`)."""
     span = init.t_end - init.t_start
@@ -225,18 +235,12 @@ class _Whole:
                 self._given = None
         return self._given
 
-    def fails(self) -> bool:
-        """Whether they fail the verdict's χ² test as given (:data:`~fgdoppler.estimators.initiation.VERDICT_LEVEL`)."""
-        given = self.given()
-        return given is not None and given.cost > _level(given.dof)
-
     def confirms(self, change: Mistake) -> str | None:
-        """Where they fail as given and pass the verdict's χ² test with ``change``: the two costs in words
-        (``None``: they do not)."""
-        if not self.fails():
-            return None
+        """Where they fail the verdict's χ² test (:data:`~fgdoppler.estimators.initiation.VERDICT_LEVEL`) as
+        given and pass it with ``change``: the two costs in words (``None``: they do not)."""
         given = self.given()
-        assert given is not None
+        if given is None or given.cost <= _level(given.dof):
+            return None
         changed = change.applied(self.spread)
         try:
             again = initiate(changed, self.model, replace(self.settings, mistake_check=False))
