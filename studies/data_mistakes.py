@@ -33,9 +33,10 @@ it lists (comma-separated names, as the tables give them).  For each: whether th
 what it names, and (``--track 1``, the default) the verdict of ``--estimator`` (default the
 offline smoother) from that initiation, with its position error at the last time of the truth
 against its own sigma along the major axis (wrong: beyond 3 sigma), and the mistake finding it
-adds from windows later in the recording, or on radar layouts from measurements spread over the whole
-recording, where the track fails its residual test and the initiation named nothing
-(:mod:`fgdoppler.estimators.later_mistakes`).
+adds where the track fails its residual test (:mod:`fgdoppler.estimators.later_mistakes`): where
+the initiation named nothing, from windows later in the recording, or on radar layouts from
+measurements spread over the whole recording; where it named a change, the change of those the
+window fits with that the measurements spread over the whole recording fit with best.
 ``--late-only 1`` runs the late clock's version alone (the check of ``--clock-sigma`` for an
 estimator whose every run is slow).
 
@@ -49,7 +50,8 @@ Run: python studies/data_mistakes.py [--runs 10] [--seed 2026] [--track 1] [--la
 [--estimator smoother] [--late-only 0] [--only VERSION,...] [--workers 2] [--out DIR]
 (with the radar layouts, 2026-11-27, on 2 cores shared with other work: ``--runs 10`` 43 min; ``--track 0``,
 the initiations alone, 15 min for ``--runs 20``; 2026-11-29, with the whole recording's check of
-:mod:`fgdoppler.estimators.later_mistakes`, on 2 idle cores: ``--runs 10`` 34 min)
+:mod:`fgdoppler.estimators.later_mistakes`, on 2 idle cores: ``--runs 10`` 34 min; with the window's
+changes ranked there too, on 2 cores beside other work: 56 min)
 """
 
 from __future__ import annotations
@@ -208,8 +210,10 @@ def one(task: tuple[int, int, int], track: int = 1, late: float = 0.5, clock_sig
 def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) -> list[str]:
     lines = [f"### {where}", "", "| data | recordings | sign / swapped / radial finding | names the change made "
              "(first / among the others) | " + (f"{estimator} ok | ok and beyond 3 sigma | named later by the "
-                                                 f"{estimator} (rightly) |" if track else ""),
-             "|---|---|---|---|" + ("---|---|---|" if track else "")]
+                                                 f"{estimator} where the window named nothing (rightly) | the "
+                                                 f"window's finding ranked by the {estimator} (the change made "
+                                                 "first) |" if track else ""),
+             "|---|---|---|---|" + ("---|---|---|---|" if track else "")]
     for name in ALL_VERSIONS:
         got = [r[where][name] for r in rows if where in r and name in r[where] and "refused" not in r[where][name]]
         if not got:
@@ -222,8 +226,10 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) 
         if track:
             ok = [g for g in got if g["status"] == "ok"]
             wrong = sum(g["error"] > 3.0 * g["sigma"] for g in ok)
-            later = [(g["later"], g["right"]) for g in got if g.get("later")]
-            line += f" {len(ok)} | {wrong} | {len(later)} ({sum(x == w for x, w in later) if wanted else '—'}) |"
+            later = [(g["later"], g["right"]) for g in got if g.get("later") and not g["finding"]]
+            ranked = [(g["later"], g["right"]) for g in got if g.get("later") and g["finding"]]
+            line += (f" {len(ok)} | {wrong} | {len(later)} ({sum(x == w for x, w in later) if wanted else '—'}) | "
+                     f"{len(ranked)} ({sum(x == w for x, w in ranked) if wanted else '—'}) |")
         lines.append(line)
     return [*lines, ""]
 

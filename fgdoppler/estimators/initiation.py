@@ -58,7 +58,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
-from typing import Literal, get_args
+from typing import TYPE_CHECKING, Literal, get_args
 
 import gtsam
 import numpy as np
@@ -86,6 +86,9 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.doppler import StackedTimes, cv_doppler, cv_doppler_jacobian, cv_information
 from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
+
+if TYPE_CHECKING:  # the mistakes' module initiates changed windows itself: imported where needed
+    from fgdoppler.estimators.window_mistakes import Mistake
 
 __all__ = ["EVIDENCE_DRAWS", "METHODS", "Candidate", "Initiation", "InitiationSettings", "initiate", "inlier_statistic",
            "lm_params", "residual_landscape", "window_grid", "window_log_evidence"]
@@ -294,6 +297,14 @@ class Initiation(Judged):
         ``x_end``/``P_end`` then summarise the window's measurements, and
         trackers start at ``t_end`` from that Gaussian instead of solving the
         window again.
+    mistake
+        Where the window fails the verdict's χ² test and fits with its data
+        changed as a common mistake in a measurement file would have changed
+        them: the change of least cost, with the others that pass in its
+        ``others`` (:func:`~fgdoppler.estimators.window_mistakes.find_mistake`;
+        the ``sign``, ``swapped`` or ``radial`` finding in :attr:`reasons`
+        says the same in words).  ``None`` otherwise, and without
+        ``mistake_check``.
     """
 
     method: str
@@ -320,6 +331,7 @@ class Initiation(Judged):
     half_plane: HalfPlane | None = None
     log_evidence: float | None = None
     window_summarised: bool = False
+    mistake: Mistake | None = None
     #: The same initiation in the frame it was computed in, with that frame (see :meth:`in_frame_of`).
     computed_in: tuple[Frame, Initiation] | None = field(default=None, repr=False, compare=False)
 
@@ -402,6 +414,7 @@ class Initiation(Judged):
             "half_plane": None if self.half_plane is None else {
                 "point": list(self.half_plane.point), "normal": list(self.half_plane.normal)},
             "log_evidence": self.log_evidence,
+            "mistake": None if self.mistake is None else self.mistake.to_dict(),
         }
 
 
@@ -551,10 +564,13 @@ def initiate(
     if not settings.mistake_check:
         return result
     # the mistakes' module initiates changed windows itself
-    from fgdoppler.estimators.window_mistakes import mistake_reasons
+    from fgdoppler.estimators.window_mistakes import find_mistake, mistake_reason
 
-    found = mistake_reasons(measurements, model, settings, result)
-    return replace(result, reasons=(*result.reasons, *found)) if found else result
+    found = find_mistake(measurements, model, settings, result)
+    if found is None:
+        return result
+    return replace(result, reasons=(*result.reasons, mistake_reason(found, result.cost, settings.confidence)),
+                   mistake=found)
 
 
 def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: tuple[Candidate, ...],

@@ -79,6 +79,16 @@ class Mistake:
         gain = np.where(np.isin(measurements.pair, self.pairs), self.factor, 1.0)
         return replace(measurements, doppler=gain * measurements.doppler)
 
+    def same_change(self, other: Mistake) -> bool:
+        """Whether ``other`` changes the data as this does (whatever the costs)."""
+        return (self.code, self.pairs, self.factor) == (other.code, other.pairs, other.factor)
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready form (:attr:`others` each without their own ``others``)."""
+        return {"code": self.code, "which": self.which, "change": self.change(), "cost": self.cost,
+                "factor": self.factor, "pairs": list(self.pairs),
+                "others": [{k: v for k, v in m.to_dict().items() if k != "others"} for m in self.others]}
+
     def change(self) -> str:
         """The change in words: ``"the Doppler of pair 1 negated"``."""
         if self.code == "swapped":
@@ -136,17 +146,21 @@ def mistake_reasons(measurements: Measurements, model: TrackingModel, settings: 
 
 
 def find_mistake(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
-                 result: Initiation, *, codes: tuple[MistakeCode, ...] = ("sign", "radial", "swapped")
-                 ) -> Mistake | None:
+                 result: Initiation, *, codes: tuple[MistakeCode, ...] = ("sign", "radial", "swapped"),
+                 changes: tuple[Mistake, ...] | None = None) -> Mistake | None:
     """The change of :func:`mistake_reasons` whose window passes with the least cost (``None``: none, or
-    ``result`` passes the verdict's χ² test); only the changes of ``codes`` are tried."""
+    ``result`` passes the verdict's χ² test), with the others that pass in its ``others``; only the changes
+    of ``codes`` are tried, or only ``changes`` (their costs and ``others`` are ignored) where given."""
     if result.cost <= float(chi2.ppf(VERDICT_LEVEL, max(result.dof, 1))):
         return None
+    if changes is not None:
+        return _least_cost(measurements, model, settings,
+                           [replace(c, cost=np.nan, others=()) for c in changes])
     pairs = [int(k) for k in np.unique(measurements.pair)]
-    changes: list[Mistake] = []  # cost filled in by the fit
+    tried: list[Mistake] = []  # cost filled in by the fit
 
     def scaled(code: MistakeCode, which: list[int], factor: float) -> None:
-        changes.append(Mistake(code=code, which=_named(which, pairs), cost=np.nan, factor=factor, pairs=tuple(which)))
+        tried.append(Mistake(code=code, which=_named(which, pairs), cost=np.nan, factor=factor, pairs=tuple(which)))
 
     for flipped in [pairs] + ([[k] for k in pairs] if len(pairs) > 1 else []) if "sign" in codes else []:
         scaled("sign", flipped, -1.0)
@@ -156,7 +170,14 @@ def find_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
             scaled("radial", group, factor)
     for i, a in enumerate(pairs if "swapped" in codes else []):
         for b in pairs[i + 1:]:
-            changes.append(Mistake(code="swapped", which=f"pairs {a} and {b}", cost=np.nan, factor=1.0, pairs=(a, b)))
+            tried.append(Mistake(code="swapped", which=f"pairs {a} and {b}", cost=np.nan, factor=1.0, pairs=(a, b)))
+    return _least_cost(measurements, model, settings, tried)
+
+
+def _least_cost(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
+                changes: list[Mistake]) -> Mistake | None:
+    """Of ``changes``, the one under which ``measurements`` pass the χ² test at ``settings.confidence`` with
+    the least cost (among equals the first), the others that pass in its ``others``; ``None``: none passes."""
     quiet = replace(settings, mistake_check=False)
     passing = []
     for k, change in enumerate(changes):

@@ -72,12 +72,73 @@ def test_data_as_simulated_get_no_mistake_named_even_where_the_track_misfits(s: 
         assert later_mistakes(sim.measurements, model, init, MISFIT) == []
 
 
-def test_where_the_initiation_named_the_mistake_or_there_is_no_room_nothing_more_is_done() -> None:
+def test_where_the_initiation_named_the_mistake_the_whole_recording_confirms_it(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Case a 45 km, run 0 (seed 2026) with every pair's Doppler negated: the initiation window fits with that
+    change alone, and the 40 measurements spread over the whole recording, which fail as given, fit with it:
+    the track's finding confirms it, from one initiation as given and one with the change (no later window).
+    An initiation with the finding in words but without its ``mistake`` (made elsewhere) gets nothing more."""
+    import fgdoppler.estimators.later_mistakes as module
+
     sim, model = _paper(2, 0)
     m = _negated(sim.measurements)
     init = fd.initiate(m.first_per_pair(10), model)
     assert [r.code for r in init.reasons if r.code in MISTAKE_CODES] == ["sign"]
-    assert later_mistakes(m, model, init, MISFIT) == []
+    assert init.mistake is not None and init.mistake.change() == "the Doppler of every pair negated"
+    assert init.mistake.others == () and init.to_dict()["mistake"]["change"] == init.mistake.change()
+    fitted: list[int] = []
+    initiate = module.initiate
+
+    def counted(window: fd.Measurements, *args: object, **kwargs: object) -> fd.Initiation:
+        fitted.append(len(window))
+        return initiate(window, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(module, "initiate", counted)
+    found = later_mistakes(m, model, init, MISFIT)
+    assert [(r.code, r.status) for r in found] == [("sign", "doubtful")]
+    assert found[0].message.startswith("the track fails its residual test; the 40 measurements spread over the "
+                                       "whole recording (t = 0-30 s) confirm the initiation window's finding: "
+                                       "with the Doppler of every pair negated they fit")
+    assert fitted == [40]  # as given; the change's initiation is the mistakes' module's own
+    assert later_mistakes(m, model, replace(init, mistake=None), MISFIT) == []
+    assert later_mistakes(m, model, init, ()) == []
+
+
+def test_of_the_changes_the_initiation_window_fits_with_the_whole_recording_ranks_the_right_one_first() -> None:
+    """The radar layout below (draw 2, rounded), the radar's radial velocity given positive for an approaching
+    target (its Doppler times -1/2).  The initiation window fits best with pairs 0 and 2 exchanged, then with
+    the radar's Doppler doubled and negated and two more changes (a short window: on 36 such radar-layout
+    windows of ``studies/data_mistakes.py`` the right change came first in 12).  Over the whole recording only
+    the right change fits: the track's finding names it and says the window's likeliest was another.  Through
+    the registry the smoother's result carries both findings."""
+    g = fd.Geometry(pairs=(fd.BistaticPair(tx=(-32094.0, -39562.0), rx=(-32094.0, -39562.0)),
+                           fd.BistaticPair(tx=(-6463.0, 18322.0), rx=(-12232.0, -14461.0)),
+                           fd.BistaticPair(tx=(38208.0, 4566.0), rx=(-23188.0, 3098.0))))
+    model = fd.TrackingModel.of(g)
+    sim = fd.simulate(fd.Scenario(geometry=g, x0=(-32575.0, -25822.0, 23.1, 129.0), duration=30.0, dt=0.5),
+                      np.random.default_rng(0))
+    m0 = sim.measurements
+    m = replace(m0, doppler=np.where(m0.pair == 0, -0.5, 1.0) * m0.doppler)
+    init = fd.initiate(m.first_per_pair(10), model)
+    assert init.mistake is not None and init.mistake.change() == "the labels of pairs 0 and 2 exchanged"
+    right = "the Doppler of pair 0 doubled and negated"
+    assert right in [o.change() for o in init.mistake.others]
+    found = later_mistakes(m, model, init, MISFIT)
+    assert [(r.code, r.status) for r in found] == [("radial", "doubtful")]
+    assert (f"of the {1 + len(init.mistake.others)} changes of the data under which the initiation window fits, "
+            "the 60 measurements spread over the whole recording (t = 0-30 s) fit best with another than its "
+            "likeliest (the labels of pairs 0 and 2 exchanged): with the Doppler of pair 0 doubled and negated they "
+            "fit") in found[0].message
+    assert found[0].message.endswith("multiply the doppler column of pair 0 by -2")
+    result = fd.run_estimator("smoother", m, model, init)
+    codes = [r.code for r in result.reasons]
+    assert "initiation-swapped" in codes and [r for r in result.reasons if r.code in MISTAKE_CODES] == found
+
+
+def test_where_there_is_no_room_for_a_later_window_nothing_more_is_done(
+        negated: tuple[fd.Measurements, fd.TrackingModel, fd.Initiation, list[Reason], fd.TrackResult]) -> None:
+    m, model, init, _, _ = negated
+    assert init.mistake is None
     short = m.between(0.0, init.t_end + 1.0)  # less than one window's span after the initiation window
     assert later_mistakes(short, model, init, MISFIT) == []
     with pytest.raises(ValueError, match="windows must be >= 1"):
