@@ -1,10 +1,12 @@
-"""Short texts for messages and reports: exceptions, times."""
+"""Short texts for messages and reports: exceptions, times, distances."""
 
 from __future__ import annotations
 
+from typing import SupportsFloat
+
 import numpy as np
 
-__all__ = ["first_line", "plain_number", "time_text"]
+__all__ = ["distance_text", "first_line", "plain_number", "time_text"]
 
 
 def first_line(exc: BaseException) -> str:
@@ -37,3 +39,26 @@ def time_text(t: float) -> str:
     ('30', '12.25', '1700000012.25')
     """
     return plain_number(t, 6)
+
+
+def distance_text(metres: SupportsFloat, km_decimals: int = 1) -> str:
+    """A distance or coordinate in metres as a message shows it: in kilometres (``km_decimals`` decimals) from
+    1 km, in whole metres from 10 m, else to two significant digits.
+
+    Messages once divided every distance by 1000 and printed ``0.0 km`` for
+    the tens of metres of a small layout (or of sensor positions given in
+    kilometres where metres are read).
+
+    Examples
+    --------
+    >>> distance_text(23012.0), distance_text(-5000.0), distance_text(437.4), distance_text(4.24), distance_text(0.0)
+    ('23.0 km', '-5.0 km', '437 m', '4.2 m', '0 m')
+    >>> distance_text(10630.0, km_decimals=2)
+    '10.63 km'
+    """
+    v = float(metres)
+    if abs(v) >= 1e3:
+        return f"{v / 1e3:.{km_decimals}f} km"
+    if abs(v) >= 10.0 or v == 0.0:
+        return f"{v:.0f} m"
+    return f"{v:.2g} m"

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fgdoppler._text import distance_text
 from fgdoppler.frames import AXIS_MIN_SHARE, SENSOR_EPS, Frame, sensor_frame
 from fgdoppler.zone import DEFAULT_SPEED_MAX, Zone, ZoneLimits, default_zone
 
@@ -373,8 +374,8 @@ class Geometry:
         d = self.zone.distance_to(sensors)
         if d > reach * extent:
             raise ValueError(f"the zone (along {list(self.zone.along)}, across {list(self.zone.across)} m) lies "
-                             f"{d / 1e3:.1f} km from the nearest sensor, more than {reach:g} sensor extents "
-                             f"({extent / 1e3:.1f} km): check its units and signs")
+                             f"{distance_text(d)} from the nearest sensor, more than {reach:g} sensor extents "
+                             f"({distance_text(extent)}): check its units and signs")
 
     def in_frame(self, frame: Frame, *, snap: float | None = SNAP) -> Geometry:
         """The same pairs with positions in ``frame``'s local coordinates, snapped to a ``snap``-metre lattice.

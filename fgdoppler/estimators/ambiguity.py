@@ -57,6 +57,7 @@ from numpy.typing import NDArray
 from scipy.special import logsumexp
 from scipy.stats import chi2
 
+from fgdoppler._text import distance_text
 from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
@@ -454,7 +455,7 @@ def _modes_reason(w: NDArray[np.float64], ends: list[Estimates]) -> Reason:
             if mid < 0.1 * low:
                 apart = float(np.linalg.norm(means[i] - means[j]))
                 return Reason(code="competing", status="doubtful", message=(
-                    f"the data leave separate solutions {apart / 1e3:.1f} km apart at the end (weights "
+                    f"the data leave separate solutions {distance_text(apart)} apart at the end (weights "
                     f"{w[i]:.2f} and {w[j]:.2f}); the estimate is their mixture, its mean between them"))
     return Reason(code="competing", status="ok", message=(
         f"{len(ends)} hypotheses, carried as a mixture; no separate mode of weight >= 0.05 at the end"))
@@ -487,7 +488,7 @@ def _competing(costs: NDArray[np.float64], results: list[TrackResult], best: int
     if margin >= COMPETING:
         return (Reason(code="competing", status="ok", message=(
             f"{len(results)} hypotheses from an ambiguous initiation; the data prefer the one reported by "
-            f"{margin:.1f} in cost (> {COMPETING:.2f}) over one ending {apart / 1e3:.1f} km away")),)
+            f"{margin:.1f} in cost (> {COMPETING:.2f}) over one ending {distance_text(apart)} away")),)
     return (Reason(code="competing", status="doubtful", message=(
         f"a competing solution explains the data about as well (cost higher by only {margin:.2f} < {COMPETING:.2f}) "
-        f"and ends {apart / 1e3:.1f} km away: the data cannot tell them apart")),)
+        f"and ends {distance_text(apart)} away: the data cannot tell them apart")),)

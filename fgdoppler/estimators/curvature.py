@@ -45,6 +45,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from fgdoppler._text import distance_text
 from fgdoppler.estimators.verdict import Reason
 
 __all__ = ["CURVATURE_LIMIT", "curvature_reason", "probe_axis", "probe_rises"]
@@ -117,7 +118,7 @@ def curvature_reason(cost: Callable[[FloatArray], float], x: FloatArray, P: Floa
     """
     lo, hi, quad, sd = probe_rises(cost, x, P, information)
     ratio = min(lo, hi) / quad
-    where = (f"{PROBE_SIGMAS:g} standard deviations ({PROBE_SIGMAS * sd / 1e3:.2f} km) along the position's "
+    where = (f"{PROBE_SIGMAS:g} standard deviations ({distance_text(PROBE_SIGMAS * sd, km_decimals=2)}) along the position's "
              f"major axis raise the cost by {lo:.3g} and {hi:.3g} where its quadratic model predicts {quad:.3g}")
     if ratio > CURVATURE_LIMIT:
         return Reason(code="nonlinear", status="doubtful", message=(

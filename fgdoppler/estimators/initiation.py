@@ -66,7 +66,7 @@ from numpy.typing import NDArray
 from scipy.special import logsumexp
 from scipy.stats import chi2
 
-from fgdoppler._text import first_line
+from fgdoppler._text import distance_text, first_line
 from fgdoppler.estimators.curvature import curvature_reason
 from fgdoppler.estimators.grid import (
     GridResult,
@@ -612,7 +612,7 @@ def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: t
             f"start's {MIRROR_ADVICE}")
         reasons.append(Reason(code="ambiguous", status="doubtful", message=(
             f"{len(alternatives)} other solution(s) fit the window as well (costs "
-            + ", ".join(f"{a.cost:.1f}" for a in alternatives) + f" vs {fit.cost:.1f}; up to {far / 1e3:.1f} km "
+            + ", ".join(f"{a.cost:.1f}" for a in alternatives) + f" vs {fit.cost:.1f}; up to {distance_text(far)} "
             f"away{share}): the window alone cannot tell them apart{mirror}"), mirror="sensors" if images else None))
     return Initiation(
         method=settings.method, t_start=w.t0, t_end=w.t0 + float(w.scan_times[-1]),
@@ -856,7 +856,7 @@ def _boundary_reasons(best: _Solution, graph: gtsam.NonlinearFactorGraph, n_data
     limit = float(chi2.ppf(settings.confidence, 1))
     outside = "" if isinstance(free, str) else (
         f"; without the bound LM reaches window cost {free.cost:.2f} "
-        f"{np.linalg.norm(free.x0[:model.dim] - best.x0[:model.dim]) / 1e3:.1f} km away "
+        f"{distance_text(np.linalg.norm(free.x0[:model.dim] - best.x0[:model.dim]))} away "
         f"(speed {np.linalg.norm(free.x0[model.dim:]):.0f} m/s)")
     axes = "along, across, altitude" if model.dim == 3 else "along, across"
     held = (f"the start state is held at the zone's boundary (excess {axes}, speed: "

@@ -84,7 +84,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.stats import chi2
 
-from fgdoppler._text import time_text
+from fgdoppler._text import distance_text, time_text
 from fgdoppler.estimators.calibration import shifted_by
 from fgdoppler.estimators.grid import speed_lower_bound
 from fgdoppler.estimators.initiation import OUTLIER_CUT, inlier_statistic
@@ -231,7 +231,7 @@ def _reference_reasons(est: Estimates, reference: TrackResult) -> list[Reason]:
     limit = float(chi2.ppf(LEVEL, n))
     if m2 > limit:
         out.append(Reason(code="reference", status="doubtful", message=(
-            f"the final state lies {np.sqrt(m2):.1f} of its own sigma ({np.linalg.norm(d[:n // 2]) / 1e3:.2f} km) "
+            f"the final state lies {np.sqrt(m2):.1f} of its own sigma ({distance_text(np.linalg.norm(d[:n // 2]), km_decimals=2)}) "
             f"from the offline smoother's, which uses the same data (chi-square {m2:.1f} > {limit:.1f}, {n} dof): "
             f"the {est.kind} estimates understate their error here (poor observability)")))
     return out
@@ -281,7 +281,7 @@ def track_reference(est: Estimates, ref: Estimates) -> list[Reason]:
         f"the {est.kind} estimates lay on average {np.sqrt(mean):.1f} of their own sigma from the offline "
         f"smoother's track, which uses all the data (mean chi-square {mean:.1f} > {limit:.1f}, {n} dof; beyond it "
         f"at {beyond.size} of {t.size} times between t = {time_text(beyond[0])} and {time_text(beyond[-1])} s, most at "
-        f"t = {time_text(t[worst])} s, {np.linalg.norm(d[worst, :n // 2]) / 1e3:.2f} km): for that while the track was "
+        f"t = {time_text(t[worst])} s, {distance_text(np.linalg.norm(d[worst, :n // 2]), km_decimals=2)}): for that while the track was "
         "confidently where the whole recording does not put it"))]
 
 

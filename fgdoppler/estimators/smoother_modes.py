@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 from scipy.stats import chi2
 
+from fgdoppler._text import distance_text
 from fgdoppler.estimators.search_memo import SearchMemo
 from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.estimators.smoother_solve import FloatArray, SmootherSolution, solve_smoother
@@ -212,7 +213,7 @@ def _best_and_rival(found: list[SmootherSolution], sol: SmootherSolution, zone: 
     notes = []
     if moved > 50.0 and moved > 3.0 * _sigma_along(best, (sol.states[-1, :k] - end) / moved):
         notes.append(f"a restart lowered the cost from {sol.cost:.2f} to {best.cost:.2f} (the track's end moved "
-                     f"{moved / 1e3:.1f} km)")
+                     f"{distance_text(moved)})")
     floor = _floor_reason(best, zone) if zone.altitude is not None and k == 3 else None
     reasons = [r for r in (floor, _rival_reason(found, best, zone, geometry)) if r is not None]
     return best, notes, reasons
@@ -344,7 +345,7 @@ def _rival_reason(found: Sequence[_Mode], best: _Mode, zone: Zone, geometry: Geo
         return None
     _, rival, apart, sd, delta = max(rivals, key=lambda r: r[0])
     head = (f"another track explains the data nearly as well (cost {rival.cost:.2f} vs {best.cost:.2f}, posterior "
-            f"weight {np.exp(-0.5 * delta):.2g} of the reported one's) and ends {apart / 1e3:.1f} km away")
+            f"weight {np.exp(-0.5 * delta):.2g} of the reported one's) and ends {distance_text(apart)} away")
     if floor is not None:
         return Reason(code="competing", status="doubtful", message=(
             f"{head} (height {zone.frame.points_to_local(rival.states[-1, :3])[2]:.0f} m vs "

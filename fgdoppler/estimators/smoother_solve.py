@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.stats import chi2
 
-from fgdoppler._text import first_line
+from fgdoppler._text import distance_text, first_line
 from fgdoppler.estimators.linearized import LinearRows, MotionBlocks, linearize_rows
 from fgdoppler.estimators.marginals import chain_solve, check_covariances
 from fgdoppler.estimators.settings import SmootherSettings
@@ -411,7 +411,7 @@ def _wall_reason(zone: Zone, x: FloatArray, inside: float, free: FloatArray, fre
     d = zone.dim
     held = (f"the track's first state is held at the zone's boundary ({_excess_words(zone, x[0])}); without the "
             f"bound{searched} the cost is {free_cost:.2f} "
-            f"instead of {inside:.2f}, {np.linalg.norm(free[0, :d] - x[0, :d]) / 1e3:.1f} km away"
+            f"instead of {inside:.2f}, {distance_text(np.linalg.norm(free[0, :d] - x[0, :d]))} away"
             f" (speed {np.linalg.norm(free[0, d:]):.0f} m/s)")
     if gain > limit:
         text, advised = advise() if advise else _held_start(zone.reaching(free[0]))

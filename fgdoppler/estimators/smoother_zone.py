@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.stats import chi2
 
+from fgdoppler._text import distance_text
 from fgdoppler.estimators.initiation import Initiation, inlier_statistic
 from fgdoppler.estimators.search_memo import SearchMemo
 from fgdoppler.estimators.settings import SmootherSettings
@@ -154,8 +155,9 @@ def _best_outside_2d(measurements: Measurements, model: TrackingModel, settings:
     # a start on the searched box's edge (or past it) was found only as far as the search reached
     edge = "; the start found lies at the edge of the search: the target may start farther out still" \
         if _at_edge(w, best.states[0]) else ""
-    searched = (f" (searched to {w.speed_max:.0f} m/s, along {w.along[0] / 1e3:.1f} to "
-                f"{w.along[1] / 1e3:.1f} km, across {w.across[0] / 1e3:.1f} to {w.across[1] / 1e3:.1f} km{edge})")
+    searched = (f" (searched to {w.speed_max:.0f} m/s, along {distance_text(w.along[0])} to "
+                f"{distance_text(w.along[1])}, across {distance_text(w.across[0])} to {distance_text(w.across[1])}"
+                f"{edge})")
     return best, inside, searched, partial(_zone_advice, measurements, model, settings, best, progress,
                                            half_plane=half_plane, memo=memo)
 
@@ -278,7 +280,7 @@ def _outside_zone_2d(measurements: Measurements, model: TrackingModel, settings:
         f"the track fits the data poorly ({'cost' if settings.huber_k is None else 'inlier chi-square'} "
         f"{misfit:.1f} above the {OUTSIDE_LEVEL:.0%} chi-square level {threshold:.1f}) and a track starting outside the zone fits them better{searched}: cost {best.cost:.2f} instead of "
         f"{inside:.2f}, lower by {gain:.1f} > {OUTSIDE_GAIN:.2f}, starting "
-        f"{np.linalg.norm(best.states[0, :d] - sol.states[0, :d]) / 1e3:.1f} km away at "
+        f"{distance_text(np.linalg.norm(best.states[0, :d] - sol.states[0, :d]))} away at "
         f"{np.linalg.norm(best.states[0, d:]):.0f} m/s (excess along, across, speed: "
         + ", ".join(f"{v:.3g}" for v in excess) + "): the target may be outside the zone; widen it to hold that "
         f"start, {text}"))
@@ -348,6 +350,6 @@ def _released_reason(measurements: Measurements, model: TrackingModel, settings:
     return [Reason(code="boundary", status="doubtful", zone=advised.box(), message=(
         f"a track held at the zone's boundary was replaced by this one (cost {inside:.2f}), but released from the "
         f"bound it fits the data better: cost {free_cost:.2f}, lower by {gain:.1f} > {WALL_GAIN:.2f}, starting "
-        f"{np.linalg.norm(free[0, :d] - sol.states[0, :d]) / 1e3:.1f} km away at "
+        f"{distance_text(np.linalg.norm(free[0, :d] - sol.states[0, :d]))} away at "
         f"{np.linalg.norm(free[0, d:]):.0f} m/s ({_excess_words(zone, free[0])}): the data prefer a start outside "
         f"the zone; widen the zone to hold that start, {text}"))]
