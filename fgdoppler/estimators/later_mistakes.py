@@ -50,6 +50,15 @@ there).  The same spread measurements then rank the window's changes: the
 one under which they pass with the least cost, where as given they fail,
 is named as the track's finding, which says whether the window's likeliest
 change is that one.
+
+Cost, on a track that misfits only: with a change the window named, one
+initiation of the spread measurements and one per change the window
+passes with; else :math:`n` initiations of later windows and, for each
+window that fails, :math:`1 + P + P(P-1)/2` more with :math:`P` pairs (and
+more with radars, :func:`~fgdoppler.estimators.window_mistakes.mistake_reasons`),
+then one initiation of the spread measurements and one more per change
+asked to confirm, or with radars where the windows name nothing, if they
+fail, :math:`2(1 + R)` more with :math:`R \ge 2` radars (one radar: 2).
 """
 
 from __future__ import annotations
@@ -123,30 +132,21 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole
     recording are tried the same way with the changes of
     :data:`WHOLE_CODES` (a radar's Doppler doubled, or doubled and negated),
-    and a change under which they pass is named.  Costs
-    nothing on a track that fits; on one that does not, :math:`n`
-    initiations and, for each window that fails,
-    :math:`1 + P + P(P-1)/2` more with :math:`P` pairs (and more with radars,
-    :func:`~fgdoppler.estimators.window_mistakes.mistake_reasons`), and with
-    radars where the windows name nothing one initiation of the spread
-    measurements and, if they fail, :math:`2(1 + R)` more with
-    :math:`R \ge 2` radars (one radar: 2), or where windows name changes one
-    initiation of the spread measurements and one more per change asked to
-    confirm — unless
-    ``reference``, a track on the same data and initiation whose own
+    and a change under which they pass is named.  Costs nothing on a track
+    that fits (on one that does not: the module's "Cost") and nothing more
+    where ``reference``, a track on the same data and initiation whose own
     ``fit`` finding is not ``ok`` either and whose settings have the same
-    ``huber_k``, made the same check already: its mistake
-    finding (or its lack of one) is then the answer.
+    ``huber_k``, made the same check already: its mistake finding (or its
+    lack of one) is then the answer.
 
     Parameters
     ----------
     measurements, model
         The recording and model the track was estimated with.
     init
-        The initiation the track started from (its window's span, findings and
-        :attr:`~fgdoppler.estimators.initiation.Initiation.mistake`; one with a
-        mistake finding but no ``mistake``, made elsewhere than by
-        :func:`~fgdoppler.estimators.initiation.initiate`, gets nothing more).
+        The initiation the track started from: its window's span, findings and
+        ``mistake`` (a mistake finding without it, as made elsewhere than by
+        :func:`~fgdoppler.estimators.initiation.initiate`: nothing more).
     reasons
         The track's findings so far.
     huber_k
