@@ -29,7 +29,7 @@ Doppler halved and halved and negated, and the recording simulated anew with its
 (``target manoeuvres``: turning by up to 0.6 deg/s and changing speed by up to 1 m/s^2 from a time in
 0-20 s, drawn per recording; right data, so no mistake should be named).  ``--only`` runs the versions
 it lists (comma-separated names, as the tables give them).  For each: whether the initiation has a ``sign``,
-``swapped`` or ``radial`` finding (:func:`fgdoppler.estimators.window_mistakes.mistake_reasons`) and
+``swapped`` or ``radial`` finding (:func:`fgdoppler.estimators.window_mistakes.with_mistake`) and
 what it names, and (``--track 1``, the default) the verdict of ``--estimator`` (default the
 offline smoother) from that initiation, with its position error at the last time of the truth
 against its own sigma along the major axis (wrong: beyond 3 sigma), and the mistake finding it
@@ -64,6 +64,7 @@ from typing import Any
 
 import numpy as np
 from _common import each_run, paper_run
+from manoeuvres import drawn_manoeuvre
 from monostatic_layouts import draw as radar_draw
 from random_layouts import draw, one_blas_thread, recorded
 
@@ -131,9 +132,7 @@ ALL_VERSIONS = [*VERSIONS, MANOEUVRE]
 def _manoeuvring(sim: fd.Simulation, key: int) -> fd.Simulation:
     """``sim``'s recording simulated anew with its target turning by up to 0.6 deg/s and changing speed by up to
     1 m/s^2 from a time in 0-20 s (``studies/manoeuvres.py``'s default rule), drawn from ``key``."""
-    pick = np.random.default_rng(7000 + key)
-    man = fd.Manoeuvre(turn_rate_deg=float(pick.uniform(-0.6, 0.6)), acceleration=float(pick.uniform(-1.0, 1.0)),
-                       onset=float(pick.uniform(0.0, 20.0)))
+    man = drawn_manoeuvre(np.random.default_rng(7000 + key))
     return fd.simulate(replace(sim.scenario, manoeuvre=man), np.random.default_rng(8000 + key))
 
 

@@ -43,15 +43,22 @@ from fgdoppler.analysis.workers import one_blas_thread
 LABELS = ("test", "no test")
 
 
+def drawn_manoeuvre(pick: np.random.Generator, turn_max: float = 0.6, accel_max: float = 1.0,
+                    onset_max: float = 20.0) -> fd.Manoeuvre:
+    """The study's rule: a turn rate uniform in ±``turn_max`` deg/s, a speed change uniform in ±``accel_max``
+    m/s² and an onset uniform in 0–``onset_max`` s, drawn from ``pick`` in that order."""
+    return fd.Manoeuvre(turn_rate_deg=float(pick.uniform(-turn_max, turn_max)),
+                        acceleration=float(pick.uniform(-accel_max, accel_max)),
+                        onset=float(pick.uniform(0.0, onset_max)))
+
+
 @one_blas_thread
 def one(k: int, first: float = 0.0, turn_max: float = 0.6, accel_max: float = 1.0,
         onset_max: float = 20.0, bias_sigma: float = 0.0) -> dict[str, Any]:
     i = k + int(first)
     g, x0, rng = draw(i)
     pick = np.random.default_rng([91, i])  # the manoeuvre from a stream of its own: the noise is draw i's
-    manoeuvre = fd.Manoeuvre(turn_rate_deg=float(pick.uniform(-turn_max, turn_max)),
-                             acceleration=float(pick.uniform(-accel_max, accel_max)),
-                             onset=float(pick.uniform(0.0, onset_max)))
+    manoeuvre = drawn_manoeuvre(pick, turn_max, accel_max, onset_max)
     out: dict[str, Any] = {"draw": i, "pairs": len(g.pairs), "x0": [round(v, 1) for v in x0],
                            "turn_rate_deg": round(manoeuvre.turn_rate_deg, 3),
                            "acceleration": round(manoeuvre.acceleration, 3), "onset": round(manoeuvre.onset, 1)}

@@ -181,7 +181,7 @@ class InitiationSettings:
     mistake_check : bool, default True
         Where the window fails the verdict's χ² test, initiate again with the
         data as two common mistakes in a measurement file would have them
-        (:func:`~fgdoppler.estimators.window_mistakes.mistake_reasons`): the Doppler of every pair, or of one pair,
+        (:func:`~fgdoppler.estimators.window_mistakes.with_mistake`): the Doppler of every pair, or of one pair,
         negated (a ``sign`` finding), or two pairs' labels exchanged (a
         ``swapped`` finding); a finding names the change that makes the
         window fit.  Costs nothing on a window that fits.
@@ -564,13 +564,9 @@ def initiate(
     if not settings.mistake_check:
         return result
     # the mistakes' module initiates changed windows itself
-    from fgdoppler.estimators.window_mistakes import find_mistake, mistake_reason
+    from fgdoppler.estimators.window_mistakes import with_mistake
 
-    found = find_mistake(measurements, model, settings, result)
-    if found is None:
-        return result
-    return replace(result, reasons=(*result.reasons, mistake_reason(found, result.cost, settings.confidence)),
-                   mistake=found)
+    return with_mistake(measurements, model, settings, result)
 
 
 def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: tuple[Candidate, ...],

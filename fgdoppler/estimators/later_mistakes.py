@@ -1,7 +1,7 @@
 r"""Mistakes in a measurement file that the initiation window did not show, looked for later in the recording.
 
 The initiation names common mistakes where its window fails the χ²
-test and fits with the data changed (:func:`~fgdoppler.estimators.window_mistakes.mistake_reasons`):
+test and fits with the data changed (:func:`~fgdoppler.estimators.window_mistakes.with_mistake`):
 the opposite sign convention (the Doppler of every pair, or of one pair,
 negated: a ``sign`` finding), two pairs' labels exchanged (``swapped``)
 and a radar's radial velocity given for its bistatic range rate
@@ -55,7 +55,7 @@ Cost, on a track that misfits only: with a change the window named, one
 initiation of the spread measurements and one per change the window
 passes with; else :math:`n` initiations of later windows and, for each
 window that fails, :math:`1 + P + P(P-1)/2` more with :math:`P` pairs (and
-more with radars, :func:`~fgdoppler.estimators.window_mistakes.mistake_reasons`),
+more with radars, :func:`~fgdoppler.estimators.window_mistakes.with_mistake`),
 then one initiation of the spread measurements and one more per change
 asked to confirm, or with radars where the windows name nothing, if they
 fail, :math:`2(1 + R)` more with :math:`R \ge 2` radars (one radar: 2).
@@ -98,7 +98,7 @@ CONFIRMED_AT_MOST = 3
 #: initiations more on every track that misfits.
 WHOLE_CODES: tuple[MistakeCode, ...] = ("radial",)
 
-#: The findings of a mistake in the measurement file (:func:`~fgdoppler.estimators.window_mistakes.mistake_reasons`).
+#: The findings of a mistake in the measurement file (:func:`~fgdoppler.estimators.window_mistakes.with_mistake`).
 MISTAKE_CODES = ("sign", "swapped", "radial")
 
 

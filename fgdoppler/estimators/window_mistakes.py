@@ -3,7 +3,7 @@ r"""Mistakes in a measurement file that the initiation window names: a sign, two
 Where the window fails the verdict's χ² test, it is initiated again with its
 data changed as each such mistake would have changed them
 (:func:`find_mistake`); a change under which it fits is a ``sign``,
-``swapped`` or ``radial`` finding (:func:`mistake_reasons`) that names the
+``swapped`` or ``radial`` finding (:func:`with_mistake`) that names the
 change and the others that pass the same test.  The same test on later
 windows of a track that fits poorly is
 :mod:`fgdoppler.estimators.later_mistakes`'s.
@@ -23,8 +23,8 @@ from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["OTHERS_NAMED", "SIGN_CONVENTION", "Mistake", "find_mistake", "mistake_reason", "mistake_reasons",
-           "radar_pairs"]
+__all__ = ["OTHERS_NAMED", "SIGN_CONVENTION", "Mistake", "find_mistake", "mistake_reason", "radar_pairs",
+           "with_mistake"]
 
 #: The data's sign convention, as a ``sign`` finding states it (docs/data-formats.md says the same).
 SIGN_CONVENTION = ("fgdoppler's doppler is the bistatic range rate, negative for a target closing on the pair; "
@@ -97,10 +97,11 @@ class Mistake:
         return f"the Doppler of {self.which} {verb}"
 
 
-def mistake_reasons(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
-                    result: Initiation) -> list[Reason]:
-    r"""A ``sign``, ``swapped`` or ``radial`` finding where the window fits only with its data changed as a
-    common mistake in writing a measurement file would have changed them.
+def with_mistake(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
+                 result: Initiation) -> Initiation:
+    r"""``result`` with a ``sign``, ``swapped`` or ``radial`` finding and its
+    :attr:`~fgdoppler.estimators.initiation.Initiation.mistake` where the window fits only with its data
+    changed as a common mistake in writing a measurement file would have changed them (else ``result``).
 
     * **Sign.**  Negating a pair's Doppler is not a change of the target's
       state: the bistatic range rate :math:`\dot r = \mathbf v \cdot
@@ -142,13 +143,16 @@ def mistake_reasons(measurements: Measurements, model: TrackingModel, settings: 
     radar: 2), made only for a window that fails.
     """
     found = find_mistake(measurements, model, settings, result)
-    return [] if found is None else [mistake_reason(found, result.cost, settings.confidence)]
+    if found is None:
+        return result
+    return replace(result, reasons=(*result.reasons, mistake_reason(found, result.cost, settings.confidence)),
+                   mistake=found)
 
 
 def find_mistake(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
                  result: Initiation, *, codes: tuple[MistakeCode, ...] = ("sign", "radial", "swapped"),
                  changes: tuple[Mistake, ...] | None = None) -> Mistake | None:
-    """The change of :func:`mistake_reasons` whose window passes with the least cost (``None``: none, or
+    """The change of :func:`with_mistake` whose window passes with the least cost (``None``: none, or
     ``result`` passes the verdict's χ² test), with the others that pass in its ``others``; only the changes
     of ``codes`` are tried, or only ``changes`` (their costs and ``others`` are ignored) where given."""
     if result.cost <= float(chi2.ppf(VERDICT_LEVEL, max(result.dof, 1))):
