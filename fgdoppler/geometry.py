@@ -362,6 +362,27 @@ class Geometry:
         """The same sensors with other zone overrides."""
         return replace(self, zone_limits=limits)
 
+    def scaled(self, factor: float) -> Geometry:
+        """The same geometry in other length units: every sensor coordinate and the zone's along, across and
+        altitude limits multiplied by ``factor`` (its speed bound, in m/s, kept).
+
+        Raises
+        ------
+        ValueError
+            If ``factor`` is not a positive finite number.
+        """
+        if not (np.isfinite(factor) and factor > 0):
+            raise ValueError(f"a length scale factor must be positive and finite, got {factor!r}")
+
+        def times(band: tuple[float, float] | None) -> tuple[float, float] | None:
+            return None if band is None else (band[0] * factor, band[1] * factor)
+
+        limits = self.zone_limits
+        return replace(self, pairs=tuple(BistaticPair(tx=np.multiply(p.tx, factor), rx=np.multiply(p.rx, factor))
+                                         for p in self.pairs),
+                       zone_limits=replace(limits, along=times(limits.along), across=times(limits.across),
+                                           altitude=times(limits.altitude)))
+
     def check_zone(self, reach: float = 10.0) -> None:
         """Raise :class:`ValueError` if the zone lies more than ``reach`` sensor extents from every sensor.
 

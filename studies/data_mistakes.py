@@ -18,18 +18,26 @@ Three mistakes, each checked on the same recordings:
   radial velocity positive for an approaching target (minus half of it: ``wavelength * f_D / 2``).
   The initiation's ``radial`` finding should name the radars.  Checked on the radar layouts alone
   (the others have no radar).
+* **Sensors in kilometres.**  The geometry's positions (and its zone's limits) in kilometres where
+  fgdoppler reads metres.  The initiation's ``units`` finding should say so
+  (:func:`fgdoppler.estimators.window_mistakes.units_reason`, tried where the sensors lie within
+  1,000 m of each other as read).  Its check for false alarms: the manoeuvring recording below on the
+  layout a hundred times smaller (lengths, speeds, sigma scaled: layouts 44-100 km across become
+  440 m-1 km, the paper's 50 km 500 m), whose windows fail for a manoeuvre and are tried in kilometres
+  too where they lie within those 1,000 m.
 * **A receiver's clock off.**  Pair 1's times ``--late`` seconds late (default 0.5; one clock for
   every pair is assumed).  Not looked for: where such data fit another track, no finding can tell.
   With ``--clock-sigma S`` the estimator is told each pair's clock may be off by S (1 sigma;
   ``clock_sigma=S`` of its settings, a consider covariance), on every version of the data.
 
-Per recording, up to eight versions of the data: as simulated, every pair's Doppler negated, pair 0's
+Per recording, up to ten versions of the data: as simulated, every pair's Doppler negated, pair 0's
 alone negated, pairs 0 and 1 swapped, pair 1's clock late, where the geometry has radars their
 Doppler halved and halved and negated, and the recording simulated anew with its target manoeuvring
 (``target manoeuvres``: turning by up to 0.6 deg/s and changing speed by up to 1 m/s^2 from a time in
-0-20 s, drawn per recording; right data, so no mistake should be named).  ``--only`` runs the versions
+0-20 s, drawn per recording; right data, so no mistake should be named), the geometry in kilometres
+and that manoeuvring recording on the layout a hundred times smaller (nothing to name).  ``--only`` runs the versions
 it lists (comma-separated names, as the tables give them).  For each: whether the initiation has a ``sign``,
-``swapped`` or ``radial`` finding (:func:`fgdoppler.estimators.window_mistakes.with_mistake`) and
+``swapped``, ``radial`` or ``units`` finding (:func:`fgdoppler.estimators.window_mistakes.with_mistake`) and
 what it names, and (``--track 1``, the default) the verdict of ``--estimator`` (default the
 offline smoother) from that initiation, with its position error at the last time of the truth
 against its own sigma along the major axis (wrong: beyond 3 sigma), and the mistake finding it
@@ -51,7 +59,8 @@ Run: python studies/data_mistakes.py [--runs 10] [--seed 2026] [--track 1] [--la
 (with the radar layouts, 2026-11-27, on 2 cores shared with other work: ``--runs 10`` 43 min; ``--track 0``,
 the initiations alone, 15 min for ``--runs 20``; 2026-11-29, with the whole recording's check of
 :mod:`fgdoppler.estimators.later_mistakes`, on 2 idle cores: ``--runs 10`` 34 min; with the window's
-changes ranked there too, on 2 cores beside other work: 56 min)
+changes ranked there too, on 2 cores beside other work: 56 min; ``--only "sensors in kilometres,target manoeuvres on
+a layout 1/100 the size"``, 23 min)
 """
 
 from __future__ import annotations
@@ -125,8 +134,18 @@ VERSIONS: dict[str, tuple[Callable[[fd.Measurements, fd.Geometry, float], fd.Mea
                                lambda g: f"the Doppler of {_radars(g)} doubled and negated", True),
 }
 
+#: The version whose geometry gives the sensors in kilometres (the data as simulated): a ``units`` finding is right.
+KILOMETRES = "sensors in kilometres"
+#: The manoeuvring version on the layout a hundred times smaller (lengths, speeds, sigma and the process noise's
+#: accelerations scaled with it: the same whitened problem), whose failing windows are tried in kilometres too.
+SMALL = "target manoeuvres on a layout 1/100 the size"
+#: What a ``units`` finding names, as :func:`_changes` reads it.
+IN_KILOMETRES = "every sensor position multiplied by 1000"
+#: The findings the tables count.
+FINDINGS = (*MISTAKE_CODES, "units")
+
 #: Every version, in the tables' order.
-ALL_VERSIONS = [*VERSIONS, MANOEUVRE]
+ALL_VERSIONS = [*VERSIONS, MANOEUVRE, KILOMETRES, SMALL]
 
 
 def _manoeuvring(sim: fd.Simulation, key: int) -> fd.Simulation:
@@ -136,8 +155,20 @@ def _manoeuvring(sim: fd.Simulation, key: int) -> fd.Simulation:
     return fd.simulate(replace(sim.scenario, manoeuvre=man), np.random.default_rng(8000 + key))
 
 
+def _shrunk(m: fd.Measurements, truth: fd.Trajectory, model: fd.TrackingModel, s: float
+            ) -> tuple[fd.Measurements, fd.Trajectory, fd.TrackingModel]:
+    """The recording of a layout ``s`` times the size, its target's positions and speeds ``s`` times too: the
+    bistatic Doppler depends on positions only through directions, so it and its sigma scale by ``s``, and
+    the process noise's density by ``s**2`` (the same problem, whitened)."""
+    g = model.geometry.scaled(s)
+    return (fd.Measurements(time=m.time, pair=m.pair, doppler=s * m.doppler, sigma=s * m.sigma),
+            replace(truth, states=s * truth.states),
+            fd.TrackingModel.of(g, motion=replace(model.motion, q=model.motion.q * s**2)))
+
+
 #: The change a mistake finding names first, and the other changes it names (``mistake_reason``'s wording).
-_FIRST = re.compile(r"^(?:.*: )?with (the (?:Doppler|labels) of .+?) (?:the window fits|they fit)")
+_FIRST = re.compile(r"^(?:.*: )?with (the (?:Doppler|labels) of .+?|every sensor position(?: and the zone's limits)? "
+                    r"multiplied by 1000) (?:the window fits|they fit)")
 _OTHERS = re.compile(r"(?:passes|pass) the same test with (.+?) too: check")
 _CHANGE = re.compile(r"(the (?:Doppler|labels) of .+?) \(cost ")
 
@@ -155,32 +186,37 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
     out: dict[str, Any] = {}
     g = sim.scenario.geometry
     for name in versions:
-        truth = sim.truth
-        if name == MANOEUVRE:
+        truth, used = sim.truth, model
+        if name in (MANOEUVRE, SMALL):
             moved = _manoeuvring(sim, key)
             m, truth, want = moved.measurements, moved.truth, (lambda g: "")
+            if name == SMALL:
+                m, truth, used = _shrunk(m, truth, model, 0.01)
+        elif name == KILOMETRES:
+            m, want, used = sim.measurements, (lambda g: IN_KILOMETRES), fd.TrackingModel.of(g.scaled(1e-3))
         else:
             version, want, radars = VERSIONS[name]
             if radars and not g.radars:
                 continue
             m = version(sim.measurements, g, late)
         try:
-            init = fd.initiate(m.first_per_pair(10), model)
+            init = fd.initiate(m.first_per_pair(10), used)
         except ValueError as exc:  # a manoeuvre can take the target beyond the zone's speed bound
             out[name] = {"refused": str(exc)}
             continue
-        found = [r for r in init.reasons if r.code in MISTAKE_CODES]
+        found = [r for r in init.reasons if r.code in FINDINGS]
         first, others = _changes(found[0] if found else None)
         row: dict[str, Any] = {"finding": found[0].code if found else "", "names": first, "others": others,
                                "right": want(g)}
         if track:
-            r = fd.run_estimator(estimator, m, model, init, estimator_info(estimator).settings(clock_sigma=clock_sigma))
+            r = fd.run_estimator(estimator, m, used, init, estimator_info(estimator).settings(clock_sigma=clock_sigma))
             e = r.primary
             k = e.states.shape[1] // 2
             j = int(np.flatnonzero(e.times <= truth.times[-1])[-1])  # a late clock's last times are not truth's
             err = float(np.linalg.norm(e.states[j, :k] - truth.at(e.times[j:j + 1])[0][:k]))
             sd = float(np.sqrt(np.max(np.linalg.eigvalsh(e.covariances[j][:k, :k])))) if e.cov_ok[j] else np.nan
-            later = [x for x in r.reasons if x.code in MISTAKE_CODES]
+            later = [x for x in r.reasons if x.code in MISTAKE_CODES or (x.code == "units" and x.message.startswith(
+                "the track fails its residual test"))]  # not the verdict's units findings of speed and distance
             row.update(status=str(r.status), error=round(err, 1), sigma=round(sd, 1),
                        later=_changes(later[0] if later else None)[0])
         out[name] = row
@@ -207,7 +243,7 @@ def one(task: tuple[int, int, int], track: int = 1, late: float = 0.5, clock_sig
 
 
 def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) -> list[str]:
-    lines = [f"### {where}", "", "| data | recordings | sign / swapped / radial finding | names the change made "
+    lines = [f"### {where}", "", "| data | recordings | sign / swapped / radial / units finding | names the change made "
              "(first / among the others) | " + (f"{estimator} ok | ok and beyond 3 sigma | named later by the "
                                                  f"{estimator} where the window named nothing (rightly) | the "
                                                  f"window's finding ranked by the {estimator} (the change made "
@@ -221,7 +257,7 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) 
         right = f"{sum(g['names'] == g['right'] for g in got)} / {sum(g['right'] in g['others'] for g in got)}" \
             if wanted else "—"
         said = [g["finding"] for g in got if g["finding"]]
-        line = f"| {name} | {len(got)} | {' / '.join(str(said.count(c)) for c in MISTAKE_CODES)} | {right} |"
+        line = f"| {name} | {len(got)} | {' / '.join(str(said.count(c)) for c in FINDINGS)} | {right} |"
         if track:
             ok = [g for g in got if g["status"] == "ok"]
             wrong = sum(g["error"] > 3.0 * g["sigma"] for g in ok)

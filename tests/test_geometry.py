@@ -5,6 +5,7 @@ import pytest
 
 import fgdoppler as fd
 from fgdoppler.geometry import resolve_geometry
+from fgdoppler.zone import ZoneLimits
 
 
 def test_paper_table1_positions() -> None:
@@ -248,3 +249,27 @@ def test_pair_names_round_trip_and_survive_the_frames(tmp_path) -> None:
     assert g.mirrored_x(1e3).pair_names == g.pair_names
     with pytest.raises(ValueError, match="name every pair or none"):
         fd.Geometry(pairs=g.pairs, pair_names=("north",))
+
+
+def test_a_geometry_in_other_units_gives_the_doppler_of_the_scaled_target() -> None:
+    """The bistatic Doppler v . (u_T + u_R) depends on positions only through the unit vectors to the sensors, so
+    sensors and target positions scaled together by s (velocities kept) give the same Doppler; scaling by s then
+    1/s is the geometry again; the zone's lengths scale and its speed bound does not; s <= 0 is refused."""
+    rng = np.random.default_rng(3)
+    g = fd.Geometry(pairs=fd.paper_geometry("b").pairs, pair_names=("east", "west"),
+                    zone_limits=ZoneLimits(along=(-5e3, 60e3), across=(0.0, 30e3), speed_max=250.0,
+                                           altitude=(0.0, 10e3)))
+    states = np.column_stack([rng.uniform(-2e4, 6e4, 50), rng.uniform(1e3, 3e4, 50), rng.uniform(0, 8e3, 50),
+                              rng.normal(0, 100, (50, 3))])
+    for s in (1e-3, 0.37, 1e3):
+        k = g.scaled(s)
+        assert k.pair_names == g.pair_names and k.zone_limits.speed_max == 250.0
+        assert k.zone_limits.along == pytest.approx((-5e3 * s, 60e3 * s))
+        assert k.zone_limits.altitude == pytest.approx((0.0, 10e3 * s))
+        moved = np.column_stack([states[:, :3] * s, states[:, 3:]])
+        np.testing.assert_allclose(fd.bistatic_doppler(moved, k), fd.bistatic_doppler(states, g), rtol=1e-9,
+                                   atol=1e-9)
+        np.testing.assert_allclose(k.scaled(1 / s).tx, g.tx, rtol=1e-12, atol=1e-9)
+    for bad in (0.0, -2.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="positive and finite"):
+            g.scaled(bad)

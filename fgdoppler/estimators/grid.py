@@ -218,7 +218,8 @@ class GridSpec:
         if lo > zone.speed_max:
             raise ValueError(
                 f"the data need a speed of at least {lo:.1f} m/s but the zone's speed bound is "
-                f"{zone.speed_max:.1f} m/s: raise the speed bound (--speed-max) or check the data's units"
+                f"{zone.speed_max:.1f} m/s: raise the speed bound (--speed-max) or check the data's units (doppler "
+                "is the bistatic range rate in m/s, not a Doppler shift in Hz: from f_D, doppler = -wavelength * f_D)"
             )
         step = self.step(zone, extent)
         speed_step = self.speed_step if self.speed_step is not None else zone.speed_max / 20

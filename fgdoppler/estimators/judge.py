@@ -66,7 +66,10 @@ the status is the worst of them, :mod:`fgdoppler.estimators.verdict`).
 ``units`` — ``"doubtful"`` when the track moves faster than
     :data:`SPEED_FACTOR` times the zone's speed bound, or lies more than
     :data:`REMOTE_FACTOR` sensor extents from every sensor: the signature of
-    times in milliseconds or positions in kilometres.
+    times in milliseconds or positions in kilometres.  (A geometry in
+    kilometres is named more directly where the data fit with it scaled:
+    :func:`~fgdoppler.estimators.window_mistakes.units_reason`, a ``units``
+    finding of the initiation or of the track.)
 
 The initiation's findings are added by
 :func:`~fgdoppler.estimators.registry.run_estimator` (``initiation-…``; its

@@ -42,6 +42,16 @@ named.  (The sign and swapped labels, which windows mostly name, are not
 tried there: that would cost :math:`1 + P + P(P-1)/2` more initiations on
 every track that misfits, a manoeuvring one included.)
 
+The geometry in kilometres
+(:func:`~fgdoppler.estimators.window_mistakes.units_reason`): where the
+initiation named it, nothing more is searched (every window would fail in a
+geometry a thousand times too small); where the initiation named nothing
+on a layout at most
+:data:`~fgdoppler.estimators.window_mistakes.KILOMETRE_EXTENT` across, the
+:data:`WHOLE_PER_PAIR` measurements a pair spread over the whole recording
+are first tried in kilometres the same way (two initiations), and a
+``units`` finding then replaces the windows' search.
+
 Where the initiation window did name a change, a short window often fits
 under several (on radar layouts with a radar's radial velocity positive
 for an approaching target, the right change came first in 12 of 36 such
@@ -76,8 +86,10 @@ from fgdoppler.estimators.window_mistakes import (
     Mistake,
     MistakeCode,
     find_mistake,
+    kilometre_extent,
     mistake_reason,
     radar_pairs,
+    units_reason,
 )
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
@@ -105,11 +117,11 @@ MISTAKE_CODES = ("sign", "swapped", "radial")
 def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initiation, reasons: tuple[Reason, ...],
                    *, huber_k: float | None = None, windows: int = LATER_WINDOWS,
                    reference: TrackResult | None = None) -> list[Reason]:
-    r"""A ``sign``, ``swapped`` or ``radial`` finding from later in the recording, where the track does not
-    fit.
+    r"""A ``sign``, ``swapped``, ``radial`` or ``units`` finding from later in the recording, where the track
+    does not fit (``reasons``, the track's, hold a ``fit`` finding that is not ``ok``) and ``init`` did not find
+    the geometry in kilometres (the module docstring: a small layout is tried in kilometres first).
 
-    Only where ``reasons`` (the track's) hold a ``fit`` finding that is not
-    ``ok``.  Where ``init`` names a change (:attr:`~fgdoppler.estimators.initiation.Initiation.mistake`),
+    Where ``init`` names a change (:attr:`~fgdoppler.estimators.initiation.Initiation.mistake`),
     the :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole
     recording are initiated as given and, where they fail the verdict's χ²
     test, with each of the window's changes; the one under which they pass
@@ -132,12 +144,10 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole
     recording are tried the same way with the changes of
     :data:`WHOLE_CODES` (a radar's Doppler doubled, or doubled and negated),
-    and a change under which they pass is named.  Costs nothing on a track
-    that fits (on one that does not: the module's "Cost") and nothing more
-    where ``reference``, a track on the same data and initiation whose own
-    ``fit`` finding is not ``ok`` either and whose settings have the same
-    ``huber_k``, made the same check already: its mistake finding (or its
-    lack of one) is then the answer.
+    and a change under which they pass is named.  Nothing more where
+    ``reference``, a track on the same data and initiation whose ``fit``
+    finding is not ``ok`` either and whose settings have the same
+    ``huber_k``, made the same check: its finding (or none) is the answer.
 
     Parameters
     ----------
@@ -171,17 +181,19 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     """
     if windows < 1:
         raise ValueError(f"windows must be >= 1, got {windows}")
-    named_by_window = any(r.code in MISTAKE_CODES for r in init.reasons)
+    named_by_window = any(r.code in (*MISTAKE_CODES, "units") for r in init.reasons)  # a units finding explains it
     if not _misfits(reasons) or (named_by_window and init.mistake is None) or len(measurements) == 0:
         return []
     if reference is not None and windows == LATER_WINDOWS and _misfits(reference.reasons) \
             and reference.settings.huber_k == huber_k:
         # the same windows, fits and votes: the answer depends on nothing else
-        return [r for r in reference.reasons if r.code in MISTAKE_CODES]
+        return [r for r in reference.reasons if r.code in MISTAKE_CODES
+                or (r.code == "units" and r.message.startswith(_UNITS_HEAD))]
     whole = _Whole(measurements, model, init, huber_k)
     if init.mistake is not None:
         return _ranked_on_whole(model, whole, init.mistake)
-    return _from_windows(measurements, model, init, windows, whole) or _from_whole(model, whole, WHOLE_CODES)
+    return _units_on_whole(model, whole) or _from_windows(measurements, model, init, windows, whole) \
+        or _from_whole(model, whole, WHOLE_CODES)
 
 
 def _misfits(reasons: tuple[Reason, ...]) -> bool:
@@ -302,6 +314,22 @@ def _ranked_on_whole(model: TrackingModel, whole: _Whole, found: Mistake) -> lis
         head = (f"of the {len(window)} changes of the data under which the initiation window fits, the "
                 f"{whole.describe()} fit best with {first}")
     return [replace(named, message=f"the track fails its residual test; {head}: {named.message}")]
+
+
+#: How the track's ``units`` finding begins (the verdict's own ``units`` findings, of speed and distance, do not).
+_UNITS_HEAD = "the track fails its residual test and the initiation window named nothing, but the"
+
+
+def _units_on_whole(model: TrackingModel, whole: _Whole) -> list[Reason]:
+    """On a layout small enough to be in kilometres (:func:`~fgdoppler.estimators.window_mistakes.kilometre_extent`),
+    where the whole recording's spread measurements fail the verdict's χ² test as given and fit with every
+    length multiplied by 1000, that as a ``units`` finding (:func:`later_mistakes`)."""
+    given = whole.given() if kilometre_extent(model) is not None else None
+    found = None if given is None else units_reason(whole.spread, model, whole.settings, given, what="they")
+    if found is None:
+        return []
+    return [replace(found, message=(
+        f"{_UNITS_HEAD} {whole.describe()} fail the chi-square test as given and fit in kilometres: {found.message}"))]
 
 
 def _from_whole(model: TrackingModel, whole: _Whole, codes: tuple[MistakeCode, ...]) -> list[Reason]:

@@ -17,14 +17,15 @@ from typing import Literal
 import numpy as np
 from scipy.stats import chi2
 
+from fgdoppler._text import distance_text
 from fgdoppler.estimators.initiation import VERDICT_LEVEL, Initiation, InitiationSettings, initiate
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["OTHERS_NAMED", "SIGN_CONVENTION", "Mistake", "find_mistake", "mistake_reason", "radar_pairs",
-           "with_mistake"]
+__all__ = ["KILOMETRE_EXTENT", "OTHERS_NAMED", "SIGN_CONVENTION", "Mistake", "find_mistake", "kilometre_extent",
+           "mistake_reason", "radar_pairs", "units_reason", "with_mistake"]
 
 #: The data's sign convention, as a ``sign`` finding states it (docs/data-formats.md says the same).
 SIGN_CONVENTION = ("fgdoppler's doppler is the bistatic range rate, negative for a target closing on the pair; "
@@ -33,6 +34,10 @@ SIGN_CONVENTION = ("fgdoppler's doppler is the bistatic range rate, negative for
 
 #: Other changes under which a window fits that a mistake finding names (the rest it counts).
 OTHERS_NAMED = 2
+
+#: Largest distance (m) between two sensors of a geometry that :func:`units_reason` also tries in kilometres: a
+#: layout 1,000 km across at most, read as metres.
+KILOMETRE_EXTENT = 1000.0
 
 #: The mistakes in a measurement file that :func:`find_mistake` tries.
 MistakeCode = Literal["sign", "swapped", "radial"]
@@ -140,8 +145,14 @@ def with_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
     gets no finding.  With :math:`P \ge 2` pairs that is :math:`1 + P + P(P-1)/2`
     more initiations of the window (two pairs: 4; four: 11; one pair: 1),
     and :math:`2(1 + R)` more with :math:`R \ge 2` radars among them (one
-    radar: 2), made only for a window that fails.
+    radar: 2), made only for a window that fails.  Before them, on a
+    layout at most :data:`KILOMETRE_EXTENT` across, a geometry in
+    kilometres is tried (:func:`units_reason`: a ``units`` finding instead,
+    one initiation more).
     """
+    units = units_reason(measurements, model, settings, result)
+    if units is not None:
+        return replace(result, reasons=(*result.reasons, units))
     found = find_mistake(measurements, model, settings, result)
     if found is None:
         return result
@@ -195,6 +206,65 @@ def _least_cost(measurements: Measurements, model: TrackingModel, settings: Init
         return None
     ranked = [m for *_, m in sorted(passing, key=lambda p: (p[0], p[1]))]
     return replace(ranked[0], others=tuple(ranked[1:]))
+
+
+def kilometre_extent(model: TrackingModel) -> float | None:
+    """The largest distance (m) between two sensors of ``model``'s geometry where it is at most
+    :data:`KILOMETRE_EXTENT` — a layout :func:`units_reason` tries in kilometres — else ``None``."""
+    geometry = getattr(model.observation, "geometry", None)
+    if not isinstance(geometry, Geometry):
+        return None
+    sensors = geometry.sensors()
+    extent = float(np.max(np.linalg.norm(sensors[:, None] - sensors[None], axis=-1)))
+    return extent if extent <= KILOMETRE_EXTENT else None
+
+
+def units_reason(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
+                 result: Initiation, *, what: str = "the window") -> Reason | None:
+    r"""A ``units`` finding where ``measurements`` (``result`` their fit) fail the verdict's χ² test and fit
+    with every length of the geometry multiplied by 1000 — sensor positions given in kilometres where
+    fgdoppler reads metres — else ``None``; ``what`` says what was fitted (:func:`mistake_reason`).
+
+    Read as metres, a layout given in kilometres puts the sensors a thousand
+    times too close together: the bistatic Doppler
+    :math:`\dot r = \mathbf v\cdot(\mathbf u_T + \mathbf u_R)` depends on
+    the directions :math:`\mathbf u` from the target to the sensors, which
+    then barely differ between pairs nor change while the target moves
+    (its metres per second against sensors metres apart), so no track fits
+    pairs whose Doppler differ.  Tried only where the sensors lie at most
+    :data:`KILOMETRE_EXTENT` apart (:func:`kilometre_extent`: a layout up to
+    1,000 km across read as metres), in the scaled geometry's own zone
+    (:meth:`~fgdoppler.geometry.Geometry.scaled`: the zone's limits scaled
+    too, its speed bound kept) with ``settings``' half plane scaled: one
+    initiation more, only where they fail.  The scaled fit must pass the χ²
+    test at ``settings.confidence``, as a change of the data must: a short
+    window of a slow target on a small layout often fits about as well
+    with the sensors a thousand times farther apart, and at the verdict's
+    99.9 % that named kilometres for one of 180 manoeuvring windows on
+    layouts 440 m-1 km across (``studies/data_mistakes.py``).
+    """
+    extent = kilometre_extent(model)
+    if extent is None or result.cost <= float(chi2.ppf(VERDICT_LEVEL, max(result.dof, 1))):
+        return None
+    geometry = model.geometry
+    factor = 1000.0
+    plane = settings.half_plane
+    quiet = replace(settings, mistake_check=False, half_plane=None if plane is None else replace(
+        plane, point=(plane.point[0] * factor, plane.point[1] * factor)))
+    scaled = TrackingModel.of(geometry.scaled(factor), motion=model.motion, weak_prior=model.weak_prior)
+    try:
+        again = initiate(measurements, scaled, quiet)
+    except ValueError:  # the data need a speed the scaled zone does not allow: no fit in it
+        return None
+    if not again.passes_chi2:
+        return None
+    zone = "" if geometry.zone_limits.along is None and geometry.zone_limits.across is None \
+        and geometry.zone_limits.altitude is None else " and the zone's limits"
+    return Reason(code="units", status="doubtful", message=(
+        f"with every sensor position{zone} multiplied by 1000 {what} fit{'s' if what == 'the window' else ''} "
+        f"(cost {again.cost:.2f}, passing the {settings.confidence:.0%} chi-square test, against {result.cost:.2f} "
+        f"as given): the geometry likely gives kilometres where fgdoppler reads metres (its sensors lie within "
+        f"{distance_text(extent)} of each other); if so, multiply every sensor coordinate{zone} by 1000"))
 
 
 def radar_pairs(model: TrackingModel) -> tuple[int, ...]:

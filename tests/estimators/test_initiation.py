@@ -8,6 +8,7 @@ import pytest
 import fgdoppler as fd
 from fgdoppler.estimators.grid import HalfPlane
 from fgdoppler.estimators.initiation import InitiationSettings, initiate
+from fgdoppler.zone import ZoneLimits
 
 
 def _noise_free_window(sc: fd.Scenario, n_per_pair: int = 10) -> fd.Measurements:
@@ -426,3 +427,58 @@ def test_a_mistake_finding_names_the_other_changes_that_pass_with_their_costs() 
             changed = _scaled(w, pairs, o.factor)
         again = initiate(changed, model, InitiationSettings(mistake_check=False))
         assert again.passes_chi2 and again.cost == pytest.approx(o.cost, rel=1e-12)
+
+
+def _units(r: fd.Initiation) -> list[str]:
+    return [x.message for x in r.reasons if x.code == "units"]
+
+
+def test_a_geometry_in_kilometres_is_named() -> None:
+    """Case a's sensors given in kilometres: read as metres the window fits nothing, and the ``units`` finding says
+    that with every position multiplied by 1000 it fits — at the cost of the window on the true geometry, which
+    that scaled problem is.  The same with the zone's limits and a half plane given in kilometres too (the
+    message then names the limits).  No data change is named, and with the check off nothing is."""
+    A = fd.paper_geometry("a")
+    w = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(1)).measurements.first_per_pair(10)
+    plain = initiate(w, A)
+    r = initiate(w, A.scaled(1e-3))
+    assert plain.passes_chi2 and not r.passes_chi2
+    [said] = _units(r)
+    assert said.startswith(f"with every sensor position multiplied by 1000 the window fits (cost {plain.cost:.2f}, "
+                           f"passing the 95% chi-square test, against {r.cost:.2f} as given)")
+    assert "(its sensors lie within 50 m of each other); if so, multiply every sensor coordinate by 1000" in said
+    assert not [x for x in r.reasons if x.code in ("sign", "swapped", "radial")] and r.mistake is None
+    assert not _units(initiate(w, A.scaled(1e-3), InitiationSettings(mistake_check=False)))
+    limited = A.with_zone(ZoneLimits(along=(10e3, 70e3), across=(-5e3, 20e3)))
+    plane = HalfPlane(point=(0.0, 500.0), normal=(0.0, 1.0))
+    plain = initiate(w, limited, InitiationSettings(half_plane=plane))
+    r = initiate(w, limited.scaled(1e-3), InitiationSettings(half_plane=HalfPlane(point=(0.0, 0.5), normal=(0.0, 1.0))))
+    [said] = _units(r)
+    assert said.startswith(f"with every sensor position and the zone's limits multiplied by 1000 the window fits "
+                           f"(cost {plain.cost:.2f},")
+
+
+def test_a_small_layout_in_metres_whose_window_fails_is_not_called_kilometres() -> None:
+    """Case a shrunk a hundredfold (sensors 500 m apart, a target 450 m out at 1 m/s, sigma 1 cm): it is tried in
+    kilometres, being small enough, but a window that fails for another reason — noise 30 times the declared
+    sigma — does not fit there either, and a window that fits is not tried."""
+    sc = fd.paper_scenario("a", 45e3)
+    small = fd.paper_geometry("a").scaled(0.01)
+    shrunk = fd.Scenario(geometry=small, x0=tuple(0.01 * np.array(sc.x0)), duration=30.0, dt=sc.dt, sigma=0.01)
+    for seed in (0, 1):
+        w = fd.simulate(shrunk, np.random.default_rng(seed)).measurements.first_per_pair(10)
+        r = initiate(w, small)
+        assert r.passes_chi2 and not _units(r)
+        noisy = fd.Measurements(time=w.time, pair=w.pair, sigma=w.sigma,
+                                doppler=w.doppler + np.random.default_rng(seed).normal(0.0, 0.3, len(w)))
+        r = initiate(noisy, small)
+        assert not r.passes_chi2 and not _units(r), [x.code for x in r.reasons]
+
+
+def test_a_doppler_shift_in_hz_is_refused_with_the_conversion() -> None:
+    """A file giving the Doppler shift in Hz of a 3 cm radar (f_D = -doppler / wavelength, 33 times the range rate):
+    the data need a speed far above the zone's bound, and the refusal gives the conversion."""
+    w = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(1)).measurements.first_per_pair(10)
+    hz = fd.Measurements(time=w.time, pair=w.pair, doppler=-w.doppler / 0.03, sigma=w.sigma / 0.03)
+    with pytest.raises(ValueError, match=r"not a Doppler shift in Hz: from f_D, doppler = -wavelength \* f_D"):
+        initiate(hz, fd.paper_geometry("a"))

@@ -304,3 +304,51 @@ def test_a_manoeuvre_that_a_change_makes_later_windows_fit_names_no_mistake(monk
     monkeypatch.setattr(module._Whole, "confirms", recorded)
     assert later_mistakes(m, model, init, MISFIT) == []
     assert asked and asked[0] == "the Doppler of every pair negated"
+
+
+def test_a_geometry_the_initiation_found_in_kilometres_gets_no_search_of_later_windows(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Case a's sensors in kilometres: the initiation's ``units`` finding explains the track's misfit, so no window
+    or spread measurements are initiated for a change of the data (each would fail, as every window does in a
+    geometry a thousand times too small); without that finding the whole recording's spread measurements name
+    the kilometres, and no window is searched either."""
+    import fgdoppler.estimators.later_mistakes as lm
+
+    sim = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(1))
+    km = fd.TrackingModel.of(fd.paper_geometry("a").scaled(1e-3))
+    init = fd.initiate(sim.measurements.first_per_pair(10), km)
+    assert [x.code for x in init.reasons if x.code == "units"] == ["units"]
+    searched: list[str] = []
+
+    def search(*args: object, **kwargs: object) -> list[Reason]:
+        searched.append("windows")
+        return []
+
+    monkeypatch.setattr(lm, "_from_windows", search)
+    assert later_mistakes(sim.measurements, km, init, MISFIT) == [] and searched == []
+    plain = replace(init, reasons=tuple(x for x in init.reasons if x.code != "units"))
+    [found] = later_mistakes(sim.measurements, km, plain, MISFIT)
+    assert found.code == "units" and searched == []  # the whole recording's check, made before any window
+
+
+def test_a_geometry_in_kilometres_the_window_missed_is_named_from_the_whole_recording() -> None:
+    """Case a 25 km, run 0 of the benchmark's seed 2026, its sensors in kilometres: on the right geometry its window
+    fails the 95 % test (cost 30.6 > 26.3, as one right window in twenty does), so in kilometres the initiation
+    names nothing; the track misfits, and the 40 measurements spread over the whole recording fit with every
+    length multiplied by 1000, which the track's ``units`` finding says — also a filter's, held against the
+    smoother.  Where the initiation named nothing on a layout wider than 1 km, that check is not made."""
+    sc = fd.paper_scenarios()[1]
+    sim = fd.simulate(sc, np.random.default_rng(np.random.SeedSequence([2026, 1, 0])))
+    w = sim.measurements.first_per_pair(10)
+    assert not fd.initiate(w, sc.geometry).passes_chi2
+    km = fd.TrackingModel.of(sc.geometry.scaled(1e-3))
+    init = fd.initiate(w, km)
+    assert not [x for x in init.reasons if x.code in (*MISTAKE_CODES, "units")]
+    [found] = later_mistakes(sim.measurements, km, init, MISFIT)
+    assert found.code == "units" and found.status == "doubtful"
+    assert found.message.startswith("the track fails its residual test and the initiation window named nothing, but "
+                                    "the 40 measurements spread over the whole recording (t = 0-30 s) fail the "
+                                    "chi-square test as given and fit in kilometres: with every sensor position "
+                                    "multiplied by 1000 they fit (cost ")
+    ekf = fd.run_estimator("ekf", sim.measurements, km, init)
+    assert [x.message for x in ekf.reasons if x.code == "units"] == [found.message]
