@@ -787,3 +787,18 @@ def test_times_are_printed_positionally_and_read_back_exactly(t: float) -> None:
     text = time_text(t)
     assert "e" not in text.lower() and float(text) == t  # every time here has at most six decimals
     assert len(text) <= len(repr(t)) + 1  # no padding: "30", not "30.000000"
+
+
+def test_track_on_a_geometry_in_kilometres_says_so_instead_of_advising_a_zone(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Case a's sensors written in kilometres: the track fails (exit 3), the initiation's ``units`` finding is
+    printed, and the hint says to give the geometry in metres rather than a zone that reads it as metres."""
+    sim = tmp_path / "sim"
+    main(["simulate", "--start-x", "45000", "--out", str(sim)])
+    fd.paper_geometry("a").scaled(1e-3).to_toml(tmp_path / "km.toml")
+    capsys.readouterr()
+    assert main(["track", str(sim / "measurements.csv"), "--geometry", str(tmp_path / "km.toml"),
+                 "--estimator", "smoother"]) == 3
+    err = capsys.readouterr().err
+    assert "doubtful: initiation: with every sensor position multiplied by 1000 the window fits" in err
+    assert "hint: the geometry is likely in kilometres" in err and "one holding every start they name" not in err

@@ -26,6 +26,7 @@ from fgdoppler.cli.common import (
 )
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
+from fgdoppler.estimators.window_mistakes import IN_KILOMETRES
 from fgdoppler.geometry import Geometry, principal_line
 from fgdoppler.zone import ZoneBox
 
@@ -282,7 +283,12 @@ def zone_hint(reasons: Any) -> str | None:
 
 
 def _print_zone_hint(reasons: Any) -> None:
-    """Where findings advise different zones, one that holds them all (:func:`zone_hint`)."""
+    """Where findings advise different zones, one that holds them all (:func:`zone_hint`) — unless a ``units``
+    finding says the geometry is likely in kilometres: every zone advised is then in misread units."""
+    if any(r.code.endswith("units") and r.status != "ok" and IN_KILOMETRES in r.message for r in reasons):
+        print("  hint: the geometry is likely in kilometres (the units finding above): give it in metres before "
+              "following any zone advice, which reads it as metres", file=sys.stderr)
+        return
     hint = zone_hint(reasons)
     if hint is not None:
         print(f"  hint: the findings above advise different zones; one holding every start they name: {hint}",

@@ -24,7 +24,7 @@ from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["KILOMETRE_EXTENT", "OTHERS_NAMED", "SIGN_CONVENTION", "Mistake", "find_mistake", "kilometre_extent",
+__all__ = ["IN_KILOMETRES", "KILOMETRE_EXTENT", "OTHERS_NAMED", "SIGN_CONVENTION", "Mistake", "find_mistake", "kilometre_extent",
            "mistake_reason", "radar_pairs", "units_reason", "with_mistake"]
 
 #: The data's sign convention, as a ``sign`` finding states it (docs/data-formats.md says the same).
@@ -38,6 +38,9 @@ OTHERS_NAMED = 2
 #: Largest distance (m) between two sensors of a geometry that :func:`units_reason` also tries in kilometres: a
 #: layout 1,000 km across at most, read as metres.
 KILOMETRE_EXTENT = 1000.0
+
+#: What a ``units`` finding of :func:`units_reason` says (and only it: the verdict's own ``units`` findings do not).
+IN_KILOMETRES = "the geometry likely gives kilometres where fgdoppler reads metres"
 
 #: The mistakes in a measurement file that :func:`find_mistake` tries.
 MistakeCode = Literal["sign", "swapped", "radial"]
@@ -263,7 +266,7 @@ def units_reason(measurements: Measurements, model: TrackingModel, settings: Ini
     return Reason(code="units", status="doubtful", message=(
         f"with every sensor position{zone} multiplied by 1000 {what} fit{'s' if what == 'the window' else ''} "
         f"(cost {again.cost:.2f}, passing the {settings.confidence:.0%} chi-square test, against {result.cost:.2f} "
-        f"as given): the geometry likely gives kilometres where fgdoppler reads metres (its sensors lie within "
+        f"as given): {IN_KILOMETRES} (its sensors lie within "
         f"{distance_text(extent)} of each other); if so, multiply every sensor coordinate{zone} by 1000"))
 
 
