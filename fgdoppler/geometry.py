@@ -304,14 +304,18 @@ class Geometry:
         velocity to second order in :math:`L_p / r` (:math:`r` its range), and a file may give that
         velocity instead.
         """
-        s = self.sensors()
-        extent = float(np.max(np.linalg.norm(s[:, None, :] - s[None, :, :], axis=-1))) if len(s) > 1 else 0.0
-        cut = max(SENSOR_EPS, AXIS_MIN_SHARE * extent)
+        cut = max(SENSOR_EPS, AXIS_MIN_SHARE * self.extent)
         return tuple(int(k) for k in np.flatnonzero(np.linalg.norm(self._tx - self._rx, axis=1) <= cut))
 
     def sensors(self) -> NDArray[np.float64]:
         """Distinct sensor positions (Tx and Rx), shape ``(n_sensors, dim)``."""
         return np.unique(np.vstack([self._tx, self._rx]), axis=0)
+
+    @cached_property
+    def extent(self) -> float:
+        """The sensors' extent: the largest distance between two sensors (m)."""
+        s = self.sensors()
+        return float(np.max(np.linalg.norm(s[:, None, :] - s[None, :, :], axis=-1)))
 
     @cached_property
     def frame(self) -> Frame:
@@ -391,7 +395,7 @@ class Geometry:
         mistake (kilometres for metres, a flipped axis).
         """
         sensors = self.sensors()
-        extent = float(np.max(np.linalg.norm(sensors[:, None] - sensors[None], axis=-1)))
+        extent = self.extent
         d = self.zone.distance_to(sensors)
         if d > reach * extent:
             raise ValueError(f"the zone (along {list(self.zone.along)}, across {list(self.zone.across)} m) lies "

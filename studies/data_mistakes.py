@@ -78,7 +78,7 @@ from monostatic_layouts import draw as radar_draw
 from random_layouts import draw, one_blas_thread, recorded
 
 import fgdoppler as fd
-from fgdoppler.estimators.later_mistakes import MISTAKE_CODES
+from fgdoppler.estimators.later_mistakes import MISTAKE_CODES, is_mistake_finding
 from fgdoppler.estimators.registry import estimator_info
 
 
@@ -204,7 +204,7 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
         except ValueError as exc:  # a manoeuvre can take the target beyond the zone's speed bound
             out[name] = {"refused": str(exc)}
             continue
-        found = [r for r in init.reasons if r.code in FINDINGS]
+        found = [r for r in init.reasons if is_mistake_finding(r)]
         first, others = _changes(found[0] if found else None)
         row: dict[str, Any] = {"finding": found[0].code if found else "", "names": first, "others": others,
                                "right": want(g)}
@@ -215,8 +215,7 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
             j = int(np.flatnonzero(e.times <= truth.times[-1])[-1])  # a late clock's last times are not truth's
             err = float(np.linalg.norm(e.states[j, :k] - truth.at(e.times[j:j + 1])[0][:k]))
             sd = float(np.sqrt(np.max(np.linalg.eigvalsh(e.covariances[j][:k, :k])))) if e.cov_ok[j] else np.nan
-            later = [x for x in r.reasons if x.code in MISTAKE_CODES or (x.code == "units" and x.message.startswith(
-                "the track fails its residual test"))]  # not the verdict's units findings of speed and distance
+            later = [x for x in r.reasons if is_mistake_finding(x)]
             row.update(status=str(r.status), error=round(err, 1), sigma=round(sd, 1),
                        later=_changes(later[0] if later else None)[0])
         out[name] = row

@@ -264,6 +264,7 @@ def test_a_geometry_in_other_units_gives_the_doppler_of_the_scaled_target() -> N
     for s in (1e-3, 0.37, 1e3):
         k = g.scaled(s)
         assert k.pair_names == g.pair_names and k.zone_limits.speed_max == 250.0
+        assert k.extent == pytest.approx(s * g.extent, rel=1e-12)
         assert k.zone_limits.along == pytest.approx((-5e3 * s, 60e3 * s))
         assert k.zone_limits.altitude == pytest.approx((0.0, 10e3 * s))
         moved = np.column_stack([states[:, :3] * s, states[:, 3:]])

@@ -364,7 +364,7 @@ def _unit_reasons(result: TrackResult, model: TrackingModel) -> list[Reason]:
                 f"({model.zone.speed_max:g} m/s): check the units of the times (seconds?) and the positions")))
     if isinstance(model.observation, DopplerModel):
         sensors = model.observation.geometry.sensors()
-        extent = float(np.max(np.linalg.norm(sensors[:, None] - sensors[None], axis=-1)))
+        extent = model.observation.geometry.extent
         k = model.dim
         d = float(np.max(np.min(np.linalg.norm(states[:, None, :k] - sensors[None, :, :k], axis=-1), axis=1)))
         if d > REMOTE_FACTOR * extent:

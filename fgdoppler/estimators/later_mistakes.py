@@ -83,6 +83,7 @@ from fgdoppler.estimators.initiation import VERDICT_LEVEL, Initiation, Initiatio
 from fgdoppler.estimators.results import TrackResult
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.estimators.window_mistakes import (
+    IN_KILOMETRES,
     Mistake,
     MistakeCode,
     find_mistake,
@@ -94,7 +95,8 @@ from fgdoppler.estimators.window_mistakes import (
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["CONFIRMED_AT_MOST", "LATER_WINDOWS", "MISTAKE_CODES", "WHOLE_CODES", "WHOLE_PER_PAIR", "later_mistakes"]
+__all__ = ["CONFIRMED_AT_MOST", "LATER_WINDOWS", "MISTAKE_CODES", "WHOLE_CODES", "WHOLE_PER_PAIR", "is_mistake_finding",
+           "later_mistakes"]
 
 #: Windows initiated after the initiation window where a track fails its residual test.
 LATER_WINDOWS = 3
@@ -181,19 +183,25 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     """
     if windows < 1:
         raise ValueError(f"windows must be >= 1, got {windows}")
-    named_by_window = any(r.code in (*MISTAKE_CODES, "units") for r in init.reasons)  # a units finding explains it
+    named_by_window = any(is_mistake_finding(r) for r in init.reasons)  # a units finding explains the misfit too
     if not _misfits(reasons) or (named_by_window and init.mistake is None) or len(measurements) == 0:
         return []
     if reference is not None and windows == LATER_WINDOWS and _misfits(reference.reasons) \
             and reference.settings.huber_k == huber_k:
         # the same windows, fits and votes: the answer depends on nothing else
-        return [r for r in reference.reasons if r.code in MISTAKE_CODES
-                or (r.code == "units" and r.message.startswith(_UNITS_HEAD))]
+        return [r for r in reference.reasons if is_mistake_finding(r)]
     whole = _Whole(measurements, model, init, huber_k)
     if init.mistake is not None:
         return _ranked_on_whole(model, whole, init.mistake)
     return _units_on_whole(model, whole) or _from_windows(measurements, model, init, windows, whole) \
         or _from_whole(model, whole, WHOLE_CODES)
+
+
+def is_mistake_finding(reason: Reason) -> bool:
+    """Whether ``reason`` names a mistake in the measurement file or the geometry: a ``sign``, ``swapped`` or
+    ``radial`` finding, or a ``units`` finding of the geometry in kilometres (not the verdict's own ``units``
+    findings of speed and distance)."""
+    return reason.code in MISTAKE_CODES or (reason.code == "units" and IN_KILOMETRES in reason.message)
 
 
 def _misfits(reasons: tuple[Reason, ...]) -> bool:
@@ -316,10 +324,6 @@ def _ranked_on_whole(model: TrackingModel, whole: _Whole, found: Mistake) -> lis
     return [replace(named, message=f"the track fails its residual test; {head}: {named.message}")]
 
 
-#: How the track's ``units`` finding begins (the verdict's own ``units`` findings, of speed and distance, do not).
-_UNITS_HEAD = "the track fails its residual test and the initiation window named nothing, but the"
-
-
 def _units_on_whole(model: TrackingModel, whole: _Whole) -> list[Reason]:
     """On a layout small enough to be in kilometres (:func:`~fgdoppler.estimators.window_mistakes.kilometre_extent`),
     where the whole recording's spread measurements fail the verdict's χ² test as given and fit with every
@@ -329,7 +333,8 @@ def _units_on_whole(model: TrackingModel, whole: _Whole) -> list[Reason]:
     if found is None:
         return []
     return [replace(found, message=(
-        f"{_UNITS_HEAD} {whole.describe()} fail the chi-square test as given and fit in kilometres: {found.message}"))]
+        f"the track fails its residual test and the initiation window named nothing, but the {whole.describe()} "
+        f"fail the chi-square test as given and fit in kilometres: {found.message}"))]
 
 
 def _from_whole(model: TrackingModel, whole: _Whole, codes: tuple[MistakeCode, ...]) -> list[Reason]:

@@ -217,9 +217,7 @@ def kilometre_extent(model: TrackingModel) -> float | None:
     geometry = getattr(model.observation, "geometry", None)
     if not isinstance(geometry, Geometry):
         return None
-    sensors = geometry.sensors()
-    extent = float(np.max(np.linalg.norm(sensors[:, None] - sensors[None], axis=-1)))
-    return extent if extent <= KILOMETRE_EXTENT else None
+    return geometry.extent if geometry.extent <= KILOMETRE_EXTENT else None
 
 
 def units_reason(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
