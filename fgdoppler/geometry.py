@@ -21,6 +21,8 @@ from fgdoppler.frames import AXIS_MIN_SHARE, SENSOR_EPS, Frame, sensor_frame
 from fgdoppler.zone import DEFAULT_SPEED_MAX, Zone, ZoneLimits, default_zone
 
 __all__ = [
+    "SPEED_OF_LIGHT",
+    "WAVELENGTH_LIMITS",
     "BistaticPair",
     "Geometry",
     "bistatic_range",
@@ -134,6 +136,30 @@ def _checked_names(names: object, n: int) -> tuple[str, ...]:
     return out
 
 
+#: Speed of light in vacuum (m/s): a carrier of frequency f_c has the wavelength c / f_c.
+SPEED_OF_LIGHT = 299_792_458.0
+
+#: Carrier wavelengths (m) a geometry accepts: 0.1 mm (3 THz) to 10 km (30 kHz).  A value beyond is
+#: almost certainly a frequency given for a wavelength, or a unit slip.
+WAVELENGTH_LIMITS = (1e-4, 1e4)
+
+
+def _checked_wavelengths(values: object, n: int) -> tuple[float, ...]:
+    """``values`` as a tuple of floats, checked (rule: :class:`Geometry`'s ``wavelengths``)."""
+    if not isinstance(values, list | tuple) or not all(_is_number(v) for v in values):
+        raise TypeError(f"wavelengths must be a sequence of numbers (metres), got {values!r}")
+    out = tuple(float(v) for v in values)
+    if out and len(out) != n:
+        raise ValueError(f"wavelengths has {len(out)} value(s) for {n} pair(s): give every pair's wavelength or none")
+    lo, hi = WAVELENGTH_LIMITS
+    for i, v in enumerate(out):
+        if not (np.isfinite(v) and lo <= v <= hi):
+            hint = (f"; if {v:g} is the carrier frequency in Hz, the wavelength is {SPEED_OF_LIGHT / v:.6g} m "
+                    "(c / f_c)" if np.isfinite(v) and v > hi else "")
+            raise ValueError(f"pair {i}'s wavelength {v:g} m is outside [{lo:g}, {hi:g}] m{hint}")
+    return out
+
+
 @dataclass(frozen=True)
 class BistaticPair:
     r"""One transmitter–receiver pair.
@@ -175,7 +201,7 @@ class BistaticPair:
 
 @dataclass(frozen=True, kw_only=True)
 class Geometry:
-    """A set of bistatic pairs observing the same target.
+    r"""A set of bistatic pairs observing the same target.
 
     Parameters
     ----------
@@ -196,12 +222,22 @@ class Geometry:
         wrongly (:meth:`~fgdoppler.measurements.Measurements.from_csv`).  Each is non-empty text without
         surrounding spaces, not a number (it would read as an index),
         without a comma, quote or line break, and unique.
+    wavelengths
+        Optional carrier wavelength of each pair in metres, one per pair in
+        their order (``()``: none), :math:`\lambda = c / f_c`: with them a
+        measurement file may give each Doppler as the frequency shift
+        :math:`f_D` in Hz (column ``doppler_hz``), read as the bistatic range
+        rate :math:`-\lambda f_D`
+        (:meth:`~fgdoppler.measurements.Measurements.from_csv`).  Each is
+        finite and within :data:`WAVELENGTH_LIMITS`.  Nothing else uses
+        them: every estimate is in metres and m/s.
     """
 
     pairs: tuple[BistaticPair, ...]
     name: str = ""
     zone_limits: ZoneLimits = field(default_factory=ZoneLimits)
     pair_names: tuple[str, ...] = ()
+    wavelengths: tuple[float, ...] = ()
     _tx: NDArray[np.float64] = field(init=False, repr=False, compare=False)
     _rx: NDArray[np.float64] = field(init=False, repr=False, compare=False)
 
@@ -214,6 +250,7 @@ class Geometry:
                 raise TypeError(f"pair {i} is {type(p).__name__}, expected BistaticPair")
         object.__setattr__(self, "pairs", pairs)
         object.__setattr__(self, "pair_names", _checked_names(self.pair_names, len(pairs)))
+        object.__setattr__(self, "wavelengths", _checked_wavelengths(self.wavelengths, len(pairs)))
         d = 3 if self.zone_limits.altitude is not None or any(len(p.tx) == 3 or len(p.rx) == 3 for p in pairs) \
             else 2
         tx = np.array([_padded(p.tx, d) for p in pairs], dtype=float)
@@ -437,6 +474,7 @@ class Geometry:
             ),
             name=self.name,
             pair_names=self.pair_names,
+            wavelengths=self.wavelengths,
         )
 
     # -- TOML -----------------------------------------------------------------

@@ -12,6 +12,8 @@ Format (metres, m/s)::
     tx = [50000.0, 0.0]         # [x, y] (on the ground: z = 0) or [x, y, z]
     rx = [0.0, 0.0]
     name = "north"              # optional (every pair or none): the measurement file may say "north" for 0
+    wavelength = 3.0            # optional (every pair or none): carrier wavelength in metres, c / f_c; the
+                                # measurement file may then give each Doppler in Hz (column doppler_hz)
 
 The problem is 3-D (states ``[x, y, z, vx, vy, vz]``) when a sensor has three
 coordinates or the zone has an ``altitude`` band, 2-D otherwise: files with
@@ -43,7 +45,7 @@ MAX_GEOMETRY_BYTES = 1 << 20
 
 _TOP = ("name", "zone", "pair")
 _ZONE = ("along", "across", "speed_max", "altitude")
-_PAIR = ("tx", "rx", "name")
+_PAIR = ("tx", "rx", "name", "wavelength")
 
 
 def _line_of(text: str, key: str, occurrence: int = 0, table: str | None = None) -> int | None:
@@ -105,6 +107,7 @@ def read_geometry(path: str | Path) -> Any:
         raise ValueError(f"{path}: expected one or more [[pair]] tables with tx and rx")
     pairs = []
     names: list[str] = []
+    wavelengths: list[float] = []
     for i, item in enumerate(raw):
         if not isinstance(item, dict):
             raise ValueError(f"{path}: pair {i} needs both tx and rx")
@@ -120,10 +123,20 @@ def read_geometry(path: str | Path) -> Any:
                 raise ValueError(f"{_where(path, _line_of(text, 'name', len(names), 'pair'))}: pair {i}: name must be a "
                                  f"string, got {item['name']!r}")
             names.append(item["name"])
+        if "wavelength" in item:
+            value = item["wavelength"]
+            if not isinstance(value, int | float) or isinstance(value, bool):
+                raise ValueError(f"{_where(path, _line_of(text, 'wavelength', len(wavelengths), 'pair'))}: pair {i}: "
+                                 f"wavelength must be a number (metres), got {value!r}")
+            wavelengths.append(value)
     if names and len(names) != len(pairs):
         unnamed = next(i for i, item in enumerate(raw) if "name" not in item)
         raise ValueError(f"{path}: pair {unnamed} has no name while {len(names)} other pair(s) have one: name "
                          "every pair or none")
+    if wavelengths and len(wavelengths) != len(pairs):
+        missing = next(i for i, item in enumerate(raw) if "wavelength" not in item)
+        raise ValueError(f"{path}: pair {missing} has no wavelength while {len(wavelengths)} other pair(s) have one: "
+                         "give every pair's carrier wavelength or none")
     name = doc.get("name", "")
     if not isinstance(name, str):
         raise ValueError(f"{_where(path, _line_of(text, 'name'))}: name must be a string, got {name!r}")
@@ -133,15 +146,23 @@ def read_geometry(path: str | Path) -> Any:
     _check_keys(path, text, zone, _ZONE, "[zone]", "zone")
     try:
         limits = ZoneLimits(**zone)
-        geometry = Geometry(pairs=tuple(pairs), name=name, zone_limits=limits, pair_names=tuple(names))
+        geometry = Geometry(pairs=tuple(pairs), name=name, zone_limits=limits, pair_names=tuple(names),
+                            wavelengths=tuple(wavelengths))
         geometry.check_zone()
     except ValueError as exc:
-        named = re.match(r"pair (\d+)'s name", str(exc))
-        key = None if named or "pair names" in str(exc) else next((k for k in _ZONE if k in str(exc)), None)
-        line = (_line_of(text, "name", int(named.group(1)), "pair") if named
-                else _line_of(text, key, table="zone") if key else None)
-        raise ValueError(f"{_where(path, line)}: {exc}") from None
+        raise ValueError(f"{_where(path, _error_line(text, str(exc)))}: {exc}") from None
     return geometry
+
+
+def _error_line(text: str, message: str) -> int | None:
+    """The line of the key a :class:`~fgdoppler.geometry.Geometry` error names, where it names one."""
+    per_pair = re.match(r"pair (\d+)'s (name|wavelength)", message)
+    if per_pair:
+        return _line_of(text, per_pair.group(2), int(per_pair.group(1)), "pair")
+    if "pair names" in message:
+        return None
+    key = next((k for k in _ZONE if k in message), None)
+    return _line_of(text, key, table="zone") if key else None
 
 
 def geometry_text(geometry: Any) -> str:
@@ -153,8 +174,10 @@ def geometry_text(geometry: Any) -> str:
         doc["name"] = geometry.name
     if not geometry.zone_limits.empty:
         doc["zone"] = geometry.zone_limits.to_dict()
-    doc["pair"] = [{"tx": list(p.tx), "rx": list(p.rx), **({"name": geometry.pair_names[i]} if geometry.pair_names
-                                                            else {})} for i, p in enumerate(geometry.pairs)]
+    doc["pair"] = [{"tx": list(p.tx), "rx": list(p.rx),
+                    **({"name": geometry.pair_names[i]} if geometry.pair_names else {}),
+                    **({"wavelength": geometry.wavelengths[i]} if geometry.wavelengths else {})}
+                   for i, p in enumerate(geometry.pairs)]
     return str(tomli_w.dumps(doc))
 
 

@@ -1,4 +1,4 @@
-"""Doppler measurements: a validated, time-ordered columnar container and its CSV form.
+r"""Doppler measurements: a validated, time-ordered columnar container and its CSV form.
 
 CSV format (one row per measurement)::
 
@@ -10,6 +10,11 @@ CSV format (one row per measurement)::
 the bistatic range rate in m/s, ``sigma`` its standard deviation in m/s.  The
 ``sigma`` column is optional when a default is supplied.  Rows must be in
 non-decreasing time order; every problem is reported with the file and line.
+
+A file may instead give the Doppler shift in Hz, ``doppler_hz`` and
+``sigma_hz`` (:data:`HZ_HEADER`), when the geometry gives each pair's carrier
+wavelength :math:`\lambda`: it is read as ``doppler`` :math:`= -\lambda f_D`
+and ``sigma`` :math:`= \lambda \sigma_f`.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -28,9 +34,14 @@ from numpy.typing import ArrayLike, NDArray
 from fgdoppler._io import atomic_write_text
 from fgdoppler.geometry import Geometry
 
-__all__ = ["MeasurementError", "Measurements", "Scans"]
+if TYPE_CHECKING:
+    from fgdoppler.csvfile import Table
+
+__all__ = ["HEADER", "HZ_HEADER", "MeasurementError", "Measurements", "Scans"]
 
 HEADER = ("time", "pair", "doppler", "sigma")
+#: The columns of a file giving the Doppler as a frequency shift in Hz (the geometry gives the wavelengths).
+HZ_HEADER = ("time", "pair", "doppler_hz", "sigma_hz")
 
 
 class MeasurementError(ValueError):
@@ -271,18 +282,33 @@ class Measurements:
         return np.lexsort((self.time, self.pair)).astype(np.intp)
 
     # -- CSV --------------------------------------------------------------------
-    def csv_text(self) -> str:
-        """The ``time,pair,doppler,sigma`` CSV as text; values round-trip exactly."""
+    def csv_text(self, *, wavelengths: Sequence[float] | None = None) -> str:
+        r"""The ``time,pair,doppler,sigma`` CSV as text; values round-trip exactly.
+
+        With ``wavelengths`` (metres, one per pair index, e.g.
+        :attr:`Geometry.wavelengths <fgdoppler.geometry.Geometry.wavelengths>`)
+        the columns are :data:`HZ_HEADER` instead: the Doppler shift
+        :math:`f_D = -\dot r / \lambda` and its sigma :math:`\sigma / \lambda`
+        in Hz, which :meth:`from_csv` reads back to within rounding.
+        """
+        if wavelengths is None:
+            header, doppler, sigma = HEADER, self.doppler, self.sigma
+        else:
+            lam = np.asarray(wavelengths, dtype=float)
+            if lam.ndim != 1 or lam.size <= int(self.pair.max(initial=-1)) or not np.all(lam > 0):
+                raise ValueError(f"wavelengths must be positive numbers, one for each pair 0..{int(self.pair.max())}, "
+                                 f"got {wavelengths!r}")
+            header, doppler, sigma = HZ_HEADER, -self.doppler / lam[self.pair], self.sigma / lam[self.pair]
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
-        w.writerow(HEADER)
-        for t, p, z, s in zip(self.time, self.pair, self.doppler, self.sigma, strict=True):
+        w.writerow(header)
+        for t, p, z, s in zip(self.time, self.pair, doppler, sigma, strict=True):
             w.writerow((repr(float(t)), int(p), repr(float(z)), repr(float(s))))
         return buf.getvalue()
 
-    def to_csv(self, path: str | Path) -> None:
+    def to_csv(self, path: str | Path, *, wavelengths: Sequence[float] | None = None) -> None:
         """Write :meth:`csv_text` atomically."""
-        atomic_write_text(Path(path), self.csv_text())
+        atomic_write_text(Path(path), self.csv_text(wavelengths=wavelengths))
 
     @classmethod
     def from_csv(
@@ -292,18 +318,22 @@ class Measurements:
         geometry: Geometry | None = None,
         default_sigma: float | None = None,
     ) -> Measurements:
-        """Read and validate a measurement CSV (:mod:`fgdoppler.csvfile` reads it strictly and boundedly).
+        r"""Read and validate a measurement CSV (:mod:`fgdoppler.csvfile` reads it strictly and boundedly).
 
         Parameters
         ----------
         path
-            The file.
+            The file: columns :data:`HEADER` (``sigma`` optional), or
+            :data:`HZ_HEADER` (``sigma_hz`` optional) for a Doppler shift in Hz.
         geometry
             If given, pair indices are checked against it, and a pair may be
             given by its name (:attr:`~fgdoppler.geometry.Geometry.pair_names`)
-            instead of its index.
+            instead of its index.  A file in Hz needs it, with every pair's
+            :attr:`~fgdoppler.geometry.Geometry.wavelengths`.
         default_sigma
-            Used when the file has no ``sigma`` column (required then).
+            Used when the file has no ``sigma`` (or ``sigma_hz``) column
+            (required then), in the unit of its Doppler column: m/s, or Hz
+            for ``doppler_hz``.
 
         Raises
         ------
@@ -312,7 +342,8 @@ class Measurements:
             missing or bad header, wrong number of fields, an empty or
             non-numeric field, a value outside :data:`LIMITS`, a non-integer
             or unknown pair index, a time earlier than the previous row *of the
-            same pair*, a duplicated (time, pair), or no data rows.
+            same pair*, a duplicated (time, pair), or no data rows; a file in
+            Hz without the wavelengths to read it.
 
         Notes
         -----
@@ -321,57 +352,52 @@ class Measurements:
         appended as each sensor reports, is read as the same measurements,
         sorted by (time, pair).  A time that goes back within one pair is a
         clock jump or two recordings run together, and is refused.
+
+        A Doppler shift :math:`f_D` (Hz, positive for a target closing on
+        the pair) of a carrier of wavelength :math:`\lambda` is the bistatic
+        range rate :math:`\dot r_T + \dot r_R = -\lambda f_D`, and its
+        standard deviation :math:`\sigma_f` is :math:`\lambda \sigma_f` in m/s.
         """
-        from fgdoppler.csvfile import CSVError, read_table
+        from fgdoppler.csvfile import CSVError, header_names, read_table
 
         path = Path(path)
         try:
+            hz = "doppler_hz" in header_names(path)
+            columns = HZ_HEADER if hz else HEADER
+            if hz:
+                _check_wavelengths(path, geometry)
             names = {} if geometry is None else {v: float(i) for i, v in enumerate(geometry.pair_names)}
-            table = read_table(path, header=HEADER[:3], optional=HEADER[3:], what="measurement file",
+            table = read_table(path, header=columns[:3], optional=columns[3:], what="measurement file",
                                labels={"pair": names} if names else None)
         except CSVError as exc:
             raise MeasurementError(str(exc)) from None
         if table.values.shape[1] == 3:
             if default_sigma is None:
-                raise MeasurementError(f"{path}: no sigma column and no default sigma given "
-                                       "(pass --sigma or add a sigma column)")
+                raise MeasurementError(f"{path}: no {columns[3]} column and no default sigma given "
+                                       f"(pass --sigma or add a {columns[3]} column)")
             _check_value(default_sigma, "sigma", f"{path}: default sigma")
         n = table.values.shape[0]
         t, z = table.values[:, 0], table.values[:, 2]
         s = table.values[:, 3] if table.values.shape[1] == 4 else np.full(n, float(default_sigma))  # type: ignore[arg-type]
-        p = np.empty(n, dtype=np.intp)
-        seen: dict[tuple[float, int], int] = {}
-        last: dict[int, int] = {}  # pair -> its latest row
-        for j in range(n):
-            where = table.where(j)
-            p[j] = _pair(table.values[j, 1], where, geometry)
-            for name, value in (("time", t[j]), ("doppler", z[j]), ("sigma", s[j])):
-                _check_value(value, name, where)
-            prev = last.get(int(p[j]))
-            if prev is not None and t[j] < t[prev]:
-                raise MeasurementError(f"{where}: time {t[j]} is earlier than pair {p[j]}'s previous row's "
-                                       f"{t[prev]} (line {table.lines[prev]}); each pair's rows must be "
-                                       "in time order")
-            last[int(p[j])] = j
-            key = (float(t[j]), int(p[j]))
-            if key in seen:
-                raise MeasurementError(f"{where}: duplicate measurement for time {t[j]}, pair {p[j]} "
-                                       f"(first at line {seen[key]})")
-            seen[key] = int(table.lines[j])
+        p = _checked_rows(table, t, z, s, geometry, hz)
         return cls.from_arrays(t, p, z, s, sort=True)
 
+
+#: How a value read from a file in Hz is named in a message: what it was converted from.
+_FROM_HZ = {"doppler": "doppler (-wavelength * doppler_hz)", "sigma": "sigma (wavelength * sigma_hz)"}
 
 #: Physical bounds of every value (inclusive): a time beyond 30,000 years, a bistatic range rate
 #: above twice the speed of light or a sigma outside 1 µm/s .. 1,000 km/s is a corrupt or mis-scaled file.
 LIMITS: dict[str, tuple[float, float]] = {"time": (-1e12, 1e12), "doppler": (-6e8, 6e8), "sigma": (1e-6, 1e6)}
 
 
-def _check_value(value: float, name: str, where: str) -> None:
+def _check_value(value: float, name: str, where: str, shown: str | None = None) -> None:
     lo, hi = LIMITS[name]
     if not (math.isfinite(value) and lo <= value <= hi):
         if name == "sigma" and value <= 0:
             raise MeasurementError(f"{where}: sigma must be > 0, got {value}")
-        raise MeasurementError(f"{where}: {name} {value:g} is outside [{lo:g}, {hi:g}]: a corrupt or mis-scaled file")
+        raise MeasurementError(f"{where}: {shown or name} {value:g} is outside [{lo:g}, {hi:g}]: a corrupt or "
+                               "mis-scaled file")
 
 
 def _pair(value: float, where: str, geometry: Geometry | None) -> int:
@@ -382,3 +408,50 @@ def _pair(value: float, where: str, geometry: Geometry | None) -> int:
         raise MeasurementError(f"{where}: unknown pair index {k}: the geometry has {geometry.n_pairs} "
                                f"pair(s), indices 0..{geometry.n_pairs - 1}")
     return k
+
+
+def _checked_rows(table: Table, t: NDArray[np.float64], z: NDArray[np.float64], s: NDArray[np.float64],
+                  geometry: Geometry | None, hz: bool) -> NDArray[np.intp]:
+    """Each row's pair index, every value checked (a file in Hz converted in ``z`` and ``s`` in place)."""
+    n = t.size
+    p = np.empty(n, dtype=np.intp)
+    seen: dict[tuple[float, int], int] = {}
+    last: dict[int, int] = {}  # pair -> its latest row
+    for j in range(n):
+        where = table.where(j)
+        p[j] = _pair(table.values[j, 1], where, geometry)
+        if hz:
+            z[j], s[j] = _from_hz(z[j], s[j], geometry.wavelengths[p[j]], where)  # type: ignore[union-attr]
+        for name, value in (("time", t[j]), ("doppler", z[j]), ("sigma", s[j])):
+            _check_value(value, name, where, _FROM_HZ.get(name) if hz else None)
+        prev = last.get(int(p[j]))
+        if prev is not None and t[j] < t[prev]:
+            raise MeasurementError(f"{where}: time {t[j]} is earlier than pair {p[j]}'s previous row's "
+                                   f"{t[prev]} (line {table.lines[prev]}); each pair's rows must be "
+                                   "in time order")
+        last[int(p[j])] = j
+        key = (float(t[j]), int(p[j]))
+        if key in seen:
+            raise MeasurementError(f"{where}: duplicate measurement for time {t[j]}, pair {p[j]} "
+                                   f"(first at line {seen[key]})")
+        seen[key] = int(table.lines[j])
+    return p
+
+
+def _check_wavelengths(path: Path, geometry: Geometry | None) -> None:
+    """Refuse a file in Hz that its geometry gives no wavelengths to read."""
+    if geometry is None or not geometry.wavelengths:
+        raise MeasurementError(
+            f"{path}: the doppler_hz column is a Doppler shift in Hz, and reading it as the bistatic range rate "
+            "(doppler = -wavelength * doppler_hz) needs each pair's carrier wavelength: "
+            + ("pass the geometry, with its wavelengths" if geometry is None else
+               "give `wavelength` (metres, c / f_c) in every [[pair]] table of the geometry file"))
+
+
+def _from_hz(shift: float, sigma: float, wavelength: float, where: str) -> tuple[float, float]:
+    """A Doppler shift and its sigma (Hz) as the bistatic range rate and its sigma (m/s)."""
+    if not (math.isfinite(shift) and math.isfinite(sigma)):
+        raise MeasurementError(f"{where}: doppler_hz and sigma_hz must be finite, got {shift:g} and {sigma:g}")
+    if sigma <= 0:
+        raise MeasurementError(f"{where}: sigma_hz must be > 0, got {sigma:g}")
+    return -wavelength * shift, wavelength * sigma

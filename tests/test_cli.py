@@ -81,6 +81,43 @@ def test_track_init_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert d["objective"] >= d["cost"]
 
 
+def test_a_recording_in_hz_tracks_as_the_same_recording_in_metres_per_second(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``simulate --wavelength`` writes the geometry's wavelengths and the Doppler in Hz (-range rate / wavelength,
+    each pair with its own); ``track`` reads them back, says so, and its track is that of the same recording in
+    m/s to rounding (the conversion round-trips to a few units in the last place).  A wrong count of wavelengths
+    or a frequency given for one exits 2."""
+    for name, extra in (("ms", []), ("hz", ["--wavelength", "3.05", "0.5"])):
+        assert main(["simulate", "--case", "a", "--start-x", "40000", "--seed", "5", "--out", str(tmp_path / name),
+                     *extra]) == 0
+    capsys.readouterr()
+    geom = fd.Geometry.from_toml(tmp_path / "hz" / "geometry.toml")
+    assert geom.wavelengths == (3.05, 0.5)
+    assert (tmp_path / "hz" / "measurements.csv").read_text().startswith("time,pair,doppler_hz,sigma_hz\n")
+    ms = fd.Measurements.from_csv(tmp_path / "ms" / "measurements.csv")
+    hz = np.loadtxt(tmp_path / "hz" / "measurements.csv", delimiter=",", skiprows=1)
+    lam = np.array([3.05, 0.5])[hz[:, 1].astype(int)]
+    np.testing.assert_allclose(hz[:, 2], -ms.doppler / lam, rtol=1e-15)
+    np.testing.assert_allclose(hz[:, 3], ms.sigma / lam, rtol=1e-15)
+    tracks = {}
+    for name in ("ms", "hz"):
+        args = ["track", str(tmp_path / name / "measurements.csv"), "--estimator", "ekf"]
+        assert main(args) == 0
+        text = capsys.readouterr().out
+        assert ("doppler_hz read as the bistatic range rate -wavelength * doppler_hz, with wavelengths 3.05, 0.5 m"
+                in text) == (name == "hz")
+        assert main([*args, "--json"]) == 0
+        tracks[name] = json.loads(capsys.readouterr().out)
+    assert [p.get("wavelength") for p in tracks["hz"]["geometry"]["pairs"]] == [3.05, 0.5]
+    assert tracks["hz"]["status"] == tracks["ms"]["status"]
+    np.testing.assert_allclose(tracks["hz"]["states"], tracks["ms"]["states"], rtol=1e-6, atol=1e-6)
+    assert main(["simulate", "--wavelength", "1", "2", "3", "--out", str(tmp_path / "x")]) == 2
+    assert "--wavelength takes one value or one per pair (2), got 3" in capsys.readouterr().err
+    assert main(["simulate", "--wavelength", "98.3e6", "--out", str(tmp_path / "x")]) == 2
+    assert "the wavelength is 3.04977 m" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+
+
 @pytest.mark.parametrize(
     ("content", "msg"),
     [

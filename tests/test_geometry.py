@@ -159,6 +159,14 @@ PAIR = "[[pair]]\ntx = [50000.0, 0.0]\nrx = [0.0, 0.0]\n"
         (PAIR + "name = 'n'\n" + PAIR.replace("50000.0, 0.0", "50000.0, 1e3") + "name = 'a,b'\n", "commas", 8),
         (PAIR + "name = ' n'\n" + PAIR.replace("50000.0, 0.0", "50000.0, 1e3") + "name = 'm'\n", "spaces", 4),
         (PAIR + "name = 'n'\n" + PAIR.replace("50000.0, 0.0", "50000.0, 1e3") + "name = 'n'\n", "unique", None),
+        (PAIR + "wavelength = '3'\n", "pair 0: wavelength must be a number", 4),
+        (PAIR + "wavelength = true\n", "pair 0: wavelength must be a number", 4),
+        (PAIR + "wavelength = 3.0\n" + PAIR.replace("50000.0, 0.0", "50000.0, 1e3"), "pair 1 has no wavelength",
+         None),
+        (PAIR + "wavelength = 3.0\n" + PAIR.replace("50000.0, 0.0", "50000.0, 1e3") + "wavelength = 0.0\n",
+         r"pair 1's wavelength 0 m is outside", 8),
+        (PAIR + "wavelength = 98.3e6\n", r"the carrier frequency in Hz, the wavelength is 3.04977 m", 4),
+        (PAIR + "wavelength = nan\n", r"pair 0's wavelength nan m is outside", 4),
     ],
 )
 def test_toml_errors_name_the_file_and_line(tmp_path, text: str, msg: str, line: int | None) -> None:
@@ -249,6 +257,32 @@ def test_pair_names_round_trip_and_survive_the_frames(tmp_path) -> None:
     assert g.mirrored_x(1e3).pair_names == g.pair_names
     with pytest.raises(ValueError, match="name every pair or none"):
         fd.Geometry(pairs=g.pairs, pair_names=("north",))
+
+
+def test_wavelengths_round_trip_and_survive_the_frames(tmp_path) -> None:
+    """Carrier wavelengths: the file writes and reads them back, a change of frame, zone or scale keeps them (a
+    wavelength is the carrier's, not a length of the layout); one per pair or none, each positive and finite,
+    and a frequency given for a wavelength is refused with the wavelength it would be (c / f_c)."""
+    from fgdoppler.geometry import SPEED_OF_LIGHT
+
+    g = fd.Geometry(pairs=fd.paper_geometry("a").pairs, wavelengths=(3.05, 0.5))
+    path = tmp_path / "g.toml"
+    g.to_toml(path)
+    back = fd.Geometry.from_toml(path)
+    assert back == g and back.wavelengths == (3.05, 0.5)
+    for moved in (g.in_frame(g.frame), g.with_zone(ZoneLimits(speed_max=300.0)), g.mirrored_x(1e3), g.scaled(1e3),
+                  g.in_3d()):
+        assert moved.wavelengths == g.wavelengths
+    assert fd.paper_geometry("a").wavelengths == ()
+    with pytest.raises(ValueError, match="give every pair's wavelength or none"):
+        fd.Geometry(pairs=g.pairs, wavelengths=(3.0,))
+    with pytest.raises(TypeError, match="sequence of numbers"):
+        fd.Geometry(pairs=g.pairs, wavelengths=("3", 0.5))  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=rf"wavelength is {SPEED_OF_LIGHT / 600e6:.6g} m"):
+        fd.Geometry(pairs=g.pairs, wavelengths=(3.0, 600e6))
+    for bad in (-1.0, 0.0, np.inf, 1e-5):
+        with pytest.raises(ValueError, match="pair 1's wavelength"):
+            fd.Geometry(pairs=g.pairs, wavelengths=(3.0, bad))
 
 
 def test_a_geometry_in_other_units_gives_the_doppler_of_the_scaled_target() -> None:

@@ -280,3 +280,53 @@ def test_spread_keeps_every_pair_evenly_with_ends() -> None:
     assert len(m.spread(1000)) == len(m)  # fewer than asked: all of them
     with pytest.raises(ValueError, match="per_pair"):
         m.spread(1)
+
+
+def test_a_doppler_shift_in_hz_is_read_with_each_pairs_wavelength(tmp_path: Path) -> None:
+    """A file of Doppler shifts in Hz (``doppler_hz``, ``sigma_hz``) reads as the bistatic range rate
+    -wavelength * f_D with sigma wavelength * sigma_f, each pair with its own carrier; written by ``csv_text`` with
+    the wavelengths it reads back to rounding, and a default sigma is in the file's unit (Hz here)."""
+    geom = fd.Geometry(pairs=fd.paper_geometry("a").pairs, wavelengths=(3.0, 0.25))
+    hz = _write(tmp_path / "hz.csv", "time,pair,doppler_hz,sigma_hz\n0.0,0,10.0,0.5\n0.0,1,-8.0,2.0\n0.5,0,4.0,1.0\n")
+    m = fd.Measurements.from_csv(hz, geometry=geom)
+    np.testing.assert_array_equal(m.doppler, [-30.0, 2.0, -12.0])  # -3 * 10, -0.25 * -8, -3 * 4
+    np.testing.assert_array_equal(m.sigma, [1.5, 0.5, 3.0])
+    no_sigma = _write(tmp_path / "n.csv", "pair,time,doppler_hz\n1,0.0,-8.0\n0,0.0,10.0\n")  # in any order
+    np.testing.assert_array_equal(fd.Measurements.from_csv(no_sigma, geometry=geom, default_sigma=4.0).sigma,
+                                  [12.0, 1.0])
+    with pytest.raises(MeasurementError, match="no sigma_hz column"):
+        fd.Measurements.from_csv(no_sigma, geometry=geom)
+
+    sim = fd.simulate(fd.paper_scenarios()[0], np.random.default_rng(3)).measurements
+    (tmp_path / "s.csv").write_text(sim.csv_text(wavelengths=geom.wavelengths))
+    assert (tmp_path / "s.csv").read_text().startswith("time,pair,doppler_hz,sigma_hz\n")
+    back = fd.Measurements.from_csv(tmp_path / "s.csv", geometry=geom)
+    np.testing.assert_array_equal(back.time, sim.time)
+    np.testing.assert_array_equal(back.pair, sim.pair)
+    np.testing.assert_allclose(back.doppler, sim.doppler, rtol=4e-16, atol=0)
+    np.testing.assert_allclose(back.sigma, sim.sigma, rtol=4e-16, atol=0)
+    with pytest.raises(ValueError, match=r"one for each pair 0\.\.1"):
+        sim.csv_text(wavelengths=(3.0,))
+
+
+@pytest.mark.parametrize(
+    ("text", "geometry", "msg"),
+    [
+        ("time,pair,doppler_hz\n0,0,1\n", None, "needs each pair's carrier wavelength: pass the geometry"),
+        ("time,pair,doppler_hz\n0,0,1\n", "a", r"give `wavelength` \(metres, c / f_c\) in every \[\[pair\]\]"),
+        # the Hz file's columns go together: a sigma in m/s or a second Doppler column is refused, not mixed
+        ("time,pair,doppler_hz,sigma\n0,0,1,1\n", "hz", "unknown column 'sigma'"),
+        ("time,pair,doppler,doppler_hz\n0,0,1,1\n", "hz", "unknown column 'doppler'"),
+        ("time,pair,doppler,sigma_hz\n0,0,1,1\n", "hz", "unknown column 'sigma_hz'"),
+        ("time,pair,doppler_hz,sigma_hz\n0,0,1,0\n", "hz", "hz.csv:2: sigma_hz must be > 0"),
+        ("time,pair,doppler_hz,sigma_hz\n0,0,1,1\n0,2,1,1\n", "hz", "hz.csv:3: unknown pair index 2"),
+        ("time,pair,doppler_hz,sigma_hz\n0,0,1e9,1\n", "hz",
+         r"hz.csv:2: doppler \(-wavelength \* doppler_hz\) -3e\+09 is outside"),
+    ],
+)
+def test_a_file_in_hz_is_refused_without_its_wavelengths_or_with_mixed_columns(
+        tmp_path: Path, text: str, geometry: str | None, msg: str) -> None:
+    geom = {None: None, "a": fd.paper_geometry("a"),
+            "hz": fd.Geometry(pairs=fd.paper_geometry("a").pairs, wavelengths=(3.0, 0.25))}[geometry]
+    with pytest.raises(MeasurementError, match=msg):
+        fd.Measurements.from_csv(_write(tmp_path / "hz.csv", text), geometry=geom)

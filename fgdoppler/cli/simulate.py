@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -10,10 +11,12 @@ import numpy as np
 
 from fgdoppler._io import write_all
 from fgdoppler.cli.common import (
+    CLIError,
     add_scenario_options,
     add_zone_options,
     emit_json,
     geometry_with_zone,
+    per_pair,
     scenario,
 )
 
@@ -26,7 +29,9 @@ def add_simulate(sub: argparse._SubParsersAction) -> None:
         "simulate",
         help="simulate a scenario and write measurements.csv, truth.csv, geometry.toml",
         description="Simulate a target seen by any geometry (a paper preset or a TOML file) and write "
-        "measurements.csv, truth.csv and geometry.toml (with the zone options as its [zone] table) into --out.",
+        "measurements.csv, truth.csv and geometry.toml (with the zone options as its [zone] table) into --out.  "
+        "Where the geometry gives the pairs' carrier wavelengths (its file, or --wavelength), the measurements "
+        "are written as Doppler shifts in Hz (columns doppler_hz, sigma_hz), as a receiver reports them.",
     )
     p.add_argument("--geometry", "--case", dest="geometry", default="a",
                    help="geometry: the paper's a or b, or a geometry TOML file (default a; --case is the old name)")
@@ -35,6 +40,9 @@ def add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--start-z", type=float, default=None,
                    help="initial height in metres: a 3-D target (the geometry must be 3-D: --altitude or "
                    "sensors with z)")
+    p.add_argument("--wavelength", type=float, nargs="+", default=None, metavar="M",
+                   help="each pair's carrier wavelength in metres (one value or one per pair; c / f_c, e.g. 3.05 for "
+                        "98.3 MHz): written into geometry.toml, and measurements.csv gives the Doppler in Hz")
     add_scenario_options(p)
     add_zone_options(p)
     p.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
@@ -47,12 +55,20 @@ def _run(args: argparse.Namespace) -> int:
     from fgdoppler.simulation import simulate
 
     geom = geometry_with_zone(args.geometry, args)
+    if args.wavelength is not None:
+        values = per_pair(args.wavelength, geom.n_pairs, "--wavelength")
+        try:
+            geom = replace(geom, wavelengths=values if isinstance(values, tuple) else (values,) * geom.n_pairs)
+        except ValueError as exc:
+            raise CLIError(f"--wavelength: {exc}") from None
     start = (args.start_x, args.start_y) if args.start_z is None else (args.start_x, args.start_y, args.start_z)
     scen = scenario(args, geom, start,
                     f"{geom.name or 'custom geometry'}, start ({args.start_x / 1e3:g}, {args.start_y / 1e3:g}) km")
     sim = simulate(scen, np.random.default_rng(args.seed))
     out: Path = args.out
-    write_all({out / "measurements.csv": sim.measurements.csv_text(), out / "truth.csv": sim.truth.csv_text(),
+    hz = geom.wavelengths or None  # a receiver's own unit where the geometry gives it
+    write_all({out / "measurements.csv": sim.measurements.csv_text(wavelengths=hz),
+               out / "truth.csv": sim.truth.csv_text(),
                out / "geometry.toml": geom.toml_text()})
     summary: dict[str, Any] = {
         "scenario": scen.name,

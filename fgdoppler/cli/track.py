@@ -38,7 +38,8 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "track",
         help="initiate and track/smooth a recorded measurement CSV",
-        description="Read FILE (CSV time,pair,doppler,sigma), initiate from the first --init-per-pair "
+        description="Read FILE (CSV time,pair,doppler,sigma in m/s, or time,pair,doppler_hz,sigma_hz in Hz with "
+        "each pair's wavelength in the geometry file), initiate from the first --init-per-pair "
         "measurements of each pair and the first --init-seconds (multi-start grid + refinement), then run the chosen estimator.  The "
         "geometry is never assumed: give --geometry, or keep a geometry.toml beside FILE (as simulate writes).",
     )
@@ -51,7 +52,9 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    help="what to run: init (initiation only), " + ", ".join(
                        f"{k} ({v.summary})" for k, v in ESTIMATORS.items())
                    + "; batch is the old name of smoother (default smoother)")
-    p.add_argument("--sigma", type=float, default=None, help="default Doppler sigma when FILE has no sigma column")
+    p.add_argument("--sigma", type=float, default=None,
+                   help="default Doppler sigma when FILE has no sigma column, in its Doppler column's unit (m/s; Hz "
+                        "for doppler_hz)")
     p.add_argument("--init-method", choices=METHODS, default="lm", help="initiation refinement (default lm)")
     p.add_argument("--init-per-pair", type=int, default=10,
                    help="initiation window: at least this many measurements per pair (default 10)")
@@ -121,7 +124,8 @@ def _describe(geometry: Any, spec: str) -> dict[str, Any]:
     """The geometry and its zone as recorded in every output."""
     return {"geometry": {"source": spec, "name": geometry.name,
                          "pairs": [{"tx": list(p.tx), "rx": list(p.rx),
-                                    **({"name": geometry.pair_names[i]} if geometry.pair_names else {})}
+                                    **({"name": geometry.pair_names[i]} if geometry.pair_names else {}),
+                                    **({"wavelength": geometry.wavelengths[i]} if geometry.wavelengths else {})}
                                    for i, p in enumerate(geometry.pairs)]},
             "zone": geometry.zone.to_dict()}
 
@@ -162,6 +166,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from fgdoppler.csvfile import header_names
     from fgdoppler.estimators.initiation import initiate
     from fgdoppler.measurements import Measurements
     from fgdoppler.simulation import Trajectory
@@ -216,6 +221,9 @@ def _run(args: argparse.Namespace) -> int:
         print(f"geometry {spec} ({geom.n_pairs} pair(s)); zone along {z.along[0]:g}..{z.along[1]:g} m, across "
               f"{z.across[0]:g}..{z.across[1]:g} m{height} in the sensors' frame, speed up to {z.speed_max:g} m/s"
               f"{rule}")
+        if "doppler_hz" in header_names(args.file):
+            print("doppler_hz read as the bistatic range rate -wavelength * doppler_hz, with wavelengths "
+                  + ", ".join(f"{v:g}" for v in geom.wavelengths) + " m (every result is in m and m/s)")
     if args.estimator == "init":
         status = _report_initiation(args, init, window, geom, truth, where)
     else:
@@ -476,7 +484,8 @@ def _csv_header(where: dict[str, Any]) -> list[str]:
     """Comment lines that record the geometry and the zone in the track CSV."""
     g, z = where["geometry"], where["zone"]
     return [f"geometry: {g['source']} name={g['name'] or '-'} pairs="
-            + ";".join(f"tx={p['tx']} rx={p['rx']}" + (f" name={p['name']}" if "name" in p else "") for p in g["pairs"]),
+            + ";".join(f"tx={p['tx']} rx={p['rx']}" + (f" name={p['name']}" if "name" in p else "")
+                       + (f" wavelength={p['wavelength']}" if "wavelength" in p else "") for p in g["pairs"]),
             f"zone: along={z['along']} across={z['across']} "
             + (f"altitude={z['altitude']} " if "altitude" in z else "")
             + f"speed_max={z['speed_max']} "

@@ -219,7 +219,9 @@ class GridSpec:
             raise ValueError(
                 f"the data need a speed of at least {lo:.1f} m/s but the zone's speed bound is "
                 f"{zone.speed_max:.1f} m/s: raise the speed bound (--speed-max) or check the data's units (doppler "
-                "is the bistatic range rate in m/s, not a Doppler shift in Hz: from f_D, doppler = -wavelength * f_D)"
+                "is the bistatic range rate in m/s, not a Doppler shift in Hz: from f_D, doppler = -wavelength * f_D; "
+                "a file may give doppler_hz and sigma_hz columns instead, with each pair's wavelength in the geometry "
+                "file)"
             )
         step = self.step(zone, extent)
         speed_step = self.speed_step if self.speed_step is not None else zone.speed_max / 20

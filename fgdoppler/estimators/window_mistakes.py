@@ -29,7 +29,7 @@ __all__ = ["IN_KILOMETRES", "KILOMETRE_EXTENT", "OTHERS_NAMED", "SIGN_CONVENTION
 
 #: The data's sign convention, as a ``sign`` finding states it (docs/data-formats.md says the same).
 SIGN_CONVENTION = ("fgdoppler's doppler is the bistatic range rate, negative for a target closing on the pair; "
-                   "from a Doppler shift f_D in Hz, doppler = -wavelength * f_D")
+                   "from a Doppler shift f_D in Hz, doppler = -wavelength * f_D (f_D positive for a closing target)")
 
 
 #: Other changes under which a window fits that a mistake finding names (the rest it counts).
