@@ -839,3 +839,26 @@ def test_track_on_a_geometry_in_kilometres_says_so_instead_of_advising_a_zone(
     err = capsys.readouterr().err
     assert "doubtful: initiation: with every sensor position multiplied by 1000 the window fits" in err
     assert "hint: the geometry is likely in kilometres" in err and "one holding every start they name" not in err
+
+
+def test_track_with_a_sign_mistake_says_to_correct_it_before_any_zone_advice(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A file in Hz written with the opposite sign convention (case b, a target 25 km out): the smoother's start is
+    held at the zone's edge and that finding advises a wider zone, read from the negated data; the ``sign``
+    finding names the mistake, and the hint says to correct it before following any zone advice.  The file as
+    simulated gets no hint at all."""
+    sim = tmp_path / "sim"
+    main(["simulate", "--case", "b", "--wavelength", "3.05", "--seed", "4", "--out", str(sim)])
+    rows = (sim / "measurements.csv").read_text().splitlines()
+    negated = [rows[0]] + [",".join((t, p, repr(-float(f)), s)) for t, p, f, s in (r.split(",") for r in rows[1:])]
+    (tmp_path / "neg.csv").write_text("\n".join(negated) + "\n")
+    capsys.readouterr()
+    args = ["--geometry", str(sim / "geometry.toml"), "--estimator", "smoother"]
+    assert main(["track", str(tmp_path / "neg.csv"), *args]) == 0  # doubtful, not failed
+    err = capsys.readouterr().err
+    assert "doubtful: the track's first state is held at the zone's boundary" in err and "--zone" in err
+    assert "with the Doppler of every pair negated" in err
+    assert ("hint: a sign finding above names a likely mistake in the measurement file: correct it before following "
+            "any zone advice") in err
+    assert main(["track", str(sim / "measurements.csv"), *args]) == 0
+    assert "hint" not in capsys.readouterr().err

@@ -6,6 +6,7 @@ import argparse
 import functools
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,7 @@ from fgdoppler.cli.common import (
     taking,
 )
 from fgdoppler.estimators.initiation import METHODS
+from fgdoppler.estimators.later_mistakes import is_mistake_finding
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
 from fgdoppler.estimators.window_mistakes import IN_KILOMETRES
 from fgdoppler.geometry import Geometry, principal_line
@@ -291,11 +293,21 @@ def zone_hint(reasons: Any) -> str | None:
 
 
 def _print_zone_hint(reasons: Any) -> None:
-    """Where findings advise different zones, one that holds them all (:func:`zone_hint`) — unless a ``units``
-    finding says the geometry is likely in kilometres: every zone advised is then in misread units."""
-    if any(r.code.endswith("units") and r.status != "ok" and IN_KILOMETRES in r.message for r in reasons):
+    """Where findings advise different zones, one that holds them all (:func:`zone_hint`) — unless a finding
+    names a likely mistake in the file or the geometry (a ``sign``, ``swapped`` or ``radial`` change of the data,
+    or the geometry in kilometres): every zone advised then reads the mistaken data or units, so the hint says
+    to correct the mistake first."""
+    # a track's findings carry its initiation's under the "initiation-" prefix; both name the mistake alike
+    mistakes = [r for r in reasons if r.status != "ok" and is_mistake_finding(
+        replace(r, code=r.code.removeprefix("initiation-")))]
+    if any(IN_KILOMETRES in r.message for r in mistakes):
         print("  hint: the geometry is likely in kilometres (the units finding above): give it in metres before "
               "following any zone advice, which reads it as metres", file=sys.stderr)
+        return
+    if mistakes and any(r.status != "ok" and r.zone is not None for r in reasons):
+        print(f"  hint: a {mistakes[0].code.removeprefix('initiation-')} finding above names a likely mistake in "
+              "the measurement file: correct it before following any zone advice, which reads the data as given",
+              file=sys.stderr)
         return
     hint = zone_hint(reasons)
     if hint is not None:
