@@ -59,6 +59,26 @@ print(f"{len(meas)} measurements, {geometry.n_pairs} pairs, "
 print("zone:", geometry.zone)
 
 # %%
+# A receiver that reports the Doppler shift in Hz
+# ------------------------------------------------
+# Passive radars and most receivers report the frequency shift
+# :math:`f_D` of the transmitter's carrier, not the bistatic range rate.
+# Give each pair's carrier wavelength :math:`\lambda = c / f_c` in the
+# geometry (``wavelength = ...`` in every ``[[pair]]`` table) and the file
+# may have the columns ``doppler_hz`` and ``sigma_hz``: they are read as the
+# range rate :math:`-\lambda f_D` and its sigma :math:`\lambda \sigma_f`.  Here
+# the transmitter is an FM station on 98.3 MHz; the same recording written
+# in Hz reads back as the one in m/s, to rounding.
+from dataclasses import replace
+
+fm = replace(geometry, wavelengths=(fd.geometry.SPEED_OF_LIGHT / 98.3e6,) * geometry.n_pairs)
+fm.to_toml(folder / "geometry_hz.toml")
+(folder / "measurements_hz.csv").write_text(recording.measurements.csv_text(wavelengths=fm.wavelengths))
+print((folder / "measurements_hz.csv").read_text().splitlines()[:2])
+in_hz = fd.Measurements.from_csv(folder / "measurements_hz.csv", geometry=fd.Geometry.from_toml(folder / "geometry_hz.toml"))
+print("largest difference from the m/s file:", np.max(np.abs(in_hz.doppler - meas.doppler)), "m/s")
+
+# %%
 # Initiation, then three estimators
 # ---------------------------------
 # The initiation fits the first 10 measurements of each pair and every
