@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -646,6 +647,30 @@ def test_an_initiation_whose_alternative_is_the_mirror_image_gets_the_half_plane
     assert sides[0] * sides[1] < 0
 
 
+def test_a_mistake_finding_comes_before_any_zone_or_half_plane_advice() -> None:
+    """A sign, swapped or radial finding (the track's or, prefixed, the initiation's) beside a finding that
+    advises a zone or a half plane: the hint is to correct the mistake first; without such advice, or with the
+    mistake finding only ``ok`` or absent, there is none; a geometry in kilometres is named whatever the rest."""
+    from fgdoppler.cli.track import mistake_hint
+    from fgdoppler.estimators.verdict import Reason
+    from fgdoppler.estimators.window_mistakes import IN_KILOMETRES
+
+    zone = fd.Zone(along=(1000.0, 30000.0), across=(-3000.0, 3000.0), speed_max=200.0, frame=fd.Frame.identity(2))
+    widen = Reason(code="boundary", status="doubtful", message="widen it",
+                   zone=zone.reaching(np.array([20000.0, 8000.0, 0.0, 0.0])).box())
+    mirror = Reason(code="competing", status="doubtful", message="its mirror image fits", mirror="sensors")
+    for code in ("sign", "initiation-swapped", "radial"):
+        named = Reason(code=code, status="doubtful", message="with pair 0 negated the window fits")
+        for advice in (widen, mirror):
+            hint = mistake_hint([named, advice])
+            assert hint is not None and hint.startswith(f"a {code.removeprefix('initiation-')} finding above")
+        assert mistake_hint([named]) is None
+        assert mistake_hint([replace(named, status="ok"), widen, mirror]) is None
+    assert mistake_hint([widen, mirror]) is None
+    km = Reason(code="initiation-units", status="doubtful", message=f"the window fits: {IN_KILOMETRES} ...")
+    assert mistake_hint([km]) is not None and "kilometres" in mistake_hint([km, widen])  # type: ignore[operator]
+
+
 def test_the_zone_hint_is_the_union_of_the_advised_zones() -> None:
     """Zones advised by two findings (from :meth:`Zone.reaching`): the hint is their union box, bounds
     rounded outward; one advice, the same advice twice, or advice in an ``ok`` finding gives none."""
@@ -859,6 +884,7 @@ def test_track_with_a_sign_mistake_says_to_correct_it_before_any_zone_advice(
     assert "doubtful: the track's first state is held at the zone's boundary" in err and "--zone" in err
     assert "with the Doppler of every pair negated" in err
     assert ("hint: a sign finding above names a likely mistake in the measurement file: correct it before following "
-            "any zone advice") in err
+            "any zone or half-plane advice") in err
+    assert "one holding every start they name" not in err
     assert main(["track", str(sim / "measurements.csv"), *args]) == 0
     assert "hint" not in capsys.readouterr().err

@@ -292,23 +292,31 @@ def zone_hint(reasons: Any) -> str | None:
     return functools.reduce(ZoneBox.union, advised.values()).options()
 
 
-def _print_zone_hint(reasons: Any) -> None:
-    """Where findings advise different zones, one that holds them all (:func:`zone_hint`) — unless a finding
-    names a likely mistake in the file or the geometry (a ``sign``, ``swapped`` or ``radial`` change of the data,
-    or the geometry in kilometres): every zone advised then reads the mistaken data or units, so the hint says
-    to correct the mistake first."""
+def mistake_hint(reasons: Any) -> str | None:
+    """The hint to correct a likely mistake in the file or the geometry first, where a finding names one (a
+    ``sign``, ``swapped`` or ``radial`` change of the data, or the geometry in kilometres) and another advises
+    a zone or a half plane: that advice reads the mistaken data or units as given.  ``None`` otherwise."""
     # a track's findings carry its initiation's under the "initiation-" prefix; both name the mistake alike
     mistakes = [r for r in reasons if r.status != "ok" and is_mistake_finding(
         replace(r, code=r.code.removeprefix("initiation-")))]
     if any(IN_KILOMETRES in r.message for r in mistakes):
-        print("  hint: the geometry is likely in kilometres (the units finding above): give it in metres before "
-              "following any zone advice, which reads it as metres", file=sys.stderr)
+        return ("the geometry is likely in kilometres (the units finding above): give it in metres before "
+                "following any zone advice, which reads it as metres")
+    if mistakes and any(r.status != "ok" and (r.zone is not None or r.mirror is not None) for r in reasons):
+        return (f"a {mistakes[0].code.removeprefix('initiation-')} finding above names a likely mistake in the "
+                "measurement file: correct it before following any zone or half-plane advice, which reads the data "
+                "as given")
+    return None
+
+
+def _print_hints(reasons: Any, geom: Geometry, args: argparse.Namespace, pairs: Any) -> None:
+    """The ``hint:`` lines after the verdict: to correct a likely mistake first (:func:`mistake_hint`), or else
+    the half planes of a mirror ambiguity and the zone holding every zone the findings advise."""
+    first = mistake_hint(reasons)
+    if first is not None:
+        print(f"  hint: {first}", file=sys.stderr)
         return
-    if mistakes and any(r.status != "ok" and r.zone is not None for r in reasons):
-        print(f"  hint: a {mistakes[0].code.removeprefix('initiation-')} finding above names a likely mistake in "
-              "the measurement file: correct it before following any zone advice, which reads the data as given",
-              file=sys.stderr)
-        return
+    _print_half_plane_hint(reasons, geom, args, pairs)
     hint = zone_hint(reasons)
     if hint is not None:
         print(f"  hint: the findings above advise different zones; one holding every start they name: {hint}",
@@ -348,8 +356,7 @@ def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: A
     figure = _plot_landscape(args, init, window, geom, truth) if args.plot else None
     _write(args, init.csv_text(header=tuple(_csv_header(where))), text, figure)
     _print_verdict(init.status, init.reasons)
-    _print_half_plane_hint(init.reasons, geom, args, window.pair)
-    _print_zone_hint(init.reasons)
+    _print_hints(init.reasons, geom, args, window.pair)
     if args.json:
         emit_json(payload)
         return str(init.status)
@@ -463,8 +470,7 @@ def _run_tracker(args: argparse.Namespace, settings: Any, init: Any, meas: Any, 
         figure = plotting.figure_bytes(ax, args.plot.suffix.lower().lstrip("."))
     _write(args, result.csv_text(header=_csv_header(where)), result.json_text(extra=where), figure)
     _print_verdict(result.status, result.reasons)
-    _print_half_plane_hint(result.reasons, model.geometry, args, meas.pair)
-    _print_zone_hint(result.reasons)
+    _print_hints(result.reasons, model.geometry, args, meas.pair)
     if args.json:
         emit_json({**result.to_dict(all_estimates=False), **where})
         return str(result.status)
