@@ -206,9 +206,16 @@ def sensor_frame(tx: ArrayLike, rx: ArrayLike) -> Frame:
       altitude band is height above the ground;
     * otherwise :math:`\mathbf e_v` is the sensors' mean offset across
       :math:`\mathbf e_u` (normalised) and
-      :math:`\mathbf e_w = \mathbf e_u \times \mathbf e_v` (right-handed),
-      which depends on the sensors only, so any rotation and translation of
-      the whole problem moves the frame with it.  If the sensors are
+      :math:`\mathbf e_w = \pm\,\mathbf e_u \times \mathbf e_v`, the sign
+      making its world :math:`z` non-negative: the normal of the sensors'
+      plane on the sky's side, so that the altitude band is above them
+      whichever side of the first baseline they lie on (with the right-handed
+      sign it pointed into the ground when they lay on its right, and a
+      target at altitude was tracked at its mirror image below the sensors).
+      Any rotation about the vertical and any translation of the whole problem
+      moves the frame with it, as does any rotation that keeps that normal on
+      the same side of the horizontal; one that turns the sky downwards is not
+      a symmetry of the problem (the band stays above the sensors).  If the sensors are
       collinear there is no such offset (the problem is symmetric about
       their line); then :math:`\mathbf e_w` is world :math:`+\mathbf z` made
       perpendicular to :math:`\mathbf e_u` and
@@ -260,6 +267,8 @@ def _sensor_frame_3d(tx: FloatArray, rx: FloatArray) -> Frame:
     if float(np.linalg.norm(mean)) > _SIDE_TOL * extent:
         e_v = mean / np.linalg.norm(mean)
         e_w = np.cross(e_u, e_v)
+        if e_w[2] < 0:  # the altitude band lies on the sky's side of the sensors' plane, whatever side they lie on
+            e_w = -e_w
     else:
         up = np.array([0.0, 0.0, 1.0]) if abs(e_u[2]) < 1.0 - 1e-12 else np.array([1.0, 0.0, 0.0])
         e_w = up - (up @ e_u) * e_u

@@ -19,8 +19,12 @@ deviations along its covariance's major axis (3-D: the position's 3×3
 block).  Printed: per estimator, the wrong-and-``ok`` count and the ``ok``
 count, and every draw that is wrong and ``ok``.
 
+``--sites H`` raises every sensor to a height drawn uniformly in 0..H m (masts and hills; the target's
+start height stays above the ground): the frame's third axis is then the sensors' plane's normal on
+the sky's side (:func:`fgdoppler.frames.sensor_frame`).
+
 Run: ``python studies/random_layouts_3d.py [--draws 60] [--first 0] [--speed-max 200] [--ceiling 4500]
-[--square 40] [--out DIR]`` (draws ``first`` to ``first + draws - 1``; a smaller square brings the
+[--square 40] [--sites 0] [--out DIR]`` (draws ``first`` to ``first + draws - 1``; a smaller square brings the
 sensors closer to the aircraft, which sees its height better).
 """
 
@@ -49,19 +53,26 @@ FLOOR = 500.0
 CLIMB = 3.0
 
 
-def draw(i: int, speed_max: float = 200.0, ceiling: float = 4500.0, square: float = SQUARE
+def draw(i: int, speed_max: float = 200.0, ceiling: float = 4500.0, square: float = SQUARE, sites: float = 0.0
          ) -> tuple[fd.Geometry, tuple[float, ...], np.random.Generator]:
-    """Layout, start state ``(x, y, z, vx, vy, vz)`` and the generator that then simulates draw ``i``."""
+    """Layout, start state ``(x, y, z, vx, vy, vz)`` and the generator that then simulates draw ``i``; with
+    ``sites`` > 0 every sensor stands at a height drawn uniformly in 0..``sites`` m (its own generator: the
+    layouts' horizontal positions and the targets are those of ``sites = 0``)."""
     rng = np.random.default_rng([77, 3, i])
+    raised = np.random.default_rng([77, 3, i, 1])
     n = int(rng.integers(2, 5))
     while True:
         pairs = random_pairs(rng, n, ground=True, square=square)
+        if sites > 0:
+            pairs = tuple(fd.BistaticPair(tx=(*p.tx[:2], raised.uniform(0, sites)), rx=(*p.rx[:2], raised.uniform(0, sites)))
+                          for p in pairs)
         g = fd.Geometry(pairs=pairs, name=f"random 3-D {i}")
         z = g.zone
         assert z.altitude is not None
         height = rng.uniform(FLOOR, min(ceiling, z.altitude[1]))
-        local = np.array([[rng.uniform(*z.along), rng.uniform(*z.across), height]])
-        p = z.frame.points_to_world(local)[0]
+        # the height above the ground (world z), whatever the tilt of the sensors' plane
+        p = z.frame.points_to_world(np.array([[rng.uniform(*z.along), rng.uniform(*z.across), 0.0]]))[0]
+        p[2] = height
         sensors = np.array([s for pair in pairs for s in (pair.tx, pair.rx)])
         if np.min(np.linalg.norm(sensors - p, axis=1)) < MIN_SENSOR_DISTANCE:
             continue
@@ -74,9 +85,9 @@ def draw(i: int, speed_max: float = 200.0, ceiling: float = 4500.0, square: floa
 
 @one_blas_thread
 def one(k: int, speed_max: float = 200.0, first: float = 0.0, ceiling: float = 4500.0,
-        square: float = SQUARE / 1e3) -> dict[str, Any]:
+        square: float = SQUARE / 1e3, sites: float = 0.0) -> dict[str, Any]:
     i = k + int(first)
-    out, sim, init = recorded(i, *draw(i, speed_max, ceiling, square * 1e3))
+    out, sim, init = recorded(i, *draw(i, speed_max, ceiling, square * 1e3, sites))
     if init is None:
         return out
     out["initiation"] = str(init.status)
@@ -88,7 +99,8 @@ def one(k: int, speed_max: float = 200.0, first: float = 0.0, ceiling: float = 4
 
 def main() -> None:
     a, all_rows = _common.each_count(one, __doc__.splitlines()[0], "draws", 60,
-                                     {"speed_max": 200.0, "first": 0.0, "ceiling": 4500.0, "square": SQUARE / 1e3})
+                                     {"speed_max": 200.0, "first": 0.0, "ceiling": 4500.0, "square": SQUARE / 1e3,
+                                      "sites": 0.0})
     rows = saved(all_rows, a.out, "random_layouts_3d.json", "wrong and ok / ok / all")
     for name in fd.ESTIMATORS:
         wrong = sum(r["rows"][name][3] for r in rows)
