@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler._text import distance_text
 from fgdoppler.frames import AXIS_MIN_SHARE, SENSOR_EPS, Frame, sensor_frame
+from fgdoppler.geodetic import GeodeticOrigin
 from fgdoppler.zone import DEFAULT_SPEED_MAX, Zone, ZoneLimits, default_zone
 
 __all__ = [
@@ -231,6 +232,13 @@ class Geometry:
         (:meth:`~fgdoppler.measurements.Measurements.from_csv`).  Each is
         finite and within :data:`WAVELENGTH_LIMITS`.  Nothing else uses
         them: every estimate is in metres and m/s.
+    geodetic_origin
+        Where the sensors were given as latitude, longitude and height
+        (:mod:`fgdoppler.geodetic`): the origin of the local east-north-up
+        frame their positions are in (``x`` east, ``y`` north, ``z`` up, in
+        metres), with which estimates convert back to latitude and longitude.
+        ``None``: a frame of the user's own.  A change of frame or scale
+        (:meth:`in_frame`, :meth:`scaled`, :meth:`mirrored_x`) drops it.
     """
 
     pairs: tuple[BistaticPair, ...]
@@ -238,6 +246,7 @@ class Geometry:
     zone_limits: ZoneLimits = field(default_factory=ZoneLimits)
     pair_names: tuple[str, ...] = ()
     wavelengths: tuple[float, ...] = ()
+    geodetic_origin: GeodeticOrigin | None = None
     _tx: NDArray[np.float64] = field(init=False, repr=False, compare=False)
     _rx: NDArray[np.float64] = field(init=False, repr=False, compare=False)
 
@@ -251,6 +260,8 @@ class Geometry:
         object.__setattr__(self, "pairs", pairs)
         object.__setattr__(self, "pair_names", _checked_names(self.pair_names, len(pairs)))
         object.__setattr__(self, "wavelengths", _checked_wavelengths(self.wavelengths, len(pairs)))
+        if self.geodetic_origin is not None and not isinstance(self.geodetic_origin, GeodeticOrigin):
+            raise TypeError(f"geodetic_origin must be a GeodeticOrigin or None, got {self.geodetic_origin!r}")
         d = 3 if self.zone_limits.altitude is not None or any(len(p.tx) == 3 or len(p.rx) == 3 for p in pairs) \
             else 2
         tx = np.array([_padded(p.tx, d) for p in pairs], dtype=float)
@@ -422,7 +433,8 @@ class Geometry:
         return replace(self, pairs=tuple(BistaticPair(tx=np.multiply(p.tx, factor), rx=np.multiply(p.rx, factor))
                                          for p in self.pairs),
                        zone_limits=replace(limits, along=times(limits.along), across=times(limits.across),
-                                           altitude=times(limits.altitude)))
+                                           altitude=times(limits.altitude)),
+                       geodetic_origin=None)
 
     def check_zone(self, reach: float = 10.0) -> None:
         """Raise :class:`ValueError` if the zone lies more than ``reach`` sensor extents from every sensor.
@@ -455,7 +467,8 @@ class Geometry:
             u = frame.points_to_local(_padded(point, frame.dim))
             return u if snap is None else np.round(u / snap) * snap + 0.0
 
-        return replace(self, pairs=tuple(BistaticPair(tx=local(p.tx), rx=local(p.rx)) for p in self.pairs))
+        return replace(self, pairs=tuple(BistaticPair(tx=local(p.tx), rx=local(p.rx)) for p in self.pairs),
+                       geodetic_origin=None)
 
     @property
     def on_lattice(self) -> bool:

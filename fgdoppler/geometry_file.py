@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from fgdoppler._io import read_text_bounded
+from fgdoppler.geodetic import check_geodetic
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -43,7 +44,8 @@ __all__ = ["MAX_GEOMETRY_BYTES", "geometry_text", "read_geometry", "write_geomet
 #: A geometry file larger than this is refused (it is a few lines of numbers).
 MAX_GEOMETRY_BYTES = 1 << 20
 
-_TOP = ("name", "zone", "pair")
+_TOP = ("name", "zone", "geodetic", "pair")
+_GEODETIC = ("origin", "positions")
 _ZONE = ("along", "across", "speed_max", "altitude")
 _PAIR = ("tx", "rx", "name", "wavelength")
 
@@ -105,7 +107,8 @@ def read_geometry(path: str | Path) -> Any:
     raw = doc.get("pair")
     if not isinstance(raw, list) or not raw:
         raise ValueError(f"{path}: expected one or more [[pair]] tables with tx and rx")
-    pairs = []
+    geodetic = _geodetic_table(path, text, doc)
+    pairs: list[Any] = []  # BistaticPair, or (tx, rx) geodetic tuples to convert
     names: list[str] = []
     wavelengths: list[float] = []
     for i, item in enumerate(raw):
@@ -114,10 +117,13 @@ def read_geometry(path: str | Path) -> Any:
         _check_keys(path, text, item, _PAIR, f"pair {i}", "pair")  # first: a misspelt tx is named as such
         if "tx" not in item or "rx" not in item:
             raise ValueError(f"{path}: pair {i} needs both tx and rx")
-        try:
-            pairs.append(BistaticPair(tx=item["tx"], rx=item["rx"]))
-        except (ValueError, TypeError) as exc:
-            raise ValueError(f"{_where(path, _line_of(text, 'tx', i, 'pair'))}: pair {i}: {exc}") from None
+        if geodetic is not None and geodetic[1] == "geodetic":  # converted once every sensor is read
+            pairs.append(tuple(_geodetic_sensor(path, text, item, key, i) for key in ("tx", "rx")))
+        else:
+            try:
+                pairs.append(BistaticPair(tx=item["tx"], rx=item["rx"]))
+            except (ValueError, TypeError) as exc:
+                raise ValueError(f"{_where(path, _line_of(text, 'tx', i, 'pair'))}: pair {i}: {exc}") from None
         if "name" in item:
             if not isinstance(item["name"], str):
                 raise ValueError(f"{_where(path, _line_of(text, 'name', len(names), 'pair'))}: pair {i}: name must be a "
@@ -129,14 +135,8 @@ def read_geometry(path: str | Path) -> Any:
                 raise ValueError(f"{_where(path, _line_of(text, 'wavelength', len(wavelengths), 'pair'))}: pair {i}: "
                                  f"wavelength must be a number (metres), got {value!r}")
             wavelengths.append(value)
-    if names and len(names) != len(pairs):
-        unnamed = next(i for i, item in enumerate(raw) if "name" not in item)
-        raise ValueError(f"{path}: pair {unnamed} has no name while {len(names)} other pair(s) have one: name "
-                         "every pair or none")
-    if wavelengths and len(wavelengths) != len(pairs):
-        missing = next(i for i, item in enumerate(raw) if "wavelength" not in item)
-        raise ValueError(f"{path}: pair {missing} has no wavelength while {len(wavelengths)} other pair(s) have one: "
-                         "give every pair's carrier wavelength or none")
+    _every_or_none(path, raw, "name", len(names), "name every pair or none")
+    _every_or_none(path, raw, "wavelength", len(wavelengths), "give every pair's carrier wavelength or none")
     name = doc.get("name", "")
     if not isinstance(name, str):
         raise ValueError(f"{_where(path, _line_of(text, 'name'))}: name must be a string, got {name!r}")
@@ -144,14 +144,78 @@ def read_geometry(path: str | Path) -> Any:
     if not isinstance(zone, dict):
         raise ValueError(f"{_where(path, _line_of(text, 'zone'))}: zone must be a table [zone]")
     _check_keys(path, text, zone, _ZONE, "[zone]", "zone")
+    origin = None
+    if geodetic is not None:
+        pairs, origin = _from_geodetic(pairs, geodetic)
     try:
         limits = ZoneLimits(**zone)
         geometry = Geometry(pairs=tuple(pairs), name=name, zone_limits=limits, pair_names=tuple(names),
-                            wavelengths=tuple(wavelengths))
+                            wavelengths=tuple(wavelengths), geodetic_origin=origin)
         geometry.check_zone()
     except ValueError as exc:
         raise ValueError(f"{_where(path, _error_line(text, str(exc)))}: {exc}") from None
     return geometry
+
+
+def _every_or_none(path: Path, raw: list[Any], key: str, given: int, rule: str) -> None:
+    """Refuse a key some pairs give and others do not, naming the first pair without it."""
+    if given and given != len(raw):
+        missing = next(i for i, item in enumerate(raw) if key not in item)
+        raise ValueError(f"{path}: pair {missing} has no {key} while {given} other pair(s) have one: {rule}")
+
+
+def _geodetic_table(path: Path, text: str, doc: dict[str, Any]) -> tuple[tuple[float, ...] | None, str] | None:
+    """The ``[geodetic]`` table's origin (``None``: pair 0's receiver) and how the pairs give their positions
+    (``"geodetic"``: latitude, longitude(, height); ``"enu"``: metres east, north(, up) of the origin); ``None``
+    without the table."""
+    table = doc.get("geodetic")
+    if table is None:
+        return None
+    if not isinstance(table, dict):
+        raise ValueError(f"{_where(path, _line_of(text, 'geodetic'))}: geodetic must be a table [geodetic]")
+    _check_keys(path, text, table, _GEODETIC, "[geodetic]", "geodetic")
+    positions = table.get("positions", "geodetic")
+    if positions not in ("geodetic", "enu"):
+        raise ValueError(f"{_where(path, _line_of(text, 'positions', table='geodetic'))}: positions must be "
+                         f"\"geodetic\" (latitude, longitude, height) or \"enu\" (metres east, north, up of the "
+                         f"origin), got {positions!r}")
+    if "origin" not in table:
+        if positions == "enu":
+            raise ValueError(f"{path}: [geodetic] positions = \"enu\" needs the origin they are measured from")
+        return None, positions
+    try:
+        return check_geodetic(table["origin"], "origin"), positions
+    except ValueError as exc:
+        raise ValueError(f"{_where(path, _line_of(text, 'origin', table='geodetic'))}: {exc}") from None
+
+
+def _geodetic_sensor(path: Path, text: str, item: dict[str, Any], key: str, i: int) -> tuple[float, ...]:
+    """Pair ``i``'s ``key`` (tx or rx) as latitude, longitude(, height), checked; an error names its own line."""
+    try:
+        return check_geodetic(item[key], key)
+    except ValueError as exc:
+        raise ValueError(f"{_where(path, _line_of(text, key, i, 'pair'))}: pair {i}: {exc}") from None
+
+
+def _from_geodetic(pairs: list[Any], geodetic: tuple[tuple[float, ...] | None, str]) -> tuple[list[Any], Any]:
+    """The pairs in the origin's east-north-up frame (positions given as ``"enu"`` are already) and the origin:
+    2-D ``(east, north)`` where every sensor is given by latitude and longitude alone, else 3-D with heights
+    0 where none is given (:mod:`fgdoppler.geodetic`)."""
+    from fgdoppler.geodetic import GeodeticOrigin
+    from fgdoppler.geometry import BistaticPair
+
+    given, positions = geodetic
+    if positions == "enu":
+        assert given is not None  # _geodetic_table requires the origin with "enu"
+        return pairs, GeodeticOrigin(latitude=given[0], longitude=given[1], height=given[2] if len(given) == 3 else 0.0)
+    sensors = [v for pair in pairs for v in pair]
+    at = given if given is not None else sensors[1]  # pair 0's receiver
+    origin = GeodeticOrigin(latitude=at[0], longitude=at[1], height=at[2] if len(at) == 3 else 0.0)
+    e, n, u = origin.to_local([v[0] for v in sensors], [v[1] for v in sensors],
+                              [v[2] if len(v) == 3 else 0.0 for v in sensors])
+    flat = all(len(v) == 2 for v in sensors)
+    local = [(e[k], n[k]) if flat else (e[k], n[k], u[k]) for k in range(len(sensors))]
+    return [BistaticPair(tx=local[2 * i], rx=local[2 * i + 1]) for i in range(len(pairs))], origin
 
 
 def _error_line(text: str, message: str) -> int | None:
@@ -172,6 +236,8 @@ def geometry_text(geometry: Any) -> str:
     doc: dict[str, object] = {}
     if geometry.name:
         doc["name"] = geometry.name
+    if geometry.geodetic_origin is not None:  # the local positions, exactly as held, and what they are relative to
+        doc["geodetic"] = {"origin": geometry.geodetic_origin.to_list(), "positions": "enu"}
     if not geometry.zone_limits.empty:
         doc["zone"] = geometry.zone_limits.to_dict()
     doc["pair"] = [{"tx": list(p.tx), "rx": list(p.rx),

@@ -128,7 +128,9 @@ def _describe(geometry: Any, spec: str) -> dict[str, Any]:
                          "pairs": [{"tx": list(p.tx), "rx": list(p.rx),
                                     **({"name": geometry.pair_names[i]} if geometry.pair_names else {}),
                                     **({"wavelength": geometry.wavelengths[i]} if geometry.wavelengths else {})}
-                                   for i, p in enumerate(geometry.pairs)]},
+                                   for i, p in enumerate(geometry.pairs)],
+                         **({"geodetic_origin": geometry.geodetic_origin.to_list()}
+                            if geometry.geodetic_origin is not None else {})},
             "zone": geometry.zone.to_dict()}
 
 
@@ -223,6 +225,11 @@ def _run(args: argparse.Namespace) -> int:
         print(f"geometry {spec} ({geom.n_pairs} pair(s)); zone along {z.along[0]:g}..{z.along[1]:g} m, across "
               f"{z.across[0]:g}..{z.across[1]:g} m{height} in the sensors' frame, speed up to {z.speed_max:g} m/s"
               f"{rule}")
+        if geom.geodetic_origin is not None:
+            o = geom.geodetic_origin
+            print(f"positions in metres east, north{' and up' if geom.dim == 3 else ''} of latitude {o.latitude:.6f}, "
+                  f"longitude {o.longitude:.6f}, height {o.height:g} m (WGS84); --out and --json add each state's "
+                  "latitude and longitude")
         if "doppler_hz" in header_names(args.file):
             print("doppler_hz read as the bistatic range rate -wavelength * doppler_hz, with wavelengths "
                   + ", ".join(f"{v:g}" for v in geom.wavelengths) + " m (every result is in m and m/s)")
@@ -351,10 +358,11 @@ def _report_initiation(args: argparse.Namespace, init: Any, window: Any, geom: A
                        where: dict[str, Any]) -> str:
     from fgdoppler.estimators.results import json_dumps
 
-    payload = {**init.to_dict(), **where}
+    columns, geodetic = _geodetic(geom, np.array([init.x_start, init.x_end]))
+    payload = {**init.to_dict(), **where, **geodetic}
     text = json_dumps(payload)
     figure = _plot_landscape(args, init, window, geom, truth) if args.plot else None
-    _write(args, init.csv_text(header=tuple(_csv_header(where))), text, figure)
+    _write(args, init.csv_text(header=tuple(_csv_header(where)), columns=columns), text, figure)
     _print_verdict(init.status, init.reasons)
     _print_hints(init.reasons, geom, args, window.pair)
     if args.json:
@@ -468,11 +476,13 @@ def _run_tracker(args: argparse.Namespace, settings: Any, init: Any, meas: Any, 
         ax = plotting.plot_track(e.times, e.states, model.geometry, covariances=e.covariances, cov_ok=e.cov_ok,
                                  truth=None if truth is None else truth.states, label=f"{name} ({e.kind})")
         figure = plotting.figure_bytes(ax, args.plot.suffix.lower().lstrip("."))
-    _write(args, result.csv_text(header=_csv_header(where)), result.json_text(extra=where), figure)
+    columns, geodetic = _geodetic(model.geometry, e.states)
+    extra = {**where, **geodetic}
+    _write(args, result.csv_text(header=_csv_header(where), columns=columns), result.json_text(extra=extra), figure)
     _print_verdict(result.status, result.reasons)
     _print_hints(result.reasons, model.geometry, args, meas.pair)
     if args.json:
-        emit_json({**result.to_dict(all_estimates=False), **where})
+        emit_json({**result.to_dict(all_estimates=False), **extra})
         return str(result.status)
     print(f"{name}: {len(e)} states ({e.kind}), t = {time_text(e.times[0])}..{time_text(e.times[-1])} s, "
           f"{result.wall_time * 1e3:.0f} ms")
@@ -486,6 +496,15 @@ def _run_tracker(args: argparse.Namespace, settings: Any, init: Any, meas: Any, 
     if args.out is not None:
         print(f"  wrote {args.out} and {args.out.with_suffix('.json')}")
     return str(result.status)
+
+
+def _geodetic(geometry: Geometry, states: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Where the sensors were given as latitude and longitude, each state's latitude, longitude (and height) as
+    the track CSV's columns and as the JSON's ``geodetic`` entry; nothing otherwise."""
+    if geometry.geodetic_origin is None:
+        return {}, {}
+    columns = geometry.geodetic_origin.columns(states)
+    return columns, {"geodetic": {k: v.tolist() for k, v in columns.items()}}
 
 
 def _state_text(x: Any, *, names: bool = True) -> str:
@@ -504,6 +523,9 @@ def _csv_header(where: dict[str, Any]) -> list[str]:
     return [f"geometry: {g['source']} name={g['name'] or '-'} pairs="
             + ";".join(f"tx={p['tx']} rx={p['rx']}" + (f" name={p['name']}" if "name" in p else "")
                        + (f" wavelength={p['wavelength']}" if "wavelength" in p else "") for p in g["pairs"]),
+            *([f"geodetic: x, y, z are metres east, north and up of latitude {g['geodetic_origin'][0]!r}, longitude "
+               f"{g['geodetic_origin'][1]!r}, height {g['geodetic_origin'][2]!r} m (WGS84); latitude, longitude "
+               "(and height) follow the covariance"] if "geodetic_origin" in g else []),
             f"zone: along={z['along']} across={z['across']} "
             + (f"altitude={z['altitude']} " if "altitude" in z else "")
             + f"speed_max={z['speed_max']} "

@@ -57,6 +57,7 @@ informational when they do not), ``covariance`` (indeterminate),
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Literal, get_args
 
@@ -354,8 +355,10 @@ class Initiation(Judged):
         """True when ``P_start`` and ``P_end`` are available."""
         return self.P_start is not None
 
-    def csv_text(self, *, header: tuple[str, ...] = ()) -> str:
-        """The window's first and last states in the track CSV format (:func:`~fgdoppler.estimators.results.states_csv`)."""
+    def csv_text(self, *, header: tuple[str, ...] = (),
+                 columns: Mapping[str, NDArray[np.float64]] | None = None) -> str:
+        """The window's first and last states in the track CSV format, ``columns`` (two values each) after the
+        covariance (:func:`~fgdoppler.estimators.results.states_csv`)."""
         from fgdoppler.estimators.results import states_csv
 
         n = self.x_start.size
@@ -363,7 +366,7 @@ class Initiation(Judged):
         return states_csv(np.array([self.t_start, self.t_end]), np.array([self.x_start, self.x_end]), np.array(P),
                           np.array([self.covariance_ok] * 2),
                           [f"fgdoppler initiation ({self.method}): window start and end, status {self.status}",
-                           *header])
+                           *header], columns)
 
     def in_frame_of(self, frame: Frame) -> Initiation:
         """This initiation in ``frame``'s local coordinates, exactly as computed there where possible.

@@ -22,7 +22,7 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -55,23 +55,26 @@ def _cov_names(n: int) -> list[str]:
 
 
 def states_csv(times: FloatArray, states: FloatArray, covariances: FloatArray, cov_ok: NDArray[np.bool_],
-               comments: Sequence[str] = ()) -> str:
+               comments: Sequence[str] = (), columns: Mapping[str, FloatArray] | None = None) -> str:
     """The track CSV: ``#`` comment lines, the header, a row per time with the covariance's upper triangle.
 
     Columns ``time, x, y, vx, vy, P00, P01, ..., P33`` in 2-D and
     ``time, x, y, z, vx, vy, vz, P00, ..., P55`` in 3-D (``Pij`` the
-    covariance of state entries ``i`` and ``j``, row-major upper triangle).
+    covariance of state entries ``i`` and ``j``, row-major upper triangle),
+    then any of ``columns`` (one value a row; e.g. each state's latitude and
+    longitude where the sensors were given so: :meth:`fgdoppler.geodetic.GeodeticOrigin.columns`).
     """
     n = int(np.shape(states)[1]) if np.ndim(states) == 2 else 4
     iu, names = _upper(n), _cov_names(n)
+    more = dict(columns or {})
     buf = io.StringIO()
     for line in comments:
         buf.write(f"# {line}\n")
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["time", *STATE_NAMES[n], *names])
-    for t, x, P, ok in zip(times, states, covariances, cov_ok, strict=True):
+    w.writerow(["time", *STATE_NAMES[n], *names, *more])
+    for k, (t, x, P, ok) in enumerate(zip(times, states, covariances, cov_ok, strict=True)):
         cov = [repr(float(v)) for v in P[iu]] if ok else [""] * len(names)
-        w.writerow([repr(float(t)), *(repr(float(v)) for v in x), *cov])
+        w.writerow([repr(float(t)), *(repr(float(v)) for v in x), *cov, *(repr(float(c[k])) for c in more.values())])
     return buf.getvalue()
 
 
@@ -338,21 +341,23 @@ class TrackResult(Judged):
             d["offsets"] = self.offsets.to_dict()
         return d
 
-    def csv_text(self, *, header: Sequence[str] = ()) -> str:
+    def csv_text(self, *, header: Sequence[str] = (), columns: Mapping[str, FloatArray] | None = None) -> str:
         """The track CSV (see :meth:`to_csv`) as text."""
         e = self.primary
         return states_csv(e.times, e.states, e.covariances, e.cov_ok,
-                          [f"fgdoppler {self.estimator}: {e.kind} estimates, status {self.status}", *header])
+                          [f"fgdoppler {self.estimator}: {e.kind} estimates, status {self.status}", *header], columns)
 
-    def to_csv(self, path: str | Path, *, header: Sequence[str] = ()) -> None:
+    def to_csv(self, path: str | Path, *, header: Sequence[str] = (),
+               columns: Mapping[str, FloatArray] | None = None) -> None:
         """One row per time: ``time``, the state (``x, y, vx, vy`` or ``x, y, z, vx, vy, vz``) and the
         covariance's upper triangle (empty if indeterminate); see :func:`states_csv`.
 
         The file starts with ``#`` comment lines: the estimator, the estimate's
         kind and the verdict, then each line of ``header`` (the command line
-        records the geometry and the zone there).  Written atomically.
+        records the geometry and the zone there).  ``columns`` follow the
+        covariance (:func:`states_csv`).  Written atomically.
         """
-        atomic_write_text(Path(path), self.csv_text(header=header))
+        atomic_write_text(Path(path), self.csv_text(header=header, columns=columns))
 
     def json_text(self, *, extra: dict[str, Any] | None = None) -> str:
         """:meth:`to_dict` (with ``extra`` keys, e.g. the geometry) as JSON; non-finite numbers become ``null``."""
@@ -381,8 +386,8 @@ class TrackResult(Judged):
             where = f"{path}: row {k + 1}"
             t[k] = parse_number(row[0], where, "time")
             x[k] = [parse_number(v, where, "state") for v in row[1:1 + m]]
-            if row[1 + m]:
-                P[k][iu] = [parse_number(v, where, "covariance") for v in row[1 + m:]]
+            if row[1 + m]:  # columns after the covariance (latitude, longitude, ...) are not read
+                P[k][iu] = [parse_number(v, where, "covariance") for v in row[1 + m:1 + m + iu[0].size]]
                 P[k] = P[k] + np.triu(P[k], 1).T
                 ok[k] = True
         return Estimates(kind=kind, times=t, states=x, covariances=P, cov_ok=ok)

@@ -1,0 +1,149 @@
+"""Sensors given as latitude, longitude and height: the local east-north-up frame, the file, the track's columns."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fgdoppler as fd
+from fgdoppler.cli import main
+from fgdoppler.geodetic import GeodeticOrigin
+from fgdoppler.zone import ZoneLimits
+
+# WGS84, for the independent Earth-centred positions below
+A, F = 6378137.0, 1 / 298.257223563
+E2 = F * (2 - F)
+
+SITES = """\
+name = "fm site"
+[geodetic]
+{origin}
+[[pair]]
+tx = [51.95, 0.25{h_tx}]
+rx = [51.50, -0.12{h_rx}]
+[[pair]]
+tx = [51.95, 0.25{h_tx}]
+rx = [51.52, 0.30]
+"""
+
+
+def _ecef(lat: float, lon: float, h: float) -> np.ndarray:
+    """The Earth-centred position of a geodetic point (the standard closed form)."""
+    p, q = np.radians(lat), np.radians(lon)
+    n = A / np.sqrt(1 - E2 * np.sin(p) ** 2)
+    return np.array([(n + h) * np.cos(p) * np.cos(q), (n + h) * np.cos(p) * np.sin(q), (n * (1 - E2) + h) * np.sin(p)])
+
+
+def _write(tmp_path: Path, origin: str = "", h_tx: str = "", h_rx: str = "") -> Path:
+    path = tmp_path / "sites.toml"
+    path.write_text(SITES.format(origin=origin, h_tx=h_tx, h_rx=h_rx))
+    return path
+
+
+def test_the_local_frame_keeps_every_distance_of_the_earth_centred_one() -> None:
+    """East-north-up is a rigid motion of the Earth-centred frame: the distances between points 1-200 km apart at
+    heights 0-10 km are the Earth-centred ones (closed form above) to 1e-6 m; a point straight above the origin is
+    (0, 0, h), one due north on its meridian has no east component, and the inverse returns the points."""
+    rng = np.random.default_rng(2)
+    origin = GeodeticOrigin(latitude=-33.9, longitude=151.2, height=40.0)
+    lat = origin.latitude + rng.uniform(-1, 1, 12)
+    lon = origin.longitude + rng.uniform(-1.2, 1.2, 12)
+    h = rng.uniform(0, 1e4, 12)
+    e, n, u = origin.to_local(lat, lon, h)
+    local = np.column_stack([e, n, u])
+    ecef = np.array([_ecef(*p) for p in zip(lat, lon, h, strict=True)])
+    for i in range(12):
+        np.testing.assert_allclose(np.linalg.norm(local - local[i], axis=1), np.linalg.norm(ecef - ecef[i], axis=1),
+                                   rtol=0, atol=1e-6)
+    np.testing.assert_allclose(origin.to_local(-33.9, 151.2, 1040.0), (0.0, 0.0, 1000.0), atol=1e-6)
+    east, north, _ = origin.to_local(-33.0, 151.2, 40.0)
+    assert abs(east) < 1e-6 and north > 99e3
+    back = origin.to_geodetic(e, n, u)
+    np.testing.assert_allclose(back[0], lat, atol=1e-10)
+    np.testing.assert_allclose(back[1], lon, atol=1e-10)
+    np.testing.assert_allclose(back[2], h, atol=1e-6)
+
+
+def test_a_file_of_latitudes_and_longitudes_is_read_in_the_local_frame(tmp_path: Path) -> None:
+    """Latitude and longitude alone: a 2-D geometry of east and north about pair 0's receiver (or the origin given);
+    a height anywhere: 3-D, sensors without one at height 0.  Written back, the file holds the local positions
+    and their origin, and reads back exactly; a change of frame or scale drops the origin, a new zone keeps it."""
+    flat = fd.Geometry.from_toml(_write(tmp_path))
+    assert flat.dim == 2 and flat.geodetic_origin == GeodeticOrigin(latitude=51.5, longitude=-0.12)
+    np.testing.assert_array_equal(flat.rx[0], [0.0, 0.0])
+    e, n, _ = flat.geodetic_origin.to_local([51.95, 51.52], [0.25, 0.30])
+    np.testing.assert_allclose(flat.tx[0], [e[0], n[0]], rtol=1e-15)
+    np.testing.assert_allclose(flat.rx[1], [e[1], n[1]], rtol=1e-15)
+    assert flat.extent > 50e3
+    lifted = fd.Geometry.from_toml(_write(tmp_path, origin="origin = [51.6, 0.0, 15.0]", h_tx=", 300.0",
+                                          h_rx=", 20.0"))
+    assert lifted.dim == 3 and lifted.geodetic_origin == GeodeticOrigin(latitude=51.6, longitude=0.0, height=15.0)
+    tx = _ecef(51.95, 0.25, 300.0)
+    for i, sensor in enumerate((_ecef(51.50, -0.12, 20.0), _ecef(51.52, 0.30, 0.0))):  # the two receivers
+        assert np.linalg.norm(lifted.tx[i] - lifted.rx[i]) == pytest.approx(np.linalg.norm(tx - sensor), abs=1e-6)
+    for g in (flat, lifted):
+        g.to_toml(tmp_path / "back.toml")
+        assert "positions = \"enu\"" in (tmp_path / "back.toml").read_text()
+        assert fd.Geometry.from_toml(tmp_path / "back.toml") == g
+        assert g.with_zone(ZoneLimits(speed_max=300.0)).geodetic_origin == g.geodetic_origin
+        for moved in (g.in_frame(g.frame), g.scaled(2.0)):
+            assert moved.geodetic_origin is None
+    assert flat.in_3d().geodetic_origin == flat.geodetic_origin
+    assert flat.mirrored_x(0.0).geodetic_origin is None
+
+
+@pytest.mark.parametrize(
+    ("text", "msg", "line"),
+    [
+        ("[geodetic]\n[[pair]]\ntx = [51.9, 0.2]\nrx = [95.0, 0.1]\n", "pair 0: rx: latitude 95 is outside", 4),
+        ("[geodetic]\n[[pair]]\ntx = [51.9, 400.0]\nrx = [51.5, 0.1]\n", "pair 0: tx: longitude 400 is outside", 3),
+        ("[geodetic]\n[[pair]]\ntx = [51.9, 0.2, 2e6]\nrx = [51.5, 0.1]\n", "height 2e\\+06 m is beyond", 3),
+        ('[geodetic]\n[[pair]]\ntx = ["51.9", 0.2]\nrx = [51.5, 0.1]\n', "tx must be two or three finite numbers", 3),
+        ("[geodetic]\n[[pair]]\ntx = [50000.0, 0.0]\nrx = [0.0, 0.0]\n", "latitude 50000 is outside", 3),
+        ("[geodetic]\norigin = [51.5]\n[[pair]]\ntx = [51.9, 0.2]\nrx = [51.5, 0.1]\n", "origin must be two", 2),
+        ("[geodetic]\npositions = \"utm\"\n[[pair]]\ntx = [51.9, 0.2]\nrx = [51.5, 0.1]\n", "positions must be", 2),
+        ("[geodetic]\npositions = \"enu\"\n[[pair]]\ntx = [5e4, 0.0]\nrx = [0.0, 0.0]\n", "needs the origin", None),
+        ("[geodetic]\norign = [51.5, 0.1]\n[[pair]]\ntx = [51.9, 0.2]\nrx = [51.5, 0.1]\n", "unknown key 'orign'", 2),
+        ("geodetic = 1\n[[pair]]\ntx = [51.9, 0.2]\nrx = [51.5, 0.1]\n", "geodetic must be a table", 1),
+    ],
+)
+def test_a_bad_geodetic_file_is_refused_with_its_line(tmp_path: Path, text: str, msg: str, line: int | None) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=msg) as info:
+        fd.Geometry.from_toml(path)
+    assert str(info.value).startswith(f"{path}:{line}:" if line else f"{path}:"), str(info.value)
+
+
+def test_a_track_of_sensors_given_by_latitude_and_longitude_gives_each_states_latitude_and_longitude(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """simulate writes the local positions and their origin; track's CSV and JSON carry each state's latitude and
+    longitude (the inverse of the local frame, checked against its states), the CSV still reads back as the
+    track, and the summary says what the positions are."""
+    folder = tmp_path / "site"
+    folder.mkdir()
+    _write(folder).rename(folder / "geometry.toml")
+    assert main(["simulate", "--geometry", str(folder / "geometry.toml"), "--start-x", "20000", "--start-y", "15000",
+                 "--velocity", "60", "-90", "--out", str(folder / "sim")]) == 0
+    capsys.readouterr()
+    out = tmp_path / "track.csv"
+    assert main(["track", str(folder / "sim" / "measurements.csv"), "--estimator", "ekf", "--out", str(out)]) == 0
+    assert "positions in metres east, north of latitude 51.500000, longitude -0.120000" in capsys.readouterr().out
+    origin = fd.Geometry.from_toml(folder / "sim" / "geometry.toml").geodetic_origin
+    assert origin == GeodeticOrigin(latitude=51.5, longitude=-0.12)
+    rows = [r for r in out.read_text().splitlines() if not r.startswith("#")]
+    assert rows[0].endswith(",P33,latitude,longitude")
+    table = np.array([[float(v) for v in r.split(",")] for r in rows[1:]])
+    track = fd.TrackResult.read_csv(out, kind="filtered")
+    np.testing.assert_array_equal(track.states, table[:, 1:5])
+    assert track.cov_ok.all()
+    lat, lon, _ = origin.to_geodetic(track.states[:, 0], track.states[:, 1])
+    np.testing.assert_array_equal(table[:, -2], lat)
+    np.testing.assert_array_equal(table[:, -1], lon)
+    saved = json.loads(out.with_suffix(".json").read_text())
+    assert saved["geometry"]["geodetic_origin"] == [51.5, -0.12, 0.0]
+    np.testing.assert_array_equal(saved["geodetic"]["latitude"], lat)
+    assert "height" not in saved["geodetic"]
