@@ -41,6 +41,7 @@ from fgdoppler.estimators import (
 )
 from fgdoppler.estimators.grid import GridSpec, HalfPlane
 from fgdoppler.frames import Frame
+from fgdoppler.geodetic import GeodeticOrigin
 from fgdoppler.geometry import (
     BistaticPair,
     Geometry,
@@ -93,6 +94,7 @@ __all__ = [
     "Event",
     "FixedLagSettings",
     "Frame",
+    "GeodeticOrigin",
     "Geometry",
     "GridSpec",
     "HalfPlane",
