@@ -131,7 +131,8 @@ def test_a_track_of_sensors_given_by_latitude_and_longitude_gives_each_states_la
     capsys.readouterr()
     out = tmp_path / "track.csv"
     assert main(["track", str(folder / "sim" / "measurements.csv"), "--estimator", "ekf", "--out", str(out)]) == 0
-    assert "positions in metres east, north of latitude 51.500000, longitude -0.120000" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "positions in metres east, north of latitude 51.500000, longitude -0.120000" in printed
     origin = fd.Geometry.from_toml(folder / "sim" / "geometry.toml").geodetic_origin
     assert origin == GeodeticOrigin(latitude=51.5, longitude=-0.12)
     rows = [r for r in out.read_text().splitlines() if not r.startswith("#")]
@@ -143,6 +144,7 @@ def test_a_track_of_sensors_given_by_latitude_and_longitude_gives_each_states_la
     lat, lon, _ = origin.to_geodetic(track.states[:, 0], track.states[:, 1])
     np.testing.assert_array_equal(table[:, -2], lat)
     np.testing.assert_array_equal(table[:, -1], lon)
+    assert f"last position: latitude {lat[-1]:.6f}°, longitude {lon[-1]:.6f}° (WGS84)" in printed
     saved = json.loads(out.with_suffix(".json").read_text())
     assert saved["geometry"]["geodetic_origin"] == [51.5, -0.12, 0.0]
     np.testing.assert_array_equal(saved["geodetic"]["latitude"], lat)

@@ -487,6 +487,9 @@ def _run_tracker(args: argparse.Namespace, settings: Any, init: Any, meas: Any, 
     print(f"{name}: {len(e)} states ({e.kind}), t = {time_text(e.times[0])}..{time_text(e.times[-1])} s, "
           f"{result.wall_time * 1e3:.0f} ms")
     print(f"  last state: {_state_text(e.states[-1])}")
+    if columns:
+        print("  last position: " + ", ".join(f"{k} {v[-1]:.6f}°" if k != "height" else f"{k} {v[-1]:.0f} m"
+                                             for k, v in columns.items()) + " (WGS84)")
     _print_events(result.events)
     if truth is not None:
         err = e.states - truth.at(e.times)
