@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from fgdoppler._io import read_text_bounded
-from fgdoppler.geodetic import check_geodetic
+from fgdoppler.geodetic import GeodeticOrigin, check_geodetic
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -197,11 +197,11 @@ def _geodetic_sensor(path: Path, text: str, item: dict[str, Any], key: str, i: i
         raise ValueError(f"{_where(path, _line_of(text, key, i, 'pair'))}: pair {i}: {exc}") from None
 
 
-def _from_geodetic(pairs: list[Any], geodetic: tuple[tuple[float, ...] | None, str]) -> tuple[list[Any], Any]:
+def _from_geodetic(pairs: list[Any], geodetic: tuple[tuple[float, ...] | None, str]
+                   ) -> tuple[list[Any], GeodeticOrigin]:
     """The pairs in the origin's east-north-up frame (positions given as ``"enu"`` are already) and the origin:
     2-D ``(east, north)`` where every sensor is given by latitude and longitude alone, else 3-D with heights
     0 where none is given (:mod:`fgdoppler.geodetic`)."""
-    from fgdoppler.geodetic import GeodeticOrigin
     from fgdoppler.geometry import BistaticPair
 
     given, positions = geodetic
