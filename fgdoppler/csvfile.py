@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import csv
 import re
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -117,7 +117,8 @@ def header_names(path: str | Path, *, comments: bool = False) -> tuple[str, ...]
 
 def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str, ...] = (),
                what: str = "file", comments: bool = False,
-               labels: Mapping[str, Mapping[str, float]] | None = None) -> Table:
+               labels: Mapping[str, Mapping[str, float]] | None = None,
+               layout: Callable[[tuple[str, ...]], tuple[tuple[str, ...], tuple[str, ...]]] | None = None) -> Table:
     """Read a numeric CSV whose columns are those of ``header`` and any of ``optional``, in any order.
 
     The columns are matched by name (case-insensitively, surrounding spaces
@@ -143,6 +144,11 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
         ignored): the geometry's pair names in the ``pair`` column.  A field
         of such a column that is neither a number nor a label is an error
         that lists the labels.
+    layout
+        Where a file may have one of several layouts, the ``(header,
+        optional)`` of the one its header's names say (e.g. a Doppler in Hz
+        where they hold ``doppler_hz``), in place of ``header`` and
+        ``optional``: the file is read once (a pipe cannot be read twice).
 
     Raises
     ------
@@ -157,6 +163,8 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
         raise CSVError(f"{path}: empty {what}: expected the header {','.join(header)}")
     line0, text0 = rows[0]
     names = _names(text0)
+    if layout is not None:
+        header, optional = layout(names)
     problem = _header_problem(names, header, optional)
     if problem:
         expected = ",".join(header) + (f" (and optionally {','.join(optional)})" if optional else "")

@@ -358,19 +358,19 @@ class Measurements:
         range rate :math:`\dot r_T + \dot r_R = -\lambda f_D`, and its
         standard deviation :math:`\sigma_f` is :math:`\lambda \sigma_f` in m/s.
         """
-        from fgdoppler.csvfile import CSVError, header_names, read_table
+        from fgdoppler.csvfile import CSVError, read_table
 
         path = Path(path)
         try:
-            hz = "doppler_hz" in header_names(path)
-            columns = HZ_HEADER if hz else HEADER
-            if hz:
-                _check_wavelengths(path, geometry)
             names = {} if geometry is None else {v: float(i) for i, v in enumerate(geometry.pair_names)}
-            table = read_table(path, header=columns[:3], optional=columns[3:], what="measurement file",
-                               labels={"pair": names} if names else None)
+            table = read_table(path, header=HEADER[:3], optional=HEADER[3:], what="measurement file",
+                               labels={"pair": names} if names else None, layout=_layout)
         except CSVError as exc:
             raise MeasurementError(str(exc)) from None
+        hz = "doppler_hz" in table.header
+        columns = HZ_HEADER if hz else HEADER
+        if hz:
+            _check_wavelengths(path, geometry)
         if table.values.shape[1] == 3:
             if default_sigma is None:
                 raise MeasurementError(f"{path}: no {columns[3]} column and no default sigma given "
@@ -436,6 +436,12 @@ def _checked_rows(table: Table, t: NDArray[np.float64], z: NDArray[np.float64], 
                                    f"(first at line {seen[key]})")
         seen[key] = int(table.lines[j])
     return p
+
+
+def _layout(names: tuple[str, ...]) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The columns of a measurement file whose header holds ``names``: in Hz where they hold ``doppler_hz``."""
+    columns = HZ_HEADER if "doppler_hz" in names else HEADER
+    return columns[:3], columns[3:]
 
 
 def _check_wavelengths(path: Path, geometry: Geometry | None) -> None:

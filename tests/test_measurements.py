@@ -330,3 +330,38 @@ def test_a_file_in_hz_is_refused_without_its_wavelengths_or_with_mixed_columns(
             "hz": fd.Geometry(pairs=fd.paper_geometry("a").pairs, wavelengths=(3.0, 0.25))}[geometry]
     with pytest.raises(MeasurementError, match=msg):
         fd.Measurements.from_csv(_write(tmp_path / "hz.csv", text), geometry=geom)
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="no named pipes here")
+def test_a_file_is_read_once_so_a_pipe_reads_as_the_file(tmp_path: Path) -> None:
+    """A named pipe (``fgdoppler track /dev/stdin``) can be read only once: the m/s and the Hz layouts, chosen from
+    the header, read through one as from the file.  (A reader that opened the pipe twice would wait for a second
+    writer: it runs in a thread that the test unblocks and fails after 30 s.)"""
+    import os
+    import threading
+
+    geom = fd.Geometry(pairs=fd.paper_geometry("a").pairs, wavelengths=(3.0, 0.25))
+    sim = fd.simulate(fd.paper_scenarios()[0], np.random.default_rng(3)).measurements
+    for name, text in (("ms", sim.csv_text()), ("hz", sim.csv_text(wavelengths=geom.wavelengths))):
+        fifo = tmp_path / f"{name}.pipe"
+        os.mkfifo(fifo)
+        out: dict[str, object] = {}
+
+        def read(path: Path = fifo, box: dict[str, object] = out) -> None:
+            try:
+                box["m"] = fd.Measurements.from_csv(path, geometry=geom)
+            except Exception as exc:  # reported below
+                box["error"] = exc
+
+        reader = threading.Thread(target=read, daemon=True)
+        reader.start()
+        fifo.write_text(text)
+        reader.join(timeout=30)
+        if reader.is_alive():
+            fifo.write_text("")  # let a second open return, then fail
+            reader.join(timeout=5)
+            pytest.fail("reading the pipe waited for a second writer: the file was opened twice")
+        assert "error" not in out, out.get("error")
+        direct = fd.Measurements.from_csv(_write(tmp_path / f"{name}.csv", text), geometry=geom)
+        for col in ("time", "pair", "doppler", "sigma"):
+            np.testing.assert_array_equal(getattr(out["m"], col), getattr(direct, col))

@@ -230,7 +230,7 @@ def _run(args: argparse.Namespace) -> int:
             print(f"positions in metres east, north{' and up' if geom.dim == 3 else ''} of latitude {o.latitude:.6f}, "
                   f"longitude {o.longitude:.6f}, height {o.height:g} m (WGS84); --out and --json add each state's "
                   "latitude and longitude")
-        if "doppler_hz" in header_names(args.file):
+        if args.file.is_file() and "doppler_hz" in header_names(args.file):  # a pipe was read once already
             print("doppler_hz read as the bistatic range rate -wavelength * doppler_hz, with wavelengths "
                   + ", ".join(f"{v:g}" for v in geom.wavelengths) + " m (every result is in m and m/s)")
     if args.estimator == "init":
