@@ -149,3 +149,30 @@ def test_a_track_of_sensors_given_by_latitude_and_longitude_gives_each_states_la
     assert saved["geometry"]["geodetic_origin"] == [51.5, -0.12, 0.0]
     np.testing.assert_array_equal(saved["geodetic"]["latitude"], lat)
     assert "height" not in saved["geodetic"]
+
+
+def test_simulate_starts_a_target_at_a_latitude_and_longitude(tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """``--start-lat-lon``: the truth starts east and north of the origin where that latitude and longitude lie on
+    the ellipsoid (below the origin's horizontal plane by d^2 / 2R, 57 m at 27 km; with that drop the inverse
+    gives them back to 1e-9 degrees); refused for a metric geometry or a latitude out of range."""
+    folder = tmp_path / "site"
+    folder.mkdir()
+    _write(folder).rename(folder / "geometry.toml")
+    assert main(["simulate", "--geometry", str(folder / "geometry.toml"), "--start-lat-lon", "51.7", "0.1",
+                 "--out", str(folder / "sim")]) == 0
+    origin = GeodeticOrigin(latitude=51.5, longitude=-0.12)
+    start = fd.Trajectory.from_csv(folder / "sim" / "truth.csv").states[0]
+    east, north, up = origin.to_local(51.7, 0.1, 0.0)
+    np.testing.assert_allclose(start[:2], [east, north], rtol=0, atol=1e-6)
+    lat, lon, _ = origin.to_geodetic(start[0], start[1], up)  # the point on the ellipsoid below the start
+    assert abs(lat - 51.7) < 1e-9 and abs(lon - 0.1) < 1e-9
+    assert up == pytest.approx(-np.hypot(east, north) ** 2 / (2 * 6.371e6), rel=0.02)  # the drop d^2 / 2R
+    capsys.readouterr()
+    assert main(["simulate", "--start-lat-lon", "51.7", "0.1", "--out", str(tmp_path / "x")]) == 2
+    assert "needs a geometry whose sites are given by latitude and longitude" in capsys.readouterr().err
+    assert main(["simulate", "--geometry", str(folder / "geometry.toml"), "--start-lat-lon", "95", "0.1",
+                 "--out", str(tmp_path / "x")]) == 2
+    assert "latitude 95 is outside" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+

@@ -37,6 +37,9 @@ def add_simulate(sub: argparse._SubParsersAction) -> None:
                    help="geometry: the paper's a or b, or a geometry TOML file (default a; --case is the old name)")
     p.add_argument("--start-x", type=float, default=25e3, help="initial x in metres (default 25000)")
     p.add_argument("--start-y", type=float, default=2e3, help="initial y in metres (default 2000)")
+    p.add_argument("--start-lat-lon", type=float, nargs=2, default=None, metavar=("LAT", "LON"),
+                   help="initial position as WGS84 latitude and longitude in degrees instead of --start-x/--start-y "
+                        "(the geometry must give its sites so: a [geodetic] table)")
     p.add_argument("--start-z", type=float, default=None,
                    help="initial height in metres: a 3-D target (the geometry must be 3-D: --altitude or "
                    "sensors with z)")
@@ -61,9 +64,9 @@ def _run(args: argparse.Namespace) -> int:
             geom = replace(geom, wavelengths=values if isinstance(values, tuple) else (values,) * geom.n_pairs)
         except ValueError as exc:
             raise CLIError(f"--wavelength: {exc}") from None
-    start = (args.start_x, args.start_y) if args.start_z is None else (args.start_x, args.start_y, args.start_z)
-    scen = scenario(args, geom, start,
-                    f"{geom.name or 'custom geometry'}, start ({args.start_x / 1e3:g}, {args.start_y / 1e3:g}) km")
+    x, y = _start_xy(args, geom)
+    start = (x, y) if args.start_z is None else (x, y, args.start_z)
+    scen = scenario(args, geom, start, f"{geom.name or 'custom geometry'}, start ({x / 1e3:g}, {y / 1e3:g}) km")
     sim = simulate(scen, np.random.default_rng(args.seed))
     out: Path = args.out
     hz = geom.wavelengths or None  # a receiver's own unit where the geometry gives it
@@ -83,3 +86,22 @@ def _run(args: argparse.Namespace) -> int:
         for f in summary["files"]:
             print(f"  wrote {f}")
     return 0
+
+
+def _start_xy(args: argparse.Namespace, geom: Any) -> tuple[float, float]:
+    """The start's x and y in metres: as given, or east and north of the geometry's origin for a latitude and
+    longitude (on the origin's horizontal plane; ``--start-z`` stays metres up)."""
+    if args.start_lat_lon is None:
+        return float(args.start_x), float(args.start_y)
+    if geom.geodetic_origin is None:
+        raise CLIError("--start-lat-lon needs a geometry whose sites are given by latitude and longitude (a [geodetic] "
+                       "table): this one's positions are metres in a frame of its own")
+    from fgdoppler.geodetic import check_geodetic
+
+    try:
+        lat, lon = check_geodetic(list(args.start_lat_lon), "--start-lat-lon")
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
+    origin = geom.geodetic_origin
+    e, n, _ = origin.to_local(lat, lon, origin.height)
+    return float(e), float(n)
