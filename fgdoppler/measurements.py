@@ -455,9 +455,8 @@ def _check_wavelengths(path: Path, geometry: Geometry | None) -> None:
 
 
 def _from_hz(shift: float, sigma: float, wavelength: float, where: str) -> tuple[float, float]:
-    """A Doppler shift and its sigma (Hz) as the bistatic range rate and its sigma (m/s)."""
-    if not (math.isfinite(shift) and math.isfinite(sigma)):
-        raise MeasurementError(f"{where}: doppler_hz and sigma_hz must be finite, got {shift:g} and {sigma:g}")
+    """A Doppler shift and its sigma (Hz; finite, as the CSV reader returns them) as the bistatic range rate and its
+    sigma (m/s)."""
     if sigma <= 0:
         raise MeasurementError(f"{where}: sigma_hz must be > 0, got {sigma:g}")
     return -wavelength * shift, wavelength * sigma
