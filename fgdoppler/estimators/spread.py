@@ -23,14 +23,33 @@ deterministic constant-velocity model (the process noise of these models
 moves a 30 s track by metres; the particle estimator makes the same
 approximation, :mod:`fgdoppler.estimators.particle`): importance sampling
 from :math:`\mathcal N(\hat{\mathbf x}_0, 4\mathbf P_0)`, resampling, then
-Metropolis moves that let the samples follow the valley.  The reported
-:math:`\mathbf\Sigma_0` encloses both that matrix and the Laplace
-covariance (:func:`_enclosing`).  The state at
-time :math:`t_k` is :math:`\mathbf F(t_k - t_0)\mathbf x_0`, so
+Metropolis moves that let the samples follow the valley.  What the samples
+add is their departure from their own Gaussian model: the sampled cost's
+Gauss–Newton information :math:`\mathbf I_\mathrm{cv}` (:func:`_information`)
+gives :math:`\mathbf C = \mathbf I_\mathrm{cv}^{-1}`, and the excess
+:math:`\mathbf E = \mathrm{encl}(\mathbf C, \mathbf\Sigma_0) - \mathbf C`
+(:func:`_enclosing`: the samples only ever widen) is added to the
+smoother's own Laplace marginals :math:`\mathbf P^\mathrm L_k`, carried
+forward at constant velocity (:func:`_carried`):
 
 .. math::
 
-    \mathbf P_k = \mathbf F(t_k - t_0)\,\mathbf\Sigma_0\,\mathbf F(t_k - t_0)^\top + \mathbf Q(t_k - t_0).
+    \mathbf P_k = \mathbf P^\mathrm L_k + \mathbf F(t_k - t_0)\,\mathbf E\,\mathbf F(t_k - t_0)^\top
+        \succeq \mathbf P^\mathrm L_k.
+
+The Laplace marginals hold what the process noise lets the track do,
+conditioned on the data; the samples, moving at exactly constant velocity,
+do not, and measure only what the non-Gaussian likelihood adds.  Until
+2026-11 the samples' matrix replaced the first state's and the process noise
+was added unconditioned, :math:`\mathbf F\mathbf\Sigma_0\mathbf F^\top + \mathbf Q(t_k - t_0)`:
+over a long recording that understated the first states where the process
+noise has a share (case a 30 km, 90 s: :math:`\mathbf C` is 0.13-0.15 of
+:math:`\mathbf P^\mathrm L_0` in one direction) and overstated the last,
+the whole span's :math:`\mathbf Q` dominating the posterior's thin direction
+(the same recording with a 30 s gap, 20 seeds: the smoother's last errors
+along that direction 0.46 of its standard deviation, and every filter
+``doubtful`` by the ``reference`` finding against it;
+``studies/gap_reference_check.py``).
 
 It runs only where the two-point curvature probe
 (:mod:`fgdoppler.estimators.curvature`) finds the cost 3 standard
@@ -67,7 +86,11 @@ the reported track becomes the posterior mean,
 (the constant-velocity map is linear, so the mean of the state at
 :math:`t_k` is the mean at :math:`t_0` carried forward; the smoother's
 process-noise wiggles are kept), with the samples' covariance about their
-mean carried as above.  Measured (100 runs per scenario, seeds 2026 and 7,
+mean in place of :math:`\mathbf\Sigma_0` above, not enclosed (a lopsided
+posterior is narrower than its Gaussian model on its steep side): where
+:math:`\mathbf E` then narrows a matrix, its whitened eigenvalues against
+:math:`\mathbf P^\mathrm L_k` are kept at or above the samples' own
+narrowing of :math:`\mathbf C` (:func:`_carried`).  Measured (100 runs per scenario, seeds 2026 and 7,
 this check's :math:`w`; ``studies/skewed_mean_check.py``): 0.080-1.005 in
 every run of the 25 km scenarios, 0.003-0.012 in every run of case a 45 km
 and case b 5 km, where the Laplace covariance stands; a run near the limit
@@ -105,7 +128,7 @@ metres, as closely as the process noise does (:math:`q = 10^{-3}` m²/s³: 3 m
 and 0.17 m/s of standard deviation after 30 s): on case a 45 km with
 σ = 0.05 m/s the share was 0.09, the probe, measuring the constant-velocity
 cost against :math:`\mathbf P_0`, found it 11 times off, and the samples,
-carried with :math:`\mathbf Q(t_k - t_0)`, made the last covariance up to
+carried with :math:`\mathbf Q(t_k - t_0)` as they then were, made the last covariance up to
 195 times the EKF's in variance.  Long recordings reach the same point more
 slowly (case a 5 km and case b 45 km: 120 s).
 
@@ -370,6 +393,7 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     x0, P0 = np.asarray(states[0], dtype=float), np.asarray(covariances[0], dtype=float)
     try:
         info = np.linalg.inv(P0)
+        np.linalg.cholesky(covariances)  # the samples' excess is carried on them
     except np.linalg.LinAlgError:
         return None
     post, data = _posterior(measurements, model, t0, huber_k, seed, SAMPLES)
@@ -386,16 +410,22 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     lo, hi, quad, _ = probe_rises(cost, x0, P0, icv)
     ratio = min(lo, hi) / quad
     rng = np.random.default_rng(seed)
+    laplace = np.asarray(covariances, dtype=float)
+    try:  # the samples' own Gaussian model, from which their departure is measured (module docstring)
+        own = np.asarray(np.linalg.inv(icv), dtype=float)
+        np.linalg.cholesky(own)
+    except np.linalg.LinAlgError:
+        own = P0
     if 1.0 / SAMPLING_LIMIT <= ratio <= SAMPLING_LIMIT:
-        return _skewed(post, model, times, states, x0, P0, info, ratio, rng) if mean else None
+        return _skewed(post, model, times, states, laplace, own, info, ratio, rng) if mean else None
     drawn = _sample_about(post, x0, P0, SAMPLES, MOVES, rng)
     if drawn is None:
         return None
     sampled, rate = drawn
-    sigma0 = _enclosing(P0, sampled)
+    carried = _carried(model, laplace, _enclosing(own, sampled) - own, times, 1.0)
     spread = _weighted_cov(post.x, np.full(SAMPLES, 1.0 / SAMPLES))
     pos = slice(0, model.dim)
-    sd_laplace, sd_sampled, sd_reported = (_major_sd(M, pos) for M in (P0, sampled, sigma0))
+    sd_laplace, sd_sampled, sd_reported = (_major_sd(M, pos) for M in (P0, sampled, carried[0]))
     bias = float(np.linalg.norm(post.x[:, pos].mean(axis=0) - x0[pos]))
     trusted = 1.0 / TRUST_LIMIT <= ratio <= TRUST_LIMIT
     warning = "" if trusted else (
@@ -407,20 +437,22 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
         f"(Metropolis acceptance {rate:.2f}); position sigma along the major axis {sd_reported:.0f} m (Laplace "
         f"{sd_laplace:.0f} m, samples {sd_sampled:.0f} m), posterior mean {bias:.0f} m from the estimate, spread "
         f"{_major_sd(spread, pos):.0f} m{warning}"))
-    return PosteriorSpread(states=np.asarray(states, dtype=float), covariances=_carried(model, sigma0, times, t0),
-                           reason=reason)
+    return PosteriorSpread(states=np.asarray(states, dtype=float), covariances=carried, reason=reason)
 
 
-def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: FloatArray, x0: FloatArray,
-            P0: FloatArray, info: FloatArray, ratio: float, rng: np.random.Generator) -> PosteriorSpread | None:
+def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: FloatArray, laplace: FloatArray,
+            own: FloatArray, info: FloatArray, ratio: float, rng: np.random.Generator) -> PosteriorSpread | None:
     """The posterior mean's track and covariance where the mean lies beyond :data:`MEAN_SHIFT_MIN` of the mode.
 
     The mode is the sampled posterior's own (:meth:`~fgdoppler.estimators.particle_posterior._Posterior.mode`, from
-    ``x0``); the reported track is the estimate moved by the mean's shift
+    the first estimate ``x0``); the reported track is the estimate moved by the mean's shift
     from ``x0``.  Importance sampling alone (no moves) decides; only then are the samples
     moved, so a track whose posterior is Gaussian costs one evaluation of
-    :data:`SAMPLES` likelihoods.
+    :data:`SAMPLES` likelihoods.  ``laplace``: the smoother's Laplace covariances; ``own``: the sampled
+    cost's own Gaussian model of the first state, whose difference from the samples' covariance about their
+    mean is added to them (:func:`_carried`, floored at the samples' narrowing of ``own``).
     """
+    x0, P0 = np.asarray(states[0], dtype=float), laplace[0]
     if post.sample_from([(x0, P0)], SAMPLES, 0, rng, tempered=False) is None:
         return None
     # skewness is the mean's distance from the sampled posterior's own mode; the smoother's estimate differs
@@ -432,7 +464,8 @@ def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
     mean0 = post.x.mean(axis=0)
     d = mean0 - x0
     w = float(d @ info @ d)
-    sigma0 = _weighted_cov(post.x, np.full(post.x.shape[0], 1.0 / post.x.shape[0]))
+    spread = _weighted_cov(post.x, np.full(post.x.shape[0], 1.0 / post.x.shape[0]))
+    carried = _carried(model, laplace, spread - own, times, min(1.0, _smallest_whitened(own, spread)))
     t0 = float(times[0])
     shifted = np.asarray(states, dtype=float) + model.motion.propagate(d, np.asarray(times, dtype=float) - t0)
     pos = slice(0, model.dim)
@@ -440,9 +473,9 @@ def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
         f"the posterior is skewed about the most likely track (the cost is near-quadratic 3 standard deviations "
         f"along the major axis, {ratio:.3g} times its quadratic model, but the posterior mean lies {np.sqrt(w):.2f} "
         f"standard deviations (Mahalanobis) from it, {np.linalg.norm(d[pos]):.0f} m in position): the reported track is the posterior mean of "
-        f"{SAMPLES} samples (Metropolis acceptance {rate:.2f}), with their covariance; position sigma along the "
-        f"major axis {_major_sd(sigma0, pos):.0f} m (Laplace {_major_sd(P0, pos):.0f} m)"))
-    return PosteriorSpread(states=shifted, covariances=_carried(model, sigma0, times, t0), reason=reason)
+        f"{SAMPLES} samples (Metropolis acceptance {rate:.2f}), with their covariance's departure from its "
+        f"Gaussian model added to the Laplace covariances; position sigma along the major axis {_major_sd(carried[0], pos):.0f} m (Laplace {_major_sd(P0, pos):.0f} m)"))
+    return PosteriorSpread(states=shifted, covariances=carried, reason=reason)
 
 
 def _major_sd(M: FloatArray, pos: slice) -> float:
@@ -493,14 +526,50 @@ def _noise_share(model: TrackingModel, covariances: FloatArray, dt: FloatArray) 
     return float(np.max(np.linalg.eigvalsh(0.5 * (noise + np.swapaxes(noise, -1, -2)))))
 
 
-def _carried(model: TrackingModel, sigma0: FloatArray, times: FloatArray, t0: float) -> FloatArray:
-    r""":math:`\mathbf F(t_k - t_0)\,\mathbf\Sigma_0\,\mathbf F(t_k - t_0)^\top + \mathbf Q(t_k - t_0)` at every time, in one batch: ``(n, d, d)``.
+def _carried(model: TrackingModel, laplace: FloatArray, excess: FloatArray, times: FloatArray,
+             floor: float) -> FloatArray:
+    r"""The smoother's Laplace marginals with the first state's sampled excess carried forward: ``(n, d, d)``.
 
-    :math:`\mathbf Q(0) = 0`, so a time equal to ``t0`` needs no case.
+    .. math::
+
+        \mathbf P_k = \mathbf P^\mathrm L_k + \mathbf F(t_k - t_0)\,\mathbf E\,\mathbf F(t_k - t_0)^\top
+
+    (module docstring), with ``laplace`` the stack :math:`\mathbf P^\mathrm L_k`, ``excess``
+    :math:`\mathbf E` and ``times[0]`` the time :math:`t_0`.  The constant-velocity map stands in for the
+    smoother's regression of :math:`\mathbf x_k` on :math:`\mathbf x_0`, which the marginals do not hold;
+    where an :math:`\mathbf E` that is not positive semi-definite makes a matrix narrower than
+    ``floor`` :math:`\times\,\mathbf P^\mathrm L_k` in some direction, its whitened eigenvalues against
+    :math:`\mathbf P^\mathrm L_k` are raised to ``floor`` (at most 1): every matrix is positive
+    definite, and none is narrowed by more than the samples narrowed their own Gaussian model.  A positive
+    semi-definite :math:`\mathbf E` with ``floor`` 1 raises nothing.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If a Laplace covariance is not positive definite.
     """
-    dt = np.asarray(times, dtype=float) - t0
+    dt = np.asarray(times, dtype=float) - float(times[0])
     F = model.motion.F(dt)
-    return np.asarray(F @ sigma0 @ np.swapaxes(F, -1, -2) + model.motion.Q(dt), dtype=float)
+    carried = laplace + F @ excess @ np.swapaxes(F, -1, -2)
+    Li = np.linalg.inv(np.linalg.cholesky(laplace))
+    lam, V = np.linalg.eigh(_symmetric(Li @ carried @ np.swapaxes(Li, -1, -2)))
+    low = np.any(lam < floor, axis=-1)
+    if np.any(low):
+        L = np.linalg.inv(Li[low])
+        raised = (V[low] * np.maximum(lam[low], floor)[..., None, :]) @ np.swapaxes(V[low], -1, -2)
+        carried[low] = L @ raised @ np.swapaxes(L, -1, -2)
+    return np.asarray(carried, dtype=float)
+
+
+def _smallest_whitened(P: FloatArray, S: FloatArray) -> float:
+    """The smallest eigenvalue of ``S`` whitened by ``P`` (``P`` positive definite): how far ``S`` narrows it."""
+    Li = np.linalg.inv(np.linalg.cholesky(P))
+    return float(np.linalg.eigvalsh(_symmetric(Li @ S @ Li.T))[0])
+
+
+def _symmetric(M: FloatArray) -> FloatArray:
+    """The symmetric part of a matrix or a stack of them."""
+    return np.asarray(0.5 * (M + np.swapaxes(M, -1, -2)), dtype=float)
 
 
 def _posterior(measurements: Measurements, model: TrackingModel, t0: float, huber_k: float | None, seed: int,
@@ -734,7 +803,8 @@ def _widening(measurements: Measurements, model: TrackingModel, t0: float, t: fl
         drawn = _sample_about(post, x0, 0.5 * (P0 + P0.T), FILTER_SAMPLES, FILTER_MOVES, rng)
         if drawn is None:
             return None
-        return _whitened_widening(P, _carried(model, drawn[0], np.array([t]), t0)[0], FILTER_WIDEN_MIN)
+        F = model.motion.F(t - t0)  # a filter has no smoothed marginals: the process noise unconditioned
+        return _whitened_widening(P, F @ drawn[0] @ F.T + model.motion.Q(t - t0), FILTER_WIDEN_MIN)
     except np.linalg.LinAlgError:
         return None
 

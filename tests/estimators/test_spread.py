@@ -18,6 +18,7 @@ from fgdoppler.estimators.spread import (
     DETERMINISTIC_MIN,
     FILTER_NOISE_MAX,
     FILTER_WIDEN_MIN,
+    _carried,
     _enclosing,
     _information,
     _noise_share,
@@ -70,6 +71,77 @@ def test_a_stack_is_widened_as_the_generalised_eigenproblem_says_and_a_bad_matri
     assert not grew_bad[11] and np.array_equal(wide_bad[11], bad[11])
     keep = np.arange(n) != 11
     assert np.array_equal(grew_bad[keep], grew[keep]) and np.array_equal(wide_bad[keep], wide[keep])
+
+
+def test_the_sampled_excess_is_carried_on_the_smoothers_marginals() -> None:
+    r""":math:`\mathbf P_k = \mathbf P^\mathrm L_k + \mathbf F_k\mathbf E\mathbf F_k^\top`, floored.
+
+    A positive semi-definite excess (:math:`\mathbf E = \mathbf B\mathbf B^\top`) with floor 1: the
+    formula exactly, no process noise added, every matrix at least its Laplace one.  An indefinite one
+    (:math:`\mathbf E = -\tfrac12\mathbf P^\mathrm L_0 + \mathbf u\mathbf u^\top`) against Laplace
+    marginals whose later matrices are narrower than the carried first one, so that the formula alone is
+    indefinite there, with floor 0.5: no whitened eigenvalue against :math:`\mathbf P^\mathrm L_k` below
+    0.5, and where the formula stays above it, it is returned as it is (the first matrix among them).
+    """
+    model = fd.TrackingModel.of(fd.paper_geometry("a"))
+    rng = np.random.default_rng(5)
+    times = np.array([3.0, 3.5, 10.0, 33.0])
+    F = model.motion.F(times - times[0])
+    A = rng.standard_normal((4, 4))
+    P0 = A @ A.T + np.eye(4)
+    laplace = F @ P0 @ np.swapaxes(F, -1, -2) + model.motion.Q(times - times[0])  # a filter-like stack
+    B = rng.standard_normal((4, 2))
+    out = _carried(model, laplace, B @ B.T, times, 1.0)
+    np.testing.assert_allclose(out, laplace + F @ (B @ B.T) @ np.swapaxes(F, -1, -2), rtol=1e-12, atol=1e-12)
+    for P, L in zip(out, laplace, strict=True):
+        assert np.linalg.eigvalsh(P - L).min() > -1e-9 * np.abs(P).max()
+    u = rng.standard_normal(4)
+    excess = -0.5 * P0 + np.outer(u, u)
+    squeezed = laplace.copy()
+    squeezed[2:] = 0.3 * laplace[2:]
+    out = _carried(model, squeezed, excess, times, 0.5)
+    formula = squeezed + F @ excess @ np.swapaxes(F, -1, -2)
+    assert min(np.linalg.eigvalsh(formula[k]).min() for k in (2, 3)) < 0  # what the floor is for
+    kept = 0
+    for k in range(4):
+        Li = np.linalg.inv(np.linalg.cholesky(squeezed[k]))
+        assert np.linalg.eigvalsh(Li @ out[k] @ Li.T).min() > 0.5 - 1e-9
+        if np.linalg.eigvalsh(Li @ formula[k] @ Li.T).min() >= 0.5:
+            kept += 1
+            np.testing.assert_allclose(out[k], formula[k], rtol=1e-12, atol=1e-12 * np.abs(out[k]).max())
+    assert kept >= 1
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_after_a_gap_the_smoothers_sampled_covariance_does_not_call_the_filters_doubtful(seed: int) -> None:
+    """Case a 30 km, 90 s, both pairs silent for t = 30-60 s (``studies/gap_reference_check.py``).
+
+    The posterior is skewed and the smoother reports its mean, with covariances from constant-velocity
+    samples.  Those samples do not hold the process noise's freedom, which over 90 s is most of the
+    Laplace covariance in one direction (the samples' own Gaussian model is 0.15 of it there): the
+    samples' matrix reported as the first state's was 0.21-0.23 of the Laplace one in some direction,
+    and the last had the whole span's process noise Q(90 s) added unconditioned, 2.1-2.6 times the
+    EKF's standard deviation along vy in 19 of 20 recordings, so that every filter was ``doubtful`` by
+    the ``reference`` finding (these two seeds included) while the EKF's errors were as its
+    covariance said.  Now only the samples' departure from their own Gaussian model is added to the
+    Laplace marginals: a modest change where the cost is near-quadratic (probe ratio 1.55-1.61; whitened
+    eigenvalues measured 0.94-1.58) and no filter is doubtful.
+    """
+    scen = fd.Scenario(geometry=fd.paper_geometry("a"), x0=(30e3, 2e3, 10.0, -100.0), duration=90.0, dt=0.5)
+    m = fd.simulate(scen, np.random.default_rng(seed)).measurements
+    m = m.subset(~((m.time >= 30.0) & (m.time < 60.0)))
+    init = fd.initiate(m.initiation_window(10, 4.5), scen.geometry)
+    smoother = fd.run_estimator("smoother", m, scen.geometry, init)
+    assert any(r.code == "nonlinear" and "posterior mean" in r.message for r in smoother.reasons)
+    laplace = fd.run_estimator("smoother", m, scen.geometry, init, fd.SmootherSettings(sampled_covariance=False),
+                               verify=False).primary
+    for P, L in zip(smoother.primary.covariances, laplace.covariances, strict=True):
+        Li = np.linalg.inv(np.linalg.cholesky(L))
+        lam = np.linalg.eigvalsh(Li @ P @ Li.T)
+        assert 0.8 < lam.min() and lam.max() < 2.0, lam
+    for name in ("ekf", "isam2", "fixed-lag"):
+        run = fd.run_estimator(name, m, scen.geometry, init, reference=smoother)
+        assert run.status == "ok", (name, run.message)
 
 
 def _run(s: int, r: int, seed: int = 2026) -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation]:
@@ -148,11 +220,10 @@ def test_a_curved_valley_widens_the_covariance_and_the_truth_moves_inside_it() -
         return float(v[e.times >= 10].mean())
 
     assert nees(after.primary) < nees(before.primary) / 4
-    # encloses the Laplace covariance: exactly at the first state, and at later times up to the
-    # deterministic-CV propagation that replaces the smoother's process-noise marginals (q = 1e-3)
-    for k, (P, S) in enumerate(zip(before.primary.covariances, after.primary.covariances, strict=True)):
+    # encloses the Laplace covariance at every time: the samples' excess is carried on its marginals
+    for P, S in zip(before.primary.covariances, after.primary.covariances, strict=True):
         Li = np.linalg.inv(np.linalg.cholesky(P))
-        assert np.linalg.eigvalsh(Li @ S @ Li.T).min() > (1 - 1e-9 if k == 0 else 0.99)  # measured 0.995
+        assert np.linalg.eigvalsh(Li @ S @ Li.T).min() > 1 - 1e-9
 
 
 def _truth_nees(sim: fd.Simulation, e: fd.Estimates, after: float = 10.0) -> float:
