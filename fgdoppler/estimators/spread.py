@@ -410,12 +410,7 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     lo, hi, quad, _ = probe_rises(cost, x0, P0, icv)
     ratio = min(lo, hi) / quad
     rng = np.random.default_rng(seed)
-    laplace = np.asarray(covariances, dtype=float)
-    try:  # the samples' own Gaussian model, from which their departure is measured (module docstring)
-        own = np.asarray(np.linalg.inv(icv), dtype=float)
-        np.linalg.cholesky(own)
-    except np.linalg.LinAlgError:
-        own = P0
+    laplace, own = np.asarray(covariances, dtype=float), _own_model(icv, P0)
     if 1.0 / SAMPLING_LIMIT <= ratio <= SAMPLING_LIMIT:
         return _skewed(post, model, times, states, laplace, own, info, ratio, rng) if mean else None
     drawn = _sample_about(post, x0, P0, SAMPLES, MOVES, rng)
@@ -476,6 +471,20 @@ def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
         f"{SAMPLES} samples (Metropolis acceptance {rate:.2f}), with their covariance's departure from its "
         f"Gaussian model added to the Laplace covariances; position sigma along the major axis {_major_sd(carried[0], pos):.0f} m (Laplace {_major_sd(P0, pos):.0f} m)"))
     return PosteriorSpread(states=shifted, covariances=carried, reason=reason)
+
+
+def _own_model(icv: FloatArray, fallback: FloatArray) -> FloatArray:
+    r"""The sampled cost's own Gaussian model of the first state, :math:`\mathbf C = \mathbf I_\mathrm{cv}^{-1}`.
+
+    The samples' departure from it is what they add to the smoother's marginals (module docstring);
+    ``fallback`` (the smoother's first covariance) where :math:`\mathbf I_\mathrm{cv}` is not positive definite.
+    """
+    try:
+        own = np.asarray(np.linalg.inv(icv), dtype=float)
+        np.linalg.cholesky(own)
+    except np.linalg.LinAlgError:
+        return fallback
+    return own
 
 
 def _major_sd(M: FloatArray, pos: slice) -> float:
