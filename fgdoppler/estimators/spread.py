@@ -469,7 +469,8 @@ def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
         f"along the major axis, {ratio:.3g} times its quadratic model, but the posterior mean lies {np.sqrt(w):.2f} "
         f"standard deviations (Mahalanobis) from it, {np.linalg.norm(d[pos]):.0f} m in position): the reported track is the posterior mean of "
         f"{SAMPLES} samples (Metropolis acceptance {rate:.2f}), with their covariance's departure from its "
-        f"Gaussian model added to the Laplace covariances; position sigma along the major axis {_major_sd(carried[0], pos):.0f} m (Laplace {_major_sd(P0, pos):.0f} m)"))
+        f"Gaussian model added to the Laplace covariances; position sigma along the major axis "
+        f"{_major_sd(carried[0], pos):.0f} m (Laplace {_major_sd(P0, pos):.0f} m)"))
     return PosteriorSpread(states=shifted, covariances=carried, reason=reason)
 
 
@@ -532,7 +533,7 @@ def _noise_share(model: TrackingModel, covariances: FloatArray, dt: FloatArray) 
     """
     Li = np.linalg.inv(np.linalg.cholesky(covariances))
     noise = Li @ model.motion.Q(dt) @ np.swapaxes(Li, -1, -2)
-    return float(np.max(np.linalg.eigvalsh(0.5 * (noise + np.swapaxes(noise, -1, -2)))))
+    return float(np.max(np.linalg.eigvalsh(_symmetric(noise))))
 
 
 def _carried(model: TrackingModel, laplace: FloatArray, excess: FloatArray, times: FloatArray,
@@ -840,7 +841,7 @@ def _whitened_apply(P: FloatArray, widening: FloatArray) -> FloatArray:
     """
     L = np.linalg.cholesky(P)
     out = L @ widening @ np.swapaxes(L, -1, -2)
-    return np.asarray(0.5 * (out + np.swapaxes(out, -1, -2)), dtype=float)
+    return _symmetric(out)
 
 
 def _widened_stack(P: FloatArray, S: FloatArray, min_ratio: float) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -908,7 +909,7 @@ def _whitened_widenings(P: FloatArray, S: FloatArray, min_ratio: float) -> tuple
     """
     Li = np.linalg.inv(np.linalg.cholesky(P))
     M = Li @ S @ np.swapaxes(Li, -1, -2)
-    lam, V = np.linalg.eigh(0.5 * (M + np.swapaxes(M, -1, -2)))
+    lam, V = np.linalg.eigh(_symmetric(M))
     grow = np.isfinite(lam) & (lam > min_ratio)
     widening = (V * np.where(grow, lam, 1.0)[..., None, :]) @ np.swapaxes(V, -1, -2)
     return np.asarray(widening, dtype=float), np.any(grow, axis=-1)
