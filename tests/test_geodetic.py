@@ -176,3 +176,39 @@ def test_simulate_starts_a_target_at_a_latitude_and_longitude(tmp_path: Path,
     assert "latitude 95 is outside" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
 
+
+
+def test_montecarlo_starts_targets_at_latitudes_and_longitudes(tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """``montecarlo --start-lat-lon``: one scenario per latitude-longitude pair, each the scenario of
+    ``--start-x/--start-y`` at that point's metres east and north of the origin (the same runs, to the bit: a
+    scenario's random streams follow its position, so each point is compared where it comes first); refused with
+    a metric geometry, an odd count or beside ``--start-x``."""
+    site = _write(tmp_path)
+    origin = GeodeticOrigin(latitude=51.5, longitude=-0.12)
+    points = [(51.7, 0.1), (51.62, -0.05)]
+    common = ["montecarlo", "--geometry", str(site), "--velocity", "-60", "40", "--runs", "2", "--workers", "1",
+              "--estimators", "lm", "ekf", "--json"]
+
+    def rows(args: list[str]) -> tuple[list[str], list[dict]]:
+        assert main([*common, *args, "--out", str(tmp_path / "mc")]) == 0
+        out = json.loads(capsys.readouterr().out)
+        first = [{k: v for k, v in r.items() if k != "scenario" and "time" not in k}
+                 for r in out["rows"] if r["scenario"] == out["scenarios"][0]]
+        return out["scenarios"], first
+
+    names, _ = rows(["--start-lat-lon", *(str(v) for p in points for v in p)])
+    assert names == [f"{site}, start latitude {lat:g}, longitude {lon:g}" for lat, lon in points]
+    for lat, lon in points:
+        east, north, _ = origin.to_local(lat, lon, 0.0)
+        by_lat_lon = rows(["--start-lat-lon", str(lat), str(lon)])[1]
+        assert by_lat_lon == rows(["--start-x", repr(float(east)), "--start-y", repr(float(north))])[1]
+    for bad, message in [(["--start-lat-lon", "51.7", "0.1", "51.6"], "takes a latitude and a longitude for each"),
+                         (["--start-lat-lon", "51.7", "0.1", "--start-x", "20000"], "give one or the other"),
+                         (["--start-lat-lon", "95", "0.1"], "latitude 95 is outside")]:
+        assert main([*common, *bad, "--out", str(tmp_path / "x")]) == 2
+        assert message in capsys.readouterr().err
+    assert main(["montecarlo", "--case", "a", "--start-lat-lon", "51.7", "0.1", "--runs", "1", "--out",
+                 str(tmp_path / "x")]) == 2
+    assert "needs a geometry whose sites are given by latitude and longitude" in capsys.readouterr().err
+    assert not (tmp_path / "x.npz").exists()

@@ -201,6 +201,23 @@ def per_pair(values: list[float], n_pairs: int, option: str, where: str = "") ->
     return values[0] if len(values) == 1 else tuple(values)
 
 
+def east_north_of(geometry: Any, lat: float, lon: float, option: str) -> tuple[float, float]:
+    """A start given as WGS84 latitude and longitude (degrees) as metres east and north of the geometry's origin,
+    on the origin's horizontal plane (a CLIError for a metric geometry or a value out of range)."""
+    if geometry.geodetic_origin is None:
+        raise CLIError(f"{option} needs a geometry whose sites are given by latitude and longitude (a [geodetic] "
+                       "table): this one's positions are metres in a frame of its own")
+    from fgdoppler.geodetic import check_geodetic
+
+    try:
+        lat, lon = check_geodetic([lat, lon], option)
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
+    origin = geometry.geodetic_origin
+    east, north, _ = origin.to_local(lat, lon, origin.height)
+    return float(east), float(north)
+
+
 def offset_sigma_error(exc: ValueError) -> CLIError:
     """A tracker settings' refusal of ``bias_sigma`` or ``clock_sigma``, in the command line's words."""
     text = str(exc).replace("(huber_k=None)", "(no --huber)")

@@ -13,6 +13,7 @@ from fgdoppler.cli.common import (
     add_huber_option,
     add_scenario_options,
     add_zone_options,
+    east_north_of,
     emit_json,
     executor,
     geometry_with_zone,
@@ -33,13 +34,17 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
         help="Monte Carlo RMSE / NEES study of the paper's scenarios or your own",
         description="Simulate scenarios --runs times each and run every estimator; writes OUT.npz and "
         "OUT.json (reloadable) and prints time-averaged RMSE.  By default the paper's six scenarios; with "
-        "--geometry, targets starting at each --start-x on that geometry, with the scenario options.",
+        "--geometry, targets starting at each --start-x (or --start-lat-lon) on that geometry, with the scenario "
+        "options.",
     )
     p.add_argument("--case", choices=("a", "b", "all"), default="all", help="paper geometry (default all)")
     p.add_argument("--geometry", default=None, help="a geometry TOML file (or a, b) instead of --case")
     p.add_argument("--start-x", type=float, nargs="+", default=None, metavar="M",
                    help="start x positions in m (default 5000 25000 45000)")
-    p.add_argument("--start-y", type=float, default=2e3, help="start y in m (default 2000)")
+    p.add_argument("--start-y", type=float, default=None, help="start y in m (default 2000)")
+    p.add_argument("--start-lat-lon", type=float, nargs="+", default=None, metavar="DEG",
+                   help="start positions as WGS84 latitude and longitude in degrees, LAT LON for each, instead of "
+                        "--start-x/--start-y (the geometry must give its sites so: a [geodetic] table)")
     p.add_argument("--start-z", type=float, default=None,
                    help="start height in m: 3-D targets (the geometry must be 3-D: --altitude or sensors with z)")
     p.add_argument("--q", type=float, default=None, help="estimators' process noise PSD in m^2/s^3 (default 1e-3)")
@@ -69,6 +74,27 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=_run)
 
 
+def _starts(args: argparse.Namespace, geometry: Any,
+            paper_x: tuple[float, ...]) -> list[tuple[float, float, str]]:
+    """Each start's x and y in metres and how a scenario's name gives it: ``--start-x`` with ``--start-y``, or
+    ``--start-lat-lon`` (metres east and north of the geometry's origin), or the paper's starts."""
+    if args.start_lat_lon is None:
+        y = 2e3 if args.start_y is None else args.start_y
+        y_note = "" if y == 2e3 else f", y {y / 1e3:g} km"
+        return [(x, y, f"{x / 1e3:g} km{y_note}") for x in (tuple(args.start_x) if args.start_x else paper_x)]
+    if args.start_x is not None or args.start_y is not None:
+        raise CLIError("--start-lat-lon gives the starts instead of --start-x and --start-y: give one or the other")
+    values = args.start_lat_lon
+    if len(values) % 2:
+        raise CLIError(f"--start-lat-lon takes a latitude and a longitude for each start, got {len(values)} "
+                       "numbers")
+    out = []
+    for lat, lon in zip(values[::2], values[1::2], strict=True):
+        east, north = east_north_of(geometry, lat, lon, "--start-lat-lon")
+        out.append((east, north, f"latitude {lat:g}, longitude {lon:g}"))
+    return out
+
+
 def _run(args: argparse.Namespace) -> int:
     from fgdoppler.analysis.montecarlo import MonteCarloSpec, run_monte_carlo
     from fgdoppler.estimators.initiation import InitiationSettings
@@ -79,16 +105,14 @@ def _run(args: argparse.Namespace) -> int:
     if args.runs < 1 or args.workers < 1:
         raise CLIError(f"--runs and --workers must be >= 1, got {args.runs} and {args.workers}")
     specs = [args.geometry] if args.geometry else (["a", "b"] if args.case == "all" else [args.case])
-    starts = tuple(args.start_x) if args.start_x else PAPER_START_X
     scen = []
     for g in specs:
         geom = geometry_with_zone(g, args)
         label = f"case {geom.name}" if geom.name in ("a", "b") and not args.geometry else str(g)
-        y_note = "" if args.start_y == 2e3 else f", y {args.start_y / 1e3:g} km"
         z = () if args.start_z is None else (args.start_z,)
         z_note = "" if args.start_z is None else f", altitude {args.start_z / 1e3:g} km"
-        scen += [scenario(args, geom, (x, args.start_y, *z), f"{label}, start {x / 1e3:g} km{y_note}{z_note}")
-                 for x in starts]
+        scen += [scenario(args, geom, (x, y, *z), f"{label}, start {where}{z_note}")
+                 for x, y, where in _starts(args, geom, PAPER_START_X)]
     from fgdoppler.estimators.registry import ESTIMATORS
 
     k = huber(args)

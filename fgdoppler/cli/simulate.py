@@ -14,6 +14,7 @@ from fgdoppler.cli.common import (
     CLIError,
     add_scenario_options,
     add_zone_options,
+    east_north_of,
     emit_json,
     geometry_with_zone,
     per_pair,
@@ -93,15 +94,5 @@ def _start_xy(args: argparse.Namespace, geom: Any) -> tuple[float, float]:
     longitude (on the origin's horizontal plane; ``--start-z`` stays metres up)."""
     if args.start_lat_lon is None:
         return float(args.start_x), float(args.start_y)
-    if geom.geodetic_origin is None:
-        raise CLIError("--start-lat-lon needs a geometry whose sites are given by latitude and longitude (a [geodetic] "
-                       "table): this one's positions are metres in a frame of its own")
-    from fgdoppler.geodetic import check_geodetic
-
-    try:
-        lat, lon = check_geodetic(list(args.start_lat_lon), "--start-lat-lon")
-    except ValueError as exc:
-        raise CLIError(str(exc)) from None
-    origin = geom.geodetic_origin
-    e, n, _ = origin.to_local(lat, lon, origin.height)
-    return float(e), float(n)
+    lat, lon = args.start_lat_lon
+    return east_north_of(geom, lat, lon, "--start-lat-lon")
