@@ -29,6 +29,12 @@ def test_reproduce_quick_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtur
         assert name in report, name
     for section in ("Table 2", "Figs. 10–11", "Lag sweep", "NEES", "Observability report"):
         assert section in report
+    # one run settles no Monte Carlo claim, and the report, the JSON and the printed summary say so
+    n_mc = sum(k.split(":")[0] in ("Fig. 10", "Fig. 11", "Section 5", "smoother") for k in claims)
+    note = json.loads((out / "claims.json").read_text())["note"]
+    assert note.startswith(f"With 1 run per scenario, the last {n_mc} claims") and note in report
+    assert list(claims)[-n_mc:] == [k for k in claims if k.split(":")[0] in ("Fig. 10", "Fig. 11", "Section 5",
+                                                                             "smoother")]
     # the lag sweep takes a fifth of the runs, at least 4, but never more than the study was given
     assert json.loads((out / "lag_sweep.json").read_text())["runs"] == 1
     assert "## Lag sweep (case b, start 5 km, 1 run)" in report
@@ -53,3 +59,12 @@ def test_altitude_section_of_the_report(tmp_path: Path, monkeypatch: pytest.Monk
     assert sum(row.startswith("| case b, start 5 km |") for row in text.splitlines()) == 2  # 0 and 3 km
     assert json.loads((tmp_path / "altitude.json").read_text())["runs"] == 1
     assert altitude_section(tmp_path, ReproduceSettings(runs=2, altitude_runs=0)) == ([], None)
+
+
+def test_a_reproduction_with_the_papers_runs_carries_no_few_runs_note() -> None:
+    from fgdoppler.analysis.reproduce import ReproduceSettings, _few_runs_note
+
+    full = ReproduceSettings().runs
+    assert full == 100  # the paper's
+    assert _few_runs_note(full, 9) is None and _few_runs_note(full + 1, 9) is None
+    assert "the last 9 claims" in (_few_runs_note(full - 1, 9) or "")

@@ -60,4 +60,6 @@ def _run(args: argparse.Namespace) -> int:
         print(f"{n_ok} of {len(claims['claims'])} claims reproduced:")
         for c, ok in claims["claims"].items():
             print(f"  [{'yes' if ok else 'NO '}] {c}")
+        if "note" in claims:
+            print(claims["note"])
     return 0
