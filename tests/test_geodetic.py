@@ -212,3 +212,23 @@ def test_montecarlo_starts_targets_at_latitudes_and_longitudes(tmp_path: Path,
                  str(tmp_path / "x")]) == 2
     assert "needs a geometry whose sites are given by latitude and longitude" in capsys.readouterr().err
     assert not (tmp_path / "x.npz").exists()
+
+
+def test_observability_reports_on_a_target_at_a_latitude_and_longitude(tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """``observability --report-lat-lon``: the report of ``--report X --offset Y`` at that point's metres east and
+    north of the origin, to the bit; refused with a metric geometry and beside ``--report``."""
+    site = _write(tmp_path)
+    east, north, _ = GeodeticOrigin(latitude=51.5, longitude=-0.12).to_local(51.7, 0.1, 0.0)
+    common = ["observability", "--geometry", str(site), "--velocity", "-60", "40", "--json"]
+    assert main([*common, "--report-lat-lon", "51.7", "0.1"]) == 0
+    by_lat_lon = json.loads(capsys.readouterr().out)
+    assert by_lat_lon["scenario"] == f"{site}, start latitude 51.7, longitude 0.1"
+    assert main([*common, "--report", repr(float(east)), "--offset", repr(float(north))]) == 0
+    metric = json.loads(capsys.readouterr().out)
+    assert {k: v for k, v in by_lat_lon.items() if k != "scenario"} == {k: v for k, v in metric.items()
+                                                                         if k != "scenario"}
+    assert main(["observability", "--report-lat-lon", "51.7", "0.1"]) == 2
+    assert "needs a geometry whose sites are given by latitude and longitude" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # argparse: the modes exclude each other
+        main([*common, "--report-lat-lon", "51.7", "0.1", "--report", "20000"])

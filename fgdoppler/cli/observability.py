@@ -9,7 +9,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fgdoppler.cli.common import CLIError, add_scenario_options, emit_json, progress_bar, scenario
+from fgdoppler.cli.common import (
+    CLIError,
+    add_scenario_options,
+    east_north_of,
+    emit_json,
+    progress_bar,
+    scenario,
+)
 
 if TYPE_CHECKING:
     from fgdoppler.analysis.observability import SamplingPattern
@@ -54,6 +61,9 @@ def add_observability(sub: argparse._SubParsersAction) -> None:
     mode.add_argument("--report", type=float, default=None, metavar="START_X",
                       help="marginal-covariance report of a target starting at (START_X, --offset) with the "
                       "scenario options; --process-noise Q also puts Q in the graph (default 0: deterministic CV)")
+    mode.add_argument("--report-lat-lon", type=float, nargs=2, default=None, metavar=("LAT", "LON"),
+                      help="--report for a target starting at a WGS84 latitude and longitude in degrees instead of "
+                           "(START_X, --offset) (the geometry must give its sites so: a [geodetic] table)")
     p.add_argument("--start-z", type=float, default=None, metavar="M",
                    help="--report only: start height of a 3-D target (the geometry must be 3-D)")
     add_scenario_options(p)
@@ -82,20 +92,21 @@ def _run(args: argparse.Namespace) -> int:
     xs = _grid(args.x, None)
     hs = _grid(args.headings, ob.DEFAULT_HEADINGS_DEG)
     assert hs is not None
-    if args.report is None and args.geometry is not None:
+    reporting = args.report is not None or args.report_lat_lon is not None
+    if not reporting and args.geometry is not None:
         from fgdoppler.geometry import resolve_geometry
 
         if resolve_geometry(args.geometry).dim == 3:
             raise CLIError("the maps, slices and speed table are 2-D (x x heading in the sensors' plane); for a 3-D "
                            "geometry use --report START_X --start-z Z, or the altitude study "
                            "(studies/altitude_study.py)")
-    if args.start_z is not None and args.report is None:
-        raise CLIError("--start-z goes with --report")
+    if args.start_z is not None and not reporting:
+        raise CLIError("--start-z goes with --report or --report-lat-lon")
     if args.table:
         return _table(args, sampling, xs, hs)
     if args.slice is not None:
         return _slice(args, sampling, xs)
-    if args.report is not None:
+    if reporting:
         return _report(args)
     return _map(args, sampling, xs, hs)
 
@@ -175,8 +186,15 @@ def _report(args: argparse.Namespace) -> int:
     from fgdoppler.simulation import simulate
 
     geom = resolve_geometry(args.geometry or "a")
-    start = (args.report, args.offset) if args.start_z is None else (args.report, args.offset, args.start_z)
-    scen = scenario(args, geom, start, f"{args.geometry or 'a'}, start ({start[0] / 1e3:g}, {start[1] / 1e3:g}) km")
+    if args.report_lat_lon is None:
+        x, y = args.report, args.offset
+        where = f"({x / 1e3:g}, {y / 1e3:g}) km"
+    else:
+        lat, lon = args.report_lat_lon
+        x, y = east_north_of(geom, lat, lon, "--report-lat-lon")
+        where = f"latitude {lat:g}, longitude {lon:g}"
+    start = (x, y) if args.start_z is None else (x, y, args.start_z)
+    scen = scenario(args, geom, start, f"{args.geometry or 'a'}, start {where}")
     sim = simulate(scen, np.random.default_rng(0))
     motion = ConstantVelocity(q=args.process_noise) if args.process_noise > 0 else None
     rep = observability_report(scen.geometry, sim.truth, sim.measurements, motion=motion)
