@@ -259,6 +259,13 @@ class Zone:
             J[d][d:] = [c / speed for c in vel]
         return np.array(e), np.array(J)
 
+    def excess_text(self, state: ArrayLike) -> str:
+        """:meth:`excess` of ``state`` in a finding's words, each number named by its axis
+        (``"excess along, across, speed: 0, 1.2e+03, 0"``; 3-D adds ``altitude``)."""
+        excess, _ = self.excess(state)
+        axes = "along, across, altitude" if self.dim == 3 else "along, across"
+        return f"excess {axes}, speed: " + ", ".join(f"{v:.3g}" for v in excess)
+
     def prior(self) -> tuple[FloatArray, FloatArray]:
         """Mean and covariance of the weak Gaussian prior spanning the zone.
 

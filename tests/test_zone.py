@@ -129,6 +129,19 @@ def test_excess_is_the_local_distance_outside_and_its_jacobian_matches_finite_di
     assert bool(zone.contains(x)) == (not np.any(e))
 
 
+def test_excess_text_names_each_number_by_its_axis_in_two_and_three_dimensions() -> None:
+    """A finding's excess names as many axes as it gives numbers: a 3-D zone's altitude is named, not read as
+    the speed (its speed used to be printed under no label)."""
+    z2 = _zone(0.7, True)
+    x2 = z2.frame.states_to_world(np.array([50e3, 0.0, 250.0, 0.0]))
+    assert z2.excess_text(x2) == "excess along, across, speed: 2e+03, 0, 50"
+    z3 = fd.Zone(frame=Frame.identity(3), along=(0.0, 1e3), across=(-1e3, 1e3), altitude=(0.0, 500.0))
+    x3 = np.array([-30.0, 0.0, 900.0, 0.0, 0.0, 210.0])
+    assert z3.excess_text(x3) == "excess along, across, altitude, speed: -30, 0, 400, 10"
+    labels, numbers = z3.excess_text(x3).removeprefix("excess ").split(": ")
+    assert len(labels.split(", ")) == len(numbers.split(", ")) == len(z3.excess(x3)[0])
+
+
 def test_prior_spans_the_zone_in_its_frame() -> None:
     zone = _zone(0.7, True)
     mean, cov = zone.prior()

@@ -857,9 +857,7 @@ def _boundary_reasons(best: _Solution, graph: gtsam.NonlinearFactorGraph, n_data
         f"; without the bound LM reaches window cost {free.cost:.2f} "
         f"{distance_text(np.linalg.norm(free.x0[:model.dim] - best.x0[:model.dim]))} away "
         f"(speed {np.linalg.norm(free.x0[model.dim:]):.0f} m/s)")
-    axes = "along, across, altitude" if model.dim == 3 else "along, across"
-    held = (f"the start state is held at the zone's boundary (excess {axes}, speed: "
-            + ", ".join(f"{v:.3g}" for v in excess) + f"; window cost {best.cost:.2f} inside the zone{outside})")
+    held = (f"the start state is held at the zone's boundary ({model.zone.excess_text(best.x0)}; window cost {best.cost:.2f} inside the zone{outside})")
     if gain > limit and not isinstance(free, str):
         advised = model.zone.reaching(free.x0)
         return [Reason(code="boundary", status="doubtful", zone=advised.box(), message=(

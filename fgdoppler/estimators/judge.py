@@ -163,8 +163,7 @@ def _zone_reasons(result: TrackResult, model: TrackingModel) -> list[Reason]:
     if np.max(np.abs(excess)) <= ZONE_TOLERANCE:
         return []
     return [Reason(code="zone", status="doubtful", message=(
-        "the track starts outside the zone the initiation assumed (excess along, across, speed: "
-        + ", ".join(f"{v:.0f}" for v in excess) + "): the data prefer another start, or cannot place it "
+        f"the track starts outside the zone the initiation assumed ({model.zone.excess_text(est.states[0])}): the data prefer another start, or cannot place it "
         "(a target moving along a bistatic ellipse and a slow one next to a sensor look alike)"))]
 
 

@@ -409,7 +409,7 @@ def _wall_reason(zone: Zone, x: FloatArray, inside: float, free: FloatArray, fre
     gain = inside - free_cost
     limit = WALL_GAIN
     d = zone.dim
-    held = (f"the track's first state is held at the zone's boundary ({_excess_words(zone, x[0])}); without the "
+    held = (f"the track's first state is held at the zone's boundary ({zone.excess_text(x[0])}); without the "
             f"bound{searched} the cost is {free_cost:.2f} "
             f"instead of {inside:.2f}, {distance_text(np.linalg.norm(free[0, :d] - x[0, :d]))} away"
             f" (speed {np.linalg.norm(free[0, d:]):.0f} m/s)")
@@ -419,13 +419,6 @@ def _wall_reason(zone: Zone, x: FloatArray, inside: float, free: FloatArray, fre
             f"{held}: the data prefer a start outside the zone (lower by {gain:.1f} > {limit:.2f}); widen the "
             f"zone to hold that start, {text}"), zone=advised.box())
     return Reason(code="boundary", status="ok", message=f"{held}: the data do not prefer a start outside it")
-
-
-def _excess_words(zone: Zone, x0: FloatArray) -> str:
-    """How far the start ``x0`` lies outside ``zone`` on each axis and in speed, in a finding's words."""
-    excess, _ = zone.excess(x0)
-    axes = "along, across, altitude" if zone.dim == 3 else "along, across"
-    return f"excess {axes}, speed: " + ", ".join(f"{v:.3g}" for v in excess)
 
 
 def _data_cost(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,

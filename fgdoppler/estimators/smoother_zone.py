@@ -36,7 +36,6 @@ from fgdoppler.estimators.smoother_solve import (
     FloatArray,
     SmootherSolution,
     _data_cost,
-    _excess_words,
     _held_start,
     _wall_reason,
 )
@@ -281,8 +280,7 @@ def _outside_zone_2d(measurements: Measurements, model: TrackingModel, settings:
         f"{misfit:.1f} above the {OUTSIDE_LEVEL:.0%} chi-square level {threshold:.1f}) and a track starting outside the zone fits them better{searched}: cost {best.cost:.2f} instead of "
         f"{inside:.2f}, lower by {gain:.1f} > {OUTSIDE_GAIN:.2f}, starting "
         f"{distance_text(np.linalg.norm(best.states[0, :d] - sol.states[0, :d]))} away at "
-        f"{np.linalg.norm(best.states[0, d:]):.0f} m/s (excess along, across, speed: "
-        + ", ".join(f"{v:.3g}" for v in excess) + "): the target may be outside the zone; widen it to hold that "
+        f"{np.linalg.norm(best.states[0, d:]):.0f} m/s ({zone.excess_text(best.states[0])}): the target may be outside the zone; widen it to hold that "
         f"start, {text}"))
 
 
@@ -351,5 +349,5 @@ def _released_reason(measurements: Measurements, model: TrackingModel, settings:
         f"a track held at the zone's boundary was replaced by this one (cost {inside:.2f}), but released from the "
         f"bound it fits the data better: cost {free_cost:.2f}, lower by {gain:.1f} > {WALL_GAIN:.2f}, starting "
         f"{distance_text(np.linalg.norm(free[0, :d] - sol.states[0, :d]))} away at "
-        f"{np.linalg.norm(free[0, d:]):.0f} m/s ({_excess_words(zone, free[0])}): the data prefer a start outside "
+        f"{np.linalg.norm(free[0, d:]):.0f} m/s ({zone.excess_text(free[0])}): the data prefer a start outside "
         f"the zone; widen the zone to hold that start, {text}"))]
