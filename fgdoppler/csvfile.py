@@ -172,18 +172,43 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
                        f"{expected}, in any order{_layout_hint(text0, comments)}")
     if len(rows) == 1:
         raise CSVError(f"{path}: no data rows after the header")
-    values = np.empty((len(rows) - 1, len(names)))
-    lines = np.empty(len(rows) - 1, dtype=np.intp)
-    for j, (line, text) in enumerate(rows[1:]):
+    values = _plain_values(rows[1:], len(names))
+    if values is None:
+        values = _checked_values(path, rows[1:], names, labels)
+    columns = tuple(c for c in (*header, *optional) if c in names)
+    order = [names.index(c) for c in columns]
+    return Table(path=path, header=columns, values=values[:, order],
+                 lines=np.fromiter((line for line, _ in rows[1:]), dtype=np.intp, count=len(rows) - 1))
+
+
+def _plain_values(rows: list[tuple[int, str]], k: int) -> NDArray[np.float64] | None:
+    """Every row's ``k`` values at once, where each row is ``k`` plain ASCII decimals separated by bare commas
+    and every value is finite; ``None`` otherwise (spaces, quotes, labels, a bad field): the row-by-row reader
+    then reads the file and names the first problem's line.
+
+    The same numbers to the bit as :func:`parse_number` gives (both are correctly rounded); about ten times
+    faster on a file of 200,000 rows.
+    """
+    number = _NUMBER.pattern
+    row = number + f"(?:,{number})" * (k - 1)
+    text = "\n".join(t for _, t in rows)
+    if re.fullmatch(f"(?:{row}\n)*{row}", text) is None:
+        return None
+    values = np.array(text.replace("\n", ",").split(","), dtype=float).reshape(len(rows), k)
+    return values if bool(np.all(np.isfinite(values))) else None
+
+
+def _checked_values(path: Path, rows: list[tuple[int, str]], names: tuple[str, ...],
+                    labels: Mapping[str, Mapping[str, float]] | None) -> NDArray[np.float64]:
+    """The rows' values read one field at a time, the first problem named with its line (:class:`CSVError`)."""
+    values = np.empty((len(rows), len(names)))
+    for j, (line, text) in enumerate(rows):
         fields = next(csv.reader([text]))
         where = f"{path}:{line}"
         if len(fields) != len(names):
             raise CSVError(f"{where}: expected {len(names)} fields, got {len(fields)}")
         values[j] = [_field(f, where, n, (labels or {}).get(n)) for f, n in zip(fields, names, strict=True)]
-        lines[j] = line
-    columns = tuple(c for c in (*header, *optional) if c in names)
-    order = [names.index(c) for c in columns]
-    return Table(path=path, header=columns, values=values[:, order], lines=lines)
+    return values
 
 
 def _field(text: str, where: str, name: str, labels: Mapping[str, float] | None) -> float:

@@ -413,6 +413,9 @@ def _pair(value: float, where: str, geometry: Geometry | None) -> int:
 def _checked_rows(table: Table, t: NDArray[np.float64], z: NDArray[np.float64], s: NDArray[np.float64],
                   geometry: Geometry | None, hz: bool) -> NDArray[np.intp]:
     """Each row's pair index, every value checked (a file in Hz converted in ``z`` and ``s`` in place)."""
+    p = _valid_pairs(table, t, z, s, geometry, hz)
+    if p is not None:
+        return p
     n = t.size
     p = np.empty(n, dtype=np.intp)
     seen: dict[tuple[float, int], int] = {}
@@ -435,6 +438,35 @@ def _checked_rows(table: Table, t: NDArray[np.float64], z: NDArray[np.float64], 
             raise MeasurementError(f"{where}: duplicate measurement for time {t[j]}, pair {p[j]} "
                                    f"(first at line {seen[key]})")
         seen[key] = int(table.lines[j])
+    return p
+
+
+def _valid_pairs(table: Table, t: NDArray[np.float64], z: NDArray[np.float64], s: NDArray[np.float64],
+                 geometry: Geometry | None, hz: bool) -> NDArray[np.intp] | None:
+    """:func:`_checked_rows` for the whole file at once where it finds nothing wrong; ``None`` (``z`` and ``s``
+    untouched) where any row fails a check, so that the row-by-row loop names the first one."""
+    v = table.values[:, 1]
+    top = geometry.n_pairs if geometry is not None else 2**31
+    if not bool(np.all((v >= 0) & (v < top) & (v == np.floor(v)))):
+        return None
+    p = v.astype(np.intp)
+    zc, sc = z, s
+    if hz:
+        if not bool(np.all(s > 0)):
+            return None
+        wavelength = np.asarray(geometry.wavelengths, dtype=float)[p]  # type: ignore[union-attr]
+        zc, sc = -wavelength * z, wavelength * s
+    for name, value in (("time", t), ("doppler", zc), ("sigma", sc)):
+        lo, hi = LIMITS[name]
+        if not bool(np.all(np.isfinite(value) & (value >= lo) & (value <= hi))):
+            return None
+    # each pair's rows in file order: its times must not go back, and an equal time is a duplicate
+    order = np.lexsort((np.arange(t.size), p))
+    same = p[order][1:] == p[order][:-1]
+    if bool(np.any(same & (np.diff(t[order]) <= 0.0))):
+        return None
+    if hz:
+        z[:], s[:] = zc, sc
     return p
 
 

@@ -309,6 +309,65 @@ def test_a_doppler_shift_in_hz_is_read_with_each_pairs_wavelength(tmp_path: Path
         sim.csv_text(wavelengths=(3.0,))
 
 
+@pytest.mark.parametrize("unit", ["m/s", "Hz"])
+def test_the_whole_file_reader_and_the_row_by_row_reader_give_the_same_measurements(
+        tmp_path: Path, rng: np.random.Generator, monkeypatch: pytest.MonkeyPatch, unit: str) -> None:
+    """A plain file is parsed and checked all at once; one padded field (and the rows' checks switched to their
+    loop) sends the same file through the careful row-by-row reader: the two give the same measurements to the bit (numbers in every form the format allows,
+    interleaved pairs, a Doppler shift in Hz converted), and a problem on the last row of a plain file is still
+    named with its line."""
+    import fgdoppler.csvfile as csvfile
+    import fgdoppler.measurements as measurements
+
+    geom = fd.Geometry(pairs=fd.paper_geometry("a").pairs, wavelengths=(3.0, 0.25)) if unit == "Hz" else \
+        fd.paper_geometry("a")
+    n = 3000
+    t = np.sort(rng.choice(600_000, n, replace=False)) / 1000.0  # distinct: no duplicate (time, pair) by chance
+    pair = rng.integers(0, 2, n)
+    forms = ("{:.17g}", "{:+.6e}", "{:.3f}", "{:.2E}")
+    z = [forms[k % 4].format(v) for k, v in enumerate(rng.normal(0.0, 80.0, n).tolist())]
+    z[:3] = ["5.", ".5", "-0"]
+    head = "time,pair,doppler_hz,sigma_hz" if unit == "Hz" else "time,pair,doppler,sigma"
+    rows = [f"{a!r},{b},{c},{d!r}" for a, b, c, d in zip(t.tolist(), pair.tolist(), z, rng.uniform(0.1, 3.0, n).tolist(), strict=True)]
+    order = np.argsort(pair, kind="stable")  # one pair's rows after the other's
+    plain = _write(tmp_path / "plain.csv", "\n".join([head, *(rows[i] for i in order)]) + "\n")
+    padded_rows = [rows[i] for i in order]
+    padded_rows[n // 2] = padded_rows[n // 2].replace(",", " , ", 1)
+    padded = _write(tmp_path / "padded.csv", "\n".join([head, *padded_rows]) + "\n")
+
+    careful = {"table": 0, "rows": 0}
+
+    def counted(name: str, module: object, function: str) -> None:
+        original = getattr(module, function)
+
+        def spy(*args: object, **kwargs: object) -> object:
+            careful[name] += 1
+            return original(*args, **kwargs)
+        monkeypatch.setattr(module, function, spy)
+
+    counted("table", csvfile, "_checked_values")
+    counted("rows", measurements, "_pair")
+    fast = fd.Measurements.from_csv(plain, geometry=geom)
+    assert careful == {"table": 0, "rows": 0}
+    monkeypatch.setattr(measurements, "_valid_pairs", lambda *args: None)  # the rows checked one at a time too
+    slow = fd.Measurements.from_csv(padded, geometry=geom)
+    assert careful["table"] == 1 and careful["rows"] == n
+    for col in ("time", "pair", "doppler", "sigma"):
+        np.testing.assert_array_equal(getattr(fast, col), getattr(slow, col))
+    expect = np.array([float(v) for v in z]) * (-np.array(geom.wavelengths)[pair] if unit == "Hz" else 1.0)
+    np.testing.assert_array_equal(np.sort(fast.doppler), np.sort(expect))
+
+    monkeypatch.undo()  # a bad last row: the whole-file checks must decline it, for the loop to name its line
+    last = padded_rows[-1].split(",")
+    for bad, msg in (([last[0], last[1], last[2], "0"], "must be > 0"),
+                     ([padded_rows[-2].split(",")[0], *last[1:]], "duplicate measurement|is earlier than"),
+                     ([last[0], "2", *last[2:]], "unknown pair index 2")):
+        broken = _write(tmp_path / "broken.csv", "\n".join([head, *(rows[i] for i in order[:-1]), ",".join(bad)]))
+        with pytest.raises(MeasurementError, match=msg) as info:
+            fd.Measurements.from_csv(broken, geometry=geom)
+        assert f"broken.csv:{n + 1}:" in str(info.value)
+
+
 @pytest.mark.parametrize(
     ("text", "geometry", "msg"),
     [
