@@ -364,3 +364,28 @@ def test_the_speed_lower_bound_never_excludes_a_3d_truth() -> None:
     bound = np.array([speed_lower_bound(row, 1.0, n_sigma=0.0) for row in h])
     assert np.all(bound <= np.linalg.norm(x[:, 3:], axis=1) + 1e-9)
     assert np.max(bound / np.linalg.norm(x[:, 3:], axis=1)) > 0.5  # and it is not vacuous
+
+
+def test_one_reporting_pair_in_space_is_said_to_leave_every_rotation_about_its_line() -> None:
+    """In 3-D a track rotated about the line of the reporting sensors gives the same Doppler to rounding (each range
+    to a sensor on the axis is unchanged), not only its mirror image: the ``data`` finding says so and offers no
+    half plane, which could not settle a rotation; in 2-D it still names the mirror image and its half plane."""
+    from fgdoppler.estimators.judge import _data_reasons
+
+    pair = fd.Geometry(pairs=(fd.BistaticPair(tx=(0.0, 0.0, 0.0), rx=(12e3, 5e3, 0.0)),))
+    axis = np.array([12e3, 5e3, 0.0]) / 13e3
+    x = np.array([[4e3, 9e3, 2e3, 60.0, -80.0, 5.0]])
+    for angle in (0.7, 2.0, -2.9):
+        K = np.cross(np.eye(3), axis)  # K v = axis x v; Rodrigues' formula about the axis through the Tx
+        R = np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+        turned = np.hstack([x[:, :3] @ R.T, x[:, 3:] @ R.T])
+        assert np.linalg.norm(turned[0, :3] - x[0, :3]) > 1e3
+        np.testing.assert_allclose(fd.bistatic_doppler(turned, pair), fd.bistatic_doppler(x, pair), rtol=1e-12)
+    m = fd.Measurements.from_arrays(np.arange(30.0), np.zeros(30, dtype=int), np.zeros(30), np.ones(30))
+    (finding,) = [r for r in _data_reasons(m, TrackingModel.of(pair), False) if "one line" in r.message]
+    assert "every rotation of the track about that line" in finding.message and finding.mirror is None
+    assert "--half-plane" not in finding.message
+    flat = fd.Geometry(pairs=(fd.BistaticPair(tx=(0.0, 0.0), rx=(12e3, 5e3)),))
+    (finding,) = [r for r in _data_reasons(m, TrackingModel.of(flat), False) if "one line" in r.message]
+    assert "mirror image" in finding.message and finding.mirror == "reporting"

@@ -51,7 +51,8 @@ the status is the worst of them, :mod:`fgdoppler.estimators.verdict`).
     sensors of the pairs that reported all lie on one line: then the mirror
     image of any track across that line fits the data exactly (a
     :class:`~fgdoppler.estimators.grid.HalfPlane` on the initiation settles
-    it).
+    it), and in 3-D so does every rotation of the track about the line
+    (only a pair off the line settles that).
 ``zone`` — ``"doubtful"`` when a smoothed track starts more than
     :data:`ZONE_TOLERANCE` outside the zone: the initiation assumed a start
     inside it, and the whole recording says otherwise (or cannot place the
@@ -85,6 +86,7 @@ import functools
 from dataclasses import replace
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from fgdoppler._text import distance_text, time_text
@@ -197,11 +199,23 @@ def _data_reasons(measurements: Measurements, model: TrackingModel, half_plane: 
         used = np.unique(measurements.pair)
         _, _, spread = principal_line(np.vstack([g.tx[used], g.rx[used]]))
         if spread.size < 2 or spread[1] <= 1e-9 * max(spread[0], 1.0):
-            out.append(Reason(code="data", status="doubtful", message=(
-                f"the sensors of the pairs that reported ({', '.join(str(int(k)) for k in used)}) lie on one "
-                "line: the mirror image of the track across it fits the data exactly (restrict the initiation "
-                "to one side with a half plane, --half-plane)"), mirror="reporting"))
+            out.append(_one_line_reason(used, g.dim))
     return out
+
+
+def _one_line_reason(used: NDArray[np.int64], dim: int) -> Reason:
+    """The ``data`` finding of reporting sensors on one line: in the plane the mirror image of a track across the
+    line gives the same Doppler, in space every rotation of it about the line does (each range is unchanged)."""
+    pairs = ", ".join(str(int(k)) for k in used)
+    if dim == 2:
+        return Reason(code="data", status="doubtful", message=(
+            f"the sensors of the pairs that reported ({pairs}) lie on one line: the mirror image of the track "
+            "across it fits the data exactly (restrict the initiation to one side with a half plane, "
+            "--half-plane)"), mirror="reporting")
+    return Reason(code="data", status="doubtful", message=(
+        f"the sensors of the pairs that reported ({pairs}) lie on one line: every rotation of the track about "
+        "that line fits the data exactly, so the data cannot say where around it the target is (a pair whose "
+        "sensors lie off that line settles it)"))
 
 
 def _reference_reasons(est: Estimates, reference: TrackResult) -> list[Reason]:
