@@ -389,3 +389,16 @@ def test_one_reporting_pair_in_space_is_said_to_leave_every_rotation_about_its_l
     flat = fd.Geometry(pairs=(fd.BistaticPair(tx=(0.0, 0.0), rx=(12e3, 5e3)),))
     (finding,) = [r for r in _data_reasons(m, TrackingModel.of(flat), False) if "one line" in r.message]
     assert "mirror image" in finding.message and finding.mirror == "reporting"
+
+
+@pytest.mark.parametrize(("scenario", "identity"), [(AIRCRAFT, False), (fd.paper_scenario("a", 25e3, altitude=2e3), True)],
+                         ids=["own frame", "paper frame"])
+def test_a_half_plane_on_a_3d_problem_is_refused_with_its_reason_in_any_frame(scenario: fd.Scenario,
+                                                                             identity: bool) -> None:
+    """A half plane is a 2-D constraint: refused for a 3-D problem with the reason, whether the sensors' frame is the
+    identity (the grid search refused it) or not (its transform into the frame failed on mismatched shapes)."""
+    sim = fd.simulate(scenario, np.random.default_rng(4))
+    assert scenario.geometry.frame.is_identity == identity and scenario.geometry.dim == 3
+    settings = fd.InitiationSettings(half_plane=fd.HalfPlane(point=(0.0, 0.0), normal=(0.0, 1.0)))
+    with pytest.raises(ValueError, match="a half-plane is a 2-D constraint"):
+        fd.initiate(sim.measurements.first_per_pair(10), scenario.geometry, settings)

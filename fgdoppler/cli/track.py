@@ -68,7 +68,8 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-region-bound", action="store_true",
                    help="let the initiation's start state leave the zone (detectable zone)")
     p.add_argument("--half-plane", type=float, nargs=4, metavar=("PX", "PY", "NX", "NY"), default=None,
-                   help="target known to satisfy (NX, NY) . (p - (PX, PY)) >= 0, e.g. 0 0 0 1 for y >= 0")
+                   help="target known to satisfy (NX, NY) . (p - (PX, PY)) >= 0, e.g. 0 0 0 1 for y >= 0 "
+                   "(2-D problems; in 3-D the altitude band bounds the height)")
     p.add_argument("--q", type=float, default=None, help="process noise PSD in m^2/s^3 (default 1e-3)")
     p.add_argument("--lag", type=float, default=5.0, help="fixed-lag smoother lag in s (default 5)")
     p.add_argument("--particles", type=int, default=None, metavar="N",
@@ -95,7 +96,7 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    help="smoother, with --bias-sigma: estimate each pair's offset with the track (the track moves, "
                         "the offsets are reported) instead of only widening the covariances")
     add_huber_option(p)
-    p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy) for --plot and errors")
+    p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy; 3-D time,x,y,z,vx,vy,vz) for --plot and errors")
     p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
     p.add_argument("--json", action="store_true", help="machine-readable result on stdout")
     p.add_argument("--plot", type=Path, default=None, metavar="PATH", help="write a figure (format from the suffix)")

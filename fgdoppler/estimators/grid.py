@@ -107,6 +107,10 @@ def _axis(start: float, stop: float, step: float, name: str) -> FloatArray:
     return np.arange(start, stop + 1e-9 * step, step)
 
 
+#: Why a half plane is refused for a 3-D problem (in any frame, before anything is computed).
+THREE_D_REFUSAL = "a half-plane is a 2-D constraint; a 3-D zone's altitude band bounds the height instead"
+
+
 @dataclass(frozen=True, kw_only=True)
 class HalfPlane:
     """The side of a line the target is known to be on: ``normal · (p - point) >= 0``.
@@ -140,6 +144,8 @@ class HalfPlane:
         :math:`(\mathbf B\mathbf n)\cdot(\mathbf u - \mathbf u_q) \ge 0`
         (:math:`\mathbf B` orthonormal).
         """
+        if frame.dim != 2:
+            raise ValueError(THREE_D_REFUSAL)
         if frame.is_identity:
             return self
         n = np.asarray(self.normal, dtype=float)
@@ -526,7 +532,7 @@ def grid_search(
     s_min = speed_lower_bound(z, sig, spec.n_sigma)
     extent = float(np.ptp(zone.frame.points_to_local(geometry.sensors())[:, 0]))
     if half_plane is not None and zone.dim == 3:
-        raise ValueError("a half-plane is a 2-D constraint; a 3-D zone's altitude band bounds the height instead")
+        raise ValueError(THREE_D_REFUSAL)
     us, vs, speeds, headings = spec.axes(zone, extent, s_min)
     ws = spec.levels(zone)
     pos_axes = (us, vs) if zone.dim == 2 else (us, vs, ws)
