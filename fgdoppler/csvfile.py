@@ -118,7 +118,8 @@ def header_names(path: str | Path, *, comments: bool = False) -> tuple[str, ...]
 def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str, ...] = (),
                what: str = "file", comments: bool = False,
                labels: Mapping[str, Mapping[str, float]] | None = None,
-               layout: Callable[[tuple[str, ...]], tuple[tuple[str, ...], tuple[str, ...]]] | None = None) -> Table:
+               layout: Callable[[tuple[str, ...]], tuple[tuple[str, ...], tuple[str, ...]]] | None = None,
+               blank: tuple[str, ...] = ()) -> Table:
     """Read a numeric CSV whose columns are those of ``header`` and any of ``optional``, in any order.
 
     The columns are matched by name (case-insensitively, surrounding spaces
@@ -149,6 +150,9 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
         optional)`` of the one its header's names say (e.g. a Doppler in Hz
         where they hold ``doppler_hz``), in place of ``header`` and
         ``optional``: the file is read once (a pipe cannot be read twice).
+    blank
+        Columns whose fields may be empty (read as NaN): a track file's
+        covariance cells where the covariance is indeterminate.
 
     Raises
     ------
@@ -174,7 +178,7 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
         raise CSVError(f"{path}: no data rows after the header")
     values = _plain_values(rows[1:], len(names))
     if values is None:
-        values = _checked_values(path, rows[1:], names, labels)
+        values = _checked_values(path, rows[1:], names, labels, blank)
     columns = tuple(c for c in (*header, *optional) if c in names)
     order = [names.index(c) for c in columns]
     return Table(path=path, header=columns, values=values[:, order],
@@ -199,15 +203,18 @@ def _plain_values(rows: list[tuple[int, str]], k: int) -> NDArray[np.float64] | 
 
 
 def _checked_values(path: Path, rows: list[tuple[int, str]], names: tuple[str, ...],
-                    labels: Mapping[str, Mapping[str, float]] | None) -> NDArray[np.float64]:
-    """The rows' values read one field at a time, the first problem named with its line (:class:`CSVError`)."""
+                    labels: Mapping[str, Mapping[str, float]] | None, blank: tuple[str, ...] = ()
+                    ) -> NDArray[np.float64]:
+    """The rows' values read one field at a time (an empty field of a ``blank`` column as NaN), the first problem
+    named with its line (:class:`CSVError`)."""
     values = np.empty((len(rows), len(names)))
     for j, (line, text) in enumerate(rows):
         fields = next(csv.reader([text]))
         where = f"{path}:{line}"
         if len(fields) != len(names):
             raise CSVError(f"{where}: expected {len(names)} fields, got {len(fields)}")
-        values[j] = [_field(f, where, n, (labels or {}).get(n)) for f, n in zip(fields, names, strict=True)]
+        values[j] = [np.nan if n in blank and not f.strip() else _field(f, where, n, (labels or {}).get(n))
+                     for f, n in zip(fields, names, strict=True)]
     return values
 
 

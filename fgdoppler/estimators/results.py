@@ -50,6 +50,12 @@ def _upper(n: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     return np.triu_indices(n)
 
 
+def _track_columns(n: int) -> tuple[str, ...]:
+    """A track file's first columns for ``n`` state entries, as :func:`~fgdoppler.csvfile.read_table` names them
+    (lower case): the time, the state and the covariance's upper triangle."""
+    return ("time", *STATE_NAMES[n], *(c.lower() for c in _cov_names(n)))
+
+
 def _cov_names(n: int) -> list[str]:
     return [f"P{i}{j}" for i, j in zip(*_upper(n), strict=True)]
 
@@ -371,23 +377,38 @@ class TrackResult(Judged):
     def read_csv(path: str | Path, kind: Kind = "smoothed") -> Estimates:
         """Read a CSV written by :meth:`to_csv` back into :class:`Estimates` (of the given kind).
 
-        Indeterminate covariances (empty cells) come back with ``cov_ok`` False.
-        """
-        from fgdoppler.csvfile import parse_number
+        Indeterminate covariances (empty cells) come back with ``cov_ok``
+        False.  Columns after the covariance (``latitude``, ``longitude``,
+        ...) are not read.  The file is read once (a pipe reads as the file).
 
-        lines = [ln for ln in Path(path).read_text(encoding="utf-8").splitlines() if ln and not ln.startswith("#")]
-        rows = list(csv.reader(lines))
-        head, body = rows[0], rows[1:]
-        m = 6 if len(head) > 3 and head[3] == "z" else 4
+        Raises
+        ------
+        fgdoppler.csvfile.CSVError
+            Naming the file and the line: not a track file (no ``time``,
+            state and covariance columns), a row with the wrong number of
+            fields, a field that is not a number, an empty state cell, or a
+            covariance given in part.
+        """
+        from fgdoppler.csvfile import CSVError, read_table
+
+        def layout(names: tuple[str, ...]) -> tuple[tuple[str, ...], tuple[str, ...]]:
+            known = _track_columns(6 if "z" in names else 4)
+            # the columns after the covariance, once it is there (otherwise the header's problem is said alone)
+            return known, tuple(n for n in names if n not in known) if set(known) <= set(names) else ()
+
+        table = read_table(path, header=(), what="track file", comments=True, layout=layout,
+                           blank=_track_columns(6)[7:])
+        m = 6 if "z" in table.header else 4
+        k = len(_cov_names(m))
+        values = table.values
+        empty = np.isnan(values[:, 1 + m:1 + m + k])
+        partial = np.flatnonzero(np.any(empty, axis=1) & ~np.all(empty, axis=1))
+        if partial.size:
+            raise CSVError(f"{table.where(int(partial[0]))}: the covariance is given in part: its cells are all "
+                           "numbers, or all empty where it is indeterminate")
+        ok = ~np.all(empty, axis=1)
         iu = _upper(m)
-        n = len(body)
-        t, x, P, ok = np.empty(n), np.empty((n, m)), np.zeros((n, m, m)), np.zeros(n, dtype=bool)
-        for k, row in enumerate(body):
-            where = f"{path}: row {k + 1}"
-            t[k] = parse_number(row[0], where, "time")
-            x[k] = [parse_number(v, where, "state") for v in row[1:1 + m]]
-            if row[1 + m]:  # columns after the covariance (latitude, longitude, ...) are not read
-                P[k][iu] = [parse_number(v, where, "covariance") for v in row[1 + m:1 + m + iu[0].size]]
-                P[k] = P[k] + np.triu(P[k], 1).T
-                ok[k] = True
-        return Estimates(kind=kind, times=t, states=x, covariances=P, cov_ok=ok)
+        P = np.zeros((len(values), m, m))
+        P[:, iu[0], iu[1]] = np.where(ok[:, None], values[:, 1 + m:1 + m + k], 0.0)
+        P = P + np.triu(P, 1).transpose(0, 2, 1)
+        return Estimates(kind=kind, times=values[:, 0], states=values[:, 1:1 + m], covariances=P, cov_ok=ok)

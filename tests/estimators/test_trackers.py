@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import gtsam
 import numpy as np
@@ -10,12 +11,13 @@ import pytest
 from scipy.stats import chi2
 
 import fgdoppler as fd
+from fgdoppler.csvfile import CSVError
 from fgdoppler.estimators import run_estimator
 from fgdoppler.estimators.ekf import ExtendedKalmanFilter, run_ekf
 from fgdoppler.estimators.fixed_lag import FixedLagTracker, run_fixed_lag
 from fgdoppler.estimators.initiation import initiate, lm_params
 from fgdoppler.estimators.isam2 import ISAM2Tracker, run_isam2
-from fgdoppler.estimators.results import TrackResult
+from fgdoppler.estimators.results import Estimates, TrackResult, states_csv
 from fgdoppler.estimators.settings import (
     EKFSettings,
     FixedLagSettings,
@@ -388,6 +390,36 @@ def test_ekf_skips_update_on_bad_innovation_variance() -> None:
     assert ekf.events and "skipped" in ekf.events[0].message
     assert np.all(np.isfinite(ekf.x))
     np.testing.assert_allclose(ekf.x[:2], x_before[:2])
+
+
+@pytest.mark.parametrize(("edit", "match"), [
+    (lambda rows: [*rows[:-1], rows[-1][:7]], r"t\.csv:8: expected 15 fields, got 2"),
+    (lambda rows: [r for r in rows if not r.startswith(("#", "time"))], r"t\.csv:1: bad header '0\.0,.*no column 'time'"),
+    (lambda rows: [*rows[:-1], ",".join(["5.0", "", *rows[-1].split(",")[2:]])], r"t\.csv:8: x is empty"),
+    (lambda rows: [*rows[:-1], ",".join(rows[-1].split(",")[:6] + [""] * 9)], r"t\.csv:8: the covariance is given in part"),
+    (lambda rows: [*rows[:-1], rows[-1].replace(",", ",nan", 1)], r"t\.csv:8: x is not a number"),
+    (lambda rows: [r for r in rows if not r[:1].isdigit()], r"t\.csv: no data rows after the header"),
+])
+def test_a_malformed_track_csv_is_refused_with_its_line(tmp_path: Path, edit: object, match: str) -> None:
+    """A track file read back (``TrackResult.read_csv``) is checked as every CSV is: a short row, a missing header, an
+    empty state cell, a covariance given in part or a non-number is refused naming the line (it used to raise an
+    IndexError, or read the first data row as the header and lose it)."""
+    times = np.arange(5.0)
+    states = np.column_stack([times, 2 * times, np.ones(5), np.zeros(5)])
+    est = Estimates(kind="filtered", times=times, states=states, covariances=np.tile(np.eye(4), (5, 1, 1)),
+                    cov_ok=np.array([False, True, True, True, True]))
+    text = states_csv(est.times, est.states, est.covariances, est.cov_ok, ["fgdoppler ekf: filtered estimates"])
+    (tmp_path / "t.csv").write_text(text)
+    back = TrackResult.read_csv(tmp_path / "t.csv", kind="filtered")
+    np.testing.assert_array_equal(back.states, states)
+    assert list(back.cov_ok) == [False, True, True, True, True]
+    np.testing.assert_array_equal(back.covariances[1:], est.covariances[1:])
+    rows = text.splitlines()
+    assert rows[1] == "time,x,y,vx,vy,P00,P01,P02,P03,P11,P12,P13,P22,P23,P33" and len(rows) == 7
+    rows.append(rows[-1].replace("4.0,", "5.0,", 1))  # line 8: the row every edit below breaks
+    (tmp_path / "t.csv").write_text("\n".join(edit(rows)) + "\n")  # type: ignore[operator]
+    with pytest.raises(CSVError, match=match):
+        TrackResult.read_csv(tmp_path / "t.csv")
 
 
 def test_result_csv_json_round_trip(tmp_path) -> None:
