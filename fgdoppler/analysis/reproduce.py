@@ -343,7 +343,7 @@ def _nees_section(mc: MonteCarloResult, names: list[str], out: Path, lines: list
         s = names.index(name)
         t = mc.times[s]
         curves = {e: mc.mean_nees(s, e) for e in TRACKERS}
-        values = {e: _mean_after(curves[e], t, 10.0) for e in TRACKERS}
+        values = {e: v if (v := mc.nees_after(s, e)) is not None else float("nan") for e in TRACKERS}
         beyond += [f"{e} in {name} ({v:.1f})" for e, v in values.items() if not v <= 2 * band[1]]
         lines.append(f"| {name} | " + " | ".join(_nees_cell(v, band) for v in values.values()) + " |")
         plotting.plot_nees(t, curves, band, ax, title=name)

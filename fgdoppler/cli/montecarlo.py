@@ -33,7 +33,8 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
         "montecarlo",
         help="Monte Carlo RMSE / NEES study of the paper's scenarios or your own",
         description="Simulate scenarios --runs times each and run every estimator; writes OUT.npz and "
-        "OUT.json (reloadable) and prints time-averaged RMSE.  By default the paper's six scenarios; with "
+        "OUT.json (reloadable) and prints per scenario and estimator the time-averaged position RMSE, the NEES "
+        "against its 95 %% band and the verdict counts.  By default the paper's six scenarios; with "
         "--geometry, targets starting at each --start-x (or --start-lat-lon) on that geometry, with the scenario "
         "options.",
     )
@@ -147,11 +148,7 @@ def _run(args: argparse.Namespace) -> int:
         emit_json(summ)
     else:
         print(f"{res.runs} runs x {len(scen)} scenarios in {res.wall_time:.1f} s; wrote {npz} and {js}")
-        width = max(22, *(len(n) for n in res.scenario_names))
-        print(f"{'scenario':{width}s} " + " ".join(f"{e:>10s}" for e in res.estimators))
-        for name in res.scenario_names:
-            vals = [r["pos_rmse_mean"] for r in summ["rows"] if r["scenario"] == name]
-            print(f"{name:{width}s} " + " ".join(f"{v:10.1f}" if v is not None else f"{'-':>10s}" for v in vals))
+        _print_summary(summ)
     if args.plot:
         from fgdoppler import plotting
 
@@ -176,3 +173,24 @@ def _with_per_pair_sigma(args: argparse.Namespace, scen: list[Any], settings: di
         return {n: replace(s, **{field: sigma}) if n in chosen else s for n, s in settings.items()}
     except ValueError as exc:
         raise offset_sigma_error(exc) from None
+
+
+def _print_summary(summ: dict[str, Any]) -> None:
+    """Three tables of a Monte Carlo summary (:meth:`~fgdoppler.analysis.montecarlo.MonteCarloResult.summary`),
+    a row per scenario and a column per estimator: the time-averaged position RMSE, the NEES against its band,
+    and the verdict counts."""
+    lo, hi = summ["nees_band"]
+    width = max(22, *(len(n) for n in summ["scenarios"]))
+    tables = (
+        ("position RMSE (m), averaged over time", lambda r: f"{v:.1f}" if (v := r["pos_rmse_mean"]) is not None else "-"),
+        (f"NEES averaged over runs and t >= {summ['nees_from']:g} s (95 % band for {summ['runs']} runs: "
+         f"{lo:.2f}-{hi:.2f}; * above it, ~ below it)",
+         lambda r: "-" if (v := r["nees_mean"]) is None else f"{v:.3g}" + ("*" if v > hi else "~" if v < lo else "")),
+        ("verdicts ok/doubtful/failed", lambda r: "/".join(str(r["verdicts"][k]) for k in ("ok", "doubtful", "failed"))),
+    )
+    for title, cell in tables:
+        print(title)
+        print(f"  {'scenario':{width}s} " + " ".join(f"{e:>12s}" for e in summ["estimators"]))
+        for name in summ["scenarios"]:
+            cells = [cell(r) for r in summ["rows"] if r["scenario"] == name]
+            print(f"  {name:{width}s} " + " ".join(f"{c:>12s}" for c in cells))

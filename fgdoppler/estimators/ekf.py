@@ -122,7 +122,7 @@ class ExtendedKalmanFilter:
         x = np.array(x0, dtype=float).reshape(-1)
         P = np.array(P0, dtype=float)
         if x.shape != (n,) or P.shape != (n, n):
-            raise ValueError(f"a {n // 2}-D model needs a state of {n} numbers and an {n}x{n} covariance, "
+            raise ValueError(f"a {n // 2}-D model needs a state of {n} numbers and a {n}x{n} covariance, "
                              f"got {x.shape} and {P.shape}")
         if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
             raise ValueError("initial state and covariance must be finite")

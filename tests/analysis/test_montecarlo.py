@@ -40,6 +40,35 @@ def test_same_seed_same_results_with_1_and_2_workers(serial: MonteCarloResult, t
     assert back.summary()["rows"][0]["scenario"] == one.scenario_names[0]
 
 
+def test_summary_nees_is_the_run_average_after_10_s_and_the_command_prints_it_against_its_band(
+        serial: MonteCarloResult, capsys: pytest.CaptureFixture[str]) -> None:
+    """The summary's NEES of each row, recomputed from the stored per-run arrays (mean over the runs that have a
+    value at each time, then over t >= 10 s), its band the chi-square quantiles of 4 x runs degrees of freedom over
+    runs, and the verdict counts summing to the runs; the command's tables print those numbers."""
+    from scipy.stats import chi2
+
+    from fgdoppler.cli.montecarlo import _print_summary
+
+    summ = serial.summary()
+    lo, hi = summ["nees_band"]
+    assert (lo, hi) == pytest.approx((chi2.ppf(0.025, 4 * SPEC.runs) / SPEC.runs, chi2.ppf(0.975, 4 * SPEC.runs) / SPEC.runs))
+    assert summ["nees_from"] == 10.0
+    for s, name in enumerate(serial.scenario_names):
+        t = serial.times[s]
+        for e in serial.estimators:
+            (row,) = [r for r in summ["rows"] if r["scenario"] == name and r["estimator"] == e]
+            x = serial.nees[s][e][:, t >= 10.0]
+            expect = np.mean([np.mean(col[np.isfinite(col)]) for col in x.T if np.any(np.isfinite(col))])
+            assert row["nees_mean"] == pytest.approx(expect, rel=1e-12)
+            assert sum(row["verdicts"].values()) == SPEC.runs
+    _print_summary(summ)
+    out = capsys.readouterr().out
+    assert f"95 % band for {SPEC.runs} runs: {lo:.2f}-{hi:.2f}" in out
+    smoother = next(r for r in summ["rows"] if r["estimator"] == "smoother")
+    mark = "*" if smoother["nees_mean"] > hi else "~" if smoother["nees_mean"] < lo else ""
+    assert f"{smoother['nees_mean']:.3g}{mark}" in out and "verdicts ok/doubtful/failed" in out
+
+
 def test_initiation_estimators_have_values_before_the_trackers() -> None:
     res = run_monte_carlo(MonteCarloSpec(scenarios=SPEC.scenarios[:1], runs=1, estimators=("lm", "ekf")),
                           progress=False)
