@@ -379,7 +379,8 @@ class TrackResult(Judged):
 
         Indeterminate covariances (empty cells) come back with ``cov_ok``
         False.  Columns after the covariance (``latitude``, ``longitude``,
-        ...) are not read.  The file is read once (a pipe reads as the file).
+        ...) must hold numbers and are not returned.  The file is read once
+        (a pipe reads as the file).
 
         Raises
         ------
