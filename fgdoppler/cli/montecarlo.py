@@ -34,7 +34,7 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
         help="Monte Carlo RMSE / NEES study of the paper's scenarios or your own",
         description="Simulate scenarios --runs times each and run every estimator; writes OUT.npz and "
         "OUT.json (reloadable) and prints per scenario and estimator the time-averaged position RMSE, the NEES "
-        "against its 95 %% band and the verdict counts.  By default the paper's six scenarios; with "
+        "against its 95 % band and the verdict counts.  By default the paper's six scenarios; with "
         "--geometry, targets starting at each --start-x (or --start-lat-lon) on that geometry, with the scenario "
         "options.",
     )
