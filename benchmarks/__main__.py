@@ -12,6 +12,7 @@ from benchmarks import (
     bench_ekf,
     bench_factors,
     bench_grid,
+    bench_io,
     bench_long,
     bench_mode_search,
     bench_montecarlo,
@@ -25,7 +26,7 @@ from benchmarks import (
 BENCHES = {"grid": bench_grid, "ekf": bench_ekf, "scaling": bench_scaling, "montecarlo": bench_montecarlo,
            "long": bench_long, "particle": bench_particle, "modes": bench_mode_search,
            "motion": bench_motion_check, "shared": bench_shared_reference, "widening": bench_widening,
-           "accuracy": bench_accuracy, "factors": bench_factors}
+           "accuracy": bench_accuracy, "factors": bench_factors, "io": bench_io}
 
 
 def main() -> None:
