@@ -120,6 +120,14 @@ def test_bad_track_options(recording: Path, capsys: pytest.CaptureFixture[str], 
         (["--offsets", "0"], "time_offsets"),
         (["--velocity", "inf", "0"], "--velocity"),
         (["--geometry", "nope.toml"], "neither a preset"),
+        # the dimension's mismatch names only the option to fix (the default velocity is 3-D in 3-D)
+        (["--altitude", "0", "9000"], "the start has 2 coordinates and the velocity 3: give --start-z, the start's "
+                                      "height\n"),
+        (["--altitude", "0", "9000", "--start-z", "1000", "--velocity", "10", "-100"],
+         "the start has 3 coordinates and the velocity 2: give --velocity VX VY VZ\n"),
+        (["--start-z", "1000"], "the geometry is 2-D (make it 3-D with --altitude LO HI) but the start has 3 "
+                                "coordinates and the velocity 2: drop --start-z\n"),
+        (["--velocity", "10", "-100", "5"], "the velocity 3: give --velocity VX VY\n"),
     ],
 )
 def test_bad_simulate_options(tmp_path: Path, capsys: pytest.CaptureFixture[str], options: list[str],

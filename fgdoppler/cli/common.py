@@ -158,10 +158,14 @@ def scenario(args: argparse.Namespace, geometry: Any, start: tuple[float, ...], 
     if dim == 3 and len(velocity) == 2 and args.velocity is None:
         velocity = (*velocity, 0.0)
     if len(start) != dim or len(velocity) != dim:
-        what = ("give --start-z and --velocity VX VY VZ" if dim == 3
-                else "drop --start-z and the third velocity, or make the problem 3-D with --altitude LO HI")
-        raise CLIError(f"the geometry is {dim}-D (an altitude band or sensors with z make it 3-D) but the start "
-                       f"has {len(start)} and --velocity {len(velocity)} coordinates: {what}")
+        # name only what is wrong: a default velocity the user never gave is not theirs to fix
+        fixes = [f for f, bad in ((("give --start-z, the start's height" if dim == 3 else "drop --start-z"),
+                                   len(start) != dim),
+                                  (f"give --velocity {'VX VY VZ' if dim == 3 else 'VX VY'}", len(velocity) != dim))
+                 if bad]
+        why = "an altitude band or sensors with z make it 3-D" if dim == 3 else "make it 3-D with --altitude LO HI"
+        raise CLIError(f"the geometry is {dim}-D ({why}) but the start has {len(start)} coordinates and the "
+                       f"velocity {len(velocity)}: " + " and ".join(fixes))
     if not all(map(_finite, (*start, *velocity))):
         raise CLIError(f"the start and --velocity must be finite, got {start} and {velocity}")
     if not (args.process_noise >= 0 and _finite(args.process_noise)):
