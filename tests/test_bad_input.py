@@ -96,6 +96,10 @@ def test_truth_is_checked_before_anything_runs(recording: Path, capsys: pytest.C
         (["--init-per-pair", "2"], "--init-per-pair"),
         (["--init-seconds", "-1"], "--init-seconds"),
         (["--init-seconds", "nan"], "--init-seconds"),
+        # the verdict's reference smoother needs process noise: said up front, in the option's words
+        (["--q", "0"], "--q must be a finite number > 0 (m^2/s^3), got 0"),
+        (["--q", "-1"], "--q must be a finite number > 0 (m^2/s^3), got -1"),
+        (["--q", "inf"], "--q must be a finite number > 0"),
     ],
 )
 def test_bad_track_options(recording: Path, capsys: pytest.CaptureFixture[str], options: list[str],
@@ -139,7 +143,8 @@ def test_bad_simulate_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]
 
 @pytest.mark.parametrize(("options", "match"), [(["--workers", "0"], "--workers"), (["--runs", "0"], "--runs"),
                                                 (["--estimators", "ukf"], "unknown estimator"),
-                                                (["--estimators", "lag:-1"], "bad lag")])
+                                                (["--estimators", "lag:-1"], "bad lag"),
+                                                (["--q", "0"], "--q must be a finite number > 0")])
 def test_bad_montecarlo_options(tmp_path: Path, capsys: pytest.CaptureFixture[str], options: list[str],
                                 match: str) -> None:
     code = main(["montecarlo", "--runs", "1", "--out", str(tmp_path / "mc"), *options])

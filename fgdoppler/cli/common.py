@@ -237,6 +237,25 @@ def taking(setting: str) -> list[str]:
     return [n for n, i in ESTIMATORS.items() if setting in {f.name for f in fields(i.settings)}]
 
 
+def motion(q: float | None) -> Any:
+    """The estimators' :class:`~fgdoppler.models.motion.ConstantVelocity` of ``--q`` (default 1e-3).
+
+    Raises
+    ------
+    CLIError
+        Unless ``q`` is a finite number > 0: the smoothers' motion factors (and the verdict's reference
+        smoother, which every command runs) need a full-rank process noise.
+    """
+    from fgdoppler.models.motion import ConstantVelocity
+
+    if q is None:
+        return ConstantVelocity(q=1e-3)
+    if not (_finite(q) and q > 0):
+        raise CLIError(f"--q must be a finite number > 0 (m^2/s^3), got {q:g}: every track is checked by a "
+                       "smoother whose motion factors need some process noise (1e-6 is a nearly constant velocity)")
+    return ConstantVelocity(q=q)
+
+
 def _finite(v: float) -> bool:
     import math
 

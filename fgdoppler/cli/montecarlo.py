@@ -19,6 +19,7 @@ from fgdoppler.cli.common import (
     geometry_with_zone,
     grid_spec,
     huber,
+    motion,
     offset_sigma_error,
     per_pair,
     scenario,
@@ -100,7 +101,6 @@ def _run(args: argparse.Namespace) -> int:
     from fgdoppler.analysis.montecarlo import MonteCarloSpec, run_monte_carlo
     from fgdoppler.estimators.initiation import InitiationSettings
     from fgdoppler.estimators.settings import SmootherSettings
-    from fgdoppler.models.motion import ConstantVelocity
     from fgdoppler.simulation import PAPER_START_X
 
     if args.runs < 1 or args.workers < 1:
@@ -133,7 +133,7 @@ def _run(args: argparse.Namespace) -> int:
     try:
         spec = MonteCarloSpec(scenarios=tuple(scen), estimators=tuple(args.estimators), runs=args.runs, seed=args.seed,
                               initiation=InitiationSettings(grid=grid_spec(args), huber_k=k), settings=settings,
-                              motion=ConstantVelocity(q=1e-3 if args.q is None else args.q))
+                              motion=motion(args.q))
     except ValueError as exc:
         raise CLIError(str(exc)) from exc
     pool, client = executor(args)

@@ -21,6 +21,7 @@ from fgdoppler.cli.common import (
     geometry_with_zone,
     grid_spec,
     huber,
+    motion,
     offset_sigma_error,
     per_pair,
     taking,
@@ -136,12 +137,11 @@ def _describe(geometry: Any, spec: str) -> dict[str, Any]:
 
 
 def _model(args: argparse.Namespace, geometry: Any) -> Any:
-    from fgdoppler.models.motion import ConstantVelocity
     from fgdoppler.models.tracking import TrackingModel
 
     kw: dict[str, Any] = {"weak_prior": not args.no_weak_prior}
     if args.q is not None:
-        kw["motion"] = ConstantVelocity(q=args.q)
+        kw["motion"] = motion(args.q)
     return TrackingModel.of(geometry, **kw)
 
 
