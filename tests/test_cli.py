@@ -82,6 +82,38 @@ def test_track_init_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert d["objective"] >= d["cost"]
 
 
+def test_an_unused_sigma_option_is_said_and_a_used_one_is_used(tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """``--sigma`` is the default for a file without a sigma column: with the column it goes unused, and a note on
+    stderr says so (nothing the user gave is dropped silently); without it, it is every measurement's sigma (the
+    initiation's cost scales as 1/sigma^2)."""
+    out = tmp_path / "sim"
+    main(["simulate", "--case", "b", "--start-x", "5000", "--out", str(out)])
+    capsys.readouterr()
+    geometry = ["--geometry", str(out / "geometry.toml"), "--estimator", "init", "--json"]
+    assert main(["track", str(out / "measurements.csv"), *geometry, "--sigma", "2"]) == 0
+    captured = capsys.readouterr()
+    assert f"note: --sigma 2 is not used: {out / 'measurements.csv'} gives each measurement's sigma (its sigma " \
+           "column)" in captured.err
+    with_column = json.loads(captured.out)
+    rows = (out / "measurements.csv").read_text().splitlines()
+    assert rows[0] == "time,pair,doppler,sigma" and all(r.endswith(",1.0") for r in rows[1:])
+    (tmp_path / "bare.csv").write_text("\n".join(r.rsplit(",", 1)[0] for r in rows) + "\n")
+    assert main(["track", str(tmp_path / "bare.csv"), *geometry, "--sigma", "1"]) == 0
+    captured = capsys.readouterr()
+    assert "note: --sigma" not in captured.err
+    assert json.loads(captured.out)["cost"] == pytest.approx(with_column["cost"], rel=1e-9)
+    # without the weak prior the data alone set the optimum: the same start (to LM's stopping tolerance, a few cm),
+    # the cost a quarter
+    unit = [*geometry, "--no-weak-prior"]
+    assert main(["track", str(tmp_path / "bare.csv"), *unit, "--sigma", "1"]) == 0
+    one = json.loads(capsys.readouterr().out)
+    assert main(["track", str(tmp_path / "bare.csv"), *unit, "--sigma", "2"]) == 0
+    two = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(two["x_start"], one["x_start"], rtol=1e-4)
+    assert two["cost"] == pytest.approx(one["cost"] / 4, rel=1e-4)
+
+
 def test_a_recording_in_hz_tracks_as_the_same_recording_in_metres_per_second(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``simulate --wavelength`` writes the geometry's wavelengths and the Doppler in Hz (-range rate / wavelength,

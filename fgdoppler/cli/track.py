@@ -136,6 +136,20 @@ def _describe(geometry: Any, spec: str) -> dict[str, Any]:
             "zone": geometry.zone.to_dict()}
 
 
+def _sigma_note(args: argparse.Namespace) -> None:
+    """Say on stderr that ``--sigma`` went unused where the file gives every measurement's own sigma (a regular
+    file only: a pipe cannot be read again for its header)."""
+    from fgdoppler.csvfile import header_names
+
+    if args.sigma is None or not Path(args.file).is_file():
+        return
+    names = header_names(args.file)
+    column = next((c for c in ("sigma", "sigma_hz") if c in names), None)
+    if column is not None:
+        print(f"note: --sigma {args.sigma:g} is not used: {args.file} gives each measurement's sigma (its {column} "
+              "column)", file=sys.stderr)
+
+
 def _model(args: argparse.Namespace, geometry: Any) -> Any:
     from fgdoppler.models.tracking import TrackingModel
 
@@ -197,6 +211,7 @@ def _run(args: argparse.Namespace) -> int:
     spec = _geometry_spec(args)
     geom = geometry_with_zone(spec, args)
     meas = Measurements.from_csv(args.file, geometry=geom, default_sigma=args.sigma)
+    _sigma_note(args)
     truth = None
     if args.truth:
         truth = Trajectory.from_csv(args.truth)
