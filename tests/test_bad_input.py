@@ -100,6 +100,8 @@ def test_truth_is_checked_before_anything_runs(recording: Path, capsys: pytest.C
         (["--q", "0"], "--q must be a finite number > 0 (m^2/s^3), got 0"),
         (["--q", "-1"], "--q must be a finite number > 0 (m^2/s^3), got -1"),
         (["--q", "inf"], "--q must be a finite number > 0"),
+        # an estimator's own option given to another is refused, not dropped (as --particles and --most-likely are)
+        (["--lag", "3"], "--lag applies to fixed-lag, not to ekf"),
     ],
 )
 def test_bad_track_options(recording: Path, capsys: pytest.CaptureFixture[str], options: list[str],

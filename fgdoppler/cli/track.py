@@ -72,7 +72,7 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    help="target known to satisfy (NX, NY) . (p - (PX, PY)) >= 0, e.g. 0 0 0 1 for y >= 0 "
                    "(2-D problems; in 3-D the altitude band bounds the height)")
     p.add_argument("--q", type=float, default=None, help="process noise PSD in m^2/s^3 (default 1e-3)")
-    p.add_argument("--lag", type=float, default=5.0, help="fixed-lag smoother lag in s (default 5)")
+    p.add_argument("--lag", type=float, default=None, help="fixed-lag smoother lag in s (default 5)")
     p.add_argument("--particles", type=int, default=None, metavar="N",
                    help="particle and map estimators: number of particles (default 4096)")
     p.add_argument("--particle-seed", type=int, default=None, metavar="S",
@@ -196,6 +196,8 @@ def _run(args: argparse.Namespace) -> int:
         tracker = _tracker_settings(args, ALIASES.get(args.estimator, args.estimator))
     elif args.particles is not None or args.particle_seed is not None:
         raise CLIError("--particles and --particle-seed apply to --estimator particle or map, not to init")
+    elif args.lag is not None:
+        raise CLIError("--lag applies to fixed-lag, not to init")
     elif args.mode_candidates is not None or args.most_likely or args.estimate_offsets:
         option = ("--mode-candidates" if args.mode_candidates is not None else
                   "--most-likely" if args.most_likely else "--estimate-offsets")
@@ -443,6 +445,8 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
                           (args.estimate_offsets, "--estimate-offsets")):
         if given and name != "smoother":
             raise CLIError(f"{option} applies to the smoother, not to {name}")
+    if args.lag is not None and name != "fixed-lag":
+        raise CLIError(f"--lag applies to fixed-lag, not to {name}")
     if args.estimate_offsets and args.bias_sigma is None:
         raise CLIError("--estimate-offsets needs --bias-sigma (each pair's offset prior)")
     offsets: dict[str, Any] = {}
@@ -468,7 +472,8 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
         except ValueError as exc:  # offsets to estimate where every pair's bias_sigma is 0
             raise CLIError(f"--estimate-offsets: {exc}") from None
     try:
-        return (FixedLagSettings(lag=args.lag, huber_k=k, **offsets) if name == "fixed-lag"
+        lag = {} if args.lag is None else {"lag": args.lag}
+        return (FixedLagSettings(huber_k=k, **lag, **offsets) if name == "fixed-lag"
                 else ESTIMATORS[name].settings(huber_k=k, **particle, **offsets))
     except ValueError as exc:
         raise CLIError(f"--{'lag' if name == 'fixed-lag' else 'particles/--particle-seed'}: {exc}") from None
