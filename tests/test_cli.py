@@ -58,6 +58,40 @@ def test_observability_cli_json_and_plot(tmp_path: Path, capsys: pytest.CaptureF
     assert json.loads(capsys.readouterr().out)["status"] == "ok"
 
 
+@pytest.mark.parametrize(("options", "message"), [
+    (["--report", "20000", "--speeds", "50"], "--speeds does not apply to --report"),
+    (["--report", "20000", "--headings", "0", "90", "10", "--samples", "3"], "--headings, --samples do not apply to "
+                                                                             "--report"),
+    (["--slice", "180", "--speeds", "50"], "--speeds does not apply to --slice"),
+    (["--table", "--velocity", "10", "-100"], "--velocity does not apply to --table"),
+    (["--table", "--group", "2"], "--group does not apply to --table"),
+    (["--table", "--offset", "500"], "--offset applies to --table with --geometry"),
+    (["--start-z", "100"], "--start-z does not apply to the map (the default mode)"),
+    (["--duration", "60"], "--duration does not apply to the map (the default mode)"),
+    (["--report-lat-lon", "51.7", "0.1", "--offset", "5"], "--offset does not apply to --report-lat-lon"),
+    (["--group", "3", "--geometry", "b", "--report", "20000"], "--group sets --geometry and --offset"),
+])
+def test_observability_refuses_an_option_its_mode_does_not_read(capsys: pytest.CaptureFixture[str],
+                                                                options: list[str], message: str) -> None:
+    """Each mode reads its own options; one it does not read is refused in one line (it was dropped silently: a
+    report with --speeds, a table with --velocity), before any work."""
+    assert main(["observability", *options]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+
+
+def test_observability_group_sets_geometry_and_offset_in_every_mode_that_reads_it(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """``--group 3`` is case b on the baseline: the report (which used to ignore it and report on case a at 2 km)
+    and the map equal --geometry b --offset 0."""
+    for mode in (["--report", "20000"], ["--x", "5000", "9000", "2000", "--headings", "0", "90", "45"]):
+        assert main(["observability", "--group", "3", *mode, "--json"]) == 0
+        by_group = json.loads(capsys.readouterr().out)
+        assert main(["observability", "--geometry", "b", "--offset", "0", *mode, "--json"]) == 0
+        assert by_group == json.loads(capsys.readouterr().out)
+    assert by_group["y"] == 0.0
+
+
 def test_observability_cli_bad_grid(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["observability", "--x", "5000", "1000", "500"]) == 2
     assert "bad grid" in capsys.readouterr().err

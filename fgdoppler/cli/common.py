@@ -100,6 +100,11 @@ def geometry_with_zone(spec: str, args: argparse.Namespace) -> Any:
     return moved
 
 
+#: The ``dest`` of every option :func:`add_scenario_options` adds.
+SCENARIO_OPTIONS = ("velocity", "duration", "dt", "offsets", "sigma", "process_noise", "turn_rate", "acceleration",
+                    "manoeuvre_onset", "bias", "clock_error")
+
+
 def add_scenario_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
     """The options of a simulated target (velocity, duration, sampling, offsets, noise); returns the group.
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -10,6 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fgdoppler.cli.common import (
+    SCENARIO_OPTIONS,
     CLIError,
     add_scenario_options,
     east_north_of,
@@ -69,7 +71,59 @@ def add_observability(sub: argparse._SubParsersAction) -> None:
     add_scenario_options(p)
     p.add_argument("--json", action="store_true", help="machine-readable output on stdout")
     p.add_argument("--plot", type=Path, default=None, metavar="PATH", help="write a figure")
-    p.set_defaults(handler=_run)
+    p.set_defaults(handler=_run, given=functools.partial(_given, p))
+
+
+#: The options each mode reads (their ``dest``), besides ``--geometry``, ``--json`` and ``--plot``; any other option
+#: given is refused, never dropped.
+MODE_OPTIONS: dict[str, frozenset[str]] = {
+    "map": frozenset({"group", "offset", "speed", "headings", "x", "samples", "interval", "pair_offsets"}),
+    # the table and the slices show the paper's groups 2 and 4 themselves (--geometry and --offset for others)
+    "table": frozenset({"offset", "speeds", "headings", "x", "samples", "interval", "pair_offsets"}),
+    "slice": frozenset({"offset", "speed", "x", "samples", "interval", "pair_offsets"}),
+    "report": frozenset({"group", "offset", "start_z", *SCENARIO_OPTIONS}),
+    "report-lat-lon": frozenset({"start_z", *SCENARIO_OPTIONS}),
+}
+
+#: Each option's name on the command line, for the messages.
+_FLAGS = {"pair_offsets": "--pair-offsets", "start_z": "--start-z", "process_noise": "--process-noise",
+          "turn_rate": "--turn-rate", "manoeuvre_onset": "--manoeuvre-onset", "clock_error": "--clock-error"}
+
+
+def _given(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[str]:
+    """The options of ``args`` given with a value other than their default (``dest`` names)."""
+    names = ("group", "offset", "speed", "speeds", "headings", "x", "samples", "interval", "pair_offsets", "start_z",
+             *SCENARIO_OPTIONS)
+    return [n for n in names if getattr(args, n) != parser.get_default(n)]
+
+
+def _mode(args: argparse.Namespace) -> str:
+    if args.table:
+        return "table"
+    if args.slice is not None:
+        return "slice"
+    if args.report is not None:
+        return "report"
+    return "report-lat-lon" if args.report_lat_lon is not None else "map"
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """Refuse options the chosen mode does not read; resolve ``--group`` into ``--geometry`` and ``--offset``."""
+    mode = _mode(args)
+    unused = [n for n in args.given(args) if n not in MODE_OPTIONS[mode]]
+    if unused:
+        flags = ", ".join(_FLAGS.get(n, "--" + n) for n in unused)
+        shown = {"map": "the map (the default mode)", "report-lat-lon": "--report-lat-lon"}.get(mode, "--" + mode)
+        raise CLIError(f"{flags} {'does' if len(unused) == 1 else 'do'} not apply to {shown}")
+    if mode in ("table", "slice") and args.geometry is None and "offset" in args.given(args):
+        raise CLIError(f"--offset applies to --{mode} with --geometry (without it, it shows the paper's groups 2 and 4 "
+                       "at their own offsets)")
+    if args.group is not None:
+        from fgdoppler.analysis.observability import PAPER_GROUPS
+
+        if args.geometry is not None or "offset" in args.given(args):
+            raise CLIError("--group sets --geometry and --offset: give either the group or those two")
+        args.geometry, args.offset = PAPER_GROUPS[args.group]
 
 
 def _grid(spec: Sequence[float] | None, default: np.ndarray | None) -> np.ndarray | None:
@@ -84,6 +138,7 @@ def _grid(spec: Sequence[float] | None, default: np.ndarray | None) -> np.ndarra
 def _run(args: argparse.Namespace) -> int:
     from fgdoppler.analysis import observability as ob
 
+    _check_options(args)
     sampling = ob.SamplingPattern(
         samples_per_pair=args.samples if args.samples is not None else ob.TABLE2_SAMPLING.samples_per_pair,
         interval=args.interval if args.interval is not None else ob.TABLE2_SAMPLING.interval,
@@ -100,8 +155,6 @@ def _run(args: argparse.Namespace) -> int:
             raise CLIError("the maps, slices and speed table are 2-D (x x heading in the sensors' plane); for a 3-D "
                            "geometry use --report START_X --start-z Z, or the altitude study "
                            "(studies/altitude_study.py)")
-    if args.start_z is not None and not reporting:
-        raise CLIError("--start-z goes with --report or --report-lat-lon")
     if args.table:
         return _table(args, sampling, xs, hs)
     if args.slice is not None:
@@ -160,7 +213,7 @@ def _map(args: argparse.Namespace, sampling: SamplingPattern, xs: np.ndarray | N
     from fgdoppler.analysis import observability as ob
     from fgdoppler.geometry import resolve_geometry
 
-    case, y = (ob.PAPER_GROUPS[args.group] if args.group else (args.geometry or "a", args.offset))
+    case, y = args.geometry or "a", args.offset
     geom = resolve_geometry(case)
     n_x = ob.default_along(geom).size if xs is None else xs.size
     with progress_bar(n_x * hs.size, "observability map") as bar:
