@@ -183,6 +183,14 @@ def test_a_recording_in_hz_tracks_as_the_same_recording_in_metres_per_second(
     assert main(["simulate", "--wavelength", "98.3e6", "--out", str(tmp_path / "x")]) == 2
     assert "the wavelength is 3.04977 m" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+    # a geometry that gives its wavelengths: --wavelength replaces them, and a note says which were replaced
+    again = ["simulate", "--geometry", str(tmp_path / "hz" / "geometry.toml"), "--out", str(tmp_path / "y")]
+    assert main([*again, "--wavelength", "2"]) == 0
+    assert ("note: --wavelength replaces the geometry's wavelengths (3.05, 0.5 m) with 2, 2 m in the files written"
+            in capsys.readouterr().err)
+    assert fd.Geometry.from_toml(tmp_path / "y" / "geometry.toml").wavelengths == (2.0, 2.0)
+    assert main([*again, "--wavelength", "3.05", "0.5"]) == 0
+    assert "note" not in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -61,10 +62,14 @@ def _run(args: argparse.Namespace) -> int:
     geom = geometry_with_zone(args.geometry, args)
     if args.wavelength is not None:
         values = per_pair(args.wavelength, geom.n_pairs, "--wavelength")
+        before = geom.wavelengths
         try:
             geom = replace(geom, wavelengths=values if isinstance(values, tuple) else (values,) * geom.n_pairs)
         except ValueError as exc:
             raise CLIError(f"--wavelength: {exc}") from None
+        if before and before != geom.wavelengths:  # the user's option wins, and the file's values are not lost silently
+            print(f"note: --wavelength replaces the geometry's wavelengths ({', '.join(f'{v:g}' for v in before)} m) "
+                  f"with {', '.join(f'{v:g}' for v in geom.wavelengths)} m in the files written", file=sys.stderr)
     x, y = _start_xy(args, geom)
     start = (x, y) if args.start_z is None else (x, y, args.start_z)
     scen = scenario(args, geom, start, f"{geom.name or 'custom geometry'}, start ({x / 1e3:g}, {y / 1e3:g}) km")
