@@ -145,8 +145,9 @@ def plot_geometry(
     if ellipse_through is not None:
         pt = np.asarray(ellipse_through, dtype=float) * s
         ax.plot(pt[0], pt[1], "*", color="r", ms=12, label="point")
-    ax.set_xlabel(f"x ({unit})")
-    ax.set_ylabel(f"y ({unit})")
+    east = geometry.geodetic_origin is not None  # sites by latitude and longitude: metres east and north
+    ax.set_xlabel(f"x, east ({unit})" if east else f"x ({unit})")
+    ax.set_ylabel(f"y, north ({unit})" if east else f"y ({unit})")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize="small", loc="best")

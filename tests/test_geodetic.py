@@ -232,3 +232,17 @@ def test_observability_reports_on_a_target_at_a_latitude_and_longitude(tmp_path:
     assert "needs a geometry whose sites are given by latitude and longitude" in capsys.readouterr().err
     with pytest.raises(SystemExit):  # argparse: the modes exclude each other
         main([*common, "--report-lat-lon", "51.7", "0.1", "--report", "20000"])
+
+
+def test_a_plot_of_sensors_given_by_latitude_and_longitude_names_east_and_north(tmp_path: Path) -> None:
+    """The plan view of a geodetic geometry is in metres east and north of the origin, and its axes say so; a metric
+    geometry's keep x and y."""
+    import matplotlib.pyplot as plt
+
+    from fgdoppler import plotting
+
+    for geometry, x, y in ((fd.Geometry.from_toml(_write(tmp_path)), "x, east (km)", "y, north (km)"),
+                           (fd.paper_geometry("a"), "x (km)", "y (km)")):
+        ax = plotting.plot_geometry(geometry)
+        assert (ax.get_xlabel(), ax.get_ylabel()) == (x, y)
+        plt.close(ax.figure)
