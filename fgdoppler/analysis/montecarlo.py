@@ -46,7 +46,7 @@ from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
 from fgdoppler.estimators.settings import FixedLagSettings, SmootherSettings, TrackerSettings
 from fgdoppler.estimators.verdict import STATUSES
 from fgdoppler.models.motion import ConstantVelocity
-from fgdoppler.models.tracking import TrackingModel
+from fgdoppler.models.tracking import TrackingModel, default_motion
 from fgdoppler.simulation import Scenario, simulate
 
 #: The summary's NEES leaves out the times before this (s): the initiation window and the first seconds after
@@ -72,10 +72,6 @@ def _lag(name: str) -> float | None:
     if not (np.isfinite(lag) and lag > 0):
         raise ValueError(f"bad lag in estimator {name!r}: must be > 0 s")
     return lag
-
-
-def _motion() -> ConstantVelocity:
-    return ConstantVelocity(q=1e-3)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -114,7 +110,7 @@ class MonteCarloSpec:
     init_per_pair: int = 10
     initiation: InitiationSettings = field(default_factory=InitiationSettings)
     settings: Mapping[str, TrackerSettings] = field(default_factory=dict)
-    motion: ConstantVelocity = field(default_factory=_motion)
+    motion: ConstantVelocity = field(default_factory=default_motion)
     weak_prior: bool = True
     verify: bool = True
 

@@ -242,8 +242,9 @@ def taking(setting: str) -> list[str]:
     return [n for n, i in ESTIMATORS.items() if setting in {f.name for f in fields(i.settings)}]
 
 
-def motion(q: float | None) -> Any:
-    """The estimators' :class:`~fgdoppler.models.motion.ConstantVelocity` of ``--q`` (default 1e-3).
+def motion(q: float) -> Any:
+    """The estimators' :class:`~fgdoppler.models.motion.ConstantVelocity` of a given ``--q`` (without the option
+    the models' own default, :func:`~fgdoppler.models.tracking.default_motion`).
 
     Raises
     ------
@@ -253,8 +254,6 @@ def motion(q: float | None) -> Any:
     """
     from fgdoppler.models.motion import ConstantVelocity
 
-    if q is None:
-        return ConstantVelocity(q=1e-3)
     if not (_finite(q) and q > 0):
         raise CLIError(f"--q must be a finite number > 0 (m^2/s^3), got {q:g}: every track is checked by a "
                        "smoother whose motion factors need some process noise (1e-6 is a nearly constant velocity)")

@@ -133,7 +133,7 @@ def _run(args: argparse.Namespace) -> int:
     try:
         spec = MonteCarloSpec(scenarios=tuple(scen), estimators=tuple(args.estimators), runs=args.runs, seed=args.seed,
                               initiation=InitiationSettings(grid=grid_spec(args), huber_k=k), settings=settings,
-                              motion=motion(args.q))
+                              **({} if args.q is None else {"motion": motion(args.q)}))
     except ValueError as exc:
         raise CLIError(str(exc)) from exc
     pool, client = executor(args)

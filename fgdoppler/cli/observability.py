@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import functools
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -71,7 +70,7 @@ def add_observability(sub: argparse._SubParsersAction) -> None:
     add_scenario_options(p)
     p.add_argument("--json", action="store_true", help="machine-readable output on stdout")
     p.add_argument("--plot", type=Path, default=None, metavar="PATH", help="write a figure")
-    p.set_defaults(handler=_run, given=functools.partial(_given, p))
+    p.set_defaults(handler=_run, defaults={n: p.get_default(n) for n in _CHECKED})
 
 
 #: The options each mode reads (their ``dest``), besides ``--geometry``, ``--json`` and ``--plot``; any other option
@@ -90,11 +89,9 @@ _FLAGS = {"pair_offsets": "--pair-offsets", "start_z": "--start-z", "process_noi
           "turn_rate": "--turn-rate", "manoeuvre_onset": "--manoeuvre-onset", "clock_error": "--clock-error"}
 
 
-def _given(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[str]:
-    """The options of ``args`` given with a value other than their default (``dest`` names)."""
-    names = ("group", "offset", "speed", "speeds", "headings", "x", "samples", "interval", "pair_offsets", "start_z",
-             *SCENARIO_OPTIONS)
-    return [n for n in names if getattr(args, n) != parser.get_default(n)]
+#: The options whose use is checked against the mode (``dest`` names).
+_CHECKED = ("group", "offset", "speed", "speeds", "headings", "x", "samples", "interval", "pair_offsets", "start_z",
+            *SCENARIO_OPTIONS)
 
 
 def _mode(args: argparse.Namespace) -> str:
@@ -110,18 +107,19 @@ def _mode(args: argparse.Namespace) -> str:
 def _check_options(args: argparse.Namespace) -> None:
     """Refuse options the chosen mode does not read; resolve ``--group`` into ``--geometry`` and ``--offset``."""
     mode = _mode(args)
-    unused = [n for n in args.given(args) if n not in MODE_OPTIONS[mode]]
+    given = [n for n in _CHECKED if getattr(args, n) != args.defaults[n]]
+    unused = [n for n in given if n not in MODE_OPTIONS[mode]]
     if unused:
         flags = ", ".join(_FLAGS.get(n, "--" + n) for n in unused)
         shown = {"map": "the map (the default mode)", "report-lat-lon": "--report-lat-lon"}.get(mode, "--" + mode)
         raise CLIError(f"{flags} {'does' if len(unused) == 1 else 'do'} not apply to {shown}")
-    if mode in ("table", "slice") and args.geometry is None and "offset" in args.given(args):
+    if mode in ("table", "slice") and args.geometry is None and "offset" in given:
         raise CLIError(f"--offset applies to --{mode} with --geometry (without it, it shows the paper's groups 2 and 4 "
                        "at their own offsets)")
     if args.group is not None:
         from fgdoppler.analysis.observability import PAPER_GROUPS
 
-        if args.geometry is not None or "offset" in args.given(args):
+        if args.geometry is not None or "offset" in given:
             raise CLIError("--group sets --geometry and --offset: give either the group or those two")
         args.geometry, args.offset = PAPER_GROUPS[args.group]
 

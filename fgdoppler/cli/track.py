@@ -136,14 +136,11 @@ def _describe(geometry: Any, spec: str) -> dict[str, Any]:
             "zone": geometry.zone.to_dict()}
 
 
-def _sigma_note(args: argparse.Namespace) -> None:
-    """Say on stderr that ``--sigma`` went unused where the file gives every measurement's own sigma (a regular
-    file only: a pipe cannot be read again for its header)."""
-    from fgdoppler.csvfile import header_names
-
-    if args.sigma is None or not Path(args.file).is_file():
+def _sigma_note(args: argparse.Namespace, names: tuple[str, ...]) -> None:
+    """Say on stderr that ``--sigma`` went unused where the file's header ``names`` give every measurement's own
+    sigma."""
+    if args.sigma is None:
         return
-    names = header_names(args.file)
     column = next((c for c in ("sigma", "sigma_hz") if c in names), None)
     if column is not None:
         print(f"note: --sigma {args.sigma:g} is not used: {args.file} gives each measurement's sigma (its {column} "
@@ -213,7 +210,8 @@ def _run(args: argparse.Namespace) -> int:
     spec = _geometry_spec(args)
     geom = geometry_with_zone(spec, args)
     meas = Measurements.from_csv(args.file, geometry=geom, default_sigma=args.sigma)
-    _sigma_note(args)
+    names = header_names(args.file) if args.file.is_file() else ()  # a pipe was read once already
+    _sigma_note(args, names)
     truth = None
     if args.truth:
         truth = Trajectory.from_csv(args.truth)
@@ -248,7 +246,7 @@ def _run(args: argparse.Namespace) -> int:
             print(f"positions in metres east, north{' and up' if geom.dim == 3 else ''} of latitude {o.latitude:.6f}, "
                   f"longitude {o.longitude:.6f}, height {o.height:g} m (WGS84); --out and --json add each state's "
                   "latitude and longitude")
-        if args.file.is_file() and "doppler_hz" in header_names(args.file):  # a pipe was read once already
+        if "doppler_hz" in names:
             print("doppler_hz read as the bistatic range rate -wavelength * doppler_hz, with wavelengths "
                   + ", ".join(f"{v:g}" for v in geom.wavelengths) + " m (every result is in m and m/s)")
     if args.estimator == "init":

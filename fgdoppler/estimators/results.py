@@ -398,7 +398,7 @@ class TrackResult(Judged):
             return known, tuple(n for n in names if n not in known) if set(known) <= set(names) else ()
 
         table = read_table(path, header=(), what="track file", comments=True, layout=layout,
-                           blank=_track_columns(6)[7:])
+                           blank=tuple(c.lower() for c in _cov_names(6)))  # every covariance cell, 2-D or 3-D
         m = 6 if "z" in table.header else 4
         k = len(_cov_names(m))
         values = table.values

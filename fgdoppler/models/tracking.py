@@ -21,12 +21,13 @@ from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.observation import DopplerModel, MeasurementModel
 from fgdoppler.zone import Zone
 
-__all__ = ["TrackingModel", "as_tracking_model"]
+__all__ = ["TrackingModel", "as_tracking_model", "default_motion"]
 
 FloatArray = NDArray[np.float64]
 
 
-def _default_motion() -> ConstantVelocity:
+def default_motion() -> ConstantVelocity:
+    """The estimators' motion model unless told otherwise: white-noise acceleration with ``q = 1e-3`` m²/s³."""
     return ConstantVelocity(q=1e-3)
 
 
@@ -64,7 +65,7 @@ class TrackingModel:
     """
 
     observation: MeasurementModel
-    motion: ConstantVelocity = field(default_factory=_default_motion)
+    motion: ConstantVelocity = field(default_factory=default_motion)
     zone: Zone | None = None
     weak_prior: bool = True
     frame: Frame | None = None
