@@ -25,6 +25,13 @@ Three mistakes, each checked on the same recordings:
   layout a hundred times smaller (lengths, speeds, sigma scaled: layouts 44-100 km across become
   440 m-1 km, the paper's 50 km 500 m), whose windows fail for a manoeuvre and are tried in kilometres
   too where they lie within those 1,000 m.
+* **Times in milliseconds.**  The time column in milliseconds where fgdoppler reads seconds (as many
+  loggers write it).  The initiation's ``units`` finding should say so
+  (:func:`fgdoppler.estimators.window_mistakes.time_units_reason`, tried where a pair's median interval
+  divided by 1000 is at least 5 ms).  Its check for false alarms: the manoeuvring recording below
+  twenty times slower (times 20 times later, Doppler, sigma and speeds a twentieth, the process noise
+  density 1/8000: the same whitened problem sampled every 10 s), whose windows fail for a manoeuvre and
+  are tried in milliseconds.
 * **A receiver's clock off.**  Pair 1's times ``--late`` seconds late (default 0.5; one clock for
   every pair is assumed).  Not looked for: where such data fit another track, no finding can tell.
   With ``--clock-sigma S`` the estimator is told each pair's clock may be off by S (1 sigma;
@@ -35,7 +42,8 @@ alone negated, pairs 0 and 1 swapped, pair 1's clock late, where the geometry ha
 Doppler halved and halved and negated, and the recording simulated anew with its target manoeuvring
 (``target manoeuvres``: turning by up to 0.6 deg/s and changing speed by up to 1 m/s^2 from a time in
 0-20 s, drawn per recording; right data, so no mistake should be named), the geometry in kilometres
-and that manoeuvring recording on the layout a hundred times smaller (nothing to name).  ``--only`` runs the versions
+and that manoeuvring recording on the layout a hundred times smaller (nothing to name), the times in milliseconds
+and the manoeuvring recording twenty times slower (nothing to name).  ``--only`` runs the versions
 it lists (comma-separated names, as the tables give them).  For each: whether the initiation has a ``sign``,
 ``swapped``, ``radial`` or ``units`` finding (:func:`fgdoppler.estimators.window_mistakes.with_mistake`) and
 what it names, and (``--track 1``, the default) the verdict of ``--estimator`` (default the
@@ -141,11 +149,18 @@ KILOMETRES = "sensors in kilometres"
 SMALL = "target manoeuvres on a layout 1/100 the size"
 #: What a ``units`` finding names, as :func:`_changes` reads it.
 IN_KILOMETRES = "every sensor position multiplied by 1000"
+#: The version with the times in milliseconds (the data as simulated otherwise): a ``units`` finding is right.
+MILLISECONDS = "times in milliseconds"
+#: What its ``units`` finding names, as :func:`_changes` reads it.
+IN_MILLISECONDS = "every time divided by 1,000"
+#: The manoeuvring version twenty times slower (sampled every 10 s), whose failing windows are tried in
+#: milliseconds.
+SLOW = "target manoeuvres 20 times slower"
 #: The findings the tables count.
 FINDINGS = (*MISTAKE_CODES, "units")
 
 #: Every version, in the tables' order.
-ALL_VERSIONS = [*VERSIONS, MANOEUVRE, KILOMETRES, SMALL]
+ALL_VERSIONS = [*VERSIONS, MANOEUVRE, KILOMETRES, SMALL, MILLISECONDS, SLOW]
 
 
 def _manoeuvring(sim: fd.Simulation, key: int) -> fd.Simulation:
@@ -166,9 +181,23 @@ def _shrunk(m: fd.Measurements, truth: fd.Trajectory, model: fd.TrackingModel, s
             fd.TrackingModel.of(g, motion=replace(model.motion, q=model.motion.q * s**2)))
 
 
+def _slowed(m: fd.Measurements, truth: fd.Trajectory, model: fd.TrackingModel, s: float
+            ) -> tuple[fd.Measurements, fd.Trajectory, fd.TrackingModel]:
+    """The recording of a target ``s`` times slower on the same layout, sampled ``s`` times less often: its
+    positions at times ``s`` times later, so the Doppler and its sigma scale by ``1/s`` and the process noise's
+    density, an acceleration's (``1/s**2``) white noise in time stretched ``s``-fold, by ``1/s**3`` (the same
+    problem, whitened)."""
+    k = truth.states.shape[1] // 2
+    slow = truth.states.copy()
+    slow[:, k:] /= s
+    return (fd.Measurements(time=s * m.time, pair=m.pair, doppler=m.doppler / s, sigma=m.sigma / s),
+            fd.Trajectory(times=s * truth.times, states=slow),
+            fd.TrackingModel.of(model.geometry, motion=replace(model.motion, q=model.motion.q / s**3)))
+
+
 #: The change a mistake finding names first, and the other changes it names (``mistake_reason``'s wording).
 _FIRST = re.compile(r"^(?:.*: )?with (the (?:Doppler|labels) of .+?|every sensor position(?: and the zone's limits)? "
-                    r"multiplied by 1000) (?:the window fits|they fit)")
+                    r"multiplied by 1000|every time divided by [\d,]+) (?:the window fits|they fit)")
 _OTHERS = re.compile(r"(?:passes|pass) the same test with (.+?) too: check")
 _CHANGE = re.compile(r"(the (?:Doppler|labels) of .+?) \(cost ")
 
@@ -187,11 +216,17 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
     g = sim.scenario.geometry
     for name in versions:
         truth, used = sim.truth, model
-        if name in (MANOEUVRE, SMALL):
+        if name in (MANOEUVRE, SMALL, SLOW):
             moved = _manoeuvring(sim, key)
             m, truth, want = moved.measurements, moved.truth, (lambda g: "")
             if name == SMALL:
                 m, truth, used = _shrunk(m, truth, model, 0.01)
+            elif name == SLOW:
+                m, truth, used = _slowed(m, truth, model, 20.0)
+        elif name == MILLISECONDS:
+            m = fd.Measurements(time=1e3 * sim.measurements.time, pair=sim.measurements.pair,
+                                doppler=sim.measurements.doppler, sigma=sim.measurements.sigma)
+            truth, want = fd.Trajectory(times=1e3 * sim.truth.times, states=sim.truth.states), (lambda g: IN_MILLISECONDS)
         elif name == KILOMETRES:
             m, want, used = sim.measurements, (lambda g: IN_KILOMETRES), fd.TrackingModel.of(g.scaled(1e-3))
         else:

@@ -941,6 +941,25 @@ def test_track_on_a_geometry_in_kilometres_says_so_instead_of_advising_a_zone(
     assert "hint: the geometry is likely in kilometres" in err and "one holding every start they name" not in err
 
 
+def test_track_with_times_in_milliseconds_says_so_instead_of_advising_a_zone(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A recording of case a (a target 45 km out) with its times written in milliseconds: the track fails (exit 3),
+    the initiation's ``units`` finding names milliseconds, and the hint says to give the times in seconds rather
+    than a zone that reads them as seconds."""
+    sim = tmp_path / "sim"
+    main(["simulate", "--start-x", "45000", "--out", str(sim)])
+    rows = (sim / "measurements.csv").read_text().splitlines()
+    ms = [rows[0]] + [",".join((repr(1e3 * float(t)), *rest)) for t, *rest in (r.split(",") for r in rows[1:])]
+    (tmp_path / "ms.csv").write_text("\n".join(ms) + "\n")
+    capsys.readouterr()
+    assert main(["track", str(tmp_path / "ms.csv"), "--geometry", str(sim / "geometry.toml"),
+                 "--estimator", "smoother"]) == 3
+    err = capsys.readouterr().err
+    assert "doubtful: initiation: with every time divided by 1,000 the window fits" in err
+    assert "the times are likely in milliseconds" in err
+    assert "hint: the times are likely not in seconds" in err and "one holding every start they name" not in err
+
+
 def test_track_with_a_sign_mistake_says_to_correct_it_before_any_zone_advice(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A file in Hz written with the opposite sign convention (case b, a target 25 km out): the smoother's start is

@@ -29,7 +29,7 @@ from fgdoppler.cli.common import (
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.later_mistakes import is_mistake_finding
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
-from fgdoppler.estimators.window_mistakes import IN_KILOMETRES
+from fgdoppler.estimators.window_mistakes import IN_KILOMETRES, IN_SECONDS
 from fgdoppler.geometry import Geometry, principal_line
 from fgdoppler.zone import ZoneBox
 
@@ -317,7 +317,8 @@ def zone_hint(reasons: Any) -> str | None:
 
 def mistake_hint(reasons: Any) -> str | None:
     """The hint to correct a likely mistake in the file or the geometry first, where a finding names one (a
-    ``sign``, ``swapped`` or ``radial`` change of the data, or the geometry in kilometres) and another advises
+    ``sign``, ``swapped`` or ``radial`` change of the data, the geometry in kilometres or the times in another
+    unit) and another advises
     a zone or a half plane: that advice reads the mistaken data or units as given.  ``None`` otherwise."""
     # a track's findings carry its initiation's under the "initiation-" prefix; both name the mistake alike
     mistakes = [r for r in reasons if r.status != "ok" and is_mistake_finding(
@@ -325,6 +326,9 @@ def mistake_hint(reasons: Any) -> str | None:
     if any(IN_KILOMETRES in r.message for r in mistakes):
         return ("the geometry is likely in kilometres (the units finding above): give it in metres before "
                 "following any zone advice, which reads it as metres")
+    if any(IN_SECONDS in r.message for r in mistakes):
+        return ("the times are likely not in seconds (the units finding above): give them in seconds before "
+                "following any zone advice, which reads them as seconds")
     if mistakes and any(r.status != "ok" and (r.zone is not None or r.mirror is not None) for r in reasons):
         return (f"a {mistakes[0].code.removeprefix('initiation-')} finding above names a likely mistake in the "
                 "measurement file: correct it before following any zone or half-plane advice, which reads the data "

@@ -43,14 +43,18 @@ tried there: that would cost :math:`1 + P + P(P-1)/2` more initiations on
 every track that misfits, a manoeuvring one included.)
 
 The geometry in kilometres
-(:func:`~fgdoppler.estimators.window_mistakes.units_reason`): where the
-initiation named it, nothing more is searched (every window would fail in a
-geometry a thousand times too small); where the initiation named nothing
-on a layout at most
-:data:`~fgdoppler.estimators.window_mistakes.KILOMETRE_EXTENT` across, the
+(:func:`~fgdoppler.estimators.window_mistakes.units_reason`) and times in
+milliseconds or microseconds
+(:func:`~fgdoppler.estimators.window_mistakes.time_units_reason`): where the
+initiation named either, nothing more is searched (every window would fail
+with the units mistaken); where the initiation named nothing, the
 :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole recording
-are first tried in kilometres the same way (two initiations), and a
-``units`` finding then replaces the windows' search.
+are first tried in kilometres (on a layout at most
+:data:`~fgdoppler.estimators.window_mistakes.KILOMETRE_EXTENT` across) and
+then with their times divided (where the recording's own sampling
+interval allows it), one initiation each and one more for the spread
+measurements as given, and a ``units`` finding then replaces the windows'
+search.
 
 Where the initiation window did name a change, a short window often fits
 under several (on radar layouts with a radar's radial velocity positive
@@ -84,12 +88,17 @@ from fgdoppler.estimators.results import TrackResult
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.estimators.window_mistakes import (
     IN_KILOMETRES,
+    IN_SECONDS,
+    SHORTEST_INTERVAL,
+    TIME_UNITS,
     Mistake,
     MistakeCode,
     find_mistake,
     kilometre_extent,
+    median_interval,
     mistake_reason,
     radar_pairs,
+    time_units_reason,
     units_reason,
 )
 from fgdoppler.measurements import Measurements
@@ -121,7 +130,7 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
                    reference: TrackResult | None = None) -> list[Reason]:
     r"""A ``sign``, ``swapped``, ``radial`` or ``units`` finding from later in the recording, where the track
     does not fit (``reasons``, the track's, hold a ``fit`` finding that is not ``ok``) and ``init`` did not find
-    the geometry in kilometres (the module docstring: a small layout is tried in kilometres first).
+    the geometry in kilometres or the times in other units (the module docstring: those are tried first).
 
     Where ``init`` names a change (:attr:`~fgdoppler.estimators.initiation.Initiation.mistake`),
     the :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole
@@ -199,9 +208,10 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
 
 def is_mistake_finding(reason: Reason) -> bool:
     """Whether ``reason`` names a mistake in the measurement file or the geometry: a ``sign``, ``swapped`` or
-    ``radial`` finding, or a ``units`` finding of the geometry in kilometres (not the verdict's own ``units``
-    findings of speed and distance)."""
-    return reason.code in MISTAKE_CODES or (reason.code == "units" and IN_KILOMETRES in reason.message)
+    ``radial`` finding, or a ``units`` finding of the geometry in kilometres or of the times in another unit
+    than seconds (not the verdict's own ``units`` findings of speed and distance)."""
+    return reason.code in MISTAKE_CODES or (reason.code == "units" and (
+        IN_KILOMETRES in reason.message or IN_SECONDS in reason.message))
 
 
 def _misfits(reasons: tuple[Reason, ...]) -> bool:
@@ -261,6 +271,7 @@ class _Whole:
         self.model = model
         self.settings = InitiationSettings(half_plane=init.half_plane, huber_k=huber_k)
         self.spread = measurements.spread(WHOLE_PER_PAIR)
+        self.interval = median_interval(measurements)
         # no more than the initiation window saw: nothing to learn from them
         self._usable = len(self.spread) > init.n_measurements
         self._given: Initiation | None = None
@@ -325,16 +336,27 @@ def _ranked_on_whole(model: TrackingModel, whole: _Whole, found: Mistake) -> lis
 
 
 def _units_on_whole(model: TrackingModel, whole: _Whole) -> list[Reason]:
-    """On a layout small enough to be in kilometres (:func:`~fgdoppler.estimators.window_mistakes.kilometre_extent`),
-    where the whole recording's spread measurements fail the verdict's χ² test as given and fit with every
-    length multiplied by 1000, that as a ``units`` finding (:func:`later_mistakes`)."""
-    given = whole.given() if kilometre_extent(model) is not None else None
-    found = None if given is None else units_reason(whole.spread, model, whole.settings, given, what="they")
+    """Where the whole recording's spread measurements fail the verdict's χ² test as given and fit with every
+    length multiplied by 1000 (on a layout small enough to be in kilometres,
+    :func:`~fgdoppler.estimators.window_mistakes.kilometre_extent`) or with the times in milliseconds or
+    microseconds (:func:`~fgdoppler.estimators.window_mistakes.time_units_reason`, judged by the recording's
+    own sampling interval), that as a ``units`` finding (:func:`later_mistakes`)."""
+    in_km = kilometre_extent(model) is not None
+    in_ms = whole.interval is not None and whole.interval / TIME_UNITS[0][1] >= SHORTEST_INTERVAL
+    given = whole.given() if in_km or in_ms else None
+    if given is None:
+        return []
+    found = units_reason(whole.spread, model, whole.settings, given, what="they") if in_km else None
+    unit = "in kilometres"
+    if found is None:
+        found = time_units_reason(whole.spread, model, whole.settings, given, what="they",
+                                  interval=whole.interval)
+        unit = "with other time units"
     if found is None:
         return []
     return [replace(found, message=(
         f"the track fails its residual test and the initiation window named nothing, but the {whole.describe()} "
-        f"fail the chi-square test as given and fit in kilometres: {found.message}"))]
+        f"fail the chi-square test as given and fit {unit}: {found.message}"))]
 
 
 def _from_whole(model: TrackingModel, whole: _Whole, codes: tuple[MistakeCode, ...]) -> list[Reason]:

@@ -24,8 +24,9 @@ from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["IN_KILOMETRES", "KILOMETRE_EXTENT", "OTHERS_NAMED", "SIGN_CONVENTION", "Mistake", "find_mistake", "kilometre_extent",
-           "mistake_reason", "radar_pairs", "units_reason", "with_mistake"]
+__all__ = ["IN_KILOMETRES", "IN_SECONDS", "KILOMETRE_EXTENT", "OTHERS_NAMED", "SHORTEST_INTERVAL", "SIGN_CONVENTION",
+           "TIME_UNITS", "Mistake", "find_mistake", "kilometre_extent", "median_interval", "mistake_reason",
+           "radar_pairs", "time_units_reason", "units_reason", "with_mistake"]
 
 #: The data's sign convention, as a ``sign`` finding states it (docs/data-formats.md says the same).
 SIGN_CONVENTION = ("fgdoppler's doppler is the bistatic range rate, negative for a target closing on the pair; "
@@ -41,6 +42,16 @@ KILOMETRE_EXTENT = 1000.0
 
 #: What a ``units`` finding of :func:`units_reason` says (and only it: the verdict's own ``units`` findings do not).
 IN_KILOMETRES = "the geometry likely gives kilometres where fgdoppler reads metres"
+
+#: What every ``units`` finding of :func:`time_units_reason` says, after the unit it names.
+IN_SECONDS = "where fgdoppler reads seconds"
+
+#: The time units :func:`time_units_reason` tries, each with what a time in it is divided by to give seconds.
+TIME_UNITS: tuple[tuple[str, float], ...] = (("milliseconds", 1e3), ("microseconds", 1e6))
+
+#: Shortest interval (s) between a pair's measurements that :func:`time_units_reason` takes for real: a unit is
+#: tried only where the median interval, divided as it says, is at least this (200 measurements a second).
+SHORTEST_INTERVAL = 5e-3
 
 #: The mistakes in a measurement file that :func:`find_mistake` tries.
 MistakeCode = Literal["sign", "swapped", "radial"]
@@ -151,9 +162,11 @@ def with_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
     radar: 2), made only for a window that fails.  Before them, on a
     layout at most :data:`KILOMETRE_EXTENT` across, a geometry in
     kilometres is tried (:func:`units_reason`: a ``units`` finding instead,
-    one initiation more).
+    one initiation more), then times in milliseconds or microseconds
+    (:func:`time_units_reason`, likewise).
     """
-    units = units_reason(measurements, model, settings, result)
+    units = units_reason(measurements, model, settings, result) \
+        or time_units_reason(measurements, model, settings, result)
     if units is not None:
         return replace(result, reasons=(*result.reasons, units))
     found = find_mistake(measurements, model, settings, result)
@@ -266,6 +279,59 @@ def units_reason(measurements: Measurements, model: TrackingModel, settings: Ini
         f"(cost {again.cost:.2f}, passing the {settings.confidence:.0%} chi-square test, against {result.cost:.2f} "
         f"as given): {IN_KILOMETRES} (its sensors lie within "
         f"{distance_text(extent)} of each other); if so, multiply every sensor coordinate{zone} by 1000"))
+
+
+def median_interval(measurements: Measurements) -> float | None:
+    """The median of the positive intervals between consecutive measurements of one pair (``None``: none)."""
+    order = np.lexsort((measurements.time, measurements.pair))
+    t, p = measurements.time[order], measurements.pair[order]
+    step = np.diff(t)[np.diff(p) == 0]
+    step = step[step > 0]
+    return float(np.median(step)) if step.size else None
+
+
+def time_units_reason(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
+                      result: Initiation, *, what: str = "the window", interval: float | None = None
+                      ) -> Reason | None:
+    r"""A ``units`` finding where ``measurements`` (``result`` their fit) fail the verdict's χ² test and fit
+    with every time divided by 1000 or by a million — times in milliseconds or microseconds where fgdoppler
+    reads seconds, as many loggers write them — else ``None``; ``what`` says what was fitted.
+
+    Read as seconds, times in milliseconds slow the target's clock a
+    thousandfold: the Doppler :math:`\dot r = \mathbf v\cdot(\mathbf u_T +
+    \mathbf u_R)` still gives its speed in metres per *second*, so between
+    two measurements half a "second" apart (500 s) it would move 50 km at
+    100 m/s, and no constant-velocity track fits Doppler that barely change
+    over such distances.  A unit of :data:`TIME_UNITS` is tried only where
+    the median interval between a pair's consecutive measurements, divided
+    as the unit says, is at least :data:`SHORTEST_INTERVAL` (a 0.5 s
+    sampling written in milliseconds, 500, tries milliseconds alone; data
+    sampled every 0.5 s as given try nothing), in the model's own zone and
+    with ``settings``' half plane; the divided fit must pass the χ² test at
+    ``settings.confidence``, as a change of the data must.  One initiation
+    more per unit tried, only where they fail; the first unit that passes
+    is named.  ``interval``: the median interval to judge by where ``measurements`` are a selection of a
+    recording (measurements spread over it lie farther apart than its sampling), else theirs.
+    """
+    interval = median_interval(measurements) if interval is None else interval
+    if interval is None or result.cost <= float(chi2.ppf(VERDICT_LEVEL, max(result.dof, 1))):
+        return None
+    quiet = replace(settings, mistake_check=False)
+    for unit, divisor in TIME_UNITS:
+        if interval / divisor < SHORTEST_INTERVAL:
+            break  # the units are tried from the smaller divisor up
+        try:
+            again = initiate(replace(measurements, time=measurements.time / divisor), model, quiet)
+        except ValueError:  # the data need a speed the zone does not allow: no fit in it
+            continue
+        if again.passes_chi2:
+            return Reason(code="units", status="doubtful", message=(
+                f"with every time divided by {divisor:,.0f} {what} fit{'s' if what == 'the window' else ''} "
+                f"(cost {again.cost:.2f}, passing the {settings.confidence:.0%} chi-square test, against "
+                f"{result.cost:.2f} as given): the times are likely in {unit} {IN_SECONDS} (the median interval "
+                f"between a pair's measurements is {interval:g} in the file); if so, divide the time column, and a truth "
+                f"file's, by {divisor:,.0f}"))
+    return None
 
 
 def radar_pairs(model: TrackingModel) -> tuple[int, ...]:

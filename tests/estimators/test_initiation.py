@@ -475,6 +475,53 @@ def test_a_small_layout_in_metres_whose_window_fails_is_not_called_kilometres() 
         assert not r.passes_chi2 and not _units(r), [x.code for x in r.reasons]
 
 
+def _times_times(w: fd.Measurements, factor: float) -> fd.Measurements:
+    return fd.Measurements(time=w.time * factor, pair=w.pair, doppler=w.doppler, sigma=w.sigma)
+
+
+@pytest.mark.parametrize(("unit", "factor"), [("milliseconds", 1e3), ("microseconds", 1e6)])
+def test_times_in_milliseconds_or_microseconds_are_named(unit: str, factor: float) -> None:
+    """Case a 45 km's window with its times written in milliseconds (or microseconds): read as seconds the target
+    would cover 50 km between two samples, and no track fits; the ``units`` finding says that with the times
+    divided back it fits — at the cost of the window as simulated, which that divided problem is — and names
+    the unit and the median interval as the file gives it.  No data change is named, and with the check off
+    nothing is."""
+    A = fd.paper_geometry("a")
+    w = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(1)).measurements.first_per_pair(10)
+    plain = initiate(w, A)
+    r = initiate(_times_times(w, factor), A)
+    assert plain.passes_chi2 and not r.passes_chi2
+    [said] = _units(r)
+    assert said.startswith(f"with every time divided by {factor:,.0f} the window fits (cost {plain.cost:.2f}, "
+                           f"passing the 95% chi-square test, against {r.cost:.2f} as given): the times are likely "
+                           f"in {unit} where fgdoppler reads seconds (the median interval between a pair's "
+                           f"measurements is {0.5 * factor:g} in the file)")
+    assert not [x for x in r.reasons if x.code in ("sign", "swapped", "radial")] and r.mistake is None
+    assert not _units(initiate(_times_times(w, factor), A, InitiationSettings(mistake_check=False)))
+
+
+def test_a_slowly_sampled_window_that_fails_for_another_reason_is_not_called_milliseconds() -> None:
+    """Case a 45 km sampled every 10 s (in seconds, as fgdoppler reads them): the window fits and gets no
+    finding; with noise 30 times the declared sigma it fails, and it is tried in milliseconds (a 10 ms
+    interval is plausible) but does not fit there either.  Sampled every 0.5 s, a failing window is not
+    tried at all (0.5 ms would be 2,000 measurements a second)."""
+    import fgdoppler.estimators.window_mistakes as wm
+
+    A = fd.paper_geometry("a")
+    slow = fd.Scenario(geometry=A, x0=fd.paper_scenario("a", 45e3).x0, duration=300.0, dt=10.0)
+    for seed in (0, 1):
+        w = fd.simulate(slow, np.random.default_rng(seed)).measurements.first_per_pair(10)
+        r = initiate(w, A)
+        assert r.passes_chi2 and not _units(r)
+        noisy = fd.Measurements(time=w.time, pair=w.pair, sigma=w.sigma,
+                                doppler=w.doppler + np.random.default_rng(seed).normal(0.0, 30.0, len(w)))
+        r = initiate(noisy, A)
+        assert not r.passes_chi2 and not _units(r), [x.code for x in r.reasons]
+        assert wm.median_interval(noisy) / wm.TIME_UNITS[0][1] >= wm.SHORTEST_INTERVAL  # it was tried
+    fast = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(0)).measurements.first_per_pair(10)
+    assert wm.median_interval(fast) == 0.5 and 0.5 / wm.TIME_UNITS[0][1] < wm.SHORTEST_INTERVAL
+
+
 def test_a_doppler_shift_in_hz_is_refused_with_the_conversion() -> None:
     """A file giving the Doppler shift in Hz of a 3 cm radar (f_D = -doppler / wavelength, 33 times the range rate):
     the data need a speed far above the zone's bound, and the refusal gives the conversion."""

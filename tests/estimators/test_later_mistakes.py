@@ -352,3 +352,38 @@ def test_a_geometry_in_kilometres_the_window_missed_is_named_from_the_whole_reco
                                     "multiplied by 1000 they fit (cost ")
     ekf = fd.run_estimator("ekf", sim.measurements, km, init)
     assert [x.message for x in ekf.reasons if x.code == "units"] == [found.message]
+
+
+def test_times_in_milliseconds_the_window_missed_are_named_from_the_whole_recording(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Case a 45 km with its times written in milliseconds: the initiation names them (a ``units`` finding), which
+    explains the track's misfit, so no later window is searched; without that finding the whole recording's
+    spread measurements name them, judged by the recording's own 500 ms sampling (spread, they lie 1,500 apart),
+    before any window is searched."""
+    import fgdoppler.estimators.later_mistakes as lm
+
+    sim = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(1))
+    m = sim.measurements
+    ms = fd.Measurements(time=m.time * 1e3, pair=m.pair, doppler=m.doppler, sigma=m.sigma)
+    model = fd.TrackingModel.of(fd.paper_geometry("a"))
+    init = fd.initiate(ms.first_per_pair(10), model)
+    assert [x.code for x in init.reasons if x.code == "units"] == ["units"]
+    searched: list[str] = []
+
+    def search(*args: object, **kwargs: object) -> list[Reason]:
+        searched.append("windows")
+        return []
+
+    monkeypatch.setattr(lm, "_from_windows", search)
+    assert later_mistakes(ms, model, init, MISFIT) == [] and searched == []
+    plain = replace(init, reasons=tuple(x for x in init.reasons if x.code != "units"))
+    [found] = later_mistakes(ms, model, plain, MISFIT)
+    assert found.code == "units" and searched == []
+    assert found.message.startswith("the track fails its residual test and the initiation window named nothing, but "
+                                    "the 40 measurements spread over the whole recording (t = 0-30000 s) fail the "
+                                    "chi-square test as given and fit with other time units: with every time "
+                                    "divided by 1,000 they fit (cost ")
+    assert "the times are likely in milliseconds where fgdoppler reads seconds (the median interval between a " \
+           "pair's measurements is 500 in the file)" in found.message
+    # in seconds the spread measurements fit as given: no units finding (and the windows' search finds nothing)
+    assert later_mistakes(m, model, fd.initiate(m.first_per_pair(10), model), MISFIT) == []
