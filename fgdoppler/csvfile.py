@@ -28,6 +28,14 @@ MAX_LINE_BYTES = 4096
 
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 
+#: A date (``2026-11-30``, ``2026/11/30``, with or without a time) or a time of day (``00:00:01.5``): a
+#: timestamp where a number of seconds is read.
+_CLOCK = re.compile(r"\s*(?:[0-9]{4}[-/][0-9]{1,2}[-/][0-9]{1,2}|[0-9]{1,2}:[0-9]{2}(?::[0-9]{2})?)")
+
+#: What a timestamp refused by :func:`parse_number` is told.
+_CLOCK_ADVICE = ("a date or a time of day: fgdoppler reads a number of seconds on one clock for every pair (e.g. "
+                 "Unix time, or seconds from the recording's start)")
+
 
 class CSVError(ValueError):
     """A malformed CSV file; the message names the file and the line."""
@@ -40,7 +48,8 @@ def parse_number(text: str, where: str, name: str) -> float:
         raise CSVError(f"{where}: {name} is empty")
     if not _NUMBER.fullmatch(t):
         shown = t if len(t) <= 40 else t[:40] + "..."
-        raise CSVError(f"{where}: {name} is not a number: {shown!r}")
+        why = f": {_CLOCK_ADVICE}" if name == "time" and _CLOCK.match(t) else ""
+        raise CSVError(f"{where}: {name} is not a number: {shown!r}{why}")
     value = float(t)
     if not np.isfinite(value):
         raise CSVError(f"{where}: {name} is too large: {t!r}")

@@ -126,7 +126,7 @@ class Measurements:
             bad = np.flatnonzero((col < lo) | (col > hi))
             if bad.size:
                 raise MeasurementError(f"entry {bad[0]}: {name} {col[bad[0]]:g} is outside [{lo:g}, {hi:g}]: "
-                                       "a corrupt or mis-scaled value")
+                                       f"{_limit_text(name, float(col[bad[0]]))}")
         bad = np.flatnonzero(p < 0)
         if bad.size:
             raise MeasurementError(f"entry {bad[0]}: pair index must be >= 0, got {p[bad[0]]}")
@@ -390,14 +390,29 @@ _FROM_HZ = {"doppler": "doppler (-wavelength * doppler_hz)", "sigma": "sigma (wa
 #: above twice the speed of light or a sigma outside 1 µm/s .. 1,000 km/s is a corrupt or mis-scaled file.
 LIMITS: dict[str, tuple[float, float]] = {"time": (-1e12, 1e12), "doppler": (-6e8, 6e8), "sigma": (1e-6, 1e6)}
 
+#: Units of a time beyond :data:`LIMITS`, each with the factor to seconds, from the largest: a Unix time now
+#: (1.8e9 s) is 1.8e12 in milliseconds, 1.8e15 in microseconds and 1.8e18 in nanoseconds.
+_SUBSECOND = (("nanoseconds", 1e9), ("microseconds", 1e6), ("milliseconds", 1e3))
+
+
+def _limit_text(name: str, value: float) -> str:
+    """Why ``value`` of column ``name`` is beyond :data:`LIMITS`: for a time that is a Unix time in a finer unit
+    than seconds, which unit and what to divide by; else a corrupt or mis-scaled value."""
+    if name == "time":
+        for unit, factor in _SUBSECOND:
+            if 1e8 < value / factor < 1e10:  # 1973 to 2286 in that unit
+                return (f"likely a Unix time in {unit} where fgdoppler reads seconds: divide the time column "
+                        f"by {factor:,.0f}")
+    return "a corrupt or mis-scaled value"
+
 
 def _check_value(value: float, name: str, where: str, shown: str | None = None) -> None:
     lo, hi = LIMITS[name]
     if not (math.isfinite(value) and lo <= value <= hi):
         if name == "sigma" and value <= 0:
             raise MeasurementError(f"{where}: sigma must be > 0, got {value}")
-        raise MeasurementError(f"{where}: {shown or name} {value:g} is outside [{lo:g}, {hi:g}]: a corrupt or "
-                               "mis-scaled file")
+        raise MeasurementError(f"{where}: {shown or name} {value:g} is outside [{lo:g}, {hi:g}]: "
+                               f"{_limit_text(name, value)}")
 
 
 def _pair(value: float, where: str, geometry: Geometry | None) -> int:

@@ -135,6 +135,11 @@ def test_a_pair_may_be_given_by_its_name(tmp_path: Path) -> None:
         ("sigma,doppler,time,pair\n1,abc,0,0\n", 2, "doppler is not a number"),
         ("pair,time,doppler,sigma\n0,1,1,1\n0,0.5,1,1\n", 3, "time 0.5 is earlier than pair 0's previous row's 1.0 \\(line 2\\)"),
         ("time,pair,doppler,sigma\n0,0,abc,1\n", 2, "doppler is not a number"),
+        # a timestamp where seconds are read: said so, with what to give instead
+        ("time,pair,doppler,sigma\n2026-11-30T00:00:00.5Z,0,1,1\n", 2, "time is not a number: "
+         "'2026-11-30T00:00:00.5Z': a date or a time of day: fgdoppler reads a number of seconds"),
+        ("time,pair,doppler,sigma\n2026/11/30 00:00:00,0,1,1\n", 2, "a date or a time of day"),
+        ("time,pair,doppler,sigma\n00:00:01.5,0,1,1\n", 2, "'00:00:01.5': a date or a time of day"),
         ("time,pair,doppler,sigma\n0,0,1,1\n0.5,0,nan,1\n", 3, "doppler is not a number: 'nan'"),
         ("time,pair,doppler,sigma\n0,0,1,1\ninf,0,1,1\n", 3, "time is not a number: 'inf'"),
         # what Python's float() would have taken
@@ -146,7 +151,14 @@ def test_a_pair_may_be_given_by_its_name(tmp_path: Path) -> None:
         # values no real file holds: each would overflow or underflow downstream
         ("time,pair,doppler,sigma\n0,0,1,5e-324\n", 2, "sigma 4.94066e-324 is outside"),
         ("time,pair,doppler,sigma\n0,0,1e308,1\n", 2, "doppler 1e\\+308 is outside"),
-        ("time,pair,doppler,sigma\n1e300,0,1,1\n", 2, "time 1e\\+300 is outside"),
+        ("time,pair,doppler,sigma\n1e300,0,1,1\n", 2, "time 1e\\+300 is outside .*: a corrupt or mis-scaled value"),
+        # a Unix time (1.76e9 s on 2025-11-26) written in a finer unit: the unit and the factor are named
+        ("time,pair,doppler,sigma\n1764115215000,0,1,1\n", 2, "time 1.76412e\\+12 is outside \\[-1e\\+12, "
+         "1e\\+12\\]: likely a Unix time in milliseconds where fgdoppler reads seconds: divide the time column by "
+         "1,000"),
+        ("time,pair,doppler,sigma\n1764115215000000,0,1,1\n", 2, "Unix time in microseconds .* by 1,000,000$"),
+        ("time,pair,doppler,sigma\n1764115215000000000,0,1,1\n", 2, "Unix time in nanoseconds .* by 1,000,000,000$"),
+        ("time,pair,doppler,sigma\n-1764115215000,0,1,1\n", 2, "outside .*: a corrupt or mis-scaled value"),
         ("time,pair,doppler,sigma\n0,0,1e999,1\n", 2, "doppler is too large"),
         # bounded reads
         ("time,pair,doppler,sigma\n0,0," + "1" * 200_000 + ",1\n", 2, "longer than 4096 bytes"),
@@ -188,6 +200,8 @@ def test_constructor_refuses_values_no_file_may_hold() -> None:
         fd.Measurements.from_arrays([0.0], [0], [1.0], 1e-9)
     with pytest.raises(MeasurementError, match=r"doppler .* is outside"):
         fd.Measurements.from_arrays([0.0], [0], [7e8], 1.0)
+    with pytest.raises(MeasurementError, match=r"time .* is outside .*: likely a Unix time in milliseconds"):
+        fd.Measurements.from_arrays([1764115215000.0], [0], [1.0], 1.0)
 
 
 def test_container_validation() -> None:
