@@ -37,7 +37,7 @@ from fgdoppler.geometry import Geometry
 if TYPE_CHECKING:
     from fgdoppler.csvfile import Table
 
-__all__ = ["HEADER", "HZ_HEADER", "MeasurementError", "Measurements", "Scans"]
+__all__ = ["HEADER", "HZ_HEADER", "MeasurementError", "Measurements", "Scans", "scan_time"]
 
 HEADER = ("time", "pair", "doppler", "sigma")
 #: The columns of a file giving the Doppler as a frequency shift in Hz (the geometry gives the wavelengths).
@@ -393,6 +393,23 @@ LIMITS: dict[str, tuple[float, float]] = {"time": (-1e12, 1e12), "doppler": (-6e
 #: Units of a time beyond :data:`LIMITS`, each with the factor to seconds, from the largest: a Unix time now
 #: (1.8e9 s) is 1.8e12 in milliseconds, 1.8e15 in microseconds and 1.8e18 in nanoseconds.
 _SUBSECOND = (("nanoseconds", 1e9), ("microseconds", 1e6), ("milliseconds", 1e3))
+
+
+def scan_time(t: float, previous: float | None) -> float:
+    """``t`` as a float, checked as the time of a live feed's next scan after one at ``previous`` (``None``:
+    the first).
+
+    Raises
+    ------
+    ValueError
+        If ``t`` is not a finite number, or not after ``previous`` (out of order).
+    """
+    t = float(t)
+    if not math.isfinite(t):
+        raise ValueError(f"scan time {t} is not a finite number")
+    if previous is not None and not t > previous:
+        raise ValueError(f"scan at t = {t} is not after the previous scan at t = {previous}: out of order")
+    return t
 
 
 def _limit_text(name: str, value: float) -> str:

@@ -68,7 +68,8 @@ Run: python studies/data_mistakes.py [--runs 10] [--seed 2026] [--track 1] [--la
 the initiations alone, 15 min for ``--runs 20``; 2026-11-29, with the whole recording's check of
 :mod:`fgdoppler.estimators.later_mistakes`, on 2 idle cores: ``--runs 10`` 34 min; with the window's
 changes ranked there too, on 2 cores beside other work: 56 min; ``--only "sensors in kilometres,target manoeuvres on
-a layout 1/100 the size"``, 23 min)
+a layout 1/100 the size"``, 23 min; 2026-11-30, ``--only "times in milliseconds,target manoeuvres 20 times slower"``,
+13 min on 2 cores)
 """
 
 from __future__ import annotations

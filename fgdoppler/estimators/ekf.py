@@ -160,9 +160,11 @@ class ExtendedKalmanFilter:
         Raises
         ------
         ValueError
-            If ``t`` is earlier than the filter's time (out-of-order data).
+            If ``t`` is earlier than the filter's time (out-of-order data) or not a finite number.
         """
         dt = float(t) - self.t
+        if not math.isfinite(dt):
+            raise ValueError(f"measurement time {t} is not a finite number")
         if dt < 0:
             raise ValueError(f"measurement at t = {t} is earlier than the filter time {self.t}: out of order")
         if dt == 0:

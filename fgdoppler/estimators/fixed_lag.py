@@ -52,7 +52,7 @@ from fgdoppler.estimators.verdict import NOT_CONVERGED, Event, Reason
 from fgdoppler.estimators.warmup import WarmUp
 from fgdoppler.estimators.window import feed_from_window_start, start_prior
 from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
-from fgdoppler.measurements import Measurements
+from fgdoppler.measurements import Measurements, scan_time
 from fgdoppler.models.observation import check_channels
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.progress import Progress
@@ -194,9 +194,7 @@ class FixedLagTracker:
         stamps: dict[Any, Any] = {}  # key -> time (gtsam's stub wants SupportsInt keys)
         m = self.motion
         for j, t in enumerate(ts):
-            t = float(t)
-            if self.times and not t > self.times[-1]:
-                raise ValueError(f"scan at t = {t} is not after the previous scan at t = {self.times[-1]}: out of order")
+            t = scan_time(t, self.times[-1] if self.times else None)
             k = len(self.times)
             cc = np.asarray(channels[j], dtype=np.intp).reshape(-1)
             zz = np.asarray(z[j], dtype=float).reshape(-1)

@@ -106,7 +106,7 @@ from fgdoppler.estimators.verdict import Event
 from fgdoppler.estimators.warmup import WarmUp
 from fgdoppler.estimators.window import feed_from_window_start, start_prior
 from fgdoppler.geometry import Geometry
-from fgdoppler.measurements import Measurements
+from fgdoppler.measurements import Measurements, scan_time
 from fgdoppler.models.observation import check_channels
 from fgdoppler.models.tracking import TrackingModel, as_tracking_model
 
@@ -295,13 +295,12 @@ class GaussianSumTracker:
             the model's pairs, or a Doppler or sigma is not a finite number
             (sigma > 0).
         """
+        t = scan_time(t, self.t)
         if self._init is None:
             if self.warmup.hold(self.tracking_model.observation, float(t), channels, z, sigma, None):
                 self._start()
                 return self._mixture()
             return np.full(self.tracking_model.n, np.nan), None
-        if self.t is not None and not t > self.t:
-            raise ValueError(f"scan at t = {t} is not after the previous scan at t = {self.t}: out of order")
         zz = np.asarray(z, dtype=float).reshape(-1)
         # refused before any hypothesis sees it (a bad value would stop them all at once), and in
         # pair order, the order in which the registry's runners take a scan

@@ -70,7 +70,7 @@ from fgdoppler.estimators.verdict import NOT_CONVERGED, Event
 from fgdoppler.estimators.warmup import WarmUp
 from fgdoppler.estimators.window import feed_from_window_start, start_prior
 from fgdoppler.factors import X, absolute_linear_factor
-from fgdoppler.measurements import Measurements
+from fgdoppler.measurements import Measurements, scan_time
 from fgdoppler.models.observation import check_channels
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.progress import Progress, prefixed
@@ -322,9 +322,7 @@ class ISAM2Tracker:
     def _add_scan(self, t: float, channels: ArrayLike, z: ArrayLike, sigma: ArrayLike,
                   x_guess: FloatArray | None, *, gate: bool, defer: bool = False) -> tuple[FloatArray, FloatArray | None]:
         """:meth:`add_scan` in the computation frame, after the warm-up; ``defer`` keeps the update for later."""
-        t = float(t)
-        if self.times and not t > self.times[-1]:
-            raise ValueError(f"scan at t = {t} is not after the previous scan at t = {self.times[-1]}: out of order")
+        t = scan_time(t, self.times[-1] if self.times else None)
         c = np.asarray(channels, dtype=np.intp).reshape(-1)
         zz = np.asarray(z, dtype=float).reshape(-1)
         ss = np.broadcast_to(np.asarray(sigma, dtype=float), zz.shape).copy()

@@ -44,7 +44,7 @@ from fgdoppler.estimators.initiation import initiate
 from fgdoppler.estimators.settings import StreamingSettings
 from fgdoppler.estimators.verdict import Event
 from fgdoppler.estimators.window import solve_window
-from fgdoppler.measurements import Measurements
+from fgdoppler.measurements import Measurements, scan_time
 from fgdoppler.models.observation import MeasurementModel, check_channels
 from fgdoppler.models.tracking import TrackingModel
 
@@ -107,8 +107,7 @@ class WarmUp:
             If ``t`` is not after the previous held scan, or a channel is
             outside ``model``.
         """
-        if self.times and not t > self.times[-1]:
-            raise ValueError(f"scan at t = {t} is not after the previous scan at t = {self.times[-1]}: out of order")
+        t = scan_time(t, self.times[-1] if self.times else None)
         c = np.asarray(channels, dtype=np.intp).reshape(-1)
         zz = np.asarray(z, dtype=float).reshape(-1)
         ss = np.broadcast_to(np.asarray(sigma, dtype=float), zz.shape).copy()

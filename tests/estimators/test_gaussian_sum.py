@@ -153,6 +153,8 @@ def test_bad_use_is_refused_with_a_reason() -> None:
     tracker = GaussianSumTracker(model, "ekf")
     with pytest.raises(ValueError, match="warming up"):
         _ = tracker.mode
+    with pytest.raises(ValueError, match="scan time nan is not a finite number"):
+        tracker.add_scan(np.nan, [0], [1.0], [1.0])
     with pytest.raises(ValueError, match="no scan was added"):
         GaussianSumTracker(model, "isam2").finish()
     with pytest.raises(ValueError, match="pair"):
@@ -162,6 +164,8 @@ def test_bad_use_is_refused_with_a_reason() -> None:
     x_before = out[-1][1]
     with pytest.raises(ValueError, match="out of order"):
         tracker.add_scan(float(m.time[-1]), [0], [1.0], [1.0])
+    with pytest.raises(ValueError, match="scan time nan is not a finite number"):
+        tracker.add_scan(np.nan, [0], [1.0], [1.0])
     late = float(m.time[-1]) + 0.5
     with pytest.raises(ValueError, match="pair"):
         tracker.add_scan(late, [0, 7], [1.0, 1.0], [1.0, 1.0])

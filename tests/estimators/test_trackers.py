@@ -347,15 +347,23 @@ def test_out_of_order_is_rejected_in_streaming_and_batch_input() -> None:
     ekf = ExtendedKalmanFilter(model, x0, np.eye(4), 1.0)
     with pytest.raises(ValueError, match="out of order"):
         ekf.update(0.5, 0, 1.0, 1.0)
+    for bad in (np.nan, np.inf):  # NaN compares false both ways: it once propagated the state to NaN silently
+        with pytest.raises(ValueError, match="not a finite number"):
+            ekf.add_scan(bad, [0], [1.0], [1.0])
+    assert np.all(np.isfinite(ekf.x))
     cold = {"warmup_seconds": 0.0, "warmup_per_pair": 0}  # the warm-up's own check: test_warmup.py
     tr = ISAM2Tracker(model, ISAM2Settings(**cold), prior=(x0, np.eye(4)))
     tr.add_scan(1.0, [0, 1], [0.0, 0.0], [1.0, 1.0], x0)
     with pytest.raises(ValueError, match="out of order"):
         tr.add_scan(1.0, [0], [0.0], [1.0])
+    with pytest.raises(ValueError, match="scan time nan is not a finite number"):
+        tr.add_scan(np.nan, [0], [0.0], [1.0])
     fl = FixedLagTracker(model, FixedLagSettings(**cold), prior=(x0, np.eye(4)))
     fl.add_scans([1.0], [[0]], [[0.0]], [[1.0]], [x0])
     with pytest.raises(ValueError, match="out of order"):
         fl.add_scans([0.5], [[0]], [[0.0]], [[1.0]])
+    with pytest.raises(ValueError, match="scan time inf is not a finite number"):
+        fl.add_scans([np.inf], [[0]], [[0.0]], [[1.0]])
     with pytest.raises(fd.MeasurementError, match="time order"):
         fd.Measurements.from_arrays([1.0, 0.5], [0, 0], [1.0, 1.0], 1.0)
 
