@@ -387,6 +387,34 @@ def test_montecarlo_and_observability_on_a_geometry_of_ones_own(tmp_path: Path,
     assert json.loads(capsys.readouterr().out)["status"] == "ok"
 
 
+def test_the_report_on_a_moved_and_rotated_geometry_takes_its_start_in_the_geometrys_coordinates(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``observability --report``'s start and velocity are in the geometry's own coordinates, as ``simulate``'s:
+    case a rotated by 30 degrees and moved, with the paper's start and velocity rotated and moved alike, gives the
+    paper's report — the weakest direction's sigma and each pair's angle to its ellipse tangent, which no rigid
+    motion changes, O and the conditioning — and its first line says so; the pairs are named by the 0-based
+    indices of the measurement file (they were once numbered from 1)."""
+    c, s = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
+    R, shift = np.array([[c, -s], [s, c]]), np.array([5e3, -3e3])
+    A = fd.paper_geometry("a")
+    fd.Geometry(pairs=tuple(fd.BistaticPair(tx=tuple(R @ p.tx + shift), rx=tuple(R @ p.rx + shift))
+                            for p in A.pairs)).to_toml(tmp_path / "turned.toml")
+    start, velocity = R @ np.array([25e3, 2e3]) + shift, R @ np.array([10.0, -100.0])
+    common = ["observability", "--velocity", *map(repr, map(float, velocity))]
+    turned = [*common, "--geometry", str(tmp_path / "turned.toml"), "--report", repr(float(start[0])), "--offset",
+              repr(float(start[1]))]
+    assert main(turned) == 0
+    text = capsys.readouterr().out
+    assert "km in the geometry's x, y: status ok" in text.splitlines()[0]
+    assert "first/last: pair 0: " in text and ", pair 1: " in text and "pair 2" not in text
+    assert main([*turned, "--json"]) == 0
+    moved = json.loads(capsys.readouterr().out)
+    assert main(["observability", "--report", "25000", "--velocity", "10", "-100", "--json"]) == 0
+    paper = json.loads(capsys.readouterr().out)
+    for key in ("weakest_std", "tangent_angle_deg", "O_x0", "cond_JtJ"):
+        assert np.allclose(moved[key], paper[key], rtol=1e-6, atol=1e-6), key
+
+
 def test_track_reports_the_verdict_on_stderr_and_exits_3_when_failed(tmp_path: Path,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
     sim = tmp_path / "sim"

@@ -21,6 +21,7 @@ from fgdoppler.cli.common import (
 
 if TYPE_CHECKING:
     from fgdoppler.analysis.observability import SamplingPattern
+    from fgdoppler.geometry import Geometry
 
 __all__ = ["add_observability"]
 
@@ -42,7 +43,9 @@ def add_observability(sub: argparse._SubParsersAction) -> None:
                    help="geometry: the paper's a or b, or a TOML file (default: a; the paper's groups 2 and 4 "
                    "for --table and --slice; --case is the old name)")
     p.add_argument("--offset", type=float, default=2e3,
-                   help="y of the evaluation points (and the start y of --report) in m (default 2000)")
+                   help="y of the evaluation points in the sensors' frame (across the first baseline), and the "
+                   "start y of --report in the geometry's own coordinates, as simulate's --start-y (the two are one "
+                   "for the paper's geometries), in m (default 2000)")
     p.add_argument("--speed", type=float, default=100.0, help="target speed in m/s (default 100)")
     p.add_argument("--speeds", type=float, nargs="+", default=[100.0, 75.0, 50.0, 25.0], metavar="M/S",
                    help="speeds of --table (default 100 75 50 25)")
@@ -61,7 +64,9 @@ def add_observability(sub: argparse._SubParsersAction) -> None:
                       help="O vs x at one heading for groups 2 and 4 (paper Fig. 8 uses 180)")
     mode.add_argument("--report", type=float, default=None, metavar="START_X",
                       help="marginal-covariance report of a target starting at (START_X, --offset) with the "
-                      "scenario options; --process-noise Q also puts Q in the graph (default 0: deterministic CV)")
+                      "scenario options, in the geometry's own coordinates as simulate's --start-x, --start-y and "
+                      "--velocity (not the maps' frame); --process-noise Q also puts Q in the graph (default 0: "
+                      "deterministic CV)")
     mode.add_argument("--report-lat-lon", type=float, nargs=2, default=None, metavar=("LAT", "LON"),
                       help="--report for a target starting at a WGS84 latitude and longitude in degrees instead of "
                            "(START_X, --offset) (the geometry must give its sites so: a [geodetic] table)")
@@ -239,7 +244,7 @@ def _report(args: argparse.Namespace) -> int:
     geom = resolve_geometry(args.geometry or "a")
     if args.report_lat_lon is None:
         x, y = args.report, args.offset
-        where = f"({x / 1e3:g}, {y / 1e3:g}) km"
+        where = f"({x / 1e3:g}, {y / 1e3:g}) km" + ("" if geom.frame.is_identity else " in the geometry's x, y")
     else:
         lat, lon = args.report_lat_lon
         x, y = east_north_of(geom, lat, lon, "--report-lat-lon")
@@ -256,7 +261,8 @@ def _report(args: argparse.Namespace) -> int:
         print(f"O(x0) = {rep.O_x0:.2f}, cond(J'J) = {rep.cond_JtJ:.3g}")
         ang = rep.tangent_angle_deg
         print("heading vs ellipse tangent (deg), first/last: "
-              + ", ".join(f"pair {i + 1}: {ang[0, i]:.1f}/{ang[-1, i]:.1f}" for i in range(ang.shape[1])))
+              + ", ".join(f"pair {_pair_label(scen.geometry, i)}: {ang[0, i]:.1f}/{ang[-1, i]:.1f}"
+                          for i in range(ang.shape[1])))
         if rep.pos_std is not None and rep.weakest_std is not None:
             print("  time   sigma_x  sigma_y  sigma_weakest (m)")
             for k in np.unique(np.linspace(0, rep.times.size - 1, 7).astype(int)):
@@ -265,3 +271,9 @@ def _report(args: argparse.Namespace) -> int:
     if args.plot:
         plotting.save(plotting.plot_report_std(rep), args.plot)
     return 0
+
+
+def _pair_label(geometry: Geometry, i: int) -> str:
+    """Pair ``i`` as the measurement file names it: its 0-based index, and its name where the geometry gives
+    one (``"1 (north)"``)."""
+    return f"{i} ({geometry.pair_names[i]})" if geometry.pair_names else str(i)
