@@ -359,6 +359,11 @@ class Geometry:
         """Distinct sensor positions (Tx and Rx), shape ``(n_sensors, dim)``."""
         return np.unique(np.vstack([self._tx, self._rx]), axis=0)
 
+    def pair_label(self, i: int) -> str:
+        """Pair ``i`` as a measurement file names it: its 0-based index, with its name where the geometry gives
+        one (``"1 (north)"``)."""
+        return f"{i} ({self.pair_names[i]})" if self.pair_names else str(i)
+
     @cached_property
     def extent(self) -> float:
         """The sensors' extent: the largest distance between two sensors (m)."""

@@ -126,10 +126,10 @@ def plot_geometry(
     for i, p in enumerate(geometry.pairs):
         c = colours[i % len(colours)]
         ax.plot([p.tx[0] * s, p.rx[0] * s], [p.tx[1] * s, p.rx[1] * s], "-", color=c, lw=1, alpha=0.6,
-                label=f"baseline {i + 1}")
+                label=f"pair {geometry.pair_label(i)}")
         if ellipse_through is not None:
             e = ellipse_points(geometry, i, ellipse_through) * s
-            ax.plot(e[:, 0], e[:, 1], "--", color=c, lw=1, label=f"ellipse {i + 1}")
+            ax.plot(e[:, 0], e[:, 1], "--", color=c, lw=1, label=f"ellipse of pair {geometry.pair_label(i)}")
     tx = np.unique(geometry.tx, axis=0) * s
     rx = np.unique(geometry.rx, axis=0) * s
     ax.plot(tx[:, 0], tx[:, 1], "^", color="k", ms=9, label="Tx")

@@ -259,6 +259,23 @@ def test_pair_names_round_trip_and_survive_the_frames(tmp_path) -> None:
         fd.Geometry(pairs=g.pairs, pair_names=("north",))
 
 
+def test_a_pair_is_labelled_as_the_measurement_file_names_it() -> None:
+    """Outputs (the observability report, plot legends) name pair ``i`` by its 0-based index, as the measurement
+    file's ``pair`` column does, with its name where the geometry gives one."""
+    import matplotlib.pyplot as plt
+
+    from fgdoppler import plotting
+
+    plain = fd.paper_geometry("b")
+    named = fd.Geometry(pairs=plain.pairs, pair_names=("north site", "south"))
+    assert [plain.pair_label(i) for i in range(2)] == ["0", "1"]
+    assert [named.pair_label(i) for i in range(2)] == ["0 (north site)", "1 (south)"]
+    ax = plotting.plot_geometry(named, ellipse_through=(20e3, 2e3))
+    assert [line.get_label() for line in ax.lines][:4] == ["pair 0 (north site)", "ellipse of pair 0 (north site)",
+                                                          "pair 1 (south)", "ellipse of pair 1 (south)"]
+    plt.close(ax.figure)
+
+
 def test_wavelengths_round_trip_and_survive_the_frames(tmp_path) -> None:
     """Carrier wavelengths: the file writes and reads them back, a change of frame, zone or scale keeps them (a
     wavelength is the carrier's, not a length of the layout); one per pair or none, each positive and finite,

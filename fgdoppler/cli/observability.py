@@ -21,7 +21,6 @@ from fgdoppler.cli.common import (
 
 if TYPE_CHECKING:
     from fgdoppler.analysis.observability import SamplingPattern
-    from fgdoppler.geometry import Geometry
 
 __all__ = ["add_observability"]
 
@@ -261,7 +260,7 @@ def _report(args: argparse.Namespace) -> int:
         print(f"O(x0) = {rep.O_x0:.2f}, cond(J'J) = {rep.cond_JtJ:.3g}")
         ang = rep.tangent_angle_deg
         print("heading vs ellipse tangent (deg), first/last: "
-              + ", ".join(f"pair {_pair_label(scen.geometry, i)}: {ang[0, i]:.1f}/{ang[-1, i]:.1f}"
+              + ", ".join(f"pair {scen.geometry.pair_label(i)}: {ang[0, i]:.1f}/{ang[-1, i]:.1f}"
                           for i in range(ang.shape[1])))
         if rep.pos_std is not None and rep.weakest_std is not None:
             print("  time   sigma_x  sigma_y  sigma_weakest (m)")
@@ -271,9 +270,3 @@ def _report(args: argparse.Namespace) -> int:
     if args.plot:
         plotting.save(plotting.plot_report_std(rep), args.plot)
     return 0
-
-
-def _pair_label(geometry: Geometry, i: int) -> str:
-    """Pair ``i`` as the measurement file names it: its 0-based index, and its name where the geometry gives
-    one (``"1 (north)"``)."""
-    return f"{i} ({geometry.pair_names[i]})" if geometry.pair_names else str(i)
