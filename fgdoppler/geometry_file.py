@@ -244,7 +244,16 @@ def geometry_text(geometry: Any) -> str:
                     **({"name": geometry.pair_names[i]} if geometry.pair_names else {}),
                     **({"wavelength": geometry.wavelengths[i]} if geometry.wavelengths else {})}
                    for i, p in enumerate(geometry.pairs)]
-    return str(tomli_w.dumps(doc))
+    return _NUMBER_ARRAY.sub(_one_line, str(tomli_w.dumps(doc)))
+
+
+#: An array of numbers as tomli-w writes it, one element a line (``[\n    0.0,\n    1.5,\n]``).
+_NUMBER_ARRAY = re.compile(r"\[\n((?:[ ]+[-+0-9.eE]+(?:inf|nan)?,\n)+)\]")
+
+
+def _one_line(match: re.Match[str]) -> str:
+    """The array of ``match`` on one line, as the documentation shows it (``[0.0, 1.5]``)."""
+    return "[" + ", ".join(v.strip().rstrip(",") for v in match.group(1).splitlines()) + "]"
 
 
 def write_geometry(geometry: Any, path: str | Path) -> None:

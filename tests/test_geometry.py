@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -111,6 +113,27 @@ def test_toml_round_trip(tmp_path) -> None:
     assert back == g
     assert resolve_geometry(str(path)) == g
     assert resolve_geometry("a") == fd.paper_geometry("a")
+
+
+def test_a_written_geometry_gives_each_position_on_one_line_and_reads_back_exactly(tmp_path) -> None:
+    """The file reads as the documentation's example (``tx = [50000.0, 0.0]``, not one number a line), for 2-D,
+    3-D and awkward values (a round-off tail, a tiny exponent, negatives), a zone and a geodetic origin, and reads
+    back exactly."""
+    from fgdoppler.geodetic import GeodeticOrigin
+
+    flat = fd.Geometry(pairs=(fd.BistaticPair(tx=(0.1 + 0.2, -1e-17), rx=(-3.5e4, 12.0)),
+                              fd.BistaticPair(tx=(5e4, 0.0), rx=(0.0, 1e3))))
+    tall = fd.Geometry(pairs=(fd.BistaticPair(tx=(5e4, 0.0, 120.5), rx=(0.0, 0.0, 30.0)),
+                              fd.BistaticPair(tx=(5e4, 0.0, 120.5), rx=(0.0, 2e3, -4.25))),
+                       zone_limits=ZoneLimits(along=(1e3, 4.9e4), altitude=(0.0, 9e3)))
+    site = replace(flat, geodetic_origin=GeodeticOrigin(latitude=51.5, longitude=-0.12, height=35.0))
+    for g in (flat, tall, site):
+        path = tmp_path / "g.toml"
+        g.to_toml(path)
+        text = path.read_text()
+        assert "[\n" not in text
+        assert f"tx = [{', '.join(map(repr, g.pairs[0].tx))}]" in text.splitlines()
+        assert fd.Geometry.from_toml(path) == g
 
 
 def test_toml_round_trip_with_a_zone_table(tmp_path) -> None:
