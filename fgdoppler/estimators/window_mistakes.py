@@ -25,7 +25,7 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
 __all__ = ["IN_KILOMETRES", "IN_SECONDS", "KILOMETRE_EXTENT", "OTHERS_NAMED", "SHORTEST_INTERVAL", "SIGN_CONVENTION",
-           "TIME_UNITS", "Mistake", "find_mistake", "kilometre_extent", "median_interval", "mistake_reason",
+           "TIME_UNITS", "Mistake", "find_mistake", "fits_beyond_the_zone", "kilometre_extent", "median_interval", "mistake_reason",
            "radar_pairs", "time_units_reason", "units_reason", "with_mistake"]
 
 #: The data's sign convention, as a ``sign`` finding states it (docs/data-formats.md says the same).
@@ -163,17 +163,40 @@ def with_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
     layout at most :data:`KILOMETRE_EXTENT` across, a geometry in
     kilometres is tried (:func:`units_reason`: a ``units`` finding instead,
     one initiation more), then times in milliseconds or microseconds
-    (:func:`time_units_reason`, likewise).
+    (:func:`time_units_reason`, likewise).  A window whose start the zone
+    holds at its boundary and that passes the test with the bound lifted
+    (:func:`fits_beyond_the_zone`) names no change of the data: the zone,
+    which its ``boundary`` finding advises widening, explains the misfit,
+    and a change of the data that lets some start inside the zone fit is
+    no evidence of a mistake (a target 10 km off a radar's baseline, outside
+    a zone 2 km across, fitted with the two pairs' labels exchanged).
     """
     units = units_reason(measurements, model, settings, result) \
         or time_units_reason(measurements, model, settings, result)
     if units is not None:
         return replace(result, reasons=(*result.reasons, units))
+    if fits_beyond_the_zone(measurements, model, settings, result):
+        return result
     found = find_mistake(measurements, model, settings, result)
     if found is None:
         return result
     return replace(result, reasons=(*result.reasons, mistake_reason(found, result.cost, settings.confidence)),
                    mistake=found)
+
+
+def fits_beyond_the_zone(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
+                         result: Initiation) -> bool:
+    """Whether ``result`` — ``measurements``' fit, failing its χ² test with a ``doubtful`` ``boundary`` finding
+    (the data prefer a start outside the zone) — passes the test at ``settings.confidence`` when initiated again
+    without the zone's bound (``region_bound=False``): one initiation more, only for such a window."""
+    held = any(r.code == "boundary" and r.status == "doubtful" for r in result.reasons)
+    if not held or not settings.region_bound or result.passes_chi2:
+        return False
+    try:
+        free = initiate(measurements, model, replace(settings, mistake_check=False, region_bound=False))
+    except ValueError:
+        return False
+    return bool(free.passes_chi2)
 
 
 def find_mistake(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,

@@ -429,6 +429,37 @@ def test_a_mistake_finding_names_the_other_changes_that_pass_with_their_costs() 
         assert again.passes_chi2 and again.cost == pytest.approx(o.cost, rel=1e-12)
 
 
+def test_a_target_outside_the_zone_is_not_called_a_mistake_in_the_file() -> None:
+    """A radar and a bistatic pair on one line, the target 10 km off it — outside the default zone, 2 km across:
+    the window fails its test with the start held at the zone's edge, and with the two pairs' labels exchanged some
+    start inside the zone fits (the ``swapped`` finding that once told the user to check the pairs' order).  The
+    bound lifted, the window fits as given, so the zone explains the misfit: the ``boundary`` finding advises a
+    wider zone and no change of the data is named; in the zone it advises the window fits as given.  The guard
+    costs nothing where no ``boundary`` finding holds the start (the window fits, or fails within the zone)."""
+    from fgdoppler.estimators.window_mistakes import find_mistake, fits_beyond_the_zone
+
+    g = fd.Geometry(pairs=(fd.BistaticPair(tx=(0.0, 0.0), rx=(0.0, 0.0)), fd.BistaticPair(tx=(0.0, 0.0),
+                                                                                          rx=(20e3, 0.0))))
+    sc = fd.Scenario(geometry=g, x0=(8e3, 10e3, 30.0, -60.0), duration=60.0, dt=0.5)
+    w = fd.simulate(sc, np.random.default_rng(2)).measurements.first_per_pair(10)
+    model = fd.TrackingModel.of(g)
+    quiet = InitiationSettings(mistake_check=False)
+    held = initiate(w, model, quiet)
+    assert not held.passes_chi2 and [r.status for r in held.reasons if r.code == "boundary"] == ["doubtful"]
+    swapped = find_mistake(w, model, InitiationSettings(), held)
+    assert swapped is not None and swapped.code == "swapped"  # what the window alone would have named
+    assert fits_beyond_the_zone(w, model, InitiationSettings(), held)
+    r = initiate(w, model)
+    assert r.mistake is None and not [x for x in r.reasons if x.code in ("sign", "swapped", "radial", "units")]
+    [boundary] = [x for x in r.reasons if x.code == "boundary"]
+    assert boundary.status == "doubtful" and boundary.zone is not None
+    wide = fd.TrackingModel.of(g.with_zone(ZoneLimits(along=boundary.zone.along, across=boundary.zone.across)))
+    assert initiate(w, wide).passes_chi2
+    paper = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(1)).measurements.first_per_pair(10)
+    a = fd.TrackingModel.of(fd.paper_geometry("a"))
+    assert not fits_beyond_the_zone(paper, a, InitiationSettings(), initiate(paper, a, quiet))
+
+
 def _units(r: fd.Initiation) -> list[str]:
     return [x.message for x in r.reasons if x.code == "units"]
 
