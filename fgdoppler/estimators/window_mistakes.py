@@ -11,6 +11,7 @@ windows of a track that fits poorly is
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Literal
 
@@ -212,9 +213,12 @@ def find_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
                            [replace(c, cost=np.nan, others=()) for c in changes])
     pairs = [int(k) for k in np.unique(measurements.pair)]
     tried: list[Mistake] = []  # cost filled in by the fit
+    geometry = getattr(model.observation, "geometry", None)
+    label = geometry.pair_label if isinstance(geometry, Geometry) else str
 
     def scaled(code: MistakeCode, which: list[int], factor: float) -> None:
-        tried.append(Mistake(code=code, which=_named(which, pairs), cost=np.nan, factor=factor, pairs=tuple(which)))
+        tried.append(Mistake(code=code, which=_named(which, label, every=which == pairs), cost=np.nan, factor=factor,
+                             pairs=tuple(which)))
 
     for flipped in [pairs] + ([[k] for k in pairs] if len(pairs) > 1 else []) if "sign" in codes else []:
         scaled("sign", flipped, -1.0)
@@ -224,7 +228,8 @@ def find_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
             scaled("radial", group, factor)
     for i, a in enumerate(pairs if "swapped" in codes else []):
         for b in pairs[i + 1:]:
-            tried.append(Mistake(code="swapped", which=f"pairs {a} and {b}", cost=np.nan, factor=1.0, pairs=(a, b)))
+            tried.append(Mistake(code="swapped", which=_named([a, b], label), cost=np.nan, factor=1.0,
+                                 pairs=(a, b)))
     return _least_cost(measurements, model, settings, tried)
 
 
@@ -364,13 +369,15 @@ def radar_pairs(model: TrackingModel) -> tuple[int, ...]:
     return tuple(int(k) for k in geometry.radars) if isinstance(geometry, Geometry) else ()
 
 
-def _named(which: list[int], pairs: list[int]) -> str:
-    """``"every pair"``, ``"pair 1"`` or ``"pairs 0, 2 and 3"``."""
-    if which == pairs:
+def _named(which: list[int], label: Callable[[int], str] = str, *, every: bool = False) -> str:
+    """``"every pair"`` (``every``: ``which`` is every pair that reported), ``"pair 1"`` or ``"pairs 0, 2 and 3"``,
+    each pair as ``label`` gives it (:meth:`~fgdoppler.geometry.Geometry.pair_label`: ``"pair 1 (south)"`` where
+    the geometry names its pairs, as the measurement file may)."""
+    if every:
         return "every pair"
     if len(which) == 1:
-        return f"pair {which[0]}"
-    return f"pairs {', '.join(map(str, which[:-1]))} and {which[-1]}"
+        return f"pair {label(which[0])}"
+    return f"pairs {', '.join(map(label, which[:-1]))} and {label(which[-1])}"
 
 
 def mistake_reason(found: Mistake, cost: float, confidence: float, *, what: str = "the window") -> Reason:

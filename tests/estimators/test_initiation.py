@@ -285,6 +285,10 @@ def test_a_window_with_the_opposite_sign_convention_is_named(start: float, seed:
             assert f"with the Doppler of {named} negated the window fits (cost {plain.cost:.2f}," in found[0].message
         off = initiate(_negated(w, pairs), sc.geometry, InitiationSettings(mistake_check=False))
         assert not [x for x in off.reasons if x.code == "sign"]
+    # named pairs are named as the measurement file may give them
+    named_pairs = fd.Geometry(pairs=sc.geometry.pairs, pair_names=("north", "south"))
+    [found] = [x for x in initiate(_negated(w, [1]), named_pairs).reasons if x.code == "sign"]
+    assert "with the Doppler of pair 1 (south) negated the window fits" in found.message
 
 
 def test_a_window_that_fails_for_another_reason_gets_no_sign_finding() -> None:
