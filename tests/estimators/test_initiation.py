@@ -500,14 +500,23 @@ def test_a_small_layout_in_metres_whose_window_fails_is_not_called_kilometres() 
     sc = fd.paper_scenario("a", 45e3)
     small = fd.paper_geometry("a").scaled(0.01)
     shrunk = fd.Scenario(geometry=small, x0=tuple(0.01 * np.array(sc.x0)), duration=30.0, dt=sc.dt, sigma=0.01)
+    _no_units_as_simulated_nor_when_noisy(shrunk, 0.3)
+
+
+def _no_units_as_simulated_nor_when_noisy(sc: fd.Scenario, noise: float) -> list[fd.Measurements]:
+    """For two seeds: ``sc``'s window fits with no ``units`` finding, and with noise of ``noise`` m/s added it fails
+    with none either; the noisy windows."""
+    out = []
     for seed in (0, 1):
-        w = fd.simulate(shrunk, np.random.default_rng(seed)).measurements.first_per_pair(10)
-        r = initiate(w, small)
+        w = fd.simulate(sc, np.random.default_rng(seed)).measurements.first_per_pair(10)
+        r = initiate(w, sc.geometry)
         assert r.passes_chi2 and not _units(r)
         noisy = fd.Measurements(time=w.time, pair=w.pair, sigma=w.sigma,
-                                doppler=w.doppler + np.random.default_rng(seed).normal(0.0, 0.3, len(w)))
-        r = initiate(noisy, small)
+                                doppler=w.doppler + np.random.default_rng(seed).normal(0.0, noise, len(w)))
+        r = initiate(noisy, sc.geometry)
         assert not r.passes_chi2 and not _units(r), [x.code for x in r.reasons]
+        out.append(noisy)
+    return out
 
 
 def _times_times(w: fd.Measurements, factor: float) -> fd.Measurements:
@@ -544,14 +553,7 @@ def test_a_slowly_sampled_window_that_fails_for_another_reason_is_not_called_mil
 
     A = fd.paper_geometry("a")
     slow = fd.Scenario(geometry=A, x0=fd.paper_scenario("a", 45e3).x0, duration=300.0, dt=10.0)
-    for seed in (0, 1):
-        w = fd.simulate(slow, np.random.default_rng(seed)).measurements.first_per_pair(10)
-        r = initiate(w, A)
-        assert r.passes_chi2 and not _units(r)
-        noisy = fd.Measurements(time=w.time, pair=w.pair, sigma=w.sigma,
-                                doppler=w.doppler + np.random.default_rng(seed).normal(0.0, 30.0, len(w)))
-        r = initiate(noisy, A)
-        assert not r.passes_chi2 and not _units(r), [x.code for x in r.reasons]
+    for noisy in _no_units_as_simulated_nor_when_noisy(slow, 30.0):
         assert wm.median_interval(noisy) / wm.TIME_UNITS[0][1] >= wm.SHORTEST_INTERVAL  # it was tried
     fast = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(0)).measurements.first_per_pair(10)
     assert wm.median_interval(fast) == 0.5 and 0.5 / wm.TIME_UNITS[0][1] < wm.SHORTEST_INTERVAL

@@ -306,17 +306,13 @@ def test_a_manoeuvre_that_a_change_makes_later_windows_fit_names_no_mistake(monk
     assert asked and asked[0] == "the Doppler of every pair negated"
 
 
-def test_a_geometry_the_initiation_found_in_kilometres_gets_no_search_of_later_windows(
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    """Case a's sensors in kilometres: the initiation's ``units`` finding explains the track's misfit, so no window
-    or spread measurements are initiated for a change of the data (each would fail, as every window does in a
-    geometry a thousand times too small); without that finding the whole recording's spread measurements name
-    the kilometres, and no window is searched either."""
+def _units_explain_the_misfit(monkeypatch: pytest.MonkeyPatch, m: fd.Measurements, model: fd.TrackingModel
+                              ) -> Reason:
+    """Where the initiation has a ``units`` finding, no later window is searched and nothing more is named; with
+    that finding taken away, the whole recording's check names the units before any window: its finding."""
     import fgdoppler.estimators.later_mistakes as lm
 
-    sim = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(1))
-    km = fd.TrackingModel.of(fd.paper_geometry("a").scaled(1e-3))
-    init = fd.initiate(sim.measurements.first_per_pair(10), km)
+    init = fd.initiate(m.first_per_pair(10), model)
     assert [x.code for x in init.reasons if x.code == "units"] == ["units"]
     searched: list[str] = []
 
@@ -325,10 +321,21 @@ def test_a_geometry_the_initiation_found_in_kilometres_gets_no_search_of_later_w
         return []
 
     monkeypatch.setattr(lm, "_from_windows", search)
-    assert later_mistakes(sim.measurements, km, init, MISFIT) == [] and searched == []
+    assert later_mistakes(m, model, init, MISFIT) == [] and searched == []
     plain = replace(init, reasons=tuple(x for x in init.reasons if x.code != "units"))
-    [found] = later_mistakes(sim.measurements, km, plain, MISFIT)
+    [found] = later_mistakes(m, model, plain, MISFIT)
     assert found.code == "units" and searched == []  # the whole recording's check, made before any window
+    return found
+
+
+def test_a_geometry_the_initiation_found_in_kilometres_gets_no_search_of_later_windows(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Case a's sensors in kilometres: the initiation's ``units`` finding explains the track's misfit, so no window
+    or spread measurements are initiated for a change of the data (each would fail, as every window does in a
+    geometry a thousand times too small); without that finding the whole recording's spread measurements name
+    the kilometres, and no window is searched either."""
+    sim = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(1))
+    _units_explain_the_misfit(monkeypatch, sim.measurements, fd.TrackingModel.of(fd.paper_geometry("a").scaled(1e-3)))
 
 
 def test_a_geometry_in_kilometres_the_window_missed_is_named_from_the_whole_recording() -> None:
@@ -360,25 +367,10 @@ def test_times_in_milliseconds_the_window_missed_are_named_from_the_whole_record
     explains the track's misfit, so no later window is searched; without that finding the whole recording's
     spread measurements name them, judged by the recording's own 500 ms sampling (spread, they lie 1,500 apart),
     before any window is searched."""
-    import fgdoppler.estimators.later_mistakes as lm
-
-    sim = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(1))
-    m = sim.measurements
+    m = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(1)).measurements
     ms = fd.Measurements(time=m.time * 1e3, pair=m.pair, doppler=m.doppler, sigma=m.sigma)
     model = fd.TrackingModel.of(fd.paper_geometry("a"))
-    init = fd.initiate(ms.first_per_pair(10), model)
-    assert [x.code for x in init.reasons if x.code == "units"] == ["units"]
-    searched: list[str] = []
-
-    def search(*args: object, **kwargs: object) -> list[Reason]:
-        searched.append("windows")
-        return []
-
-    monkeypatch.setattr(lm, "_from_windows", search)
-    assert later_mistakes(ms, model, init, MISFIT) == [] and searched == []
-    plain = replace(init, reasons=tuple(x for x in init.reasons if x.code != "units"))
-    [found] = later_mistakes(ms, model, plain, MISFIT)
-    assert found.code == "units" and searched == []
+    found = _units_explain_the_misfit(monkeypatch, ms, model)
     assert found.message.startswith("the track fails its residual test and the initiation window named nothing, but "
                                     "the 40 measurements spread over the whole recording (t = 0-30000 s) fail the "
                                     "chi-square test as given and fit with other time units: with every time "
