@@ -29,7 +29,7 @@ from fgdoppler.cli.common import (
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.later_mistakes import is_mistake_finding
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
-from fgdoppler.estimators.window_mistakes import IN_KILOMETRES, IN_SECONDS
+from fgdoppler.estimators.window_mistakes import IN_KILOMETRES, IN_SECONDS, OR_OUTSIDE_THE_ZONE
 from fgdoppler.geometry import Geometry, principal_line
 from fgdoppler.zone import ZoneBox
 
@@ -329,6 +329,10 @@ def mistake_hint(reasons: Any) -> str | None:
     if any(IN_SECONDS in r.message for r in mistakes):
         return ("the times are likely not in seconds (the units finding above): give them in seconds before "
                 "following any zone advice, which reads them as seconds")
+    if any(OR_OUTSIDE_THE_ZONE in r.message for r in mistakes):
+        return (f"a {mistakes[0].code.removeprefix('initiation-')} finding above names a likely mistake in the "
+                "measurement file, but the data fit as given with a start outside the zone too: check the file, and "
+                "if it is right, follow the zone advice")
     if mistakes and any(r.status != "ok" and (r.zone is not None or r.mirror is not None) for r in reasons):
         return (f"a {mistakes[0].code.removeprefix('initiation-')} finding above names a likely mistake in the "
                 "measurement file: correct it before following any zone or half-plane advice, which reads the data "
@@ -338,11 +342,13 @@ def mistake_hint(reasons: Any) -> str | None:
 
 def _print_hints(reasons: Any, geom: Geometry, args: argparse.Namespace, pairs: Any) -> None:
     """The ``hint:`` lines after the verdict: to correct a likely mistake first (:func:`mistake_hint`), or else
-    the half planes of a mirror ambiguity and the zone holding every zone the findings advise."""
+    the half planes of a mirror ambiguity and the zone holding every zone the findings advise — also after the
+    mistake's hint where the data fit as given with a start outside the zone too."""
     first = mistake_hint(reasons)
     if first is not None:
         print(f"  hint: {first}", file=sys.stderr)
-        return
+        if not any(OR_OUTSIDE_THE_ZONE in r.message for r in reasons):
+            return  # else the zone advice is the other explanation: given below
     _print_half_plane_hint(reasons, geom, args, pairs)
     hint = zone_hint(reasons)
     if hint is not None:

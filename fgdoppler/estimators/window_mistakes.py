@@ -25,7 +25,7 @@ from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["IN_KILOMETRES", "IN_SECONDS", "KILOMETRE_EXTENT", "OTHERS_NAMED", "SHORTEST_INTERVAL", "SIGN_CONVENTION",
+__all__ = ["IN_KILOMETRES", "IN_SECONDS", "KILOMETRE_EXTENT", "OR_OUTSIDE_THE_ZONE", "OTHERS_NAMED", "SHORTEST_INTERVAL", "SIGN_CONVENTION",
            "TIME_UNITS", "Mistake", "find_mistake", "fits_beyond_the_zone", "kilometre_extent", "median_interval", "mistake_reason",
            "radar_pairs", "time_units_reason", "units_reason", "with_mistake"]
 
@@ -46,6 +46,10 @@ IN_KILOMETRES = "the geometry likely gives kilometres where fgdoppler reads metr
 
 #: What every ``units`` finding of :func:`time_units_reason` says, after the unit it names.
 IN_SECONDS = "where fgdoppler reads seconds"
+
+#: What a mistake finding adds where the window also fits as given with its start outside the zone.
+OR_OUTSIDE_THE_ZONE = ("but the window also fits as given with its start outside the zone (the boundary finding): the "
+                       "target may start there instead, and then the data need no change")
 
 #: The time units :func:`time_units_reason` tries, each with what a time in it is divided by to give seconds.
 TIME_UNITS: tuple[tuple[str, float], ...] = (("milliseconds", 1e3), ("microseconds", 1e6))
@@ -164,25 +168,26 @@ def with_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
     layout at most :data:`KILOMETRE_EXTENT` across, a geometry in
     kilometres is tried (:func:`units_reason`: a ``units`` finding instead,
     one initiation more), then times in milliseconds or microseconds
-    (:func:`time_units_reason`, likewise).  A window whose start the zone
-    holds at its boundary and that passes the test with the bound lifted
-    (:func:`fits_beyond_the_zone`) names no change of the data: the zone,
-    which its ``boundary`` finding advises widening, explains the misfit,
-    and a change of the data that lets some start inside the zone fit is
-    no evidence of a mistake (a target 10 km off a radar's baseline, outside
-    a zone 2 km across, fitted with the two pairs' labels exchanged).
+    (:func:`time_units_reason`, likewise).  Where the window's start is held
+    at the zone's boundary and the window also passes the test as given with
+    the bound lifted (:func:`fits_beyond_the_zone`), the finding says so
+    (:data:`OR_OUTSIDE_THE_ZONE`): a target outside the zone explains the
+    misfit as well as the change does (a target 10 km off a radar's
+    baseline, outside a zone 2 km across, fits with the two pairs' labels
+    exchanged; a paper recording with pair 0's Doppler negated fits as
+    given with a start outside the zone in 6 of 60 windows).
     """
     units = units_reason(measurements, model, settings, result) \
         or time_units_reason(measurements, model, settings, result)
     if units is not None:
         return replace(result, reasons=(*result.reasons, units))
-    if fits_beyond_the_zone(measurements, model, settings, result):
-        return result
     found = find_mistake(measurements, model, settings, result)
     if found is None:
         return result
-    return replace(result, reasons=(*result.reasons, mistake_reason(found, result.cost, settings.confidence)),
-                   mistake=found)
+    named = mistake_reason(found, result.cost, settings.confidence)
+    if fits_beyond_the_zone(measurements, model, settings, result):
+        named = replace(named, message=f"{named.message}; {OR_OUTSIDE_THE_ZONE}")
+    return replace(result, reasons=(*result.reasons, named), mistake=found)
 
 
 def fits_beyond_the_zone(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,

@@ -433,14 +433,15 @@ def test_a_mistake_finding_names_the_other_changes_that_pass_with_their_costs() 
         assert again.passes_chi2 and again.cost == pytest.approx(o.cost, rel=1e-12)
 
 
-def test_a_target_outside_the_zone_is_not_called_a_mistake_in_the_file() -> None:
+def test_a_mistake_that_a_start_outside_the_zone_explains_as_well_says_so() -> None:
     """A radar and a bistatic pair on one line, the target 10 km off it — outside the default zone, 2 km across:
-    the window fails its test with the start held at the zone's edge, and with the two pairs' labels exchanged some
-    start inside the zone fits (the ``swapped`` finding that once told the user to check the pairs' order).  The
-    bound lifted, the window fits as given, so the zone explains the misfit: the ``boundary`` finding advises a
-    wider zone and no change of the data is named; in the zone it advises the window fits as given.  The guard
-    costs nothing where no ``boundary`` finding holds the start (the window fits, or fails within the zone)."""
-    from fgdoppler.estimators.window_mistakes import find_mistake, fits_beyond_the_zone
+    the window fails its test with the start held at the zone's edge, and with the two pairs' labels exchanged a
+    start inside the zone fits.  With the bound lifted it fits as given too, so the ``swapped`` finding says that
+    the target may start outside the zone instead, and ``track``'s hint gives both (it once told the user to
+    correct the pairs' order before any zone advice); in the zone the ``boundary`` finding advises, the window
+    fits as given.  A window that fits, or one the zone does not hold, is not initiated again."""
+    from fgdoppler.cli.track import mistake_hint
+    from fgdoppler.estimators.window_mistakes import OR_OUTSIDE_THE_ZONE, fits_beyond_the_zone
 
     g = fd.Geometry(pairs=(fd.BistaticPair(tx=(0.0, 0.0), rx=(0.0, 0.0)), fd.BistaticPair(tx=(0.0, 0.0),
                                                                                           rx=(20e3, 0.0))))
@@ -450,11 +451,13 @@ def test_a_target_outside_the_zone_is_not_called_a_mistake_in_the_file() -> None
     quiet = InitiationSettings(mistake_check=False)
     held = initiate(w, model, quiet)
     assert not held.passes_chi2 and [r.status for r in held.reasons if r.code == "boundary"] == ["doubtful"]
-    swapped = find_mistake(w, model, InitiationSettings(), held)
-    assert swapped is not None and swapped.code == "swapped"  # what the window alone would have named
     assert fits_beyond_the_zone(w, model, InitiationSettings(), held)
     r = initiate(w, model)
-    assert r.mistake is None and not [x for x in r.reasons if x.code in ("sign", "swapped", "radial", "units")]
+    assert r.mistake is not None and r.mistake.code == "swapped"
+    [named] = [x for x in r.reasons if x.code == "swapped"]
+    assert named.message.endswith(f"; {OR_OUTSIDE_THE_ZONE}")
+    assert "but the data fit as given with a start outside the zone too: check the file, and if it is right, " \
+           "follow the zone advice" in (mistake_hint(r.reasons) or "")
     [boundary] = [x for x in r.reasons if x.code == "boundary"]
     assert boundary.status == "doubtful" and boundary.zone is not None
     wide = fd.TrackingModel.of(g.with_zone(ZoneLimits(along=boundary.zone.along, across=boundary.zone.across)))
@@ -462,6 +465,8 @@ def test_a_target_outside_the_zone_is_not_called_a_mistake_in_the_file() -> None
     paper = fd.simulate(fd.paper_scenario("a", 45e3), np.random.default_rng(1)).measurements.first_per_pair(10)
     a = fd.TrackingModel.of(fd.paper_geometry("a"))
     assert not fits_beyond_the_zone(paper, a, InitiationSettings(), initiate(paper, a, quiet))
+    negated = initiate(_negated(paper, [0, 1]), a)  # a mistake the zone does not explain: named alone
+    assert negated.mistake is not None and not [x for x in negated.reasons if OR_OUTSIDE_THE_ZONE in x.message]
 
 
 def _units(r: fd.Initiation) -> list[str]:
