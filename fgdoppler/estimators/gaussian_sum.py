@@ -297,17 +297,17 @@ class GaussianSumTracker:
         """
         t = scan_time(t, self.t)
         if self._init is None:
-            if self.warmup.hold(self.tracking_model.observation, float(t), channels, z, sigma, None):
+            if self.warmup.hold(self.tracking_model.observation, t, channels, z, sigma, None):
                 self._start()
                 return self._mixture()
             return np.full(self.tracking_model.n, np.nan), None
         zz = np.asarray(z, dtype=float).reshape(-1)
         # refused before any hypothesis sees it (a bad value would stop them all at once), and in
         # pair order, the order in which the registry's runners take a scan
-        scan = Measurements.from_scans([float(t)], [channels], [zz], [np.broadcast_to(sigma, zz.shape)])
+        scan = Measurements.from_scans([t], [channels], [zz], [np.broadcast_to(sigma, zz.shape)])
         check_channels(self.tracking_model.observation, scan)
         c, zz, ss = scan.pair, scan.doppler, scan.sigma
-        self.t = float(t)
+        self.t = t
         for h in self._hyps:
             if not h.alive:
                 continue

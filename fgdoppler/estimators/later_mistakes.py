@@ -89,8 +89,6 @@ from fgdoppler.estimators.verdict import Reason
 from fgdoppler.estimators.window_mistakes import (
     IN_KILOMETRES,
     IN_SECONDS,
-    SHORTEST_INTERVAL,
-    TIME_UNITS,
     Mistake,
     MistakeCode,
     find_mistake,
@@ -99,6 +97,7 @@ from fgdoppler.estimators.window_mistakes import (
     mistake_reason,
     radar_pairs,
     time_units_reason,
+    tries_time_units,
     units_reason,
 )
 from fgdoppler.measurements import Measurements
@@ -342,7 +341,7 @@ def _units_on_whole(model: TrackingModel, whole: _Whole) -> list[Reason]:
     microseconds (:func:`~fgdoppler.estimators.window_mistakes.time_units_reason`, judged by the recording's
     own sampling interval), that as a ``units`` finding (:func:`later_mistakes`)."""
     in_km = kilometre_extent(model) is not None
-    in_ms = whole.interval is not None and whole.interval / TIME_UNITS[0][1] >= SHORTEST_INTERVAL
+    in_ms = tries_time_units(whole.interval)
     given = whole.given() if in_km or in_ms else None
     if given is None:
         return []

@@ -27,7 +27,7 @@ from fgdoppler.models.tracking import TrackingModel
 
 __all__ = ["IN_KILOMETRES", "IN_SECONDS", "KILOMETRE_EXTENT", "OR_OUTSIDE_THE_ZONE", "OTHERS_NAMED", "SHORTEST_INTERVAL", "SIGN_CONVENTION",
            "TIME_UNITS", "Mistake", "find_mistake", "fits_beyond_the_zone", "kilometre_extent", "median_interval", "mistake_reason",
-           "radar_pairs", "time_units_reason", "units_reason", "with_mistake"]
+           "radar_pairs", "time_units_reason", "tries_time_units", "units_reason", "with_mistake"]
 
 #: The data's sign convention, as a ``sign`` finding states it (docs/data-formats.md says the same).
 SIGN_CONVENTION = ("fgdoppler's doppler is the bistatic range rate, negative for a target closing on the pair; "
@@ -323,6 +323,12 @@ def median_interval(measurements: Measurements) -> float | None:
     return float(np.median(step)) if step.size else None
 
 
+def tries_time_units(interval: float | None) -> bool:
+    """Whether :func:`time_units_reason` tries any unit for a recording whose median interval between a pair's
+    measurements is ``interval`` (``None``: none): where it divided by 1000 is at least :data:`SHORTEST_INTERVAL`."""
+    return interval is not None and interval / TIME_UNITS[0][1] >= SHORTEST_INTERVAL
+
+
 def time_units_reason(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
                       result: Initiation, *, what: str = "the window", interval: float | None = None
                       ) -> Reason | None:
@@ -347,8 +353,9 @@ def time_units_reason(measurements: Measurements, model: TrackingModel, settings
     recording (measurements spread over it lie farther apart than its sampling), else theirs.
     """
     interval = median_interval(measurements) if interval is None else interval
-    if interval is None or result.cost <= float(chi2.ppf(VERDICT_LEVEL, max(result.dof, 1))):
+    if not tries_time_units(interval) or result.cost <= float(chi2.ppf(VERDICT_LEVEL, max(result.dof, 1))):
         return None
+    assert interval is not None
     quiet = replace(settings, mistake_check=False)
     for unit, divisor in TIME_UNITS:
         if interval / divisor < SHORTEST_INTERVAL:
