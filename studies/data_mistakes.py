@@ -157,11 +157,36 @@ IN_MILLISECONDS = "every time divided by 1,000"
 #: The manoeuvring version twenty times slower (sampled every 10 s), whose failing windows are tried in
 #: milliseconds.
 SLOW = "target manoeuvres 20 times slower"
+#: The version with two gross outliers in the initiation window (the data as simulated otherwise): an ``outliers``
+#: finding naming them is right.
+OUTLIERS = "two outliers in the window"
 #: The findings the tables count.
 FINDINGS = (*MISTAKE_CODES, "units")
 
 #: Every version, in the tables' order.
-ALL_VERSIONS = [*VERSIONS, MANOEUVRE, KILOMETRES, SMALL, MILLISECONDS, SLOW]
+ALL_VERSIONS = [*VERSIONS, MANOEUVRE, KILOMETRES, SMALL, MILLISECONDS, SLOW, OUTLIERS]
+#: A named outlier in an ``outliers`` finding's words: its pair and time.
+_OUTLIER = re.compile(r"pair (\d+)(?: \([^)]*\))? at t = ([\d.]+) s: ")
+
+
+def _with_outliers(m: fd.Measurements, key: int) -> tuple[fd.Measurements, list[tuple[int, float]]]:
+    """``m`` with two of its first ten measurements per pair (the initiation window) moved by 20-50 sigma, each
+    of a random sign, drawn from ``key``; and those two as (pair, time)."""
+    rng = np.random.default_rng(9000 + key)
+    hit = rng.choice(_window_rows(m), size=2, replace=False)
+    jump = np.zeros(len(m))
+    jump[hit] = rng.choice([-1.0, 1.0], size=2) * rng.uniform(20.0, 50.0, size=2) * m.sigma[hit]
+    return (fd.Measurements(time=m.time, pair=m.pair, doppler=m.doppler + jump, sigma=m.sigma),
+            sorted((int(m.pair[i]), float(m.time[i])) for i in hit))
+
+
+def _window_rows(m: fd.Measurements, per_pair: int = 10) -> list[int]:
+    """The rows of ``m`` that ``m.first_per_pair(per_pair)`` keeps."""
+    rank = np.zeros(len(m), dtype=int)
+    for p in np.unique(m.pair):
+        rows = np.flatnonzero(m.pair == p)
+        rank[rows] = np.arange(rows.size)
+    return [int(i) for i in np.flatnonzero(rank < per_pair)]
 
 
 def _manoeuvring(sim: fd.Simulation, key: int) -> fd.Simulation:
@@ -216,7 +241,7 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
     out: dict[str, Any] = {}
     g = sim.scenario.geometry
     for name in versions:
-        truth, used = sim.truth, model
+        truth, used, corrupted = sim.truth, model, []
         if name in (MANOEUVRE, SMALL, SLOW):
             moved = _manoeuvring(sim, key)
             m, truth, want = moved.measurements, moved.truth, (lambda g: "")
@@ -230,6 +255,8 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
             truth, want = fd.Trajectory(times=1e3 * sim.truth.times, states=sim.truth.states), (lambda g: IN_MILLISECONDS)
         elif name == KILOMETRES:
             m, want, used = sim.measurements, (lambda g: IN_KILOMETRES), fd.TrackingModel.of(g.scaled(1e-3))
+        elif name == OUTLIERS:
+            (m, corrupted), want = _with_outliers(sim.measurements, key), (lambda g: "")
         else:
             version, want, radars = VERSIONS[name]
             if radars and not g.radars:
@@ -242,8 +269,12 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
             continue
         found = [r for r in init.reasons if is_mistake_finding(r)]
         first, others = _changes(found[0] if found else None)
+        outliers = [r for r in init.reasons if r.code == "outliers" and r.status != "ok"]
         row: dict[str, Any] = {"finding": found[0].code if found else "", "names": first, "others": others,
-                               "right": want(g)}
+                               "right": want(g),
+                               "outliers": sorted((int(p), float(t)) for p, t in _OUTLIER.findall(outliers[0].message))
+                               if outliers else None,
+                               "corrupted": corrupted if name == OUTLIERS else None}
         if track:
             r = fd.run_estimator(estimator, m, used, init, estimator_info(estimator).settings(clock_sigma=clock_sigma))
             e = r.primary
@@ -279,11 +310,11 @@ def one(task: tuple[int, int, int], track: int = 1, late: float = 0.5, clock_sig
 
 def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) -> list[str]:
     lines = [f"### {where}", "", "| data | recordings | sign / swapped / radial / units finding | names the change made "
-             "(first / among the others) | " + (f"{estimator} ok | ok and beyond 3 sigma | named later by the "
+             "(first / among the others) | outliers finding (names exactly the two made) | " + (f"{estimator} ok | ok and beyond 3 sigma | named later by the "
                                                  f"{estimator} where the window named nothing (rightly) | the "
                                                  f"window's finding ranked by the {estimator} (the change made "
                                                  "first) |" if track else ""),
-             "|---|---|---|---|" + ("---|---|---|---|" if track else "")]
+             "|---|---|---|---|---|" + ("---|---|---|---|" if track else "")]
     for name in ALL_VERSIONS:
         got = [r[where][name] for r in rows if where in r and name in r[where] and "refused" not in r[where][name]]
         if not got:
@@ -292,7 +323,10 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) 
         right = f"{sum(g['names'] == g['right'] for g in got)} / {sum(g['right'] in g['others'] for g in got)}" \
             if wanted else "—"
         said = [g["finding"] for g in got if g["finding"]]
-        line = f"| {name} | {len(got)} | {' / '.join(str(said.count(c)) for c in FINDINGS)} | {right} |"
+        flagged = [g for g in got if g.get("outliers") is not None]
+        exact = f" ({sum(g['outliers'] == g['corrupted'] for g in flagged)})" if name == OUTLIERS else ""
+        line = (f"| {name} | {len(got)} | {' / '.join(str(said.count(c)) for c in FINDINGS)} | {right} | "
+                f"{len(flagged)}{exact} |")
         if track:
             ok = [g for g in got if g["status"] == "ok"]
             wrong = sum(g["error"] > 3.0 * g["sigma"] for g in ok)

@@ -753,10 +753,15 @@ def test_an_initiation_whose_alternative_is_the_mirror_image_gets_the_half_plane
 def test_a_mistake_finding_comes_before_any_zone_or_half_plane_advice() -> None:
     """A sign, swapped or radial finding (the track's or, prefixed, the initiation's) beside a finding that
     advises a zone or a half plane: the hint is to correct the mistake first; without such advice, or with the
-    mistake finding only ``ok`` or absent, there is none; a geometry in kilometres is named whatever the rest."""
+    mistake finding only ``ok`` or absent, there is none; a geometry in kilometres is named whatever the rest.  The
+    same for an initiation window that fits with a few outliers down-weighted: the Huber loss first."""
     from fgdoppler.cli.track import mistake_hint
     from fgdoppler.estimators.verdict import Reason
-    from fgdoppler.estimators.window_mistakes import IN_KILOMETRES
+    from fgdoppler.estimators.window_mistakes import (
+        IN_KILOMETRES,
+        OR_OUTSIDE_THE_ZONE,
+        WITH_OUTLIERS,
+    )
 
     zone = fd.Zone(along=(1000.0, 30000.0), across=(-3000.0, 3000.0), speed_max=200.0, frame=fd.Frame.identity(2))
     widen = Reason(code="boundary", status="doubtful", message="widen it",
@@ -772,6 +777,13 @@ def test_a_mistake_finding_comes_before_any_zone_or_half_plane_advice() -> None:
     assert mistake_hint([widen, mirror]) is None
     km = Reason(code="initiation-units", status="doubtful", message=f"the window fits: {IN_KILOMETRES} ...")
     assert mistake_hint([km]) is not None and "kilometres" in mistake_hint([km, widen])  # type: ignore[operator]
+    # an outliers finding: track with the Huber loss first; both where a start outside the zone fits too
+    outliers = Reason(code="initiation-outliers", status="doubtful", message=f"the window fits: {WITH_OUTLIERS}, ...")
+    assert mistake_hint([outliers]) is None and mistake_hint([replace(outliers, status="ok"), widen]) is None
+    assert "track with the Huber loss (--huber) before" in (mistake_hint([outliers, widen]) or "")
+    either = replace(outliers, message=f"{outliers.message}; {OR_OUTSIDE_THE_ZONE}")
+    assert "check those measurements, and if they are right, follow the zone advice" in (
+        mistake_hint([either, widen]) or "")
 
 
 def test_the_zone_hint_is_the_union_of_the_advised_zones() -> None:

@@ -29,7 +29,12 @@ from fgdoppler.cli.common import (
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.later_mistakes import is_mistake_finding
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
-from fgdoppler.estimators.window_mistakes import IN_KILOMETRES, IN_SECONDS, OR_OUTSIDE_THE_ZONE
+from fgdoppler.estimators.window_mistakes import (
+    IN_KILOMETRES,
+    IN_SECONDS,
+    OR_OUTSIDE_THE_ZONE,
+    WITH_OUTLIERS,
+)
 from fgdoppler.geometry import Geometry, principal_line
 from fgdoppler.zone import ZoneBox
 
@@ -318,8 +323,9 @@ def zone_hint(reasons: Any) -> str | None:
 def mistake_hint(reasons: Any) -> str | None:
     """The hint to correct a likely mistake in the file or the geometry first, where a finding names one (a
     ``sign``, ``swapped`` or ``radial`` change of the data, the geometry in kilometres or the times in another
-    unit) and another advises
-    a zone or a half plane: that advice reads the mistaken data or units as given.  ``None`` otherwise."""
+    unit) and another advises a zone or a half plane: that advice reads the mistaken data or units as given.
+    Likewise to track with the Huber loss first where the initiation window fits with a few outliers
+    down-weighted (an ``outliers`` finding).  ``None`` otherwise."""
     # a track's findings carry its initiation's under the "initiation-" prefix; both name the mistake alike
     mistakes = [r for r in reasons if r.status != "ok" and is_mistake_finding(
         replace(r, code=r.code.removeprefix("initiation-")))]
@@ -329,6 +335,15 @@ def mistake_hint(reasons: Any) -> str | None:
     if any(IN_SECONDS in r.message for r in mistakes):
         return ("the times are likely not in seconds (the units finding above): give them in seconds before "
                 "following any zone advice, which reads them as seconds")
+    outliers = [r for r in reasons if r.status != "ok" and WITH_OUTLIERS in r.message]
+    if outliers and any(OR_OUTSIDE_THE_ZONE in r.message for r in outliers):
+        return ("an outliers finding above says the initiation window fits with a few measurements down-weighted, "
+                "but it fits as given with a start outside the zone too: check those measurements, and if they are "
+                "right, follow the zone advice")
+    if outliers and any(r.status != "ok" and (r.zone is not None or r.mirror is not None) for r in reasons):
+        return ("an outliers finding above says the initiation window fits with a few measurements down-weighted: "
+                "track with the Huber loss (--huber) before following any zone or half-plane advice, which reads the "
+                "outliers as data")
     if any(OR_OUTSIDE_THE_ZONE in r.message for r in mistakes):
         return (f"a {mistakes[0].code.removeprefix('initiation-')} finding above names a likely mistake in the "
                 "measurement file, but the data fit as given with a start outside the zone too: check the file, and "

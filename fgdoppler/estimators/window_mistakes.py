@@ -18,15 +18,23 @@ from typing import Literal
 import numpy as np
 from scipy.stats import chi2
 
-from fgdoppler._text import distance_text
-from fgdoppler.estimators.initiation import VERDICT_LEVEL, Initiation, InitiationSettings, initiate
+from fgdoppler._text import distance_text, time_text
+from fgdoppler.estimators.initiation import (
+    OUTLIER_CUT,
+    VERDICT_LEVEL,
+    Initiation,
+    InitiationSettings,
+    initiate,
+)
+from fgdoppler.estimators.judge import REJECT_ROBUST
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["IN_KILOMETRES", "IN_SECONDS", "KILOMETRE_EXTENT", "OR_OUTSIDE_THE_ZONE", "OTHERS_NAMED", "SHORTEST_INTERVAL", "SIGN_CONVENTION",
-           "TIME_UNITS", "Mistake", "find_mistake", "fits_beyond_the_zone", "kilometre_extent", "median_interval", "mistake_reason",
+__all__ = ["HUBER_TRIED", "IN_KILOMETRES", "IN_SECONDS", "KILOMETRE_EXTENT", "OR_OUTSIDE_THE_ZONE",
+           "OTHERS_NAMED", "SHORTEST_INTERVAL", "SIGN_CONVENTION", "TIME_UNITS", "WITH_OUTLIERS", "Mistake", "find_mistake",
+           "fits_beyond_the_zone", "kilometre_extent", "median_interval", "mistake_reason", "outliers_reason",
            "radar_pairs", "time_units_reason", "tries_time_units", "units_reason", "with_mistake"]
 
 #: The data's sign convention, as a ``sign`` finding states it (docs/data-formats.md says the same).
@@ -57,6 +65,12 @@ TIME_UNITS: tuple[tuple[str, float], ...] = (("milliseconds", 1e3), ("microsecon
 #: Shortest interval (s) between a pair's measurements that :func:`time_units_reason` takes for real: a unit is
 #: tried only where the median interval, divided as it says, is at least this (200 measurements a second).
 SHORTEST_INTERVAL = 5e-3
+
+#: The Huber threshold (whitened residuals) :func:`outliers_reason` fits a failing window with: ``--huber``'s default.
+HUBER_TRIED = 1.345
+
+#: What an ``outliers`` finding of :func:`outliers_reason` says (and only it).
+WITH_OUTLIERS = "the data likely hold outliers"
 
 #: The mistakes in a measurement file that :func:`find_mistake` tries.
 MistakeCode = Literal["sign", "swapped", "radial"]
@@ -161,7 +175,9 @@ def with_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
     (on radar layouts a short window often fits two of them:
     ``studies/data_mistakes.py``).  A window that fails for another reason
     (outliers, a manoeuvre, a wrong sigma) is mended by none of these and
-    gets no finding.  With :math:`P \ge 2` pairs that is :math:`1 + P + P(P-1)/2`
+    gets none of these findings; where it fits with a few measurements
+    down-weighted by the Huber loss, an ``outliers`` finding names them
+    instead (:func:`outliers_reason`, one initiation more).  With :math:`P \ge 2` pairs that is :math:`1 + P + P(P-1)/2`
     more initiations of the window (two pairs: 4; four: 11; one pair: 1),
     and :math:`2(1 + R)` more with :math:`R \ge 2` radars among them (one
     radar: 2), made only for a window that fails.  Before them, on a
@@ -182,9 +198,10 @@ def with_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
     if units is not None:
         return replace(result, reasons=(*result.reasons, units))
     found = find_mistake(measurements, model, settings, result)
-    if found is None:
+    named = outliers_reason(measurements, model, settings, result) if found is None \
+        else mistake_reason(found, result.cost, settings.confidence)
+    if named is None:
         return result
-    named = mistake_reason(found, result.cost, settings.confidence)
     if fits_beyond_the_zone(measurements, model, settings, result):
         named = replace(named, message=f"{named.message}; {OR_OUTSIDE_THE_ZONE}")
     return replace(result, reasons=(*result.reasons, named), mistake=found)
@@ -203,6 +220,53 @@ def fits_beyond_the_zone(measurements: Measurements, model: TrackingModel, setti
     except ValueError:
         return False
     return bool(free.passes_chi2)
+
+
+def outliers_reason(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
+                    result: Initiation) -> Reason | None:
+    r"""An ``outliers`` finding where ``measurements`` (``result`` their fit, with the Gaussian loss) fail the
+    verdict's χ² test and fit with a few of them down-weighted by the Huber loss, else ``None``.
+
+    A gross error in one measurement of the window drags a least-squares
+    start far from the rest: its whitened residual :math:`r_i` enters the
+    cost as :math:`r_i^2`, and a 40σ outlier outweighs the other nineteen
+    measurements' χ² a hundredfold, so the start moves (even to the zone's
+    edge, with advice to widen it) to shrink that one residual.  The window
+    is initiated again with the Huber loss
+    (:data:`HUBER_TRIED`, ``--huber``'s default): it passes when the χ²
+    statistic of its inliers, :math:`|r_i| \le` :data:`~fgdoppler.estimators.initiation.OUTLIER_CUT`,
+    passes the test at ``settings.confidence`` on their degrees of freedom
+    (:func:`~fgdoppler.estimators.initiation.inlier_statistic`).  The
+    finding names each outlier (pair, time, :math:`r_i` at the robust
+    fit's start carried by the constant-velocity model) and is made only
+    where they are at most :data:`~fgdoppler.estimators.judge.REJECT_ROBUST`
+    of the window (at least one): more down-weighted measurements than a
+    robust track's verdict allows are a misfit of the model (a manoeuvre, a
+    wrong sigma), not outliers.  Not tried where ``settings`` already use
+    the Huber loss.  One initiation more, only for a window that fails and
+    that no change of :func:`find_mistake` mends.
+    """
+    if settings.huber_k is not None or result.cost <= float(chi2.ppf(VERDICT_LEVEL, max(result.dof, 1))):
+        return None
+    try:
+        robust = initiate(measurements, model, replace(settings, mistake_check=False, huber_k=HUBER_TRIED))
+    except ValueError:
+        return None
+    n = len(measurements)
+    states = model.motion.propagate(robust.x_start, measurements.time - robust.t_start)
+    r = (measurements.doppler - model.observation.predict(states, measurements.pair)) / measurements.sigma
+    out = np.flatnonzero(np.abs(r) > OUTLIER_CUT)
+    if not robust.passes_chi2 or out.size == 0 or out.size > max(1, int(REJECT_ROBUST * n)):
+        return None
+    geometry = getattr(model.observation, "geometry", None)
+    label = geometry.pair_label if isinstance(geometry, Geometry) else str
+    which = "; ".join(f"pair {label(int(measurements.pair[i]))} at t = {time_text(float(measurements.time[i]))} s: "
+                      f"{r[i]:+.1f} sigma" for i in out[np.argsort(-np.abs(r[out]))])
+    return Reason(code="outliers", status="doubtful", message=(
+        f"with the Huber loss (k = {HUBER_TRIED:g}) the window fits (cost {robust.cost:.2f} over its "
+        f"{n - out.size} inliers, passing the {settings.confidence:.0%} chi-square test, against {result.cost:.2f} "
+        f"as given): {WITH_OUTLIERS}, {out.size} of its {n} measurements beyond {OUTLIER_CUT:.2f} sigma of that fit "
+        f"({which}); if so, track with the Huber loss (--huber), which down-weights them"))
 
 
 def find_mistake(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,

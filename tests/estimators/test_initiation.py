@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -306,6 +308,40 @@ def test_a_window_that_fails_for_another_reason_gets_no_sign_finding() -> None:
         r = initiate(bad, sc.geometry)
         assert any(x.code == "chi2" and x.status == "doubtful" for x in r.reasons)
         assert not [x for x in r.reasons if x.code == "sign"]
+
+
+def test_a_window_with_a_few_outliers_names_them() -> None:
+    """Case b 5 km's window with one 40-sigma outlier, or two of opposite signs: it fails the verdict's test, and
+    the ``outliers`` finding names exactly the corrupted measurements (pair and time), each with its residual at
+    the robust fit's start — the jump within 4 sigma, the rest of the window fitting that start as the truth
+    does.  None for the window as simulated, nor where the settings already use the Huber loss, nor with four
+    outliers (more than a tenth of the window: a misfit of the model, not a few outliers)."""
+    from fgdoppler.estimators.window_mistakes import WITH_OUTLIERS
+
+    sc = fd.paper_scenario("b", 5e3)
+    w = fd.simulate(sc, np.random.default_rng(5)).measurements.first_per_pair(10)
+    assert not [x for x in initiate(w, sc.geometry).reasons if x.code == "outliers"]
+    for jumps in ({7: 40.0}, {4: -25.0, 15: 30.0}):
+        bad = np.zeros(len(w))
+        bad[list(jumps)] = list(jumps.values())
+        corrupted = fd.Measurements(time=w.time, pair=w.pair, doppler=w.doppler + bad * w.sigma, sigma=w.sigma)
+        r = initiate(corrupted, sc.geometry)
+        assert any(x.code == "chi2" and x.status == "doubtful" for x in r.reasons)
+        [found] = [x for x in r.reasons if x.code == "outliers"]
+        assert found.status == "doubtful" and WITH_OUTLIERS in found.message
+        named = re.findall(r"pair (\d) at t = ([\d.]+) s: ([+-][\d.]+) sigma", found.message)
+        assert sorted((int(p), float(t)) for p, t, _ in named) == sorted(
+            (int(w.pair[i]), float(w.time[i])) for i in jumps)
+        for p, t, sigmas in named:
+            [i] = [i for i in jumps if (w.pair[i], w.time[i]) == (int(p), float(t))]
+            assert abs(float(sigmas) - jumps[i]) < 4.0
+        robust = initiate(corrupted, sc.geometry, InitiationSettings(huber_k=1.345))
+        assert [x.status for x in robust.reasons if x.code == "outliers"] == ["ok"]
+    four = np.zeros(len(w))
+    four[[3, 8, 12, 17]] = 30.0
+    r = initiate(fd.Measurements(time=w.time, pair=w.pair, doppler=w.doppler + four * w.sigma, sigma=w.sigma),
+                 sc.geometry)
+    assert not r.passes_chi2 and not [x for x in r.reasons if x.code == "outliers"]
 
 
 #: Three pairs anywhere (draw 106 of studies/random_layouts.py, rounded to the metre), and its target's start.
