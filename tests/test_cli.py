@@ -754,7 +754,7 @@ def test_a_mistake_finding_comes_before_any_zone_or_half_plane_advice() -> None:
     """A sign, swapped or radial finding (the track's or, prefixed, the initiation's) beside a finding that
     advises a zone or a half plane: the hint is to correct the mistake first; without such advice, or with the
     mistake finding only ``ok`` or absent, there is none; a geometry in kilometres is named whatever the rest.  The
-    same for an initiation window that fits with a few outliers down-weighted: the Huber loss first."""
+    same for an initiation window that fits without a few outliers: the Huber loss first."""
     from fgdoppler.cli.track import mistake_hint
     from fgdoppler.estimators.verdict import Reason
     from fgdoppler.estimators.window_mistakes import (

@@ -324,8 +324,8 @@ def mistake_hint(reasons: Any) -> str | None:
     """The hint to correct a likely mistake in the file or the geometry first, where a finding names one (a
     ``sign``, ``swapped`` or ``radial`` change of the data, the geometry in kilometres or the times in another
     unit) and another advises a zone or a half plane: that advice reads the mistaken data or units as given.
-    Likewise to track with the Huber loss first where the initiation window fits with a few outliers
-    down-weighted (an ``outliers`` finding).  ``None`` otherwise."""
+    Likewise to track with the Huber loss first where the initiation window fits without a few outliers (an
+    ``outliers`` finding).  ``None`` otherwise."""
     # a track's findings carry its initiation's under the "initiation-" prefix; both name the mistake alike
     mistakes = [r for r in reasons if r.status != "ok" and is_mistake_finding(
         replace(r, code=r.code.removeprefix("initiation-")))]
@@ -337,11 +337,11 @@ def mistake_hint(reasons: Any) -> str | None:
                 "following any zone advice, which reads them as seconds")
     outliers = [r for r in reasons if r.status != "ok" and WITH_OUTLIERS in r.message]
     if outliers and any(OR_OUTSIDE_THE_ZONE in r.message for r in outliers):
-        return ("an outliers finding above says the initiation window fits with a few measurements down-weighted, "
+        return ("an outliers finding above says the initiation window fits without a few measurements, "
                 "but it fits as given with a start outside the zone too: check those measurements, and if they are "
                 "right, follow the zone advice")
     if outliers and any(r.status != "ok" and (r.zone is not None or r.mirror is not None) for r in reasons):
-        return ("an outliers finding above says the initiation window fits with a few measurements down-weighted: "
+        return ("an outliers finding above says the initiation window fits without a few measurements: "
                 "track with the Huber loss (--huber) before following any zone or half-plane advice, which reads the "
                 "outliers as data")
     if any(OR_OUTSIDE_THE_ZONE in r.message for r in mistakes):

@@ -132,3 +132,29 @@ def test_the_split_time_is_named_in_the_recordings_own_clock() -> None:
     assert here is not None and there is not None
     assert "up to t = 15 s" in here.message and "up to t = 1764115215 s" in there.message
     assert there.message.replace("1764115215", "15") == here.message
+
+
+def test_a_split_statistic_that_a_few_outliers_raise_says_so() -> None:
+    """Case b 5 km with three 40-sigma outliers (Gaussian loss): each part's track bends to them more freely than
+    one track, so the split test fires; without the measurements beyond the outlier cut the parts agree, and the
+    finding says the data more likely hold outliers (it stays ``doubtful``).  The manoeuvre that fools every
+    estimator gets no such clause (its misfit is not a few measurements), nor does the test under the Huber
+    loss, which down-weights the outliers itself and does not fire."""
+    sc = fd.paper_scenario("b", 5e3)
+    m = fd.simulate(sc, np.random.default_rng(1)).measurements
+    jump = np.zeros(len(m))
+    jump[[15, 40, 77]] = 40.0
+    bad = fd.Measurements(time=m.time, pair=m.pair, doppler=m.doppler + jump * m.sigma, sigma=m.sigma)
+    init = fd.initiate(bad.first_per_pair(10), sc.geometry)
+    r = fd.run_estimator("smoother", bad, sc.geometry, init, verify=False)
+    [found] = [x for x in r.reasons if x.code == "manoeuvre"]
+    assert found.status == "doubtful"
+    assert "but without the 3 measurements beyond 3.89 sigma of the track the two parts agree" in found.message
+    assert "track with the Huber loss (--huber)" in found.message
+    robust = fd.run_estimator("smoother", bad, sc.geometry, init, fd.SmootherSettings(huber_k=1.345), verify=False)
+    assert not [x for x in robust.reasons if x.code == "manoeuvre"]
+    g, sim = _manoeuvring_two_pair_recording(4)
+    turning = fd.run_estimator("smoother", sim.measurements, g, fd.initiate(sim.measurements.first_per_pair(10), g),
+                               verify=False)
+    [real] = [x for x in turning.reasons if x.code == "manoeuvre"]
+    assert "outliers" not in real.message
