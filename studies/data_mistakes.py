@@ -32,18 +32,22 @@ Three mistakes, each checked on the same recordings:
   twenty times slower (times 20 times later, Doppler, sigma and speeds a twentieth, the process noise
   density 1/8000: the same whitened problem sampled every 10 s), whose windows fail for a manoeuvre and
   are tried in milliseconds.
+* **Two outliers in the window.**  Two of the initiation window's measurements moved by 20-50 sigma, each
+  of a random sign (``two outliers in the window``).  Not a file mistake: the initiation's ``outliers``
+  finding (:func:`fgdoppler.estimators.window_mistakes.outliers_reason`) should name exactly those two, and
+  nothing on the other versions (the table's outliers column).
 * **A receiver's clock off.**  Pair 1's times ``--late`` seconds late (default 0.5; one clock for
   every pair is assumed).  Not looked for: where such data fit another track, no finding can tell.
   With ``--clock-sigma S`` the estimator is told each pair's clock may be off by S (1 sigma;
   ``clock_sigma=S`` of its settings, a consider covariance), on every version of the data.
 
-Per recording, up to ten versions of the data: as simulated, every pair's Doppler negated, pair 0's
+Per recording, up to thirteen versions of the data: as simulated, every pair's Doppler negated, pair 0's
 alone negated, pairs 0 and 1 swapped, pair 1's clock late, where the geometry has radars their
 Doppler halved and halved and negated, and the recording simulated anew with its target manoeuvring
 (``target manoeuvres``: turning by up to 0.6 deg/s and changing speed by up to 1 m/s^2 from a time in
 0-20 s, drawn per recording; right data, so no mistake should be named), the geometry in kilometres
 and that manoeuvring recording on the layout a hundred times smaller (nothing to name), the times in milliseconds
-and the manoeuvring recording twenty times slower (nothing to name).  ``--only`` runs the versions
+and the manoeuvring recording twenty times slower (nothing to name), and two outliers in the window.  ``--only`` runs the versions
 it lists (comma-separated names, as the tables give them).  For each: whether the initiation has a ``sign``,
 ``swapped``, ``radial`` or ``units`` finding (:func:`fgdoppler.estimators.window_mistakes.with_mistake`) and
 what it names, and (``--track 1``, the default) the verdict of ``--estimator`` (default the
@@ -69,7 +73,8 @@ the initiations alone, 15 min for ``--runs 20``; 2026-11-29, with the whole reco
 :mod:`fgdoppler.estimators.later_mistakes`, on 2 idle cores: ``--runs 10`` 34 min; with the window's
 changes ranked there too, on 2 cores beside other work: 56 min; ``--only "sensors in kilometres,target manoeuvres on
 a layout 1/100 the size"``, 23 min; 2026-11-30, ``--only "times in milliseconds,target manoeuvres 20 times slower"``,
-13 min on 2 cores)
+13 min on 2 cores; ``--only "as given,target manoeuvres,two outliers in the window,pair 1's clock late"``, 18 min
+on 2 cores)
 """
 
 from __future__ import annotations
