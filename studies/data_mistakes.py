@@ -36,14 +36,18 @@ Three mistakes, each checked on the same recordings:
   of a random sign (``two outliers in the window``).  Not a file mistake: the initiation's ``outliers``
   finding (:func:`fgdoppler.estimators.window_mistakes.outliers_reason`) should name exactly those two, and
   nothing on the other versions (the table's outliers column).
+* **The Doppler's scale.**  Every Doppler and its sigma times 0.5, 0.8, 1.25 or 2 (``Doppler scaled by F``):
+  a Doppler shift in Hz converted with a wrong wavelength, or a range rate in another unit.  Not looked
+  for: where the scaled data fit another track, no finding can tell (the table's smoother columns say how
+  often a confident answer is wrong).
 * **A receiver's clock off.**  Pair 1's times ``--late`` seconds late (default 0.5; one clock for
   every pair is assumed).  Not looked for: where such data fit another track, no finding can tell.
   With ``--clock-sigma S`` the estimator is told each pair's clock may be off by S (1 sigma;
   ``clock_sigma=S`` of its settings, a consider covariance), on every version of the data.
 
-Per recording, up to thirteen versions of the data: as simulated, every pair's Doppler negated, pair 0's
+Per recording, up to seventeen versions of the data: as simulated, every pair's Doppler negated, pair 0's
 alone negated, pairs 0 and 1 swapped, pair 1's clock late, where the geometry has radars their
-Doppler halved and halved and negated, and the recording simulated anew with its target manoeuvring
+Doppler halved and halved and negated, every Doppler scaled by 0.5, 0.8, 1.25 and 2, the recording simulated anew with its target manoeuvring
 (``target manoeuvres``: turning by up to 0.6 deg/s and changing speed by up to 1 m/s^2 from a time in
 0-20 s, drawn per recording; right data, so no mistake should be named), the geometry in kilometres
 and that manoeuvring recording on the layout a hundred times smaller (nothing to name), the times in milliseconds
@@ -79,6 +83,7 @@ on 2 cores)
 
 from __future__ import annotations
 
+import functools
 import json
 import re
 from collections.abc import Callable
@@ -122,6 +127,12 @@ def _radars(g: fd.Geometry) -> str:
     return f"pair {r[0]}" if len(r) == 1 else f"pairs {', '.join(map(str, r[:-1]))} and {r[-1]}"
 
 
+def _scaled(m: fd.Measurements, g: fd.Geometry, late: float, *, factor: float) -> fd.Measurements:
+    """``m`` with every Doppler and sigma times ``factor``: a Doppler shift in Hz converted with a wavelength
+    ``factor`` times the carrier's, or a range rate in another unit."""
+    return fd.Measurements(time=m.time, pair=m.pair, doppler=factor * m.doppler, sigma=factor * m.sigma)
+
+
 def _late(m: fd.Measurements, seconds: float) -> fd.Measurements:
     """``m`` with pair 1's times ``seconds`` late (its receiver's clock off)."""
     return fd.Measurements.from_arrays(np.where(m.pair == 1, m.time + seconds, m.time), m.pair, m.doppler, m.sigma,
@@ -146,6 +157,8 @@ VERSIONS: dict[str, tuple[Callable[[fd.Measurements, fd.Geometry, float], fd.Mea
                                 True),
     "radars' approach speed": (lambda m, g, _: _radial(m, g, -0.5),
                                lambda g: f"the Doppler of {_radars(g)} doubled and negated", True),
+    **{f"Doppler scaled by {f:g}": (functools.partial(_scaled, factor=f), lambda g: "", False)
+       for f in (0.5, 0.8, 1.25, 2.0)},
 }
 
 #: The version whose geometry gives the sensors in kilometres (the data as simulated): a ``units`` finding is right.
