@@ -269,16 +269,11 @@ def test_a_window_with_the_opposite_sign_convention_is_named(start: float, seed:
     the window negated back — which is the window as simulated, so that cost is the simulated window's own.
     The same in a moved and turned copy of the problem (the check runs in the sensors' frame); none with the
     check off."""
-    from fgdoppler.geometry import Geometry
-
     sc = fd.paper_scenario("a", start)
     w = fd.simulate(sc, np.random.default_rng(seed)).measurements.first_per_pair(10)
     plain = initiate(w, sc.geometry)
     assert plain.passes_chi2 and not [r for r in plain.reasons if r.code == "sign"]
-    angle, shift = 0.7, np.array([3e5, -2e5])
-    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
-    moved = Geometry(pairs=tuple(fd.BistaticPair(tx=rot @ p.tx + shift, rx=rot @ p.rx + shift)
-                                 for p in sc.geometry.pairs))
+    moved = _moved(sc.geometry)
     for pairs, named in (([0, 1], "every pair"), ([1], "pair 1"), ([0], "pair 0")):
         for geometry in (sc.geometry, moved):
             r = initiate(_negated(w, pairs), geometry)
@@ -310,11 +305,18 @@ def test_a_window_that_fails_for_another_reason_gets_no_sign_finding() -> None:
         assert not [x for x in r.reasons if x.code == "sign"]
 
 
+def _moved(g: fd.Geometry, angle: float = 0.7, shift: tuple[float, float] = (3e5, -2e5)) -> fd.Geometry:
+    """``g`` turned by ``angle`` about the origin and moved by ``shift``."""
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    return fd.Geometry(pairs=tuple(fd.BistaticPair(tx=rot @ p.tx + np.asarray(shift), rx=rot @ p.rx + np.asarray(shift))
+                                   for p in g.pairs))
+
+
 def test_a_window_with_a_few_outliers_names_them() -> None:
     """Case b 5 km's window with one 40-sigma outlier, or two of opposite signs: it fails the verdict's test, and
     the ``outliers`` finding names exactly the corrupted measurements (pair and time), each with its residual at
-    the robust fit's start — the jump within 4 sigma, the rest of the window fitting that start as the truth
-    does.  None for the window as simulated, nor where the settings already use the Huber loss, nor with four
+    the fit's start without them — the jump within 4 sigma, the rest of the window fitting that start as the
+    truth does; the same in a moved and turned copy.  None for the window as simulated, nor where the settings already use the Huber loss, nor with four
     outliers (more than a tenth of the window: a misfit of the model, not a few outliers)."""
     from fgdoppler.estimators.window_mistakes import WITH_OUTLIERS
 
@@ -337,6 +339,9 @@ def test_a_window_with_a_few_outliers_names_them() -> None:
             assert abs(float(sigmas) - jumps[i]) < 4.0
         robust = initiate(corrupted, sc.geometry, InitiationSettings(huber_k=1.345))
         assert [x.status for x in robust.reasons if x.code == "outliers"] == ["ok"]
+        # the same words in a moved and turned copy of the problem (the check runs in the sensors' frame)
+        assert [x.message for x in initiate(corrupted, _moved(sc.geometry)).reasons if x.code == "outliers"] \
+            == [found.message]
     four = np.zeros(len(w))
     four[[3, 8, 12, 17]] = 30.0
     r = initiate(fd.Measurements(time=w.time, pair=w.pair, doppler=w.doppler + four * w.sigma, sigma=w.sigma),
