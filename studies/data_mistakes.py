@@ -40,18 +40,22 @@ Three mistakes, each checked on the same recordings:
   a Doppler shift in Hz converted with a wrong wavelength, or a range rate in another unit.  Not looked
   for: where the scaled data fit another track, no finding can tell (the table's smoother columns say how
   often a confident answer is wrong).
+* **A receiver misplaced.**  The geometry puts pair 1's receiver 5 km east of where it is (the data as
+  simulated; ``pair 1's receiver 5 km off``).  Not a mistake in the file: where the window names a change
+  anyway and the track fits as given, the track's ``unconfirmed`` finding
+  (:mod:`fgdoppler.estimators.later_mistakes`) should say that the whole recording does not need it.
 * **A receiver's clock off.**  Pair 1's times ``--late`` seconds late (default 0.5; one clock for
   every pair is assumed).  Not looked for: where such data fit another track, no finding can tell.
   With ``--clock-sigma S`` the estimator is told each pair's clock may be off by S (1 sigma;
   ``clock_sigma=S`` of its settings, a consider covariance), on every version of the data.
 
-Per recording, up to seventeen versions of the data: as simulated, every pair's Doppler negated, pair 0's
+Per recording, up to eighteen versions of the data: as simulated, every pair's Doppler negated, pair 0's
 alone negated, pairs 0 and 1 swapped, pair 1's clock late, where the geometry has radars their
 Doppler halved and halved and negated, every Doppler scaled by 0.5, 0.8, 1.25 and 2, the recording simulated anew with its target manoeuvring
 (``target manoeuvres``: turning by up to 0.6 deg/s and changing speed by up to 1 m/s^2 from a time in
 0-20 s, drawn per recording; right data, so no mistake should be named), the geometry in kilometres
 and that manoeuvring recording on the layout a hundred times smaller (nothing to name), the times in milliseconds
-and the manoeuvring recording twenty times slower (nothing to name), and two outliers in the window.  ``--only`` runs the versions
+and the manoeuvring recording twenty times slower (nothing to name), two outliers in the window, and pair 1's receiver misplaced.  ``--only`` runs the versions
 it lists (comma-separated names, as the tables give them).  For each: whether the initiation has a ``sign``,
 ``swapped``, ``radial`` or ``units`` finding (:func:`fgdoppler.estimators.window_mistakes.with_mistake`) and
 what it names, and (``--track 1``, the default) the verdict of ``--estimator`` (default the
@@ -97,7 +101,7 @@ from monostatic_layouts import draw as radar_draw
 from random_layouts import draw, one_blas_thread, recorded
 
 import fgdoppler as fd
-from fgdoppler.estimators.later_mistakes import MISTAKE_CODES, is_mistake_finding
+from fgdoppler.estimators.later_mistakes import MISTAKE_CODES, UNCONFIRMED, is_mistake_finding
 from fgdoppler.estimators.registry import estimator_info
 
 
@@ -178,11 +182,14 @@ SLOW = "target manoeuvres 20 times slower"
 #: The version with two gross outliers in the initiation window (the data as simulated otherwise): an ``outliers``
 #: finding naming them is right.
 OUTLIERS = "two outliers in the window"
+#: The version whose geometry puts pair 1's receiver 5 km east of where it is (the data as simulated): nothing to
+#: name in the file; an ``unconfirmed`` finding where the window names a change is right.
+MISPLACED = "pair 1's receiver 5 km off"
 #: The findings the tables count.
 FINDINGS = (*MISTAKE_CODES, "units")
 
 #: Every version, in the tables' order.
-ALL_VERSIONS = [*VERSIONS, MANOEUVRE, KILOMETRES, SMALL, MILLISECONDS, SLOW, OUTLIERS]
+ALL_VERSIONS = [*VERSIONS, MANOEUVRE, KILOMETRES, SMALL, MILLISECONDS, SLOW, OUTLIERS, MISPLACED]
 #: A named outlier in an ``outliers`` finding's words: its pair and time.
 _OUTLIER = re.compile(r"pair (\d+)(?: \([^)]*\))? at t = ([\d.]+) s: ")
 
@@ -196,6 +203,14 @@ def _with_outliers(m: fd.Measurements, key: int) -> tuple[fd.Measurements, list[
     jump[hit] = rng.choice([-1.0, 1.0], size=2) * rng.uniform(20.0, 50.0, size=2) * m.sigma[hit]
     return (fd.Measurements(time=m.time, pair=m.pair, doppler=m.doppler + jump, sigma=m.sigma),
             sorted((int(m.pair[i]), float(m.time[i])) for i in hit))
+
+
+def _misplaced(g: fd.Geometry, metres: float = 5e3) -> fd.Geometry:
+    """``g`` with pair 1's receiver ``metres`` farther along x (east) than it is; its zone, names and
+    wavelengths kept."""
+    p = g.pairs[1]
+    moved = fd.BistaticPair(tx=p.tx, rx=np.asarray(p.rx, dtype=float) + np.eye(len(p.rx))[0] * metres)
+    return replace(g, pairs=(g.pairs[0], moved, *g.pairs[2:]))
 
 
 def _window_rows(m: fd.Measurements, per_pair: int = 10) -> list[int]:
@@ -273,6 +288,8 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
             truth, want = fd.Trajectory(times=1e3 * sim.truth.times, states=sim.truth.states), (lambda g: IN_MILLISECONDS)
         elif name == KILOMETRES:
             m, want, used = sim.measurements, (lambda g: IN_KILOMETRES), fd.TrackingModel.of(g.scaled(1e-3))
+        elif name == MISPLACED:
+            m, want, used = sim.measurements, (lambda g: ""), fd.TrackingModel.of(_misplaced(g))
         elif name == OUTLIERS:
             (m, corrupted), want = _with_outliers(sim.measurements, key), (lambda g: "")
         else:
@@ -302,7 +319,8 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
             sd = float(np.sqrt(np.max(np.linalg.eigvalsh(e.covariances[j][:k, :k])))) if e.cov_ok[j] else np.nan
             later = [x for x in r.reasons if is_mistake_finding(x)]
             row.update(status=str(r.status), error=round(err, 1), sigma=round(sd, 1),
-                       later=_changes(later[0] if later else None)[0])
+                       later=_changes(later[0] if later else None)[0],
+                       unconfirmed=any(x.code == UNCONFIRMED for x in r.reasons))
         out[name] = row
     return out
 
@@ -331,8 +349,9 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) 
              "(first / among the others) | outliers finding (names exactly the two made) | " + (f"{estimator} ok | ok and beyond 3 sigma | named later by the "
                                                  f"{estimator} where the window named nothing (rightly) | the "
                                                  f"window's finding ranked by the {estimator} (the change made "
-                                                 "first) |" if track else ""),
-             "|---|---|---|---|---|" + ("---|---|---|---|" if track else "")]
+                                                 f"first) | the window's finding unconfirmed by the {estimator} |"
+                                                 if track else ""),
+             "|---|---|---|---|---|" + ("---|---|---|---|---|" if track else "")]
     for name in ALL_VERSIONS:
         got = [r[where][name] for r in rows if where in r and name in r[where] and "refused" not in r[where][name]]
         if not got:
@@ -351,7 +370,8 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) 
             later = [(g["later"], g["right"]) for g in got if g.get("later") and not g["finding"]]
             ranked = [(g["later"], g["right"]) for g in got if g.get("later") and g["finding"]]
             line += (f" {len(ok)} | {wrong} | {len(later)} ({sum(x == w for x, w in later) if wanted else '—'}) | "
-                     f"{len(ranked)} ({sum(x == w for x, w in ranked) if wanted else '—'}) |")
+                     f"{len(ranked)} ({sum(x == w for x, w in ranked) if wanted else '—'}) | "
+                     f"{sum(bool(g.get('unconfirmed')) for g in got)} |")
         lines.append(line)
     return [*lines, ""]
 

@@ -777,6 +777,11 @@ def test_a_mistake_finding_comes_before_any_zone_or_half_plane_advice() -> None:
     assert mistake_hint([widen, mirror]) is None
     km = Reason(code="initiation-units", status="doubtful", message=f"the window fits: {IN_KILOMETRES} ...")
     assert mistake_hint([km]) is not None and "kilometres" in mistake_hint([km, widen])  # type: ignore[operator]
+    # a change the whole recording does not confirm: check the file and the geometry, not correct
+    unconfirmed = Reason(code="unconfirmed", status="doubtful", message="the track fits its data as given, ...")
+    sign = Reason(code="initiation-sign", status="doubtful", message="with pair 0 negated the window fits")
+    assert "does not confirm (the unconfirmed finding): check the file and the geometry" in (
+        mistake_hint([sign, unconfirmed, widen]) or "")
     # an outliers finding: track with the Huber loss first; both where a start outside the zone fits too
     outliers = Reason(code="initiation-outliers", status="doubtful", message=f"the window fits: {WITH_OUTLIERS}, ...")
     assert mistake_hint([outliers]) is None and mistake_hint([replace(outliers, status="ok"), widen]) is None

@@ -27,7 +27,7 @@ from fgdoppler.cli.common import (
     taking,
 )
 from fgdoppler.estimators.initiation import METHODS
-from fgdoppler.estimators.later_mistakes import is_mistake_finding
+from fgdoppler.estimators.later_mistakes import UNCONFIRMED, is_mistake_finding
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
 from fgdoppler.estimators.window_mistakes import (
     IN_KILOMETRES,
@@ -348,7 +348,12 @@ def mistake_hint(reasons: Any) -> str | None:
         return (f"a {mistakes[0].code.removeprefix('initiation-')} finding above names a likely mistake in the "
                 "measurement file, but the data fit as given with a start outside the zone too: check the file, and "
                 "if it is right, follow the zone advice")
-    if mistakes and any(r.status != "ok" and (r.zone is not None or r.mirror is not None) for r in reasons):
+    advised = any(r.status != "ok" and (r.zone is not None or r.mirror is not None) for r in reasons)
+    if mistakes and advised and any(r.code == UNCONFIRMED for r in reasons):
+        return (f"a {mistakes[0].code.removeprefix('initiation-')} finding above names a possible mistake in the "
+                "measurement file that the whole recording does not confirm (the unconfirmed finding): check the file "
+                "and the geometry before following any zone or half-plane advice")
+    if mistakes and advised:
         return (f"a {mistakes[0].code.removeprefix('initiation-')} finding above names a likely mistake in the "
                 "measurement file: correct it before following any zone or half-plane advice, which reads the data "
                 "as given")

@@ -65,6 +65,15 @@ one under which they pass with the least cost, where as given they fail,
 is named as the track's finding, which says whether the window's likeliest
 change is that one.
 
+Where the window named a change and the track nevertheless fits its data
+as given, the same spread measurements are initiated as given; where they
+pass the verdict's χ² test, an ``unconfirmed`` finding says so: the data
+do not need the change, and the window's misfit may have another cause.  A
+receiver 5 km from where a three-pair layout's geometry puts it made the
+window fit only with that pair's Doppler negated (a ``sign`` finding), while
+the smoother's track fitted the whole recording as given, 94–117 m from the
+truth.
+
 Cost, on a track that misfits only: with a change the window named, one
 initiation of the spread measurements and one per change the window
 passes with; else :math:`n` initiations of later windows and, for each
@@ -103,11 +112,13 @@ from fgdoppler.estimators.window_mistakes import (
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["CONFIRMED_AT_MOST", "LATER_WINDOWS", "MISTAKE_CODES", "WHOLE_CODES", "WHOLE_PER_PAIR", "is_mistake_finding",
-           "later_mistakes"]
+__all__ = ["CONFIRMED_AT_MOST", "LATER_WINDOWS", "MISTAKE_CODES", "UNCONFIRMED", "WHOLE_CODES", "WHOLE_PER_PAIR",
+           "is_mistake_finding", "later_mistakes"]
 
 #: Windows initiated after the initiation window where a track fails its residual test.
 LATER_WINDOWS = 3
+#: The code of the finding that the whole recording fits as given where the initiation window named a change.
+UNCONFIRMED = "unconfirmed"
 
 #: Measurements per pair, spread evenly over the whole recording, of the last check (:func:`later_mistakes`).
 WHOLE_PER_PAIR = 20
@@ -131,6 +142,9 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     does not fit (``reasons``, the track's, hold a ``fit`` finding that is not ``ok``) and ``init`` did not find
     the geometry in kilometres or the times in other units (the module docstring: those are tried first).
 
+    Where the track fits (no such ``fit`` finding) but ``init`` named a change, the :data:`WHOLE_PER_PAIR`
+    measurements a pair spread over the whole recording are initiated as given; where they pass the verdict's
+    χ² test, an ``unconfirmed`` finding says that the data do not need the window's change (one initiation).
     Where ``init`` names a change (:attr:`~fgdoppler.estimators.initiation.Initiation.mistake`),
     the :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole
     recording are initiated as given and, where they fail the verdict's χ²
@@ -192,7 +206,15 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     if windows < 1:
         raise ValueError(f"windows must be >= 1, got {windows}")
     named_by_window = any(is_mistake_finding(r) for r in init.reasons)  # a units finding explains the misfit too
-    if not _misfits(reasons) or (named_by_window and init.mistake is None) or len(measurements) == 0:
+    if len(measurements) == 0:
+        return []
+    if not _misfits(reasons):
+        if init.mistake is None:
+            return []
+        if reference is not None and not _misfits(reference.reasons) and reference.settings.huber_k == huber_k:
+            return [r for r in reference.reasons if r.code == UNCONFIRMED]
+        return _unconfirmed(_Whole(measurements, model, init, huber_k), init.mistake)
+    if named_by_window and init.mistake is None:
         return []
     if reference is not None and windows == LATER_WINDOWS and _misfits(reference.reasons) \
             and reference.settings.huber_k == huber_k:
@@ -332,6 +354,21 @@ def _ranked_on_whole(model: TrackingModel, whole: _Whole, found: Mistake) -> lis
         head = (f"of the {len(window)} changes of the data under which the initiation window fits, the "
                 f"{whole.describe()} fit best with {first}")
     return [replace(named, message=f"the track fails its residual test; {head}: {named.message}")]
+
+
+def _unconfirmed(whole: _Whole, found: Mistake) -> list[Reason]:
+    """Where the track fits its data as given and so do the whole recording's spread measurements (the verdict's
+    χ² test), an ``unconfirmed`` finding: the initiation window's change ``found`` is not what the data need
+    (:func:`later_mistakes`)."""
+    given = whole.given()
+    if given is None or given.cost > _level(given.dof):
+        return []
+    return [Reason(code=UNCONFIRMED, status="doubtful", message=(
+        f"the track fits its data as given, and so do the {whole.describe()}, cost {given.cost:.2f} against "
+        f"{_level(given.dof):.2f} at the 99.9 % level: they do not confirm the initiation window's {found.code} "
+        f"finding ({found.change()}); the window's misfit may have another cause (a sensor's position in the "
+        "geometry, outliers, a manoeuvre early in the recording): check those as well as the file before changing "
+        "the data"))]
 
 
 def _units_on_whole(model: TrackingModel, whole: _Whole) -> list[Reason]:

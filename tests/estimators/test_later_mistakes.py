@@ -379,3 +379,32 @@ def test_times_in_milliseconds_the_window_missed_are_named_from_the_whole_record
            "pair's measurements is 500 in the file)" in found.message
     # in seconds the spread measurements fit as given: no units finding (and the windows' search finds nothing)
     assert later_mistakes(m, model, fd.initiate(m.first_per_pair(10), model), MISFIT) == []
+
+
+def test_a_window_change_the_whole_recording_does_not_need_is_called_unconfirmed() -> None:
+    """Three pairs far apart (draw 106 of studies/random_layouts.py, rounded), the geometry putting pair 2's
+    receiver 5 km east of where it is: the initiation window fits only with pair 2's Doppler negated (a
+    ``sign`` finding), yet the smoother's track fits the whole recording as given, and so do the 60 measurements
+    spread over it, so the track gets an ``unconfirmed`` finding naming that change.  Where the change is real
+    (case a 45 km with every pair negated, above) the spread measurements fail as given: no such finding even
+    for a track said to fit; nor for an initiation that named no change."""
+    truth_geometry = fd.Geometry(pairs=(fd.BistaticPair(tx=(12165.0, 1921.0), rx=(-27238.0, -20527.0)),
+                                        fd.BistaticPair(tx=(-5481.0, 2590.0), rx=(-1065.0, -15248.0)),
+                                        fd.BistaticPair(tx=(-21887.0, 29768.0), rx=(11061.0, 2292.0))))
+    told = fd.Geometry(pairs=(*truth_geometry.pairs[:2],
+                              fd.BistaticPair(tx=(-21887.0, 29768.0), rx=(16061.0, 2292.0))))
+    sc = fd.Scenario(geometry=truth_geometry, x0=(-13457.0, 5810.0, -126.0, 86.0), duration=30.0, dt=0.5)
+    m = fd.simulate(sc, np.random.default_rng(0)).measurements
+    model = fd.TrackingModel.of(told)
+    init = fd.initiate(m.first_per_pair(10), model)
+    assert init.mistake is not None and init.mistake.change() == "the Doppler of pair 2 negated"
+    result = fd.run_estimator("smoother", m, model, init, verify=False)
+    assert not [r for r in result.reasons if r.code == "fit" and r.status != "ok"]
+    [found] = [r for r in result.reasons if r.code == "unconfirmed"]
+    assert found.status == "doubtful" and "the 60 measurements spread over the whole recording" in found.message
+    assert "do not confirm the initiation window's sign finding (the Doppler of pair 2 negated)" in found.message
+    assert later_mistakes(m, model, init, ()) == [found]
+    assert later_mistakes(m, model, replace(init, mistake=None), ()) == []
+    sim, a = _paper(2, 0)
+    negated_init = fd.initiate(_negated(sim.measurements).first_per_pair(10), a)
+    assert negated_init.mistake is not None and later_mistakes(_negated(sim.measurements), a, negated_init, ()) == []
