@@ -142,11 +142,10 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     does not fit (``reasons``, the track's, hold a ``fit`` finding that is not ``ok``) and ``init`` did not find
     the geometry in kilometres or the times in other units (the module docstring: those are tried first).
 
-    Where the track fits (no such ``fit`` finding) but ``init`` named a change, the :data:`WHOLE_PER_PAIR`
-    measurements a pair spread over the whole recording are initiated as given; where they pass the verdict's
-    χ² test, an ``unconfirmed`` finding says that the data do not need the window's change (one initiation).
-    Where ``init`` names a change (:attr:`~fgdoppler.estimators.initiation.Initiation.mistake`),
-    the :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole
+    Where the track fits but ``init`` named a change, an ``unconfirmed`` finding where the data do not need it
+    (:func:`_unconfirmed`).  Where ``init`` names a change
+    (:attr:`~fgdoppler.estimators.initiation.Initiation.mistake`), the
+    :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole
     recording are initiated as given and, where they fail the verdict's χ²
     test, with each of the window's changes; the one under which they pass
     the χ² test at 95 % with the least cost is named (one initiation and one
@@ -164,14 +163,11 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole
     recording fail the verdict's χ² test as given and pass it with that
     change (else the next, up to :data:`CONFIRMED_AT_MOST` changes).  Where no
-    window names a change and the model's geometry has radars, the
-    :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole
-    recording are tried the same way with the changes of
-    :data:`WHOLE_CODES` (a radar's Doppler doubled, or doubled and negated),
-    and a change under which they pass is named.  Nothing more where
-    ``reference``, a track on the same data and initiation whose ``fit``
-    finding is not ``ok`` either and whose settings have the same
-    ``huber_k``, made the same check: its finding (or none) is the answer.
+    window names one and the geometry has radars, those spread measurements
+    are tried with the changes of :data:`WHOLE_CODES` (a radar's Doppler
+    doubled, or doubled and negated).  Nothing more where ``reference``, a
+    track on the same data and initiation with the same ``huber_k`` that
+    misfits too, made the same check: its finding (or none) is the answer.
 
     Parameters
     ----------
@@ -205,17 +201,11 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     """
     if windows < 1:
         raise ValueError(f"windows must be >= 1, got {windows}")
-    named_by_window = any(is_mistake_finding(r) for r in init.reasons)  # a units finding explains the misfit too
-    if len(measurements) == 0:
-        return []
-    if not _misfits(reasons):
-        if init.mistake is None:
-            return []
-        if reference is not None and not _misfits(reference.reasons) and reference.settings.huber_k == huber_k:
-            return [r for r in reference.reasons if r.code == UNCONFIRMED]
-        return _unconfirmed(_Whole(measurements, model, init, huber_k), init.mistake)
-    if named_by_window and init.mistake is None:
-        return []
+    if len(measurements) == 0 or not _misfits(reasons):
+        return [] if len(measurements) == 0 or init.mistake is None \
+            else _unconfirmed(measurements, model, init, huber_k, reference)
+    if init.mistake is None and any(is_mistake_finding(r) for r in init.reasons):
+        return []  # a units finding explains the misfit
     if reference is not None and windows == LATER_WINDOWS and _misfits(reference.reasons) \
             and reference.settings.huber_k == huber_k:
         # the same windows, fits and votes: the answer depends on nothing else
@@ -356,10 +346,17 @@ def _ranked_on_whole(model: TrackingModel, whole: _Whole, found: Mistake) -> lis
     return [replace(named, message=f"the track fails its residual test; {head}: {named.message}")]
 
 
-def _unconfirmed(whole: _Whole, found: Mistake) -> list[Reason]:
-    """Where the track fits its data as given and so do the whole recording's spread measurements (the verdict's
-    χ² test), an ``unconfirmed`` finding: the initiation window's change ``found`` is not what the data need
-    (:func:`later_mistakes`)."""
+def _unconfirmed(measurements: Measurements, model: TrackingModel, init: Initiation, huber_k: float | None,
+                 reference: TrackResult | None) -> list[Reason]:
+    """Where the track fits its data as given although ``init`` named a change (its ``mistake``), and the
+    :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole recording, initiated as given, pass the
+    verdict's χ² test too, an ``unconfirmed`` finding: the data do not need the window's change (one
+    initiation; the answer of ``reference`` where it fits too with the same ``huber_k``)."""
+    assert init.mistake is not None
+    if reference is not None and not _misfits(reference.reasons) and reference.settings.huber_k == huber_k:
+        return [r for r in reference.reasons if r.code == UNCONFIRMED]
+    whole = _Whole(measurements, model, init, huber_k)
+    found = init.mistake
     given = whole.given()
     if given is None or given.cost > _level(given.dof):
         return []
