@@ -9,6 +9,7 @@ unobservability (Section 4).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
@@ -30,6 +31,7 @@ __all__ = [
     "ellipse_tangent",
     "is_mirror_image",
     "mirrored",
+    "pair_labels",
     "paper_geometry",
     "principal_line",
 ]
@@ -56,6 +58,13 @@ def _point(value: ArrayLike, name: str) -> tuple[float, ...]:
 
 def _padded(point: tuple[float, ...], d: int) -> tuple[float, ...]:
     return point + (0.0,) * (d - len(point))
+
+
+def pair_labels(observation: object) -> Callable[[int], str]:
+    """How a message names pair ``i`` of ``observation``'s geometry (:meth:`Geometry.pair_label`: ``"1 (north)"``
+    where the geometry names its pairs, as a measurement file may), or by its index for a model without one."""
+    geometry = getattr(observation, "geometry", None)
+    return geometry.pair_label if isinstance(geometry, Geometry) else str
 
 
 def principal_line(points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:

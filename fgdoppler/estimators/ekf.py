@@ -63,6 +63,7 @@ from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import EKFSettings
 from fgdoppler.estimators.verdict import Event, Reason
 from fgdoppler.estimators.window import split_window
+from fgdoppler.geometry import pair_labels
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import check_channels
 from fgdoppler.models.tracking import TrackingModel
@@ -136,7 +137,8 @@ class ExtendedKalmanFilter:
         self._rank: list[int] | None = None if rank is None else [int(r) for r in rank]
         self._Q: dict[float, list[list[float]]] = {}
         self.events: list[Event] = []
-        self.gate = NISGate(self.settings.gate_probability, self.events, self.settings.gaussian_gate_probability)
+        self.gate = NISGate(self.settings.gate_probability, self.events, self.settings.gaussian_gate_probability,
+                            label=pair_labels(self.model))
         self._sensors = self._pair_sensors(n // 2)
         self._huber = self.settings.huber_k
         #: Cumulative predictive log-likelihood of all measurements (gated ones

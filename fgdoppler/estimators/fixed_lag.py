@@ -52,6 +52,7 @@ from fgdoppler.estimators.verdict import NOT_CONVERGED, Event, Reason
 from fgdoppler.estimators.warmup import WarmUp
 from fgdoppler.estimators.window import feed_from_window_start, start_prior
 from fgdoppler.factors import X, measurement_factor, motion_factor, prior_factor
+from fgdoppler.geometry import pair_labels
 from fgdoppler.measurements import Measurements, scan_time
 from fgdoppler.models.observation import check_channels
 from fgdoppler.models.tracking import TrackingModel
@@ -105,7 +106,7 @@ class FixedLagTracker:
         self.prior = self.local.prior_in(prior)  # in the computation frame
         self.times: list[float] = []
         self.events: list[Event] = []
-        self.gate = NISGate(self.settings.gate_probability, self.events)
+        self.gate = NISGate(self.settings.gate_probability, self.events, label=pair_labels(self.model))
         self.lagged: dict[int, tuple[FloatArray, FloatArray | None]] = {}
         self.rebuilds = 0
         self.iterations = 0

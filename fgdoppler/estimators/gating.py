@@ -100,10 +100,14 @@ class NISGate:
     gaussian_probability
         The wider gate's probability where the tracker's Gaussian fits its
         posterior (sag ratio below :data:`SAG_LIMIT`); ``None``: one gate.
+    label
+        How the events name a channel (:func:`~fgdoppler.geometry.pair_labels`: with the pair's name where the
+        geometry gives one); by its index by default.
     """
 
     def __init__(self, probability: float | None, events: list[Event],
-                 gaussian_probability: float | None = None) -> None:
+                 gaussian_probability: float | None = None, label: Callable[[int], str] = str) -> None:
+        self._label = label
         self.threshold = float(chi2.ppf(probability, 1)) if probability is not None else math.inf
         wide = float(chi2.ppf(gaussian_probability, 1)) if gaussian_probability is not None else self.threshold
         #: NIS threshold where the tracker's Gaussian fits its posterior (never below :attr:`threshold`).
@@ -124,11 +128,11 @@ class NISGate:
             ok = rho < SAG_LIMIT
             if ok:
                 self.events.append(Event(time=t, message=(
-                    f"pair {channel}: NIS {nis:.1f} > gate {self.threshold:.1f}, measurement kept: the Gaussian "
+                    f"pair {self._label(channel)}: NIS {nis:.1f} > gate {self.threshold:.1f}, measurement kept: the Gaussian "
                     f"fits the posterior here (sag ratio {rho:.2f} < {SAG_LIMIT:g}; gate {self.gaussian_threshold:.1f})")))
         self.log.append((t, channel, nis, ok))
         if not ok:
-            self.events.append(Event(time=t, message=f"pair {channel}: NIS {nis:.1f} > gate {self.threshold:.1f}, "
+            self.events.append(Event(time=t, message=f"pair {self._label(channel)}: NIS {nis:.1f} > gate {self.threshold:.1f}, "
                                                       "measurement rejected"))
         return ok
 

@@ -70,6 +70,7 @@ from fgdoppler.estimators.verdict import NOT_CONVERGED, Event
 from fgdoppler.estimators.warmup import WarmUp
 from fgdoppler.estimators.window import feed_from_window_start, start_prior
 from fgdoppler.factors import X, absolute_linear_factor
+from fgdoppler.geometry import pair_labels
 from fgdoppler.measurements import Measurements, scan_time
 from fgdoppler.models.observation import check_channels
 from fgdoppler.models.tracking import TrackingModel
@@ -139,7 +140,7 @@ class ISAM2Tracker:
         self.scans: list[_ScanData] = []
         self.relinearized: list[int] = []
         self.events: list[Event] = []
-        self.gate = NISGate(self.settings.gate_probability, self.events)
+        self.gate = NISGate(self.settings.gate_probability, self.events, label=pair_labels(self.model))
         self.final_passes = 0
         self.converged = True
         self._last: tuple[FloatArray, FloatArray | None] | None = None  # newest (x, P) after an update

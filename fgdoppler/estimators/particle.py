@@ -121,6 +121,7 @@ from fgdoppler.estimators.window_posterior import (
     _window_posterior,
     window_posterior,
 )
+from fgdoppler.geometry import pair_labels
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import check_channels, predict_along
 from fgdoppler.models.robust import huber_rho
@@ -211,7 +212,7 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
     post, rate = _window_posterior(measurements, model, init, settings, rng)
     _, stream = split_window(measurements, init.t_end)
     events: list[Event] = []
-    gate = NISGate(settings.gate_probability, events)
+    gate = NISGate(settings.gate_probability, events, label=pair_labels(model.observation))
     rates = [rate]
     scans = stream.scans()
     start_task(progress, name, len(scans))

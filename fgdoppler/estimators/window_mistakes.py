@@ -29,7 +29,7 @@ from fgdoppler.estimators.initiation import (
 )
 from fgdoppler.estimators.judge import REJECT_ROBUST
 from fgdoppler.estimators.verdict import Reason
-from fgdoppler.geometry import Geometry
+from fgdoppler.geometry import Geometry, pair_labels
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
@@ -268,8 +268,7 @@ def outliers_reason(measurements: Measurements, model: TrackingModel, settings: 
     if not kept.passes_chi2:
         return None
     r = _residuals(measurements, model, kept)
-    geometry = getattr(model.observation, "geometry", None)
-    label = geometry.pair_label if isinstance(geometry, Geometry) else str
+    label = pair_labels(model.observation)
     named = np.flatnonzero(out)
     which = "; ".join(f"pair {label(int(measurements.pair[i]))} at t = {time_text(float(measurements.time[i]))} s: "
                       f"{r[i]:+.1f} sigma" for i in named[np.argsort(-np.abs(r[named]))])
@@ -300,8 +299,7 @@ def find_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
                            [replace(c, cost=np.nan, others=()) for c in changes])
     pairs = [int(k) for k in np.unique(measurements.pair)]
     tried: list[Mistake] = []  # cost filled in by the fit
-    geometry = getattr(model.observation, "geometry", None)
-    label = geometry.pair_label if isinstance(geometry, Geometry) else str
+    label = pair_labels(model.observation)
 
     def scaled(code: MistakeCode, which: list[int], factor: float) -> None:
         tried.append(Mistake(code=code, which=_named(which, label, every=which == pairs), cost=np.nan, factor=factor,

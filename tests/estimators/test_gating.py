@@ -150,3 +150,22 @@ def test_the_sag_ratio_tells_a_genuine_measurement_from_one_that_would_lead_a_cu
     one = fd.run_estimator("ekf", m, model, init, EKFSettings(gaussian_gate_probability=None), verify=False)
     assert any("rejected" in s for s in _gate_events(wide, 8.25))
     np.testing.assert_array_equal(wide.primary.states, one.primary.states)
+
+
+@pytest.mark.parametrize("name", ["ekf", "isam2", "fixed-lag", "particle"])
+def test_a_gate_event_names_the_pair_as_the_file_may(name: str) -> None:
+    """Case a 45 km with its pairs named and one measurement of pair 1 moved by 60 sigma after the window: the
+    gate rejects it, and its event names the pair by index and name (``pair 1 (south)``), as the measurement
+    file may give it; without names, by index alone."""
+    sc = fd.paper_scenario("a", 45e3)
+    m = fd.simulate(sc, np.random.default_rng(3)).measurements
+    k = int(np.flatnonzero((m.pair == 1) & (m.time == 20.0))[0])
+    jump = np.zeros(len(m))
+    jump[k] = 60.0 * m.sigma[k]
+    bad = fd.Measurements(time=m.time, pair=m.pair, doppler=m.doppler + jump, sigma=m.sigma)
+    for names, label in ((("north", "south"), "pair 1 (south)"), ((), "pair 1")):
+        g = fd.Geometry(pairs=sc.geometry.pairs, pair_names=names)
+        init = fd.initiate(bad.first_per_pair(10), g)
+        r = fd.run_estimator(name, bad, g, init, verify=False)
+        assert any(e.time == 20.0 and e.message.startswith(f"{label}: NIS ") and "rejected" in e.message
+                   for e in r.events), [e.message for e in r.events][:5]
