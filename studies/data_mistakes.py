@@ -200,7 +200,9 @@ def _with_outliers(m: fd.Measurements, key: int) -> tuple[fd.Measurements, list[
     """``m`` with two of its first ten measurements per pair (the initiation window) moved by 20-50 sigma, each
     of a random sign, drawn from ``key``; and those two as (pair, time)."""
     rng = np.random.default_rng(9000 + key)
-    hit = rng.choice(_window_rows(m), size=2, replace=False)
+    w = m.first_per_pair(10)
+    hit = [int(np.flatnonzero((m.pair == w.pair[i]) & (m.time == w.time[i]))[0])
+           for i in rng.choice(len(w), size=2, replace=False)]
     jump = np.zeros(len(m))
     jump[hit] = rng.choice([-1.0, 1.0], size=2) * rng.uniform(20.0, 50.0, size=2) * m.sigma[hit]
     return (fd.Measurements(time=m.time, pair=m.pair, doppler=m.doppler + jump, sigma=m.sigma),
@@ -213,15 +215,6 @@ def _misplaced(g: fd.Geometry, metres: float = 5e3) -> fd.Geometry:
     p = g.pairs[1]
     moved = fd.BistaticPair(tx=p.tx, rx=np.asarray(p.rx, dtype=float) + np.eye(len(p.rx))[0] * metres)
     return replace(g, pairs=(g.pairs[0], moved, *g.pairs[2:]))
-
-
-def _window_rows(m: fd.Measurements, per_pair: int = 10) -> list[int]:
-    """The rows of ``m`` that ``m.first_per_pair(per_pair)`` keeps."""
-    rank = np.zeros(len(m), dtype=int)
-    for p in np.unique(m.pair):
-        rows = np.flatnonzero(m.pair == p)
-        rank[rows] = np.arange(rows.size)
-    return [int(i) for i in np.flatnonzero(rank < per_pair)]
 
 
 def _manoeuvring(sim: fd.Simulation, key: int) -> fd.Simulation:

@@ -336,11 +336,12 @@ def mistake_hint(reasons: Any) -> str | None:
         return ("the times are likely not in seconds (the units finding above): give them in seconds before "
                 "following any zone advice, which reads them as seconds")
     outliers = [r for r in reasons if r.status != "ok" and WITH_OUTLIERS in r.message]
+    advised = any(r.status != "ok" and (r.zone is not None or r.mirror is not None) for r in reasons)
     if outliers and any(OR_OUTSIDE_THE_ZONE in r.message for r in outliers):
         return ("an outliers finding above says the initiation window fits without a few measurements, "
                 "but it fits as given with a start outside the zone too: check those measurements, and if they are "
                 "right, follow the zone advice")
-    if outliers and any(r.status != "ok" and (r.zone is not None or r.mirror is not None) for r in reasons):
+    if outliers and advised:
         return ("an outliers finding above says the initiation window fits without a few measurements: "
                 "track with the Huber loss (--huber) before following any zone or half-plane advice, which reads the "
                 "outliers as data")
@@ -348,7 +349,6 @@ def mistake_hint(reasons: Any) -> str | None:
         return (f"a {mistakes[0].code.removeprefix('initiation-')} finding above names a likely mistake in the "
                 "measurement file, but the data fit as given with a start outside the zone too: check the file, and "
                 "if it is right, follow the zone advice")
-    advised = any(r.status != "ok" and (r.zone is not None or r.mirror is not None) for r in reasons)
     if mistakes and advised and any(r.code == UNCONFIRMED for r in reasons):
         return (f"a {mistakes[0].code.removeprefix('initiation-')} finding above names a possible mistake in the "
                 "measurement file that the whole recording does not confirm (the unconfirmed finding): check the file "

@@ -92,7 +92,7 @@ if TYPE_CHECKING:  # the mistakes' module initiates changed windows itself: impo
     from fgdoppler.estimators.window_mistakes import Mistake
 
 __all__ = ["EVIDENCE_DRAWS", "METHODS", "Candidate", "Initiation", "InitiationSettings", "initiate", "inlier_statistic",
-           "lm_params", "residual_landscape", "window_grid", "window_log_evidence"]
+           "lm_params", "residual_landscape", "whitened_residuals", "window_grid", "window_log_evidence"]
 
 FloatArray = NDArray[np.float64]
 Method = Literal["grid", "ils", "lm"]
@@ -105,6 +105,11 @@ VERDICT_LEVEL = 0.999
 #: Whitened residual beyond which a robust initiation counts a measurement as an outlier: the 0.9999
 #: quantile of |N(0, 1)|, where the trackers' default gate rejects.
 OUTLIER_CUT = float(np.sqrt(chi2.ppf(0.9999, 1)))
+
+
+def whitened_residuals(model: TrackingModel, measurements: Measurements, states: FloatArray) -> FloatArray:
+    r""":math:`r_i = (z_i - h(\mathbf x_i)) / \sigma_i` with ``states`` ``(n, 2d)``, one per measurement."""
+    return (measurements.doppler - model.observation.predict(states, measurements.pair)) / measurements.sigma
 
 
 def inlier_statistic(model: TrackingModel, measurements: Measurements, states: FloatArray,
@@ -124,9 +129,7 @@ def inlier_statistic(model: TrackingModel, measurements: Measurements, states: F
     """
     from fgdoppler.estimators.linearized import MotionBlocks
 
-    scans = measurements.scans()
-    r = (measurements.doppler - model.observation.predict(states[scans.scan_of], measurements.pair)) \
-        / measurements.sigma
+    r = whitened_residuals(model, measurements, states[measurements.scans().scan_of])
     inlier = np.abs(r) <= OUTLIER_CUT
     motion = MotionBlocks(model.motion).residuals(states, times)
     return float(r[inlier] @ r[inlier] + np.sum(motion**2)), int(np.sum(~inlier))

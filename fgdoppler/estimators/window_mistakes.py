@@ -26,6 +26,7 @@ from fgdoppler.estimators.initiation import (
     Initiation,
     InitiationSettings,
     initiate,
+    whitened_residuals,
 )
 from fgdoppler.estimators.judge import REJECT_ROBUST
 from fgdoppler.estimators.verdict import Reason
@@ -33,10 +34,31 @@ from fgdoppler.geometry import Geometry, pair_labels
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["HUBER_TRIED", "IN_KILOMETRES", "IN_SECONDS", "KILOMETRE_EXTENT", "OR_OUTSIDE_THE_ZONE",
-           "OTHERS_NAMED", "SHORTEST_INTERVAL", "SIGN_CONVENTION", "TIME_UNITS", "WITH_OUTLIERS", "Mistake", "find_mistake",
-           "fits_beyond_the_zone", "kilometre_extent", "median_interval", "mistake_reason", "outliers_reason",
-           "radar_pairs", "time_units_reason", "tries_time_units", "units_reason", "with_mistake"]
+__all__ = [
+    "HUBER_TRIED",
+    "IN_KILOMETRES",
+    "IN_SECONDS",
+    "KILOMETRE_EXTENT",
+    "OR_OUTSIDE_THE_ZONE",
+    "OTHERS_NAMED",
+    "SHORTEST_INTERVAL",
+    "SIGN_CONVENTION",
+    "TIME_UNITS",
+    "WITH_OUTLIERS",
+    "Mistake",
+    "few_outliers",
+    "find_mistake",
+    "fits_beyond_the_zone",
+    "kilometre_extent",
+    "median_interval",
+    "mistake_reason",
+    "outliers_reason",
+    "radar_pairs",
+    "time_units_reason",
+    "tries_time_units",
+    "units_reason",
+    "with_mistake",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -259,8 +281,8 @@ def outliers_reason(measurements: Measurements, model: TrackingModel, settings: 
     n = len(measurements)
     try:
         robust = initiate(measurements, model, replace(quiet, huber_k=HUBER_TRIED))
-        out = np.abs(_residuals(measurements, model, robust)) > OUTLIER_CUT
-        if not out.any() or out.sum() > max(1, int(REJECT_ROBUST * n)):
+        out = few_outliers(_residuals(measurements, model, robust))
+        if out is None:
             return None
         kept = initiate(measurements.subset(~out), model, quiet)
     except ValueError:
@@ -282,8 +304,15 @@ def outliers_reason(measurements: Measurements, model: TrackingModel, settings: 
 
 def _residuals(measurements: Measurements, model: TrackingModel, fit: Initiation) -> FloatArray:
     """Whitened residuals of ``measurements`` at ``fit``'s start carried by the constant-velocity model."""
-    states = model.motion.propagate(fit.x_start, measurements.time - fit.t_start)
-    return (measurements.doppler - model.observation.predict(states, measurements.pair)) / measurements.sigma
+    return whitened_residuals(model, measurements, model.motion.propagate(fit.x_start, measurements.time - fit.t_start))
+
+
+def few_outliers(r: FloatArray) -> NDArray[np.bool_] | None:
+    """Which whitened residuals ``r`` lie beyond :data:`~fgdoppler.estimators.initiation.OUTLIER_CUT`, where
+    some do and they are at most :data:`~fgdoppler.estimators.judge.REJECT_ROBUST` of them (at least one): a few
+    outliers, not a misfit of the model; ``None`` otherwise."""
+    out = np.abs(r) > OUTLIER_CUT
+    return out if out.any() and out.sum() <= max(1, int(REJECT_ROBUST * r.size)) else None
 
 
 def find_mistake(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
