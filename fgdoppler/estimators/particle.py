@@ -268,7 +268,7 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
     offsets = None
     if post.offsets is not None:
         offsets = _offsets_at_end(post, last_mode[1] if mode and last_mode is not None else None)
-        events.append(Event(time=times[-1], message="calibration offsets at the end: " + offsets.describe()))
+        events.append(Event(time=times[-1], message="calibration offsets at the end: " + offsets.describe(pair_labels(model.observation))))
     return TrackResult(
         estimator=name,
         settings=settings,

@@ -22,7 +22,7 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -217,9 +217,10 @@ class OffsetEstimate:
         out[:, self.pairs] = (vec * np.sqrt(np.maximum(lam, 0.0))).T
         return out
 
-    def describe(self) -> str:
-        """One line: each pair's offset and standard deviation."""
-        return ", ".join(f"pair {p} {v:+.2f} +- {sd:.2f} m/s" for p, v, sd in
+    def describe(self, label: Callable[[int], str] = str) -> str:
+        """One line: each pair's offset and standard deviation, the pair named by ``label`` (its index by default;
+        :func:`~fgdoppler.geometry.pair_labels` names it as the measurement file may, ``"pair 1 (south)"``)."""
+        return ", ".join(f"pair {label(int(p))} {v:+.2f} +- {sd:.2f} m/s" for p, v, sd in
                          zip(self.pairs, self.values, np.sqrt(np.diag(self.covariance)), strict=True))
 
     def to_dict(self) -> dict[str, Any]:

@@ -58,6 +58,7 @@ from fgdoppler.estimators.smoother_solve import FloatArray, SmootherSolution, so
 from fgdoppler.estimators.smoother_zone import _outside_findings, _released_reason
 from fgdoppler.estimators.spread import posterior_spread
 from fgdoppler.estimators.verdict import Event, Reason
+from fgdoppler.geometry import pair_labels
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.observation import DopplerModel
@@ -158,9 +159,10 @@ def _mirror_reason(measurements: Measurements, model: TrackingModel, settings: S
     found = _rival_reason([joint, mirror], joint, model.zone)
     if found is None:
         return None
+    label = pair_labels(model.observation)
     return replace(found, message=(
         f"{found.message} — the mirror image of the track across the sensors' line, with the offsets "
-        f"{mirror.offsets.describe()} (the reported track's: {joint.offsets.describe()})"), mirror="sensors")
+        f"{mirror.offsets.describe(label)} (the reported track's: {joint.offsets.describe(label)})"), mirror="sensors")
 
 
 def with_offset_findings(reference: TrackResult, measurements: Measurements, model: TrackingModel,
@@ -244,7 +246,8 @@ def _with_bias(measurements: Measurements, model: TrackingModel, settings: Smoot
     n_pairs = model.observation.n_channels
     if joint is not None:
         if not isinstance(joint, str):
-            notes += [*joint.notes, "calibration offsets estimated with the track: " + joint.offsets.describe()]
+            notes += [*joint.notes, "calibration offsets estimated with the track: "
+                      + joint.offsets.describe(pair_labels(model.observation))]
             off = joint.offsets
             if has_covs:
                 covs = list(with_bias_uncertainty(shifted_by(measurements, -off.full(n_pairs)), model, sol.times,

@@ -19,6 +19,7 @@ from fgdoppler.cli import main
 from fgdoppler.estimators.manoeuvre import split_statistics
 from fgdoppler.estimators.marginals import bordered_chain_solve
 from fgdoppler.estimators.offset_posterior import OffsetPrior
+from fgdoppler.estimators.results import OffsetEstimate
 from fgdoppler.estimators.smoother import with_offset_findings
 from fgdoppler.estimators.smoother_offsets import (
     _JointProblem,
@@ -217,7 +218,8 @@ def test_at_the_last_time_the_smoother_and_the_filtered_mode_read_the_same_joint
     # offsets within 0.002 m/s; the smoother's leading sigma 0.78-0.89 of map's (its particles' second moment
     # about the mode, which holds their spread about the mean too).
     base = fd.paper_scenario(case, x)
-    model = fd.TrackingModel.of(base.geometry)
+    # pairs named as a measurement file may name them: the offsets' description says so
+    model = fd.TrackingModel.of(dataclasses.replace(base.geometry, pair_names=("north", "south")))
     rng = np.random.default_rng(0)
     sim = fd.simulate(dataclasses.replace(base, bias=tuple(rng.normal(0.0, 1.0, 2))), rng)
     m = sim.measurements
@@ -227,6 +229,9 @@ def test_at_the_last_time_the_smoother_and_the_filtered_mode_read_the_same_joint
     mode = fd.run_estimator("map", m, model, init, fd.MapSettings(bias_sigma=1.0), verify=False)
     assert smoother.offsets is not None and mode.offsets is not None
     np.testing.assert_allclose(smoother.offsets.values, mode.offsets.values, atol=0.02)
+    for said in ([e.message for e in smoother.events], [e.message for e in mode.events]):
+        assert any("calibration offsets" in e and ": pair 0 (north) " in e and ", pair 1 (south) " in e
+                   for e in said), said
     P, Q = smoother.primary.covariances[-1][:2, :2], mode.primary.covariances[-1][:2, :2]
     lead = float(np.sqrt(np.linalg.eigvalsh(P)[-1]))
     apart = float(np.hypot(*(smoother.primary.states[-1, :2] - mode.primary.states[-1, :2])))
@@ -417,3 +422,10 @@ def test_a_filter_told_of_offsets_is_not_called_doubtful_for_a_manoeuvre_that_th
 
     assert any("motion model" in text for text in reference_findings(fd.EKFSettings()))
     assert not any("motion model" in text for text in reference_findings(fd.EKFSettings(bias_sigma=1.0)))
+
+
+def test_offsets_are_described_by_index_or_as_the_geometry_names_the_pairs() -> None:
+    off = OffsetEstimate(pairs=np.array([0, 2]), values=np.array([0.123, -1.0]), covariance=np.diag([0.0025, 0.04]))
+    assert off.describe() == "pair 0 +0.12 +- 0.05 m/s, pair 2 -1.00 +- 0.20 m/s"
+    g = fd.Geometry(pairs=(fd.BistaticPair(tx=(0.0, 0.0), rx=(1e3, 0.0)),) * 3, pair_names=("a", "b", "c"))
+    assert off.describe(g.pair_label) == "pair 0 (a) +0.12 +- 0.05 m/s, pair 2 (c) -1.00 +- 0.20 m/s"
