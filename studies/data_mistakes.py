@@ -209,7 +209,7 @@ def _with_outliers(m: fd.Measurements, key: int) -> tuple[fd.Measurements, list[
             sorted((int(m.pair[i]), float(m.time[i])) for i in hit))
 
 
-def _misplaced(g: fd.Geometry, metres: float = 5e3) -> fd.Geometry:
+def misplaced(g: fd.Geometry, metres: float = 5e3) -> fd.Geometry:
     """``g`` with pair 1's receiver ``metres`` farther along x (east) than it is; its zone, names and
     wavelengths kept."""
     p = g.pairs[1]
@@ -217,7 +217,7 @@ def _misplaced(g: fd.Geometry, metres: float = 5e3) -> fd.Geometry:
     return replace(g, pairs=(g.pairs[0], moved, *g.pairs[2:]))
 
 
-def _manoeuvring(sim: fd.Simulation, key: int) -> fd.Simulation:
+def manoeuvring(sim: fd.Simulation, key: int) -> fd.Simulation:
     """``sim``'s recording simulated anew with its target turning by up to 0.6 deg/s and changing speed by up to
     1 m/s^2 from a time in 0-20 s (``studies/manoeuvres.py``'s default rule), drawn from ``key``."""
     man = drawn_manoeuvre(np.random.default_rng(7000 + key))
@@ -271,7 +271,7 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
     for name in versions:
         truth, used, corrupted = sim.truth, model, []
         if name in (MANOEUVRE, SMALL, SLOW):
-            moved = _manoeuvring(sim, key)
+            moved = manoeuvring(sim, key)
             m, truth, want = moved.measurements, moved.truth, (lambda g: "")
             if name == SMALL:
                 m, truth, used = _shrunk(m, truth, model, 0.01)
@@ -284,7 +284,7 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
         elif name == KILOMETRES:
             m, want, used = sim.measurements, (lambda g: IN_KILOMETRES), fd.TrackingModel.of(g.scaled(1e-3))
         elif name == MISPLACED:
-            m, want, used = sim.measurements, (lambda g: ""), fd.TrackingModel.of(_misplaced(g))
+            m, want, used = sim.measurements, (lambda g: ""), fd.TrackingModel.of(misplaced(g))
         elif name == OUTLIERS:
             (m, corrupted), want = _with_outliers(sim.measurements, key), (lambda g: "")
         else:
