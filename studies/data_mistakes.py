@@ -44,14 +44,20 @@ Three mistakes, each checked on the same recordings:
   simulated; ``pair 1's receiver 5 km off``).  Not a mistake in the file: where the window names a change
   anyway and the track fits as given, the track's ``unconfirmed`` finding
   (:mod:`fgdoppler.estimators.later_mistakes`) should say that the whole recording does not need it.
+* **Sigma too small.**  Every sigma times 0.2 or 0.5, the Doppler as measured (``sigma times F``): sigma in
+  another unit, or estimated for another integration time.  Every cost then grows about ``1/F**2``-fold and the
+  smoother's split test of the motion model fires on targets that fly straight; its ``manoeuvre`` finding should
+  say that the sigma are more likely too small (:func:`fgdoppler.estimators.manoeuvre._sigma_instead`), and
+  nothing of the kind on the manoeuvring recordings or with a receiver misplaced (the table's last column).
 * **A receiver's clock off.**  Pair 1's times ``--late`` seconds late (default 0.5; one clock for
   every pair is assumed).  Not looked for: where such data fit another track, no finding can tell.
   With ``--clock-sigma S`` the estimator is told each pair's clock may be off by S (1 sigma;
   ``clock_sigma=S`` of its settings, a consider covariance), on every version of the data.
 
-Per recording, up to eighteen versions of the data: as simulated, every pair's Doppler negated, pair 0's
+Per recording, up to twenty versions of the data: as simulated, every pair's Doppler negated, pair 0's
 alone negated, pairs 0 and 1 swapped, pair 1's clock late, where the geometry has radars their
-Doppler halved and halved and negated, every Doppler scaled by 0.5, 0.8, 1.25 and 2, the recording simulated anew with its target manoeuvring
+Doppler halved and halved and negated, every Doppler scaled by 0.5, 0.8, 1.25 and 2, every sigma times 0.2
+and 0.5, the recording simulated anew with its target manoeuvring
 (``target manoeuvres``: turning by up to 0.6 deg/s and changing speed by up to 1 m/s^2 from a time in
 0-20 s, drawn per recording; right data, so no mistake should be named), the geometry in kilometres
 and that manoeuvring recording on the layout a hundred times smaller (nothing to name), the times in milliseconds
@@ -104,6 +110,7 @@ from random_layouts import draw, one_blas_thread, recorded
 
 import fgdoppler as fd
 from fgdoppler.estimators.later_mistakes import MISTAKE_CODES, UNCONFIRMED, is_mistake_finding
+from fgdoppler.estimators.manoeuvre import SIGMA_ADVICE
 from fgdoppler.estimators.registry import estimator_info
 
 
@@ -139,6 +146,12 @@ def _scaled(m: fd.Measurements, g: fd.Geometry, late: float, *, factor: float) -
     return fd.Measurements(time=m.time, pair=m.pair, doppler=factor * m.doppler, sigma=factor * m.sigma)
 
 
+def _sigma_scaled(m: fd.Measurements, g: fd.Geometry, late: float, *, factor: float) -> fd.Measurements:
+    """``m`` with every sigma times ``factor`` (the Doppler as measured): sigma in another unit, or estimated for
+    another integration time."""
+    return fd.Measurements(time=m.time, pair=m.pair, doppler=m.doppler, sigma=factor * m.sigma)
+
+
 def _late(m: fd.Measurements, seconds: float) -> fd.Measurements:
     """``m`` with pair 1's times ``seconds`` late (its receiver's clock off)."""
     return fd.Measurements.from_arrays(np.where(m.pair == 1, m.time + seconds, m.time), m.pair, m.doppler, m.sigma,
@@ -165,6 +178,7 @@ VERSIONS: dict[str, tuple[Callable[[fd.Measurements, fd.Geometry, float], fd.Mea
                                lambda g: f"the Doppler of {_radars(g)} doubled and negated", True),
     **{f"Doppler scaled by {f:g}": (functools.partial(_scaled, factor=f), lambda g: "", False)
        for f in (0.5, 0.8, 1.25, 2.0)},
+    **{f"sigma times {f:g}": (functools.partial(_sigma_scaled, factor=f), lambda g: "", False) for f in (0.2, 0.5)},
 }
 
 #: The version whose geometry gives the sensors in kilometres (the data as simulated): a ``units`` finding is right.
@@ -315,7 +329,9 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
             later = [x for x in r.reasons if is_mistake_finding(x)]
             row.update(status=str(r.status), error=round(err, 1), sigma=round(sd, 1),
                        later=_changes(later[0] if later else None)[0],
-                       unconfirmed=any(x.code == UNCONFIRMED for x in r.reasons))
+                       unconfirmed=any(x.code == UNCONFIRMED for x in r.reasons),
+                       manoeuvre=any(x.code == "manoeuvre" for x in r.reasons),
+                       sigma_small=any(x.code == "manoeuvre" and SIGMA_ADVICE in x.message for x in r.reasons))
         out[name] = row
     return out
 
@@ -344,9 +360,10 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) 
              "(first / among the others) | outliers finding (names exactly the two made) | " + (f"{estimator} ok | ok and beyond 3 sigma | named later by the "
                                                  f"{estimator} where the window named nothing (rightly) | the "
                                                  f"window's finding ranked by the {estimator} (the change made "
-                                                 f"first) | the window's finding unconfirmed by the {estimator} |"
-                                                 if track else ""),
-             "|---|---|---|---|---|" + ("---|---|---|---|---|" if track else "")]
+                                                 f"first) | the window's finding unconfirmed by the {estimator} | "
+                                                 f"the {estimator}'s manoeuvre finding (saying the sigma are too "
+                                                 "small) |" if track else ""),
+             "|---|---|---|---|---|" + ("---|---|---|---|---|---|" if track else "")]
     for name in ALL_VERSIONS:
         got = [r[where][name] for r in rows if where in r and name in r[where] and "refused" not in r[where][name]]
         if not got:
@@ -366,7 +383,8 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) 
             ranked = [(g["later"], g["right"]) for g in got if g.get("later") and g["finding"]]
             line += (f" {len(ok)} | {wrong} | {len(later)} ({sum(x == w for x, w in later) if wanted else '—'}) | "
                      f"{len(ranked)} ({sum(x == w for x, w in ranked) if wanted else '—'}) | "
-                     f"{sum(bool(g.get('unconfirmed')) for g in got)} |")
+                     f"{sum(bool(g.get('unconfirmed')) for g in got)} | {sum(bool(g.get('manoeuvre')) for g in got)} "
+                     f"({sum(bool(g.get('sigma_small')) for g in got)}) |")
         lines.append(line)
     return [*lines, ""]
 

@@ -346,11 +346,13 @@ def _fit_reasons(statistic: float, dof: int, n: int, rejected: int, lost: int | 
     if dof > 0:
         limit_stat = float(chi2.ppf(LEVEL, dof))
         scale = float(np.sqrt(statistic / dof))
+        # the cut removes the largest residuals, so with many rejected the scale is an underestimate
+        kept = f" among the {n - rejected} measurements kept" if rejected else ""
         if statistic > limit_stat:
             out.append(Reason(code="fit", status="doubtful", message=(
                 f"the track does not fit the data: chi-square {statistic:.1f} > {limit_stat:.1f} "
                 f"({LEVEL:.1%}, {dof} dof; {statistic / dof:.2f} per dof, residuals about {scale:.2f} times the "
-                "model's): its covariance is too small for its errors, or the model (motion, sigma) does not "
+                f"model's{kept}): its covariance is too small for its errors, or the model (motion, sigma) does not "
                 "hold")))
         low = float(chi2.ppf(1.0 - LEVEL, dof))
         if dof >= MIN_FIT_DOF and statistic < low:

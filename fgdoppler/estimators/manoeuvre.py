@@ -64,11 +64,12 @@ pair's margin over the next was larger on the manoeuvring ones.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
+from scipy.stats import f as f_distribution
 
 from fgdoppler._text import time_text
 from fgdoppler.estimators.settings import SmootherSettings
@@ -76,7 +77,8 @@ from fgdoppler.estimators.verdict import Reason
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["AGREE_LEVEL", "LEVEL", "MIN_PART", "NOT_ONLY_A_MANOEUVRE", "SPLITS", "manoeuvre_reason", "split_statistics"]
+__all__ = ["AGREE_LEVEL", "LEVEL", "MIN_PART", "NOT_ONLY_A_MANOEUVRE", "SCALE_AGREE_LEVEL", "SIGMA_ADVICE", "SPLITS", "Split",
+           "manoeuvre_reason", "split_statistics", "splits"]
 
 FloatArray = NDArray[np.float64]
 
@@ -89,6 +91,11 @@ LEVEL = 0.999
 AGREE_LEVEL = 0.90
 #: A part must hold at least this many measurements per state component.
 MIN_PART = 2
+#: Level within which the split statistic, against the parts' own scatter, says the parts agree (:func:`_sigma_instead`).
+SCALE_AGREE_LEVEL = 0.99
+#: What the finding advises where the sigma look too small (:func:`_sigma_instead`).
+SIGMA_ADVICE = ("if so, give the measurements' right sigma (check their unit and what they were estimated from): "
+                "the gates, the rejections and the fit test read them as given")
 #: What the finding says misfits like a manoeuvre (module docstring, "Not only a manoeuvre").
 NOT_ONLY_A_MANOEUVRE = ("or the geometry or one pair's data are off in a way no other finding names (a sensor's "
                         "position, a pair's wavelength or clock), which makes the parts disagree the same way: if the "
@@ -101,6 +108,59 @@ def _fit_cost(measurements: Measurements, model: TrackingModel, states: FloatArr
     from fgdoppler.estimators.smoother import solve_smoother
 
     return solve_smoother(measurements, model, states, settings).cost
+
+
+@dataclass(frozen=True, kw_only=True)
+class Split:
+    """One split of the recording (:func:`splits`).
+
+    Attributes
+    ----------
+    time
+        The split time :math:`t_c`: the last scan of the first part.
+    statistic
+        :math:`D(t_c) = C - C_1 - C_2`.
+    parts_cost
+        :math:`C_1 + C_2`, the two parts' least costs.
+    measurements
+        The measurements of both parts, :math:`N`.
+    """
+
+    time: float
+    statistic: float
+    parts_cost: float
+    measurements: int
+
+
+def splits(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
+           settings: SmootherSettings | None = None) -> list[Split]:
+    """The split test's fits at each of :data:`SPLITS` (:func:`split_statistics`, whose parameters these are),
+    with the parts' own cost."""
+    base = replace(settings or SmootherSettings(), covariances=False, region_bound=False)
+    scan_times = measurements.scans().times
+    if scan_times.size != np.asarray(times).size:
+        raise ValueError(f"{np.asarray(times).size} states for {scan_times.size} scans")
+    need = MIN_PART * model.n
+    try:
+        whole = _fit_cost(measurements, model, states, base)
+    except (RuntimeError, ValueError, np.linalg.LinAlgError):
+        return []
+    t0, t1 = float(scan_times[0]), float(scan_times[-1])
+    out: list[Split] = []
+    for f in SPLITS:
+        k = int(np.searchsorted(scan_times, t0 + f * (t1 - t0), side="right")) - 1
+        tc = float(scan_times[max(k, 0)])
+        first = measurements.time <= tc
+        if min(int(first.sum()), int((~first).sum())) < need or (out and out[-1].time == tc):
+            continue
+        try:
+            parts = sum(_fit_cost(measurements.subset(mask), model, states[sel], base)
+                        for mask, sel in ((first, scan_times <= tc), (~first, scan_times > tc)))
+        except (RuntimeError, ValueError, np.linalg.LinAlgError):
+            continue
+        out.append(Split(time=tc, statistic=max(whole - parts, 0.0), parts_cost=float(parts),
+                         measurements=len(measurements)))
+    return out
 
 
 def split_statistics(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
@@ -127,30 +187,7 @@ def split_statistics(measurements: Measurements, model: TrackingModel, times: Fl
         split whose parts hold enough measurements; a split whose fit fails
         (an indeterminate linear system) is left out.
     """
-    base = replace(settings or SmootherSettings(), covariances=False, region_bound=False)
-    scan_times = measurements.scans().times
-    if scan_times.size != np.asarray(times).size:
-        raise ValueError(f"{np.asarray(times).size} states for {scan_times.size} scans")
-    need = MIN_PART * model.n
-    try:
-        whole = _fit_cost(measurements, model, states, base)
-    except (RuntimeError, ValueError, np.linalg.LinAlgError):
-        return []
-    t0, t1 = float(scan_times[0]), float(scan_times[-1])
-    out: list[tuple[float, float]] = []
-    for f in SPLITS:
-        k = int(np.searchsorted(scan_times, t0 + f * (t1 - t0), side="right")) - 1
-        tc = float(scan_times[max(k, 0)])
-        first = measurements.time <= tc
-        if min(int(first.sum()), int((~first).sum())) < need or (out and out[-1][0] == tc):
-            continue
-        try:
-            parts = sum(_fit_cost(measurements.subset(mask), model, states[sel], base)
-                        for mask, sel in ((first, scan_times <= tc), (~first, scan_times > tc)))
-        except (RuntimeError, ValueError, np.linalg.LinAlgError):
-            continue
-        out.append((tc, max(whole - parts, 0.0)))
-    return out
+    return [(x.time, x.statistic) for x in splits(measurements, model, times, states, settings)]
 
 
 def manoeuvre_reason(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
@@ -165,8 +202,8 @@ def manoeuvre_reason(measurements: Measurements, model: TrackingModel, times: Fl
     model: :func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`).
     """
     joint = stats is not None
-    if stats is None:
-        stats = split_statistics(measurements, model, times, states, settings)
+    found = [] if stats is not None else splits(measurements, model, times, states, settings)
+    stats = stats if stats is not None else [(x.time, x.statistic) for x in found]
     if not stats:
         return None
     tc, d = max(stats, key=lambda s: s[1])
@@ -177,6 +214,7 @@ def manoeuvre_reason(measurements: Measurements, model: TrackingModel, times: Fl
     shared = f" over {len(SPLITS)} split times" if len(SPLITS) > 1 else ""
     robust = settings is not None and settings.huber_k is not None
     outliers = None if joint or robust else _outliers_instead(measurements, model, times, states, settings)
+    scale = None if joint or robust else _sigma_instead(max(found, key=lambda x: x.statistic), model.n)
     return Reason(code="manoeuvre", status="doubtful", message=(
         f"the target does not move as the motion model says: the data up to t = {time_text(tc)} s and after it, "
         f"each fitted with a track of its own, explain the data better than one track by {d:.1f} "
@@ -184,7 +222,36 @@ def manoeuvre_reason(measurements: Measurements, model: TrackingModel, times: Fl
         f"{LEVEL:.1%}{shared}): the target may manoeuvre, and a track that "
         "assumes it does not can lie far from it while fitting its data"
         + (f" (motion model: nearly constant velocity, process noise q = {q:g} m^2/s^3)" if q is not None else "")
-        + f"; {NOT_ONLY_A_MANOEUVRE}" + (outliers or "")))
+        + f"; {NOT_ONLY_A_MANOEUVRE}" + (outliers or "") + (scale or "")))
+
+
+def _sigma_instead(split: Split, n: int) -> str | None:
+    r"""What the manoeuvre finding adds where stated sigma too small explain the split statistic instead: ``None``
+    unless the parts themselves misfit — :math:`C_1 + C_2` above its χ² :data:`LEVEL` quantile on
+    :math:`\nu = N - 2n` degrees of freedom — and, against the scatter they show, the split is an ordinary
+    draw: :math:`F = (D / n) / ((C_1 + C_2) / \nu)` within the :math:`F(n, \nu)` quantile at
+    :data:`SCALE_AGREE_LEVEL`.
+
+    With every sigma :math:`1/s` of the truth, every cost grows about
+    :math:`s^2`-fold, :math:`D` with it, and the test fires on a target that
+    flies straight; :math:`F` divides the scale out (the F test of a
+    likelihood ratio whose noise scale is estimated), and the parts' scatter
+    :math:`\sqrt{(C_1 + C_2) / \nu}` estimates :math:`s`.  A manoeuvre
+    leaves the parts fitting their own tracks, so :math:`F` stays about
+    :math:`D / n` (module docstring, "Sigma too small")."""
+    dof = split.measurements - 2 * n
+    if dof < 1 or split.parts_cost <= float(chi2.ppf(LEVEL, dof)):
+        return None
+    ratio = split.parts_cost / dof
+    f = split.statistic / n / ratio
+    agree = float(f_distribution.ppf(SCALE_AGREE_LEVEL, n, dof))
+    if f > agree:
+        return None
+    return (f"; but each part fits its own track only to within about {np.sqrt(ratio):.1f} times the stated sigma "
+            f"(the parts' cost {split.parts_cost:.1f} on {dof} degrees of freedom), and against that scatter the parts "
+            f"agree (F = {f:.2f}, within the {SCALE_AGREE_LEVEL:.0%} level {agree:.2f} of F({n}, {dof})): the "
+            f"measurements' sigma are more likely about {np.sqrt(ratio):.1f} times too small than the target "
+            f"manoeuvring; {SIGMA_ADVICE}")
 
 
 def _outliers_instead(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
