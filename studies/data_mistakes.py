@@ -88,7 +88,8 @@ the initiations alone, 15 min for ``--runs 20``; 2026-11-29, with the whole reco
 changes ranked there too, on 2 cores beside other work: 56 min; ``--only "sensors in kilometres,target manoeuvres on
 a layout 1/100 the size"``, 23 min; 2026-11-30, ``--only "times in milliseconds,target manoeuvres 20 times slower"``,
 13 min on 2 cores; ``--only "as given,target manoeuvres,two outliers in the window,pair 1's clock late"``, 18 min
-on 2 cores; the four ``Doppler scaled by`` versions, 10 min on 2 cores; ``--only "as given,every pair negated,pair 0
+on 2 cores; the four ``Doppler scaled by`` versions, 10 min on 2 cores; ``--only "as given,target manoeuvres,pair 1's
+receiver 5 km off,sigma times 0.2,sigma times 0.5"``, 31 min on 2 cores; ``--only "as given,every pair negated,pair 0
 negated,pairs 0 and 1 swapped,radars' radial velocity,radars' approach speed,pair 1's receiver 5 km off"``, 34 min on
 2 cores)
 """

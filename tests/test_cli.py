@@ -754,8 +754,10 @@ def test_a_mistake_finding_comes_before_any_zone_or_half_plane_advice() -> None:
     """A sign, swapped or radial finding (the track's or, prefixed, the initiation's) beside a finding that
     advises a zone or a half plane: the hint is to correct the mistake first; without such advice, or with the
     mistake finding only ``ok`` or absent, there is none; a geometry in kilometres is named whatever the rest.  The
-    same for an initiation window that fits without a few outliers: the Huber loss first."""
+    same for an initiation window that fits without a few outliers (the Huber loss first) and for sigma the manoeuvre
+    finding says look too small (the right sigma first)."""
     from fgdoppler.cli.track import mistake_hint
+    from fgdoppler.estimators.manoeuvre import SIGMA_ADVICE
     from fgdoppler.estimators.verdict import Reason
     from fgdoppler.estimators.window_mistakes import (
         IN_KILOMETRES,
@@ -789,6 +791,11 @@ def test_a_mistake_finding_comes_before_any_zone_or_half_plane_advice() -> None:
     either = replace(outliers, message=f"{outliers.message}; {OR_OUTSIDE_THE_ZONE}")
     assert "check those measurements, and if they are right, follow the zone advice" in (
         mistake_hint([either, widen]) or "")
+    # sigma that look too small (the manoeuvre finding's clause): give the right sigma first, where advice would follow
+    small = Reason(code="manoeuvre", status="doubtful", message=f"the target does not move ...; {SIGMA_ADVICE}")
+    assert mistake_hint([small]) is None and mistake_hint([replace(small, message="the target ..."), widen]) is None
+    for advice in (widen, mirror):
+        assert "sigma look too small: give their right sigma before" in (mistake_hint([small, advice]) or "")
 
 
 def test_the_zone_hint_is_the_union_of_the_advised_zones() -> None:

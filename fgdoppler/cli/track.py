@@ -28,6 +28,7 @@ from fgdoppler.cli.common import (
 )
 from fgdoppler.estimators.initiation import METHODS
 from fgdoppler.estimators.later_mistakes import UNCONFIRMED, is_mistake_finding
+from fgdoppler.estimators.manoeuvre import SIGMA_ADVICE
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
 from fgdoppler.estimators.window_mistakes import (
     IN_KILOMETRES,
@@ -324,8 +325,9 @@ def mistake_hint(reasons: Any) -> str | None:
     """The hint to correct a likely mistake in the file or the geometry first, where a finding names one (a
     ``sign``, ``swapped`` or ``radial`` change of the data, the geometry in kilometres or the times in another
     unit) and another advises a zone or a half plane: that advice reads the mistaken data or units as given.
-    Likewise to track with the Huber loss first where the initiation window fits without a few outliers (an
-    ``outliers`` finding).  ``None`` otherwise."""
+    Likewise to give the right sigma first where the manoeuvre finding says they look too small, and to track with
+    the Huber loss first where the initiation window fits without a few outliers (an ``outliers`` finding).
+    ``None`` otherwise."""
     # a track's findings carry its initiation's under the "initiation-" prefix; both name the mistake alike
     mistakes = [r for r in reasons if r.status != "ok" and is_mistake_finding(
         replace(r, code=r.code.removeprefix("initiation-")))]
@@ -337,6 +339,9 @@ def mistake_hint(reasons: Any) -> str | None:
                 "following any zone advice, which reads them as seconds")
     outliers = [r for r in reasons if r.status != "ok" and WITH_OUTLIERS in r.message]
     advised = any(r.status != "ok" and (r.zone is not None or r.mirror is not None) for r in reasons)
+    if advised and any(r.status != "ok" and SIGMA_ADVICE in r.message for r in reasons):
+        return ("the manoeuvre finding above says the measurements' sigma look too small: give their right sigma "
+                "before following any zone or half-plane advice, which reads the misfit they make as the target's")
     if outliers and any(OR_OUTSIDE_THE_ZONE in r.message for r in outliers):
         return ("an outliers finding above says the initiation window fits without a few measurements, "
                 "but it fits as given with a start outside the zone too: check those measurements, and if they are "

@@ -24,7 +24,11 @@ the status is the worst of them, :mod:`fgdoppler.estimators.verdict`).
     ``"doubtful"`` above :data:`REJECT_DOUBTFUL` of them (:data:`REJECT_ROBUST`
     with the Huber loss, which is there to absorb outliers; informational up
     to that); ``"failed"`` above :data:`REJECT_FAILED`: the track explains
-    less than half the data.
+    less than half the data.  Under the Gaussian loss a doubtful finding
+    suggests the Huber loss up to :data:`REJECT_ROBUST` of them; more are
+    not a few outliers (stated sigma five times too small had 41.8 and
+    45.9 % of two paper recordings' measurements rejected: docs/concepts.md,
+    "Manoeuvring targets"), and the message says so.
 ``lost`` — ``"failed"`` when the filter rejects more than :data:`LOST` of
     the last quarter of the measurements: it has lost the target.
 ``reference`` — for estimators that report filtered or lagged states, the
@@ -337,7 +341,10 @@ def _fit_reasons(statistic: float, dof: int, n: int, rejected: int, lost: int | 
     elif rejected:
         limit = REJECT_ROBUST if robust else REJECT_DOUBTFUL
         doubtful = fraction > limit and rejected >= 2
-        hint = "" if robust or not doubtful else "; if the data have outliers, try the Huber loss (--huber)"
+        hint = "" if robust or not doubtful else (
+            "; if the data have outliers, try the Huber loss (--huber)" if fraction <= REJECT_ROBUST else
+            f"; more than {REJECT_ROBUST:.0%} are not a few outliers (the Huber loss would find the track doubtful "
+            "too): the sigma, the motion model or the geometry more likely misfit the data")
         out.append(Reason(code="rejections", status="doubtful" if doubtful else "ok", message=(
             f"{rejected} of {n} measurements ({fraction:.1%}) are rejected or outliers{hint}")))
     if lost is not None and lost > LOST * max(n // 4, 8):

@@ -3,11 +3,20 @@ every estimator, and silent where it cannot test."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
+from scipy.stats import chi2
 
 import fgdoppler as fd
-from fgdoppler.estimators.manoeuvre import manoeuvre_reason, split_statistics
+from fgdoppler.estimators.manoeuvre import (
+    SIGMA_ADVICE,
+    Split,
+    _sigma_instead,
+    manoeuvre_reason,
+    split_statistics,
+)
 
 
 def test_the_split_statistic_has_the_chi_square_mean_under_the_model() -> None:
@@ -157,7 +166,7 @@ def test_a_split_statistic_that_a_few_outliers_raise_says_so() -> None:
     turning = fd.run_estimator("smoother", sim.measurements, g, fd.initiate(sim.measurements.first_per_pair(10), g),
                                verify=False)
     [real] = [x for x in turning.reasons if x.code == "manoeuvre"]
-    assert "outliers" not in real.message
+    assert "outliers" not in real.message and SIGMA_ADVICE not in real.message
 
 
 def test_a_receiver_misplaced_in_the_geometry_reads_as_a_manoeuvre_and_the_finding_says_so() -> None:
@@ -181,4 +190,43 @@ def test_a_receiver_misplaced_in_the_geometry_reads_as_a_manoeuvre_and_the_findi
     assert any(x.code == "fit" and x.status != "ok" for x in results["told"].reasons)
     assert found.status == "doubtful" and "the target may manoeuvre" in found.message
     assert "a sensor's position, a pair's wavelength or clock" in found.message
+    assert SIGMA_ADVICE not in found.message  # each part fits its own track: not a scale of the noise
     assert results["truth"].status == "ok", results["truth"].message
+
+
+def test_sigma_too_small_read_as_a_manoeuvre_are_named_instead() -> None:
+    """Case a 25 km with every sigma a fifth of the truth's: every cost grows about 25-fold, D with it, and the split
+    test fires on a target flying straight.  Each part then misfits its own track, and against that scatter the
+    split is an ordinary draw, so the finding says the sigma are more likely too small, by a factor the parts'
+    scatter estimates: sqrt((C1 + C2) / nu) with nu = N - 8 about 114, so 5 to within 3 of its relative standard
+    deviation sqrt(1 / (2 nu)) = 0.066 (the process noise absorbs a little more, so rather below).  With the sigma
+    right the recording has no manoeuvre finding."""
+    scen = fd.paper_scenario("a", 25e3)
+    m = fd.simulate(scen, np.random.default_rng(5)).measurements
+    small = fd.Measurements(time=m.time, pair=m.pair, doppler=m.doppler, sigma=0.2 * m.sigma)
+    found = {}
+    for name, data in (("small", small), ("right", m)):
+        r = fd.run_estimator("smoother", data, scen.geometry, fd.initiate(data.first_per_pair(10), scen.geometry),
+                             verify=False)
+        found[name] = [x for x in r.reasons if x.code == "manoeuvre"]
+    assert found["right"] == []
+    [said] = found["small"]
+    assert SIGMA_ADVICE in said.message, said.message
+    factor = float(re.search(r"more likely about ([\d.]+) times too small", said.message).group(1))
+    assert 5.0 * (1 - 3 * 0.066) < factor < 5.0 * (1 + 3 * 0.066), factor
+
+
+def test_the_sigma_clause_is_the_f_test_of_the_split() -> None:
+    # F = (D / n) / ((C1 + C2) / nu), nu = N - 2n, against the F(n, nu) quantile at 99 %: with the parts' cost 25 nu
+    # (sigma a fifth of the truth's) and D = 25 n, F = 1 and the scale is 5.0; D 25 times the 99 % quantile of
+    # F(4, 114) (3.49) per degree of freedom and more is no longer an ordinary draw; parts that fit their own tracks
+    # (cost at most their chi-square 99.9 % level) leave the split to the manoeuvre, whatever D.
+    n, N = 4, 122
+    nu = N - 2 * n
+    said = _sigma_instead(Split(time=15.0, statistic=25.0 * n, parts_cost=25.0 * nu, measurements=N), n)
+    assert said is not None and "about 5.0 times too small" in said and "F = 1.00" in said
+    assert _sigma_instead(Split(time=15.0, statistic=25.0 * n * 3.6, parts_cost=25.0 * nu, measurements=N), n) is None
+    assert _sigma_instead(Split(time=15.0, statistic=25.0 * n * 3.4, parts_cost=25.0 * nu, measurements=N), n) \
+        is not None
+    level = float(chi2.ppf(0.999, nu))
+    assert _sigma_instead(Split(time=15.0, statistic=1.0, parts_cost=level, measurements=N), n) is None

@@ -325,3 +325,21 @@ def test_a_stated_sigma_larger_than_the_datas_is_said_and_measured(estimator: st
         if expect:
             scale = float(re.search(r"residuals about ([\d.]+) times", low[0].message).group(1))  # type: ignore[union-attr]
             assert low[0].status == "ok" and abs(scale - 0.3) < 0.05
+
+
+def test_the_rejections_finding_suggests_the_huber_loss_only_for_a_few_outliers() -> None:
+    # 100 measurements with the Gaussian loss: 1 rejected is informational (not above REJECT_DOUBTFUL = 1 %), 5 are
+    # doubtful and a few (up to REJECT_ROBUST = 10 %, what the Huber loss is there to absorb): try it; 30 are no
+    # longer a few, and the finding says what more likely misfits; with the Huber loss already, no advice at all.
+    from fgdoppler.estimators.judge import REJECT_ROBUST, _fit_reasons
+
+    def rejections(rejected: int, robust: bool = False) -> fd.Reason:
+        [found] = [r for r in _fit_reasons(80.0, 100 - rejected, 100, rejected, None, robust) if r.code == "rejections"]
+        return found
+
+    assert rejections(1).status == "ok" and "Huber" not in rejections(1).message
+    assert rejections(5).status == "doubtful" and "try the Huber loss (--huber)" in rejections(5).message
+    assert rejections(10).status == "doubtful" and "try the Huber loss" in rejections(10).message
+    many = rejections(30).message
+    assert f"more than {REJECT_ROBUST:.0%} are not a few outliers" in many and "try the Huber loss" not in many
+    assert "Huber" not in rejections(30, robust=True).message
