@@ -59,7 +59,8 @@ not tell them apart: of the spread measurements of
 :mod:`~fgdoppler.estimators.later_mistakes` that fail as given, those
 without exactly one pair passed the χ² test at 95 % on 13 of 82 manoeuvring
 recordings against 5 of 34 with the misplaced receiver, and the best
-pair's margin over the next was larger on the manoeuvring ones.
+pair's margin over the next was larger on the manoeuvring ones
+(``python studies/one_pair_out.py --runs 10``).
 
 **Sigma too small.**  With every stated sigma :math:`1/s` of the truth's,
 every cost grows about :math:`s^2`-fold, :math:`D` with it, and the test
@@ -97,8 +98,8 @@ from fgdoppler.estimators.verdict import Reason
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["AGREE_LEVEL", "LEVEL", "MIN_PART", "NOT_ONLY_A_MANOEUVRE", "SCALE_AGREE_LEVEL", "SIGMA_ADVICE", "SPLITS", "Split",
-           "manoeuvre_reason", "split_statistics", "splits"]
+__all__ = ["AGREE_LEVEL", "LEVEL", "MIN_PART", "NOT_ONLY_A_MANOEUVRE", "SCALE_AGREE_LEVEL", "SIGMA_ADVICE", "SPLITS",
+           "Split", "manoeuvre_reason", "split_statistics", "splits"]
 
 FloatArray = NDArray[np.float64]
 
