@@ -235,7 +235,8 @@ def manoeuvre_reason(measurements: Measurements, model: TrackingModel, times: Fl
     shared = f" over {len(SPLITS)} split times" if len(SPLITS) > 1 else ""
     robust = settings is not None and settings.huber_k is not None
     outliers = None if joint or robust else _outliers_instead(measurements, model, times, states, settings)
-    scale = None if joint or robust else _sigma_instead(max(found, key=lambda x: x.statistic), model.n)
+    scale = None if joint or robust else _sigma_instead(max(found, key=lambda x: x.statistic), model.n,
+                                                        _scatter_per_pair(measurements, model, states))
     return Reason(code="manoeuvre", status="doubtful", message=(
         f"the target does not move as the motion model says: the data up to t = {time_text(tc)} s and after it, "
         f"each fitted with a track of its own, explain the data better than one track by {d:.1f} "
@@ -246,7 +247,22 @@ def manoeuvre_reason(measurements: Measurements, model: TrackingModel, times: Fl
         + f"; {NOT_ONLY_A_MANOEUVRE}" + (outliers or "") + (scale or "")))
 
 
-def _sigma_instead(split: Split, n: int) -> str | None:
+def _scatter_per_pair(measurements: Measurements, model: TrackingModel, states: FloatArray) -> str:
+    r"""Each pair's root-mean-square whitened residual of the track ``states`` (one per scan), in words: where one
+    pair's sigma alone are too small, its scatter stands out (case a 25 km with pair 1's sigma a fifth of the
+    truth's, ``tests/estimators/test_manoeuvre.py``: 4.4 against 0.9 for pair 0, where the parts' scatter gives
+    3.2 for both)."""
+    from fgdoppler.estimators.initiation import whitened_residuals
+    from fgdoppler.geometry import pair_labels
+
+    r = whitened_residuals(model, measurements, states[measurements.scans().scan_of])
+    label = pair_labels(model.observation)
+    pairs = np.unique(measurements.pair)
+    rms = [float(np.sqrt(np.mean(r[measurements.pair == p] ** 2))) for p in pairs]
+    return ", ".join(f"pair {label(int(p))} {v:.1f}" for p, v in zip(pairs, rms, strict=True))
+
+
+def _sigma_instead(split: Split, n: int, per_pair: str = "") -> str | None:
     r"""What the manoeuvre finding adds where stated sigma too small explain the split statistic instead: ``None``
     unless the parts themselves misfit — :math:`C_1 + C_2` above its χ² :data:`LEVEL` quantile on
     :math:`\nu = N - 2n` degrees of freedom — and, against the scatter they show, the split is an ordinary
@@ -272,7 +288,8 @@ def _sigma_instead(split: Split, n: int) -> str | None:
             f"(the parts' cost {split.parts_cost:.1f} on {dof} degrees of freedom), and against that scatter the parts "
             f"agree (F = {f:.2f}, within the {SCALE_AGREE_LEVEL:.0%} level {agree:.2f} of F({n}, {dof})): the "
             f"measurements' sigma are more likely about {np.sqrt(ratio):.1f} times too small than the target "
-            f"manoeuvring; {SIGMA_ADVICE}")
+            "manoeuvring" + (f" (the track's residuals, root mean square per pair in sigma: {per_pair})"
+                             if per_pair else "") + f"; {SIGMA_ADVICE}")
 
 
 def _outliers_instead(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,

@@ -216,6 +216,25 @@ def test_sigma_too_small_read_as_a_manoeuvre_are_named_instead() -> None:
     assert 5.0 * (1 - 3 * 0.066) < factor < 5.0 * (1 + 3 * 0.066), factor
 
 
+def test_one_pairs_sigma_too_small_stand_out_in_the_scatter_per_pair() -> None:
+    """Case a 25 km with pair 1's sigma a fifth of the truth's: the finding says the sigma look too small, and the
+    track's residuals per pair say whose: pair 1's root mean square about 5, pair 0's about 1, each to within 3 of
+    its relative standard deviation sqrt(1 / (2 * 61)) = 0.064 for 61 measurements a pair (the track leans towards
+    pair 1's data, which the sigma weigh 25 times more: so pair 1's a little lower, pair 0's a little higher)."""
+    scen = fd.paper_scenario("a", 25e3)
+    m = fd.simulate(scen, np.random.default_rng(5)).measurements
+    small = fd.Measurements(time=m.time, pair=m.pair, doppler=m.doppler, sigma=np.where(m.pair == 1, 0.2, 1.0) * m.sigma)
+    r = fd.run_estimator("smoother", small, scen.geometry, fd.initiate(small.first_per_pair(10), scen.geometry),
+                         verify=False)
+    [said] = [x for x in r.reasons if x.code == "manoeuvre"]
+    assert SIGMA_ADVICE in said.message, said.message
+    scatter = re.search(r"root mean square per pair in sigma: pair 0 ([\d.]+), pair 1 ([\d.]+)\)", said.message)
+    assert scatter is not None, said.message
+    first, second = float(scatter.group(1)), float(scatter.group(2))
+    assert 1.0 - 3 * 0.064 < first < 1.0 + 6 * 0.064 and 5.0 * (1 - 6 * 0.064) < second < 5.0 * (1 + 3 * 0.064), (
+        first, second)
+
+
 def test_the_sigma_clause_is_the_f_test_of_the_split() -> None:
     # F = (D / n) / ((C1 + C2) / nu), nu = N - 2n, against the F(n, nu) quantile at 99 %: with the parts' cost 25 nu
     # (sigma a fifth of the truth's) and D = 25 n, F = 1 and the scale is 5.0; D 25 times the 99 % quantile of
