@@ -35,6 +35,17 @@ def report(artefact) -> None:  # type: ignore[no-untyped-def]
         print(f"  wrote {f}")
 
 
+def save_table(out: Path, stem: str, text: str, rows: Any) -> None:
+    """Write a study's table ``text`` to ``out/stem.md`` and its ``rows`` to ``out/stem.json``, and print the
+    table."""
+    import json
+
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{stem}.md").write_text(text)
+    (out / f"{stem}.json").write_text(json.dumps(rows, indent=1))
+    print(text)
+
+
 def paper_run(s: int, r: int, seed: int) -> tuple[Any, Any, Any]:
     """Run ``r`` of paper scenario ``s`` as the accuracy benchmark records it: (simulation, model, initiation).
 

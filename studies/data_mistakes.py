@@ -97,14 +97,13 @@ negated,pairs 0 and 1 swapped,radars' radial velocity,radars' approach speed,pai
 from __future__ import annotations
 
 import functools
-import json
 import re
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from _common import each_run, paper_run
+from _common import each_run, paper_run, save_table
 from manoeuvres import drawn_manoeuvre
 from monostatic_layouts import draw as radar_draw
 from random_layouts import draw, one_blas_thread, recorded
@@ -405,10 +404,7 @@ def main() -> None:
                        f"{args.clock_sigma:g} s", "",
                       *(line for where in ("paper", "layout", "radar layout")
                         for line in _table(rows, where, track, args.estimator))])
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "data_mistakes.md").write_text(text)
-    (args.out / "data_mistakes.json").write_text(json.dumps(rows, indent=1))
-    print(text)
+    save_table(args.out, "data_mistakes", text, rows)
 
 
 if __name__ == "__main__":

@@ -27,11 +27,10 @@ fix the recordings)
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 import numpy as np
-from _common import each_run
+from _common import each_run, save_table
 from data_mistakes import manoeuvring, misplaced
 from monostatic_layouts import draw as radar_draw
 from random_layouts import draw, one_blas_thread, recorded
@@ -127,10 +126,7 @@ def main() -> None:
     text = "\n".join(["| version | recordings | track misfits | with a manoeuvre finding | spread measurements fail "
                       "| exactly one pair out passes (pair 1) | best pair's margin, largest / median |",
                       "|---|---|---|---|---|---|---|", *(_summary(rows, name) for name in VERSIONS)])
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "one_pair_out.md").write_text(text)
-    (args.out / "one_pair_out.json").write_text(json.dumps(rows, indent=1))
-    print(text)
+    save_table(args.out, "one_pair_out", text, rows)
 
 
 if __name__ == "__main__":
