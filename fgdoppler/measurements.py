@@ -432,14 +432,24 @@ def _check_value(value: float, name: str, where: str, shown: str | None = None) 
                                f"{_limit_text(name, value)}")
 
 
-def _pair(value: float, where: str, geometry: Geometry | None) -> int:
+def _pair(value: float, where: str, geometry: Geometry | None, one_based: bool = False) -> int:
     if value != int(value) or value < 0:
         raise MeasurementError(f"{where}: pair must be a non-negative integer, got {value:g}")
     k = int(value)
     if geometry is not None and k >= geometry.n_pairs:
+        hint = (f"; the file numbers its pairs 1..{geometry.n_pairs}: fgdoppler numbers them from 0 in the "
+                "geometry's order, so subtract 1 if that is what they mean") if one_based else ""
         raise MeasurementError(f"{where}: unknown pair index {k}: the geometry has {geometry.n_pairs} "
-                               f"pair(s), indices 0..{geometry.n_pairs - 1}")
+                               f"pair(s), indices 0..{geometry.n_pairs - 1}{hint}")
     return k
+
+
+def _numbered_from_one(column: NDArray[np.float64], geometry: Geometry | None) -> bool:
+    """Whether a file's pair column holds whole numbers 1..P exactly, for the P pairs of ``geometry``, each at least
+    once: likely numbered from 1 where fgdoppler numbers from 0."""
+    if geometry is None or not bool(np.all(np.isfinite(column) & (column == np.floor(column)))):
+        return False
+    return set(np.unique(column).astype(int).tolist()) == set(range(1, geometry.n_pairs + 1))
 
 
 def _checked_rows(table: Table, t: NDArray[np.float64], z: NDArray[np.float64], s: NDArray[np.float64],
@@ -452,9 +462,10 @@ def _checked_rows(table: Table, t: NDArray[np.float64], z: NDArray[np.float64], 
     p = np.empty(n, dtype=np.intp)
     seen: dict[tuple[float, int], int] = {}
     last: dict[int, int] = {}  # pair -> its latest row
+    one_based = _numbered_from_one(table.values[:, 1], geometry)
     for j in range(n):
         where = table.where(j)
-        p[j] = _pair(table.values[j, 1], where, geometry)
+        p[j] = _pair(table.values[j, 1], where, geometry, one_based)
         if hz:
             z[j], s[j] = _from_hz(z[j], s[j], geometry.wavelengths[p[j]], where)  # type: ignore[union-attr]
         for name, value in (("time", t[j]), ("doppler", z[j]), ("sigma", s[j])):

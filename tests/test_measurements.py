@@ -165,7 +165,11 @@ def test_a_pair_may_be_given_by_its_name(tmp_path: Path) -> None:
         ("time,pair,doppler,sigma\n0,0,1\x00,1\n", 2, "NUL"),
         ("time,pair,doppler,sigma\n0,0,1,0\n", 2, "sigma must be > 0"),
         ("time,pair,doppler,sigma\n0,0,1,-1\n", 2, "sigma must be > 0"),
-        ("time,pair,doppler,sigma\n0,2,1,1\n", 2, "unknown pair index 2"),
+        ("time,pair,doppler,sigma\n0,2,1,1\n", 2, "unknown pair index 2: the geometry has 2 pair\\(s\\), indices 0..1$"),
+        # pairs numbered 1..2 for the geometry's two: likely from 1, and the message says so; not where 0 appears
+        ("time,pair,doppler,sigma\n0,1,1,1\n0,2,1,1\n", 3, "indices 0..1; the file numbers its pairs 1..2: fgdoppler "
+         "numbers them from 0 in the geometry's order, so subtract 1 if that is what they mean$"),
+        ("time,pair,doppler,sigma\n0,0,1,1\n0,1,1,1\n0,2,1,1\n", 4, "indices 0..1$"),
         ("time,pair,doppler,sigma\n0,0.5,1,1\n", 2, "non-negative integer"),
         ("time,pair,doppler,sigma\n0,-1,1,1\n", 2, "non-negative integer"),
         ("time,pair,doppler,sigma\n0,0,1,1\n0,1,1,1\n0,0,2,1\n", 4, "duplicate measurement"),
