@@ -354,6 +354,11 @@ class Initiation(Judged):
             else None
 
     @property
+    def n_outliers(self) -> int:
+        """Window measurements a robust fit left out of its χ² test as outliers (0 under the Gaussian loss)."""
+        return self.n_measurements - self.x_start.size - self.dof
+
+    @property
     def covariance_ok(self) -> bool:
         """True when ``P_start`` and ``P_end`` are available."""
         return self.P_start is not None

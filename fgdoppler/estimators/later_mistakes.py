@@ -101,6 +101,7 @@ from fgdoppler.estimators.window_mistakes import (
     Mistake,
     MistakeCode,
     find_mistake,
+    fits,
     kilometre_extent,
     median_interval,
     mistake_reason,
@@ -302,14 +303,14 @@ class _Whole:
         """Where they fail the verdict's χ² test (:data:`~fgdoppler.estimators.initiation.VERDICT_LEVEL`) as
         given and pass it with ``change``: the two costs in words (``None``: they do not)."""
         given = self.given()
-        if given is None or given.cost <= _level(given.dof):
+        if given is None or fits(given, VERDICT_LEVEL):
             return None
         changed = change.applied(self.spread)
         try:
             again = initiate(changed, self.model, replace(self.settings, mistake_check=False))
         except ValueError:  # no start in the zone explains them
             return None
-        if again.cost > _level(again.dof):
+        if not fits(again, VERDICT_LEVEL):
             return None
         return f"cost {again.cost:.2f} with it, {given.cost:.2f} as given, {_level(given.dof):.2f} the 99.9 % level"
 
@@ -358,7 +359,7 @@ def _unconfirmed(measurements: Measurements, model: TrackingModel, init: Initiat
     whole = _Whole(measurements, model, init, huber_k)
     found = init.mistake
     given = whole.given()
-    if given is None or given.cost > _level(given.dof):
+    if given is None or not fits(given, VERDICT_LEVEL):
         return []
     return [Reason(code=UNCONFIRMED, status="doubtful", message=(
         f"the track fits its data as given, and so do the {whole.describe()}, cost {given.cost:.2f} against "

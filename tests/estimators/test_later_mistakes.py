@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy.stats import chi2
 
 import fgdoppler as fd
 from fgdoppler.estimators.later_mistakes import MISTAKE_CODES, later_mistakes
@@ -408,3 +409,31 @@ def test_a_window_change_the_whole_recording_does_not_need_is_called_unconfirmed
     sim, a = _paper(2, 0)
     negated_init = fd.initiate(_negated(sim.measurements).first_per_pair(10), a)
     assert negated_init.mistake is not None and later_mistakes(_negated(sim.measurements), a, negated_init, ()) == []
+
+
+def test_a_robust_fit_that_leaves_a_pair_out_does_not_name_a_change() -> None:
+    """Case a 25 km with every sigma a fifth of the truth's and the Huber loss: no change of the data is the
+    mistake, yet with pair 0's Doppler negated the 40 spread measurements passed the chi-square test on what the
+    robust fit kept (cost 8.79 against 119.25 as given), most of pair 0 left out as outliers, and the track was
+    told to negate correct data.  A fit passes the mistake search's tests only leaving out a few measurements
+    (window_mistakes.fits: at most a tenth), so no finding is made; under the Gaussian loss nothing is left out."""
+    from fgdoppler.estimators.initiation import VERDICT_LEVEL
+    from fgdoppler.estimators.later_mistakes import WHOLE_PER_PAIR, is_mistake_finding
+    from fgdoppler.estimators.window_mistakes import fits
+
+    scen = fd.paper_scenario("a", 25e3)
+    m = fd.simulate(scen, np.random.default_rng(5)).measurements
+    small = fd.Measurements(time=m.time, pair=m.pair, doppler=m.doppler, sigma=0.2 * m.sigma)
+    robust = fd.InitiationSettings(huber_k=1.345)
+    init = fd.initiate(small.first_per_pair(10), scen.geometry, robust)
+    r = fd.run_estimator("smoother", small, scen.geometry, init, fd.SmootherSettings(huber_k=1.345), verify=False)
+    assert not [x for x in r.reasons if is_mistake_finding(x)], r.message
+    pair0 = small.pair == 0
+    spread = fd.Measurements(time=small.time, pair=small.pair, doppler=np.where(pair0, -1.0, 1.0) * small.doppler,
+                             sigma=small.sigma).spread(WHOLE_PER_PAIR)
+    negated = fd.initiate(spread, scen.geometry, replace(robust, half_plane=init.half_plane, mistake_check=False))
+    # the whole recording's check reads the verdict's level: passed there, on the few measurements the fit kept
+    assert negated.cost <= chi2.ppf(VERDICT_LEVEL, negated.dof) and negated.n_outliers > 0.1 * negated.n_measurements
+    assert not fits(negated) and not fits(negated, VERDICT_LEVEL)
+    gaussian = fd.initiate(m.first_per_pair(10), scen.geometry)
+    assert gaussian.n_outliers == 0 and fits(gaussian) == gaussian.passes_chi2
