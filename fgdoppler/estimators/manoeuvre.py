@@ -234,9 +234,13 @@ def manoeuvre_reason(measurements: Measurements, model: TrackingModel, times: Fl
     q = getattr(model.motion, "q", None)
     shared = f" over {len(SPLITS)} split times" if len(SPLITS) > 1 else ""
     robust = settings is not None and settings.huber_k is not None
-    outliers = None if joint or robust else _outliers_instead(measurements, model, times, states, settings)
-    scale = None if joint or robust else _sigma_instead(max(found, key=lambda x: x.statistic), model.n,
-                                                        _scatter_per_pair(measurements, model, states))
+    outliers = scale = None
+    if not (joint or robust):
+        from fgdoppler.estimators.initiation import whitened_residuals
+
+        r = whitened_residuals(model, measurements, states[measurements.scans().scan_of])
+        outliers = _outliers_instead(measurements, model, times, states, settings, r)
+        scale = _sigma_instead(max(found, key=lambda x: x.statistic), model.n, measurements, model, r)
     return Reason(code="manoeuvre", status="doubtful", message=(
         f"the target does not move as the motion model says: the data up to t = {time_text(tc)} s and after it, "
         f"each fitted with a track of its own, explain the data better than one track by {d:.1f} "
@@ -247,22 +251,21 @@ def manoeuvre_reason(measurements: Measurements, model: TrackingModel, times: Fl
         + f"; {NOT_ONLY_A_MANOEUVRE}" + (outliers or "") + (scale or "")))
 
 
-def _scatter_per_pair(measurements: Measurements, model: TrackingModel, states: FloatArray) -> str:
-    r"""Each pair's root-mean-square whitened residual of the track ``states`` (one per scan), in words: where one
-    pair's sigma alone are too small, its scatter stands out (case a 25 km with pair 1's sigma a fifth of the
-    truth's, ``tests/estimators/test_manoeuvre.py``: 4.4 against 0.9 for pair 0, where the parts' scatter gives
-    3.2 for both)."""
-    from fgdoppler.estimators.initiation import whitened_residuals
+def _scatter_per_pair(measurements: Measurements, model: TrackingModel, r: FloatArray) -> str:
+    r"""Each pair's root-mean-square whitened residual ``r`` (one per measurement), in words: where one pair's
+    sigma alone are too small, its scatter stands out (case a 25 km with pair 1's sigma a fifth of the truth's,
+    ``tests/estimators/test_manoeuvre.py``: 4.4 against 0.9 for pair 0, where the parts' scatter gives 3.2 for
+    both)."""
     from fgdoppler.geometry import pair_labels
 
-    r = whitened_residuals(model, measurements, states[measurements.scans().scan_of])
     label = pair_labels(model.observation)
-    pairs = np.unique(measurements.pair)
-    rms = [float(np.sqrt(np.mean(r[measurements.pair == p] ** 2))) for p in pairs]
+    pairs, at = np.unique(measurements.pair, return_inverse=True)
+    rms = np.sqrt(np.bincount(at, weights=r**2) / np.bincount(at))
     return ", ".join(f"pair {label(int(p))} {v:.1f}" for p, v in zip(pairs, rms, strict=True))
 
 
-def _sigma_instead(split: Split, n: int, per_pair: str = "") -> str | None:
+def _sigma_instead(split: Split, n: int, measurements: Measurements, model: TrackingModel, r: FloatArray
+                   ) -> str | None:
     r"""What the manoeuvre finding adds where stated sigma too small explain the split statistic instead: ``None``
     unless the parts themselves misfit — :math:`C_1 + C_2` above its χ² :data:`LEVEL` quantile on
     :math:`\nu = N - 2n` degrees of freedom — and, against the scatter they show, the split is an ordinary
@@ -275,7 +278,8 @@ def _sigma_instead(split: Split, n: int, per_pair: str = "") -> str | None:
     likelihood ratio whose noise scale is estimated), and the parts' scatter
     :math:`\sqrt{(C_1 + C_2) / \nu}` estimates :math:`s`.  A manoeuvre
     leaves the parts fitting their own tracks, so :math:`F` stays about
-    :math:`D / n` (module docstring, "Sigma too small")."""
+    :math:`D / n` (module docstring, "Sigma too small").  The clause also gives each pair's scatter of the
+    track's whitened residuals ``r`` (:func:`_scatter_per_pair`)."""
     dof = split.measurements - 2 * n
     if dof < 1 or split.parts_cost <= float(chi2.ppf(LEVEL, dof)):
         return None
@@ -288,17 +292,18 @@ def _sigma_instead(split: Split, n: int, per_pair: str = "") -> str | None:
             f"(the parts' cost {split.parts_cost:.1f} on {dof} degrees of freedom), and against that scatter the parts "
             f"agree (F = {f:.2f}, within the {SCALE_AGREE_LEVEL:.0%} level {agree:.2f} of F({n}, {dof})): the "
             f"measurements' sigma are more likely about {np.sqrt(ratio):.1f} times too small than the target "
-            "manoeuvring" + (f" (the track's residuals, root mean square per pair in sigma: {per_pair})"
-                             if per_pair else "") + f"; {SIGMA_ADVICE}")
+            "manoeuvring (the track's residuals, root mean square per pair in sigma: "
+            f"{_scatter_per_pair(measurements, model, r)}); {SIGMA_ADVICE}")
 
 
 def _outliers_instead(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
-                      settings: SmootherSettings | None) -> str | None:
+                      settings: SmootherSettings | None, r: FloatArray) -> str | None:
     r"""What the manoeuvre finding adds where a few outliers explain the split statistic instead: ``None`` unless
     the recording has measurements beyond :data:`~fgdoppler.estimators.initiation.OUTLIER_CUT` of the track —
     at most :data:`~fgdoppler.estimators.judge.REJECT_ROBUST` of them — without which the largest :math:`D`
     is an ordinary draw of its law under the model, within the :math:`\chi^2_n` quantile at
-    :data:`AGREE_LEVEL` (the alarm's is :data:`LEVEL`).
+    :data:`AGREE_LEVEL` (the alarm's is :data:`LEVEL`).  ``r``: the track's whitened residuals, one per
+    measurement.
 
     A gross error at :math:`r_i` whitened adds up to :math:`r_i^2` to
     :math:`C` and less to :math:`C_1 + C_2`, whose two tracks bend to it
@@ -310,10 +315,10 @@ def _outliers_instead(measurements: Measurements, model: TrackingModel, times: F
     random layouts (``studies/manoeuvres.py``'s rule, draws 0–119) the one
     residual of a genuine manoeuvre just beyond the cut (4.0σ, 4.2σ) took
     :math:`D` from above 18.5 to 15 in two of 110 findings."""
-    from fgdoppler.estimators.initiation import OUTLIER_CUT, whitened_residuals
+    from fgdoppler.estimators.initiation import OUTLIER_CUT
     from fgdoppler.estimators.window_mistakes import few_outliers
 
-    out = few_outliers(whitened_residuals(model, measurements, states[measurements.scans().scan_of]))
+    out = few_outliers(r)
     if out is None:
         return None
     kept = measurements.subset(~out)

@@ -316,7 +316,7 @@ def fits(fit: Initiation, level: float | None = None) -> bool:
     with pair 0's Doppler negated (cost 8.79 against 119.25 as given), most of that pair left out, and the track
     was told to negate correct data."""
     passes = fit.passes_chi2 if level is None else fit.cost <= float(chi2.ppf(level, max(fit.dof, 1)))
-    return passes and fit.n_outliers <= max(1, int(REJECT_ROBUST * fit.n_measurements))
+    return passes and _a_few(fit.n_outliers, fit.n_measurements)
 
 
 def few_outliers(r: FloatArray) -> NDArray[np.bool_] | None:
@@ -324,7 +324,13 @@ def few_outliers(r: FloatArray) -> NDArray[np.bool_] | None:
     some do and they are at most :data:`~fgdoppler.estimators.judge.REJECT_ROBUST` of them (at least one): a few
     outliers, not a misfit of the model; ``None`` otherwise."""
     out = np.abs(r) > OUTLIER_CUT
-    return out if out.any() and out.sum() <= max(1, int(REJECT_ROBUST * r.size)) else None
+    return out if out.any() and _a_few(int(out.sum()), r.size) else None
+
+
+def _a_few(count: int, n: int) -> bool:
+    """Whether ``count`` of ``n`` measurements are a few: at most :data:`~fgdoppler.estimators.judge.REJECT_ROBUST`
+    of them, and one always is."""
+    return count <= max(1, int(REJECT_ROBUST * n))
 
 
 def find_mistake(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,

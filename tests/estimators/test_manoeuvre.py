@@ -240,12 +240,23 @@ def test_the_sigma_clause_is_the_f_test_of_the_split() -> None:
     # (sigma a fifth of the truth's) and D = 25 n, F = 1 and the scale is 5.0; D 25 times the 99 % quantile of
     # F(4, 114) (3.49) per degree of freedom and more is no longer an ordinary draw; parts that fit their own tracks
     # (cost at most their chi-square 99.9 % level) leave the split to the manoeuvre, whatever D.
-    n, N = 4, 122
+    # The per-pair scatter is the root mean square of the residuals given: 5 and 1 here.
+    scen = fd.paper_scenario("a", 25e3)
+    m = fd.simulate(scen, np.random.default_rng(0)).measurements
+    model = fd.TrackingModel.of(scen.geometry)
+    r = np.where(m.pair == 0, 5.0, -1.0)
+    n, N = 4, len(m)
+    assert N == 122
     nu = N - 2 * n
-    said = _sigma_instead(Split(time=15.0, statistic=25.0 * n, parts_cost=25.0 * nu, measurements=N), n)
+
+    def clause(statistic: float, parts_cost: float) -> str | None:
+        return _sigma_instead(Split(time=15.0, statistic=statistic, parts_cost=parts_cost, measurements=N), n, m,
+                              model, r)
+
+    said = clause(25.0 * n, 25.0 * nu)
     assert said is not None and "about 5.0 times too small" in said and "F = 1.00" in said
-    assert _sigma_instead(Split(time=15.0, statistic=25.0 * n * 3.6, parts_cost=25.0 * nu, measurements=N), n) is None
-    assert _sigma_instead(Split(time=15.0, statistic=25.0 * n * 3.4, parts_cost=25.0 * nu, measurements=N), n) \
-        is not None
+    assert "root mean square per pair in sigma: pair 0 5.0, pair 1 1.0)" in said
+    assert clause(25.0 * n * 3.6, 25.0 * nu) is None
+    assert clause(25.0 * n * 3.4, 25.0 * nu) is not None
     level = float(chi2.ppf(0.999, nu))
-    assert _sigma_instead(Split(time=15.0, statistic=1.0, parts_cost=level, measurements=N), n) is None
+    assert clause(1.0, level) is None
