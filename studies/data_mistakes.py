@@ -49,6 +49,12 @@ Three mistakes, each checked on the same recordings:
   smoother's split test of the motion model fires on targets that fly straight; its ``manoeuvre`` finding should
   say that the sigma are more likely too small (:func:`fgdoppler.estimators.manoeuvre._sigma_instead`), and
   nothing of the kind on the manoeuvring recordings or with a receiver misplaced (the table's last column).
+* **A receiver that holds or writes a fixed value.**  Every third of pair 1's measurements the one before it
+  (``pair 1 holds a third of its values``: a receiver holding its last value without a detection), or pair 1
+  reading 0 throughout (``pair 1 reads 0 throughout``: a dead one); each also with the repeats the verdict finds
+  left out (``... (repeats dropped)``, as ``track --drop-repeats`` does: :mod:`fgdoppler.repeats`).  The
+  smoother's ``data`` finding should name the repeats (the table's last column) and nothing on the other
+  versions.
 * **A receiver's clock off.**  Pair 1's times ``--late`` seconds late (default 0.5; one clock for
   every pair is assumed).  Not looked for: where such data fit another track, no finding can tell.
   With ``--clock-sigma S`` the estimator is told each pair's clock may be off by S (1 sigma;
@@ -109,9 +115,11 @@ from monostatic_layouts import draw as radar_draw
 from random_layouts import draw, one_blas_thread, recorded
 
 import fgdoppler as fd
+from fgdoppler.estimators.judge import LEVEL, REPEATS_ADVICE
 from fgdoppler.estimators.later_mistakes import MISTAKE_CODES, UNCONFIRMED, is_mistake_finding
 from fgdoppler.estimators.manoeuvre import SIGMA_ADVICE
 from fgdoppler.estimators.registry import estimator_info
+from fgdoppler.repeats import drop_repeats, find_repeats
 
 
 def _negated(m: fd.Measurements, pairs: list[int] | None) -> fd.Measurements:
@@ -152,6 +160,23 @@ def _sigma_scaled(m: fd.Measurements, g: fd.Geometry, late: float, *, factor: fl
     return fd.Measurements(time=m.time, pair=m.pair, doppler=m.doppler, sigma=factor * m.sigma)
 
 
+def _held(m: fd.Measurements, g: fd.Geometry, late: float, *, dropped: bool) -> fd.Measurements:
+    """``m`` with every third measurement of pair 1 the one before it (a receiver holding its last value where it
+    has no detection); ``dropped``: then without the repeats the verdict finds (``track --drop-repeats``)."""
+    z = m.doppler.copy()
+    rows = np.flatnonzero(m.pair == 1)
+    z[rows[3::3]] = z[rows[2::3][:rows[3::3].size]]
+    out = fd.Measurements(time=m.time, pair=m.pair, doppler=z, sigma=m.sigma)
+    return drop_repeats(out, find_repeats(out, level=LEVEL)) if dropped else out
+
+
+def _dead(m: fd.Measurements, g: fd.Geometry, late: float, *, dropped: bool) -> fd.Measurements:
+    """``m`` with pair 1 reading 0 throughout (a dead receiver whose software writes 0 without a detection);
+    ``dropped``: then without the repeats the verdict finds (``track --drop-repeats``: all of pair 1)."""
+    out = fd.Measurements(time=m.time, pair=m.pair, doppler=np.where(m.pair == 1, 0.0, m.doppler), sigma=m.sigma)
+    return drop_repeats(out, find_repeats(out, level=LEVEL)) if dropped else out
+
+
 def _late(m: fd.Measurements, seconds: float) -> fd.Measurements:
     """``m`` with pair 1's times ``seconds`` late (its receiver's clock off)."""
     return fd.Measurements.from_arrays(np.where(m.pair == 1, m.time + seconds, m.time), m.pair, m.doppler, m.sigma,
@@ -162,6 +187,10 @@ def _late(m: fd.Measurements, seconds: float) -> fd.Measurements:
 LATE = "pair 1's clock late"
 #: The version whose data are right but whose target manoeuvres (a recording simulated anew): nothing to name.
 MANOEUVRE = "target manoeuvres"
+#: A receiver holding its last value (every third of pair 1's measurements the one before), and a dead one.
+HELD = "pair 1 holds a third of its values"
+DEAD = "pair 1 reads 0 throughout"
+
 #: The versions of each recording: name -> (the data given the geometry and the clock's lateness in s, the change
 #: of the data that a mistake finding should name given the geometry, as it words it — "" for none —, whether the
 #: version needs radars).
@@ -179,6 +208,10 @@ VERSIONS: dict[str, tuple[Callable[[fd.Measurements, fd.Geometry, float], fd.Mea
     **{f"Doppler scaled by {f:g}": (functools.partial(_scaled, factor=f), lambda g: "", False)
        for f in (0.5, 0.8, 1.25, 2.0)},
     **{f"sigma times {f:g}": (functools.partial(_sigma_scaled, factor=f), lambda g: "", False) for f in (0.2, 0.5)},
+    HELD: (functools.partial(_held, dropped=False), lambda g: "", False),
+    f"{HELD} (repeats dropped)": (functools.partial(_held, dropped=True), lambda g: "", False),
+    DEAD: (functools.partial(_dead, dropped=False), lambda g: "", False),
+    f"{DEAD} (repeats dropped)": (functools.partial(_dead, dropped=True), lambda g: "", False),
 }
 
 #: The version whose geometry gives the sensors in kilometres (the data as simulated): a ``units`` finding is right.
@@ -331,7 +364,8 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
                        later=_changes(later[0] if later else None)[0],
                        unconfirmed=any(x.code == UNCONFIRMED for x in r.reasons),
                        manoeuvre=any(x.code == "manoeuvre" for x in r.reasons),
-                       sigma_small=any(x.code == "manoeuvre" and SIGMA_ADVICE in x.message for x in r.reasons))
+                       sigma_small=any(x.code == "manoeuvre" and SIGMA_ADVICE in x.message for x in r.reasons),
+                       repeats=any(x.code == "data" and REPEATS_ADVICE in x.message for x in r.reasons))
         out[name] = row
     return out
 
@@ -362,8 +396,8 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) 
                                                  f"window's finding ranked by the {estimator} (the change made "
                                                  f"first) | the window's finding unconfirmed by the {estimator} | "
                                                  f"the {estimator}'s manoeuvre finding (saying the sigma are too "
-                                                 "small) |" if track else ""),
-             "|---|---|---|---|---|" + ("---|---|---|---|---|---|" if track else "")]
+                                                 f"small) | the {estimator}'s repeats finding |" if track else ""),
+             "|---|---|---|---|---|" + ("---|---|---|---|---|---|---|" if track else "")]
     for name in ALL_VERSIONS:
         got = [r[where][name] for r in rows if where in r and name in r[where] and "refused" not in r[where][name]]
         if not got:
@@ -384,7 +418,7 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) 
             line += (f" {len(ok)} | {wrong} | {len(later)} ({sum(x == w for x, w in later) if wanted else '—'}) | "
                      f"{len(ranked)} ({sum(x == w for x, w in ranked) if wanted else '—'}) | "
                      f"{sum(bool(g.get('unconfirmed')) for g in got)} | {sum(bool(g.get('manoeuvre')) for g in got)} "
-                     f"({sum(bool(g.get('sigma_small')) for g in got)}) |")
+                     f"({sum(bool(g.get('sigma_small')) for g in got)}) | {sum(bool(g.get('repeats')) for g in got)} |")
         lines.append(line)
     return [*lines, ""]
 

@@ -27,6 +27,7 @@ from fgdoppler.cli.common import (
     taking,
 )
 from fgdoppler.estimators.initiation import METHODS
+from fgdoppler.estimators.judge import LEVEL, REPEATS_ADVICE
 from fgdoppler.estimators.later_mistakes import UNCONFIRMED, is_mistake_finding
 from fgdoppler.estimators.manoeuvre import SIGMA_ADVICE
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
@@ -37,6 +38,7 @@ from fgdoppler.estimators.window_mistakes import (
     WITH_OUTLIERS,
 )
 from fgdoppler.geometry import Geometry, principal_line
+from fgdoppler.repeats import drop_repeats, find_repeats
 from fgdoppler.zone import ZoneBox
 
 __all__ = ["add_track"]
@@ -103,6 +105,10 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    help="smoother, with --bias-sigma: estimate each pair's offset with the track (the track moves, "
                         "the offsets are reported) instead of only widening the covariances")
     add_huber_option(p)
+    p.add_argument("--drop-repeats", action="store_true",
+                   help="leave out the repeats of every pair found repeating its Doppler more often than noise allows "
+                        "(a receiver that holds its last value, or writes a fixed one, without a detection: the data "
+                        "finding); the first measurement of each run stays")
     p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy; 3-D time,x,y,z,vx,vy,vz) for --plot and errors")
     p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
     p.add_argument("--json", action="store_true", help="machine-readable result on stdout")
@@ -151,6 +157,23 @@ def _sigma_note(args: argparse.Namespace, names: tuple[str, ...]) -> None:
     if column is not None:
         print(f"note: --sigma {args.sigma:g} is not used: {args.file} gives each measurement's sigma (its {column} "
               "column)", file=sys.stderr)
+
+
+def _dropped_repeats(args: argparse.Namespace, meas: Any, geom: Geometry) -> tuple[Any, dict[str, Any]]:
+    """``meas`` without the repeats of the pairs found repeating (``--drop-repeats``; the verdict's level), said
+    on stderr, and the JSON's ``dropped_repeats`` entry (pair index -> repeats left out); as read otherwise."""
+    if not args.drop_repeats:
+        return meas, {}
+    found = find_repeats(meas, level=LEVEL)
+    if not found:
+        print("--drop-repeats: no pair repeats its values more often than noise allows; every measurement kept",
+              file=sys.stderr)
+    for r in found:
+        what = ("each equal to the one before" if r.resolution is not None else
+                "every one: it gives one value throughout")
+        print(f"--drop-repeats: left out {r.rows.size} of pair {geom.pair_label(r.pair)}'s {r.measurements} "
+              f"measurements, {what}", file=sys.stderr)
+    return drop_repeats(meas, found), {"dropped_repeats": {str(r.pair): int(r.rows.size) for r in found}}
 
 
 def _model(args: argparse.Namespace, geometry: Any) -> Any:
@@ -218,6 +241,7 @@ def _run(args: argparse.Namespace) -> int:
     meas = Measurements.from_csv(args.file, geometry=geom, default_sigma=args.sigma)
     names = header_names(args.file) if args.file.is_file() else ()  # a pipe was read once already
     _sigma_note(args, names)
+    meas, dropped = _dropped_repeats(args, meas, geom)
     truth = None
     if args.truth:
         truth = Trajectory.from_csv(args.truth)
@@ -237,7 +261,7 @@ def _run(args: argparse.Namespace) -> int:
         init = initiate(window, model, settings)
     except ValueError as exc:  # e.g. the data need a speed above the zone's bound
         raise CLIError(f"{args.file}: {exc}") from None
-    where = _describe(geom, spec)
+    where = {**_describe(geom, spec), **dropped}
     if not args.json:
         z = geom.zone
         height = "" if z.altitude is None else f", height {z.altitude[0]:g}..{z.altitude[1]:g} m (3-D)"
@@ -329,6 +353,9 @@ def mistake_hint(reasons: Any) -> str | None:
     the Huber loss first where the initiation window fits without a few outliers (an ``outliers`` finding).
     ``None`` otherwise."""
     # a track's findings carry its initiation's under the "initiation-" prefix; both name the mistake alike
+    if any(r.status != "ok" and REPEATS_ADVICE in r.message for r in reasons):
+        return ("a pair repeats its values (the data finding above): track again with --drop-repeats, or without "
+                "the pair, before following any other advice, which reads the repeats as measurements")
     mistakes = [r for r in reasons if r.status != "ok" and is_mistake_finding(
         replace(r, code=r.code.removeprefix("initiation-")))]
     if any(IN_KILOMETRES in r.message for r in mistakes):

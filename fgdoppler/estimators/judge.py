@@ -56,7 +56,11 @@ the status is the worst of them, :mod:`fgdoppler.estimators.verdict`).
     image of any track across that line fits the data exactly (a
     :class:`~fgdoppler.estimators.grid.HalfPlane` on the initiation settles
     it), and in 3-D so does every rotation of the track about the line
-    (only a pair off the line settles that).
+    (only a pair off the line settles that).  And when a pair repeats its
+    values more often than noise on the file's resolution allows
+    (:func:`repeat_reasons`, :mod:`fgdoppler.repeats`): a receiver that holds
+    its last value, or writes a fixed one, without a detection; ``"doubtful"``
+    where the repeats are more than :data:`REJECT_DOUBTFUL` of the data.
 ``zone`` — ``"doubtful"`` when a smoothed track starts more than
     :data:`ZONE_TOLERANCE` outside the zone: the initiation assumed a start
     inside it, and the whole recording says otherwise (or cannot place the
@@ -99,16 +103,17 @@ from fgdoppler.estimators.grid import speed_lower_bound
 from fgdoppler.estimators.initiation import OUTLIER_CUT, inlier_statistic
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import TrackerSettings
-from fgdoppler.estimators.verdict import Reason, message_of, status_of
-from fgdoppler.geometry import principal_line
+from fgdoppler.estimators.verdict import Reason, Status, message_of, status_of
+from fgdoppler.geometry import pair_labels, principal_line
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import DopplerModel
 from fgdoppler.models.tracking import TrackingModel
+from fgdoppler.repeats import find_repeats
 from fgdoppler.zone import ZoneBox
 
 __all__ = ["COVARIANCE_RATIO", "LEVEL", "LOST", "MIN_FIT_DOF", "MIN_MEASUREMENTS", "REJECT_DOUBTFUL", "REJECT_FAILED",
-           "REJECT_ROBUST", "REMOTE_FACTOR", "SPEED_FACTOR", "ZONE_TOLERANCE", "judge", "needed_speed",
-           "track_reference"]
+           "REJECT_ROBUST", "REMOTE_FACTOR", "REPEATS_ADVICE", "SPEED_FACTOR", "ZONE_TOLERANCE", "judge",
+           "needed_speed", "repeat_reasons", "track_reference"]
 
 #: Level of the verdict's χ² tests: a consistent track fails one in a thousand times.
 LEVEL = 0.999
@@ -133,6 +138,8 @@ MIN_FIT_DOF = 10
 MIN_MEASUREMENTS = 20
 #: How far (m, m/s) a smoothed track may start outside the zone before it contradicts it.
 ZONE_TOLERANCE = 100.0
+#: What the ``data`` finding of repeated values advises (``track``'s hint looks for it).
+REPEATS_ADVICE = "leave the repeats out (fgdoppler track --drop-repeats"
 
 
 def judge(result: TrackResult, measurements: Measurements, model: TrackingModel,
@@ -155,6 +162,7 @@ def judge(result: TrackResult, measurements: Measurements, model: TrackingModel,
     if reference is not None:
         reasons += _reference_reasons(result.primary, reference)
     reasons += _data_reasons(measurements, model, half_plane)
+    reasons += repeat_reasons(measurements, model)
     reasons += _zone_reasons(result, model)
     reasons += _speed_reasons(measurements, model)
     reasons += _unit_reasons(result, model)
@@ -205,6 +213,33 @@ def _data_reasons(measurements: Measurements, model: TrackingModel, half_plane: 
         if spread.size < 2 or spread[1] <= 1e-9 * max(spread[0], 1.0):
             out.append(_one_line_reason(used, g.dim))
     return out
+
+
+def repeat_reasons(measurements: Measurements, model: TrackingModel) -> list[Reason]:
+    """The ``data`` finding of pairs that repeat their values more often than their noise allows
+    (:func:`~fgdoppler.repeats.find_repeats` at :data:`LEVEL`): a receiver that holds its last value, or writes
+    a fixed one, when it has no detection.  ``"doubtful"`` where the repeats are more than
+    :data:`REJECT_DOUBTFUL` of the measurements, as rejections would be; informational below."""
+    found = find_repeats(measurements, level=LEVEL)
+    if not found:
+        return []
+    label = pair_labels(model.observation)
+    parts = []
+    for r in found:
+        grid = (f"a resolution of {r.resolution:.2g} m/s" if r.resolution is not None
+                else "a resolution as coarse as that (it gives one value throughout)")
+        parts.append(
+            f"pair {label(r.pair)} repeats its previous Doppler in {r.repeats} of its {r.measurements} measurements "
+            f"(the longest run: {r.value:g} m/s {r.longest} times, t = {time_text(r.start)}..{time_text(r.end)} s); "
+            f"noise of sigma {r.sigma:.2g} m/s on {grid} repeats so often with chance {r.chance:.1g}")
+    share = sum(r.repeats for r in found) / len(measurements)
+    status: Status = "doubtful" if share > REJECT_DOUBTFUL else "ok"
+    tail = ("" if status == "doubtful" else
+            f"; they are {100 * share:.1f} % of the measurements, too few to make the track doubtful")
+    return [Reason(code="data", status=status, message=(
+        "; ".join(parts) + ": a receiver that holds its last value, or writes a fixed one, when it has no "
+        f"detection — repeats are not measurements: {REPEATS_ADVICE} keeps the first of each run and leaves "
+        f"out a pair with one value throughout; fgdoppler.repeats.drop_repeats) or the pair{tail}"))]
 
 
 def _one_line_reason(used: NDArray[np.int64], dim: int) -> Reason:

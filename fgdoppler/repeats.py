@@ -1,0 +1,193 @@
+r"""Repeated values in a pair's Doppler: a receiver that holds its last value, or writes a fixed one, when it has
+no detection.
+
+A Doppler measurement carries noise of standard deviation :math:`\sigma`, so two successive measurements of a
+pair are equal only where the file rounds them to a coarse resolution :math:`q`.  For two values each the truth
+plus :math:`\mathcal N(0, \sigma^2)` noise, rounded to a grid of step :math:`q` whose offset is arbitrary, the
+chance that both fall in one cell is, with :math:`D` their difference (:math:`\mathcal N(0, 2\sigma^2)`) and
+:math:`a = q / (\sigma\sqrt 2)`,
+
+.. math::
+
+    p(a) = \mathrm E\left[\max\left(0, 1 - \frac{|D|}{q}\right)\right]
+         = \operatorname{erf}\frac{a}{\sqrt 2} - \frac{2\,\varphi(0)}{a}\left(1 - e^{-a^2/2}\right),
+
+:math:`a\,\varphi(0) = q / (2\sigma\sqrt\pi)` for a fine grid.  The truth's own change between the two
+measurements only lowers it, so :math:`p` bounds the chance from above.  Of a pair's :math:`n` measurements in
+time order, the number :math:`m` equal to the one before is then at most Binomial(:math:`n - 1, p`) by chance,
+and the pair is *found repeating* where :math:`P(M \ge m)` is below :math:`(1 - \text{level}) / P` for the
+:math:`P` pairs tested (:func:`find_repeats`).
+
+Neither :math:`q` nor the noise is taken on trust, so that right data are not called repeating:
+
+- :math:`q` is the smallest gap between the pair's distinct values: on a grid at least its step, and in
+  values written to full precision far coarser than their true resolution (conservative either way); a pair
+  with one value throughout takes :math:`q = \sigma` (the coarsest resolution tested);
+- :math:`\sigma` is the smaller of the stated sigma (root mean square over the pair) and the scatter of the
+  pair's steps, :math:`\sqrt{(\overline{\Delta z^2} - q^2/6)/2}` (a step of two rounded values has variance
+  :math:`2\sigma^2 + q^2/6`; the truth's own change only adds to it, and lowers the chance of a repeat more
+  than that raises :math:`\sigma`): stated sigma too large would otherwise make a coarse grid's repeats look
+  unlikely.  Where every step is zero the stated sigma stands;
+- a pair whose resolution is coarser than that :math:`\sigma` (:math:`q > \sigma`) is not tested: its values
+  repeat whenever the truth moves less than a grid step.
+
+Under continuous noise written to full precision equal successive values do not occur; on the paper's six
+scenarios no pair is found repeating.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.special import erf
+from scipy.stats import binom
+
+from fgdoppler.measurements import Measurements
+
+__all__ = ["Repeats", "drop_repeats", "find_repeats", "repeat_probability"]
+
+FloatArray = NDArray[np.float64]
+
+_PHI0 = 1.0 / np.sqrt(2.0 * np.pi)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Repeats:
+    """A pair found repeating its values (:func:`find_repeats`).
+
+    Attributes
+    ----------
+    pair
+        The pair's index.
+    measurements
+        Its measurements.
+    repeats
+        How many of them equal the one before (the pair's, in time order).
+    chance
+        The chance of at least that many by noise, :math:`P(M \\ge m)` (module docstring).
+    resolution
+        The resolution :math:`q` the test took (m/s); ``None`` where the pair has one value throughout
+        (then :math:`q = \\sigma`).
+    sigma
+        The noise :math:`\\sigma` the test took (m/s).
+    longest, value, start, end
+        The longest run of one value: its measurements, the value (m/s), its first and last time (s).
+    rows
+        The indices in the measurements of what :func:`drop_repeats` leaves out: the repeats (each a
+        measurement equal to the one before), or every measurement of a pair with one value throughout.
+    """
+
+    pair: int
+    measurements: int
+    repeats: int
+    chance: float
+    resolution: float | None
+    sigma: float
+    longest: int
+    value: float
+    start: float
+    end: float
+    rows: NDArray[np.intp] = field(repr=False, compare=False)
+
+
+def repeat_probability(a: ArrayLike) -> FloatArray:
+    r"""The chance :math:`p(a)` that two noisy values fall in one cell of a grid (module docstring), for
+    :math:`a = q / (\sigma\sqrt 2) > 0`.
+
+    Examples
+    --------
+    >>> float(repeat_probability(1e-6) / (1e-6 / np.sqrt(2 * np.pi)))  # a phi(0) for a fine grid
+    1.0
+    """
+    a = np.asarray(a, dtype=float)
+    # expm1 keeps the second term accurate for a fine grid, where it is -a phi(0) against erf's 2 a phi(0)
+    return np.asarray(erf(a / np.sqrt(2.0)) + 2.0 * _PHI0 * np.expm1(-0.5 * a * a) / a, dtype=float)
+
+
+def find_repeats(measurements: Measurements, *, level: float = 0.999) -> tuple[Repeats, ...]:
+    """The pairs of ``measurements`` that repeat their values more often than noise on their resolution allows
+    (module docstring), in the order of their indices.
+
+    Parameters
+    ----------
+    measurements
+        Any measurements.
+    level
+        The test's level for the whole recording (Bonferroni over the pairs tested): right data are found
+        repeating at most ``1 - level`` of the time.
+    """
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must lie in (0, 1), got {level:g}")
+    m = measurements
+    pairs, idx, counts = np.unique(m.pair, return_inverse=True, return_counts=True)
+    order = np.lexsort((m.time, idx))  # each pair's measurements together, in time order
+    i, z = idx[order], m.doppler[order]
+    same = i[1:] == i[:-1]
+    step = np.diff(z)
+    equal = same & (step == 0.0)
+    k = pairs.size
+    repeats = np.bincount(i[1:][equal], minlength=k)
+    stated = np.sqrt(np.bincount(idx, weights=m.sigma ** 2, minlength=k) / counts)
+    resolution = _resolution(idx, m.doppler, k)
+    # each step is the difference of two rounded noisy values: variance 2 sigma^2 + q^2 / 6 (Sheppard)
+    n_steps = np.bincount(i[1:][same], minlength=k)
+    step_ms = np.bincount(i[1:][same], weights=step[same] ** 2, minlength=k) / np.maximum(n_steps, 1)
+    finite_q = np.where(np.isfinite(resolution), resolution, 0.0)
+    scatter = np.sqrt(np.maximum(step_ms - finite_q ** 2 / 6.0, 0.0) / 2.0)
+    sigma = np.where(scatter > 0.0, np.minimum(stated, scatter), stated)
+    q = np.where(np.isfinite(resolution), resolution, sigma)
+    tested = (q <= sigma) & (counts > 1)
+    p = repeat_probability(q / (sigma * np.sqrt(2.0)))
+    chance = np.where(repeats > 0, binom.sf(repeats - 1, counts - 1, np.minimum(p, 1.0)), 1.0)
+    found = np.flatnonzero(tested & (chance < (1.0 - level) / max(int(tested.sum()), 1)))
+    out = []
+    for j in found:
+        # a pair with one value throughout has no measurement to tell from its fixed value: all of it goes
+        rows = order[i == j] if not np.isfinite(resolution[j]) else order[1:][equal & (i[1:] == j)]
+        longest, value, start, end = _longest_run(m, order[i == j])
+        out.append(Repeats(pair=int(pairs[j]), measurements=int(counts[j]), repeats=int(repeats[j]),
+                           chance=float(chance[j]),
+                           resolution=float(resolution[j]) if np.isfinite(resolution[j]) else None,
+                           sigma=float(sigma[j]), longest=longest, value=value, start=start, end=end,
+                           rows=np.sort(rows)))
+    return tuple(out)
+
+
+def _resolution(idx: NDArray[np.intp], z: FloatArray, k: int) -> FloatArray:
+    """Each of ``k`` pairs' smallest gap between its distinct values (``inf`` for one value throughout)."""
+    order = np.lexsort((z, idx))
+    i, zs = idx[order], z[order]
+    gap = np.diff(zs)
+    ok = (i[1:] == i[:-1]) & (gap > 0.0)
+    out = np.full(k, np.inf)
+    np.minimum.at(out, i[1:][ok], gap[ok])
+    return out
+
+
+def _longest_run(m: Measurements, rows: NDArray[np.intp]) -> tuple[int, float, float, float]:
+    """The longest run of one value among a pair's ``rows`` (in time order): its length, value, first and last
+    time."""
+    z = m.doppler[rows]
+    starts = np.flatnonzero(np.r_[True, z[1:] != z[:-1]])
+    lengths = np.diff(np.r_[starts, z.size])
+    j = int(np.argmax(lengths))
+    first, last = rows[starts[j]], rows[starts[j] + lengths[j] - 1]
+    return int(lengths[j]), float(z[starts[j]]), float(m.time[first]), float(m.time[last])
+
+
+def drop_repeats(measurements: Measurements, found: tuple[Repeats, ...] | None = None) -> Measurements:
+    """``measurements`` without the repeats of the pairs found repeating (``found``, else :func:`find_repeats`
+    at its default level): of each run of one value the first measurement stays (the value a receiver holds was
+    measured once), except where a pair gives one value throughout, which is left out whole.
+
+    A receiver that writes a fixed value (say 0) in its gaps between real measurements keeps the first of each
+    such run: a gross outlier, for the gate or the Huber loss (``--huber``), which no test here can tell from a
+    held real value.
+    """
+    found = find_repeats(measurements) if found is None else found
+    keep = np.ones(len(measurements), dtype=bool)
+    for r in found:
+        keep[r.rows] = False
+    return measurements.subset(keep)
