@@ -20,9 +20,11 @@ and the pair is *found repeating* where :math:`P(M \ge m)` is below :math:`(1 - 
 
 Neither :math:`q` nor the noise is taken on trust, so that right data are not called repeating:
 
-- :math:`q` is the smallest gap between the pair's distinct values: on a grid at least its step, and in
-  values written to full precision far coarser than their true resolution (conservative either way); a pair
-  with one value throughout takes :math:`q = \sigma` (the coarsest resolution tested);
+- :math:`q` is the step of the grid the pair's values lie on (:func:`grid_step`: the smallest gap between its
+  distinct values divided by the smallest whole number that puts every gap on the grid), or, for values
+  written to full precision, that gap over :data:`GRID_DIVISORS`: coarser than their true resolution, which
+  only makes the test conservative; a pair with one value throughout takes :math:`q = \sigma` (the
+  coarsest resolution tested);
 - :math:`\sigma` is the smaller of the stated sigma (root mean square over the pair) and the scatter of the
   pair's steps, :math:`\sqrt{(\overline{\Delta z^2} - q^2/6)/2}` (a step of two rounded values has variance
   :math:`2\sigma^2 + q^2/6`; the truth's own change only adds to it, and lowers the chance of a repeat more
@@ -46,11 +48,16 @@ from scipy.stats import binom
 
 from fgdoppler.measurements import Measurements
 
-__all__ = ["Repeats", "drop_repeats", "find_repeats", "repeat_probability"]
+__all__ = ["GRID_DIVISORS", "GRID_TOLERANCE", "Repeats", "drop_repeats", "find_repeats", "grid_step", "repeat_probability"]
 
 FloatArray = NDArray[np.float64]
 
 _PHI0 = 1.0 / np.sqrt(2.0 * np.pi)
+
+#: The finest grid :func:`grid_step` looks for: a pair's smallest gap divided by up to this.
+GRID_DIVISORS = 1000
+#: How near a whole number each gap over a grid step must be for the values to lie on that grid.
+GRID_TOLERANCE = 1e-6
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -98,7 +105,7 @@ def repeat_probability(a: ArrayLike) -> FloatArray:
 
     Examples
     --------
-    >>> float(repeat_probability(1e-6) / (1e-6 / np.sqrt(2 * np.pi)))  # a phi(0) for a fine grid
+    >>> round(float(repeat_probability(1e-6) / (1e-6 / np.sqrt(2 * np.pi))), 9)  # a phi(0) for a fine grid
     1.0
     """
     a = np.asarray(a, dtype=float)
@@ -156,14 +163,45 @@ def find_repeats(measurements: Measurements, *, level: float = 0.999) -> tuple[R
 
 
 def _resolution(idx: NDArray[np.intp], z: FloatArray, k: int) -> FloatArray:
-    """Each of ``k`` pairs' smallest gap between its distinct values (``inf`` for one value throughout)."""
+    """Each of ``k`` pairs' resolution (:func:`grid_step` of the gaps between its distinct values; ``inf`` for one
+    value throughout)."""
     order = np.lexsort((z, idx))
     i, zs = idx[order], z[order]
     gap = np.diff(zs)
     ok = (i[1:] == i[:-1]) & (gap > 0.0)
     out = np.full(k, np.inf)
-    np.minimum.at(out, i[1:][ok], gap[ok])
+    scale = float(np.max(np.abs(z))) if z.size else 0.0
+    for j in np.unique(i[1:][ok]):
+        out[j] = grid_step(gap[ok & (i[1:] == j)], scale)
     return out
+
+
+def grid_step(gaps: ArrayLike, scale: float = 0.0) -> float:
+    r"""The step of the grid that values with these ``gaps`` between them (sorted distinct values, all > 0) were
+    rounded to: the largest :math:`g_{\min}/j`, :math:`j \le` :data:`GRID_DIVISORS`, that every gap is a whole
+    multiple of (to :data:`GRID_TOLERANCE`, and the float rounding of values up to ``scale``); where there is none,
+    :math:`g_{\min}/` :data:`GRID_DIVISORS`, no finer than any grid the values may lie on.
+
+    Every gap of values on a grid is a whole multiple of its step, the smallest too, so the step is
+    :math:`g_{\min}/j` for a whole :math:`j`.  Values written to full precision lie on no grid, and the bound
+    only makes the test conservative.
+
+    Examples
+    --------
+    >>> grid_step(np.array([0.3, 0.1, 1.2])), grid_step(np.array([0.2, 0.3]))
+    (0.1, 0.1)
+    """
+    g = np.asarray(gaps, dtype=float)
+    g0 = float(g.min())
+    for first in range(1, GRID_DIVISORS + 1, 64):
+        j = np.arange(first, min(first + 64, GRID_DIVISORS + 1))
+        ratio = g[:, None] * j[None, :] / g0
+        # a gap of two values each rounded once is off its multiple by a few units in the last place of the values
+        tol = GRID_TOLERANCE + 8.0 * np.finfo(float).eps * scale * j / g0
+        on = np.all(np.abs(ratio - np.rint(ratio)) <= tol[None, :], axis=0)
+        if on.any():
+            return g0 / float(j[np.argmax(on)])
+    return g0 / GRID_DIVISORS
 
 
 def _longest_run(m: Measurements, rows: NDArray[np.intp]) -> tuple[int, float, float, float]:

@@ -13,7 +13,7 @@ from scipy.stats import norm
 import fgdoppler as fd
 from fgdoppler.cli.main import main
 from fgdoppler.estimators.judge import LEVEL, REJECT_DOUBTFUL, REPEATS_ADVICE
-from fgdoppler.repeats import drop_repeats, find_repeats, repeat_probability
+from fgdoppler.repeats import GRID_DIVISORS, drop_repeats, find_repeats, grid_step, repeat_probability
 
 A = fd.paper_geometry("a")
 
@@ -55,6 +55,20 @@ def test_the_chance_on_a_fine_grid_is_its_density_at_zero() -> None:
     # N(0, 2 sigma^2): q / (2 sigma sqrt(pi)) = a phi(0).
     a = np.array([1e-9, 1e-6, 1e-3])
     np.testing.assert_allclose(repeat_probability(a), a * norm.pdf(0.0), rtol=1e-3)
+
+
+@pytest.mark.parametrize(("step", "scale"), [(0.001, 1.0), (0.1, 3.05), (0.5, 1.0), (1.0, 0.2998)])
+def test_the_grid_of_rounded_values_is_found(step: float, scale: float) -> None:
+    # values rounded to a step (in Hz), converted with a wavelength as the reader does: every gap a whole multiple
+    # of step * wavelength, which is found however the smallest gap lies
+    z = -scale * np.round(np.random.default_rng(3).normal(0.0, 40.0, 200) / step) * step
+    u = np.unique(z)
+    assert grid_step(np.diff(u), float(np.max(np.abs(z)))) == pytest.approx(step * scale, rel=1e-9)
+
+
+def test_values_on_no_grid_get_their_smallest_gap_over_the_divisors() -> None:
+    u = np.unique(np.random.default_rng(4).normal(0.0, 40.0, 200))
+    assert grid_step(np.diff(u), 200.0) == pytest.approx(np.diff(u).min() / GRID_DIVISORS)
 
 
 @pytest.mark.parametrize("step", [0.0, 0.02, 0.2, 0.5, 1.0, 2.0])
