@@ -13,7 +13,13 @@ from scipy.stats import norm
 import fgdoppler as fd
 from fgdoppler.cli.main import main
 from fgdoppler.estimators.judge import LEVEL, REJECT_DOUBTFUL, REPEATS_ADVICE
-from fgdoppler.repeats import GRID_DIVISORS, drop_repeats, find_repeats, grid_step, repeat_probability
+from fgdoppler.repeats import (
+    GRID_DIVISORS,
+    drop_repeats,
+    find_repeats,
+    grid_step,
+    repeat_probability,
+)
 
 A = fd.paper_geometry("a")
 
@@ -166,6 +172,11 @@ def test_track_drops_repeats_when_asked(tmp_path: Path, capsys: pytest.CaptureFi
     main(["track", str(tmp_path / "held.csv"), "--estimator", "ekf", "--allow-failed"])
     err = capsys.readouterr().err
     assert REPEATS_ADVICE in err and "hint: a pair repeats its values" in err
+    # the initiation alone: its window (10 measurements a pair, 3 of pair 0's held) is tested
+    main(["track", str(tmp_path / "held.csv"), "--estimator", "init", "--json"])
+    d = json.loads(capsys.readouterr().out)
+    assert any(r["code"] == "data" and REPEATS_ADVICE in r["message"] and "3 of its 10" in r["message"]
+               for r in d["reasons"])
     assert main(["track", str(tmp_path / "held.csv"), "--estimator", "ekf", "--drop-repeats", "--json"]) == 0
     out = capsys.readouterr()
     assert f"left out {rows.size} of pair 0's" in out.err

@@ -27,7 +27,7 @@ from fgdoppler.cli.common import (
     taking,
 )
 from fgdoppler.estimators.initiation import METHODS
-from fgdoppler.estimators.judge import LEVEL, REPEATS_ADVICE
+from fgdoppler.estimators.judge import LEVEL, REPEATS_ADVICE, repeat_reasons
 from fgdoppler.estimators.later_mistakes import UNCONFIRMED, is_mistake_finding
 from fgdoppler.estimators.manoeuvre import SIGMA_ADVICE
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
@@ -280,6 +280,8 @@ def _run(args: argparse.Namespace) -> int:
             print("doppler_hz read as the bistatic range rate -wavelength * doppler_hz, with wavelengths "
                   + ", ".join(f"{v:g}" for v in geom.wavelengths) + " m (every result is in m and m/s)")
     if args.estimator == "init":
+        # a track's verdict tests the whole recording for repeats; the window's is tested here
+        init = replace(init, reasons=(*init.reasons, *repeat_reasons(window, model)))
         status = _report_initiation(args, init, window, geom, truth, where)
     else:
         status = _run_tracker(args, tracker, init, meas, model, truth, where)
