@@ -119,6 +119,7 @@ from fgdoppler.estimators.judge import LEVEL, REPEATS_ADVICE
 from fgdoppler.estimators.later_mistakes import MISTAKE_CODES, UNCONFIRMED, is_mistake_finding
 from fgdoppler.estimators.manoeuvre import SIGMA_ADVICE
 from fgdoppler.estimators.registry import estimator_info
+from fgdoppler.estimators.verdict import status_of
 from fgdoppler.repeats import drop_repeats, find_repeats
 
 
@@ -365,7 +366,9 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
                        unconfirmed=any(x.code == UNCONFIRMED for x in r.reasons),
                        manoeuvre=any(x.code == "manoeuvre" for x in r.reasons),
                        sigma_small=any(x.code == "manoeuvre" and SIGMA_ADVICE in x.message for x in r.reasons),
-                       repeats=any(x.code == "data" and REPEATS_ADVICE in x.message for x in r.reasons))
+                       repeats=any(x.code == "data" and REPEATS_ADVICE in x.message for x in r.reasons),
+                       but_repeats=status_of(x for x in r.reasons
+                                             if not (x.code == "data" and REPEATS_ADVICE in x.message)))
         out[name] = row
     return out
 
@@ -389,6 +392,13 @@ def one(task: tuple[int, int, int], track: int = 1, late: float = 0.5, clock_sig
     return out
 
 
+def _repeats_cell(got: list[dict[str, Any]]) -> str:
+    """The repeats column: tracks with the finding (of them, ``ok`` but for it, and of those, beyond 3 sigma)."""
+    found = [g for g in got if g.get("repeats")]
+    but = [g for g in found if g.get("but_repeats") == "ok"]
+    return f"{len(found)} ({len(but)}, {sum(g['error'] > 3.0 * g['sigma'] for g in but)})"
+
+
 def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) -> list[str]:
     lines = [f"### {where}", "", "| data | recordings | sign / swapped / radial / units finding | names the change made "
              "(first / among the others) | outliers finding (names exactly the two made) | " + (f"{estimator} ok | ok and beyond 3 sigma | named later by the "
@@ -396,7 +406,7 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) 
                                                  f"window's finding ranked by the {estimator} (the change made "
                                                  f"first) | the window's finding unconfirmed by the {estimator} | "
                                                  f"the {estimator}'s manoeuvre finding (saying the sigma are too "
-                                                 f"small) | the {estimator}'s repeats finding |" if track else ""),
+                                                 f"small) | the {estimator}'s repeats finding (ok but for it, beyond 3 sigma) |" if track else ""),
              "|---|---|---|---|---|" + ("---|---|---|---|---|---|---|" if track else "")]
     for name in ALL_VERSIONS:
         got = [r[where][name] for r in rows if where in r and name in r[where] and "refused" not in r[where][name]]
@@ -418,7 +428,7 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) 
             line += (f" {len(ok)} | {wrong} | {len(later)} ({sum(x == w for x, w in later) if wanted else '—'}) | "
                      f"{len(ranked)} ({sum(x == w for x, w in ranked) if wanted else '—'}) | "
                      f"{sum(bool(g.get('unconfirmed')) for g in got)} | {sum(bool(g.get('manoeuvre')) for g in got)} "
-                     f"({sum(bool(g.get('sigma_small')) for g in got)}) | {sum(bool(g.get('repeats')) for g in got)} |")
+                     f"({sum(bool(g.get('sigma_small')) for g in got)}) | {_repeats_cell(got)} |")
         lines.append(line)
     return [*lines, ""]
 
