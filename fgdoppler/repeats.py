@@ -15,8 +15,17 @@ chance that both fall in one cell is, with :math:`D` their difference (:math:`\m
 :math:`a\,\varphi(0) = q / (2\sigma\sqrt\pi)` for a fine grid.  The truth's own change between the two
 measurements only lowers it, so :math:`p` bounds the chance from above.  Of a pair's :math:`n` measurements in
 time order, the number :math:`m` equal to the one before is then at most Binomial(:math:`n - 1, p`) by chance,
-and the pair is *found repeating* where :math:`P(M \ge m)` is below :math:`(1 - \text{level}) / P` for the
+and the pair is *found repeating* where :math:`P(M \ge m)` is below :math:`(1 - \text{level}) / 2P` for the
 :math:`P` pairs tested (:func:`find_repeats`).
+
+A receiver that writes a fixed value (say 0) in its gaps between real measurements repeats it, not always in a
+row.  Any one measurement takes a given value of the grid with chance at most
+:math:`c = 2\Phi(q / 2\sigma) - 1`, that of the cell about its mean whatever the truth, so the chance that some
+value comes :math:`k` or more times among :math:`n` is at most
+:math:`n\,P(\text{Binomial}(n - 1, c) \ge k - 1)` (the union over which measurement first takes it); counted
+as the runs of one value it starts (a held run once), the bound holds all the more.  Where that is below the same
+bound the value is *fixed*, no measurement wherever it stands; so is the value of a pair that gives one value
+throughout.
 
 Neither :math:`q` nor the noise is taken on trust, so that right data are not called repeating:
 
@@ -44,7 +53,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import erf
-from scipy.stats import binom
+from scipy.stats import binom, norm
 
 from fgdoppler.measurements import Measurements
 
@@ -83,9 +92,13 @@ class Repeats:
         The noise :math:`\\sigma` the test took (m/s).
     longest, value, start, end
         The longest run of one value: its measurements, the value (m/s), its first and last time (s).
+    fixed, fixed_count, fixed_chance
+        The value that starts more of the pair's runs than noise allows, or the pair's one value throughout (a
+        fixed value written without a detection; ``None`` where neither), how many runs its most frequent value
+        starts, and the chance of that by noise (bounded above, module docstring).
     rows
         The indices in the measurements of what :func:`drop_repeats` leaves out: the repeats (each a
-        measurement equal to the one before), or every measurement of a pair with one value throughout.
+        measurement equal to the one before) and every measurement of the fixed value.
     """
 
     pair: int
@@ -98,6 +111,9 @@ class Repeats:
     value: float
     start: float
     end: float
+    fixed: float | None
+    fixed_count: int
+    fixed_chance: float
     rows: NDArray[np.intp] = field(repr=False, compare=False)
 
 
@@ -117,15 +133,15 @@ def repeat_probability(a: ArrayLike) -> FloatArray:
 
 def find_repeats(measurements: Measurements, *, level: float = 0.999) -> tuple[Repeats, ...]:
     """The pairs of ``measurements`` that repeat their values more often than noise on their resolution allows
-    (module docstring), in the order of their indices.
+    (module docstring: in a row, or one value anywhere), in the order of their indices.
 
     Parameters
     ----------
     measurements
         Any measurements.
     level
-        The test's level for the whole recording (Bonferroni over the pairs tested): right data are found
-        repeating at most ``1 - level`` of the time.
+        The tests' level for the whole recording (Bonferroni over the pairs tested and the two tests): right data
+        are found repeating at most ``1 - level`` of the time.
     """
     if not 0.0 < level < 1.0:
         raise ValueError(f"level must lie in (0, 1), got {level:g}")
@@ -138,30 +154,65 @@ def find_repeats(measurements: Measurements, *, level: float = 0.999) -> tuple[R
     equal = same & (step == 0.0)
     k = pairs.size
     repeats = np.bincount(i[1:][equal], minlength=k)
-    stated = np.sqrt(np.bincount(idx, weights=m.sigma ** 2, minlength=k) / counts)
     resolution = _resolution(idx, m.doppler, k)
+    q, sigma = _grid_and_noise(m, idx, i, step, same, resolution, counts)
+    tested = (q <= sigma) & (counts > 1)
+    bound = (1.0 - level) / (2 * max(int(tested.sum()), 1))
+    chance = np.where(repeats > 0, binom.sf(repeats - 1, counts - 1, repeat_probability(q / (sigma * np.sqrt(2.0)))),
+                      1.0)
+    modal, value = _modal(i, z, k)
+    # any one measurement takes a given value of the grid with chance at most that of the cell about its mean; the
+    # union over which measurement first takes the value bounds the chance that some value starts that many runs
+    cell = 2.0 * norm.cdf(q / (2.0 * sigma)) - 1.0
+    recurs = np.minimum(counts * binom.sf(modal - 2, counts - 1, cell), 1.0)
+    constant = ~np.isfinite(resolution)
+    out = []
+    for j in np.flatnonzero(tested & ((chance < bound) | (recurs < bound))):
+        # a pair with one value throughout has no measurement to tell from that value either
+        fixed = recurs[j] < bound or constant[j]
+        rows = order[1:][equal & (i[1:] == j)]
+        if fixed:  # a fixed value written without a detection is no measurement wherever it stands
+            rows = np.union1d(rows, np.flatnonzero((m.pair == pairs[j]) & (m.doppler == value[j])))
+        longest, run_value, start, end = _longest_run(m, order[i == j])
+        out.append(Repeats(pair=int(pairs[j]), measurements=int(counts[j]), repeats=int(repeats[j]),
+                           chance=float(chance[j]),
+                           resolution=float(resolution[j]) if np.isfinite(resolution[j]) else None,
+                           sigma=float(sigma[j]), longest=longest, value=run_value, start=start, end=end,
+                           fixed=float(value[j]) if fixed else None, fixed_count=int(modal[j]),
+                           fixed_chance=float(recurs[j]), rows=np.sort(rows)))
+    return tuple(out)
+
+
+def _grid_and_noise(m: Measurements, idx: NDArray[np.intp], i: NDArray[np.intp], step: FloatArray,
+                    same: NDArray[np.bool_], resolution: FloatArray, counts: NDArray[np.intp]
+                    ) -> tuple[FloatArray, FloatArray]:
+    """Each pair's grid step :math:`q` and noise :math:`\\sigma` as the tests take them (module docstring)."""
+    k = resolution.size
+    stated = np.sqrt(np.bincount(idx, weights=m.sigma ** 2, minlength=k) / counts)
     # each step is the difference of two rounded noisy values: variance 2 sigma^2 + q^2 / 6 (Sheppard)
     n_steps = np.bincount(i[1:][same], minlength=k)
     step_ms = np.bincount(i[1:][same], weights=step[same] ** 2, minlength=k) / np.maximum(n_steps, 1)
     finite_q = np.where(np.isfinite(resolution), resolution, 0.0)
     scatter = np.sqrt(np.maximum(step_ms - finite_q ** 2 / 6.0, 0.0) / 2.0)
     sigma = np.where(scatter > 0.0, np.minimum(stated, scatter), stated)
-    q = np.where(np.isfinite(resolution), resolution, sigma)
-    tested = (q <= sigma) & (counts > 1)
-    p = repeat_probability(q / (sigma * np.sqrt(2.0)))
-    chance = np.where(repeats > 0, binom.sf(repeats - 1, counts - 1, np.minimum(p, 1.0)), 1.0)
-    found = np.flatnonzero(tested & (chance < (1.0 - level) / max(int(tested.sum()), 1)))
-    out = []
-    for j in found:
-        # a pair with one value throughout has no measurement to tell from its fixed value: all of it goes
-        rows = order[i == j] if not np.isfinite(resolution[j]) else order[1:][equal & (i[1:] == j)]
-        longest, value, start, end = _longest_run(m, order[i == j])
-        out.append(Repeats(pair=int(pairs[j]), measurements=int(counts[j]), repeats=int(repeats[j]),
-                           chance=float(chance[j]),
-                           resolution=float(resolution[j]) if np.isfinite(resolution[j]) else None,
-                           sigma=float(sigma[j]), longest=longest, value=value, start=start, end=end,
-                           rows=np.sort(rows)))
-    return tuple(out)
+    return np.where(np.isfinite(resolution), resolution, sigma), sigma
+
+
+def _modal(i: NDArray[np.intp], z: FloatArray, k: int) -> tuple[NDArray[np.intp], FloatArray]:
+    """Each of ``k`` pairs' value that starts the most runs (``i``, ``z``: the pairs' measurements each in time
+    order) and how many it starts (the largest value among equals): a held run counts once."""
+    first = np.r_[True, (i[1:] != i[:-1]) | (z[1:] != z[:-1])]
+    ir, zr = i[first], z[first]
+    order = np.lexsort((zr, ir))
+    ir, zr = ir[order], zr[order]
+    starts = np.flatnonzero(np.r_[True, (ir[1:] != ir[:-1]) | (zr[1:] != zr[:-1])])
+    runs = np.diff(np.r_[starts, zr.size])
+    count = np.zeros(k, dtype=np.intp)
+    np.maximum.at(count, ir[starts], runs)
+    best = runs == count[ir[starts]]
+    value = np.full(k, np.nan)
+    value[ir[starts][best]] = zr[starts][best]
+    return count, value
 
 
 def _resolution(idx: NDArray[np.intp], z: FloatArray, k: int) -> FloatArray:
@@ -223,11 +274,11 @@ def _longest_run(m: Measurements, rows: NDArray[np.intp]) -> tuple[int, float, f
 def drop_repeats(measurements: Measurements, found: tuple[Repeats, ...] | None = None) -> Measurements:
     """``measurements`` without the repeats of the pairs found repeating (``found``, else :func:`find_repeats`
     at its default level): of each run of one value the first measurement stays (the value a receiver holds was
-    measured once), except where a pair gives one value throughout, which is left out whole.
+    measured once), and every measurement of a value found fixed goes (a dead receiver's value throughout, or
+    one written in many of the gaps).
 
-    A receiver that writes a fixed value (say 0) in its gaps between real measurements keeps the first of each
-    such run: a gross outlier, for the gate or the Huber loss (``--huber``), which no test here can tell from a
-    held real value.
+    A fixed value that comes too seldom to be found stays: a gross outlier, for the gate or the Huber loss
+    (``--huber``).
     """
     found = find_repeats(measurements) if found is None else found
     keep = np.ones(len(measurements), dtype=bool)

@@ -4,8 +4,9 @@ receiver that holds its last value?
 Each recording is one of the paper's two geometries with a target drawn anywhere in the default zone (speed up to
 150 m/s in each axis, 30 s at 2 Hz, sigma 1 m/s).  Its Doppler is written rounded to a grid of step ``q`` (none,
 0.05, 0.1, 0.3, 0.7 and 1 sigma) with the sigma stated as they are or 2 or 5 times too large, and each version is
-tested as it is (right data: a finding is a false alarm, at most one in a thousand at the verdict's level) and with
-pair 1 holding its last value at 10 % of its measurements (drawn at random) and at every third.
+tested as it is (right data: a finding is a false alarm, at most one in a thousand at the verdict's level), with
+pair 1 holding its last value at 10 % of its measurements (drawn at random) and at every third, and with pair 1
+reading 0 at 10 % of its measurements (drawn at random: a fixed value written without a detection).
 
 Run: python studies/repeats_test.py [--recordings 500] [--out DIR]   (about 1 min on 2 cores at the default)
 """
@@ -21,7 +22,7 @@ from fgdoppler.repeats import find_repeats
 
 STEPS = (0.0, 0.05, 0.1, 0.3, 0.7, 1.0)
 SIGMA_FACTORS = (1.0, 2.0, 5.0)
-HOLDS = ("none", "10 % at random", "every third")
+HOLDS = ("none", "10 % at random", "every third", "0 at 10 % at random")
 
 
 def _held(m: fd.Measurements, how: str, rng: np.random.Generator) -> fd.Measurements:
@@ -29,6 +30,9 @@ def _held(m: fd.Measurements, how: str, rng: np.random.Generator) -> fd.Measurem
         return m
     z = m.doppler.copy()
     rows = np.flatnonzero(m.pair == 1)
+    if how.startswith("0 at"):  # a fixed value written where the receiver has no detection
+        z[rows[rng.random(rows.size) < 0.1]] = 0.0
+        return fd.Measurements(time=m.time, pair=m.pair, doppler=z, sigma=m.sigma)
     pos = np.arange(rows.size)
     held = (rng.random(rows.size) < 0.1) if how == "10 % at random" else (pos % 3 == 0)
     held[0] = False
@@ -56,7 +60,8 @@ def one(k: int) -> dict[str, bool]:
 
 def main() -> None:
     args, rows = _common.each_count(one, __doc__.splitlines()[0], "recordings", 500)
-    lines = [f"{len(rows)} recordings; found repeating (of {len(rows)}), pair 1 holding its last value:", "",
+    lines = [f"{len(rows)} recordings; found repeating (of {len(rows)}), pair 1 holding its last value or writing 0:",
+             "",
              "| grid step (sigma) | sigma stated | " + " | ".join(HOLDS) + " |", "|---|---|" + "---|" * len(HOLDS)]
     for step in STEPS:
         for f in SIGMA_FACTORS:

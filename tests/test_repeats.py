@@ -80,10 +80,13 @@ def test_values_on_no_grid_get_their_smallest_gap_over_the_divisors() -> None:
 @pytest.mark.parametrize("step", [0.0, 0.02, 0.2, 0.5, 1.0, 2.0])
 def test_right_data_are_not_found_repeating_however_rounded(step: float) -> None:
     # Right recordings rounded to a grid from none to twice sigma (where most successive values repeat); the
-    # test is at 99.9 % a recording, so over 40 recordings a finding would come by chance with probability 0.04.
+    # tests are at 99.9 % a recording together, so over 40 recordings a finding would come by chance with
+    # probability at most 0.04.
     found = []
     for seed in range(40):
-        m = _recording(seed, x0=(25e3 + 500.0 * seed, 2e3, 10.0, -100.0))
+        # a quarter of them stationary: the Doppler near 0 throughout, where one value recurs most by chance
+        velocity = (0.0, 0.0) if seed % 4 == 0 else (10.0, -100.0)
+        m = _recording(seed, x0=(25e3 + 500.0 * seed, 2e3, *velocity))
         z = m.doppler if step == 0.0 else np.round(m.doppler / step) * step
         found += find_repeats(_with(m, z), level=LEVEL)
     assert not found
@@ -122,11 +125,34 @@ def test_a_held_value_on_a_fine_grid_is_found() -> None:
     assert r.pair == 0 and r.repeats >= rows.size
 
 
+def test_a_value_written_in_the_gaps_is_found_fixed_and_left_out_wherever_it_stands() -> None:
+    # a receiver writing 0 where it has no detection, at a tenth of its scans, none of them in a row
+    m = _recording(8)
+    rows = np.flatnonzero(m.pair == 1)[2::10]
+    z = m.doppler.copy()
+    z[rows] = 0.0
+    (r,) = find_repeats(_with(m, z))
+    assert r.pair == 1 and r.repeats == 0 and r.fixed == 0.0 and r.fixed_count == rows.size
+    np.testing.assert_array_equal(r.rows, rows)
+    np.testing.assert_array_equal(drop_repeats(_with(m, z)).doppler, np.delete(m.doppler, rows))
+
+
+def test_a_held_run_is_no_fixed_value() -> None:
+    # one value held for ten scans: its first measurement is the receiver's, and stays
+    m = _recording(9)
+    rows = np.flatnonzero(m.pair == 0)
+    z = m.doppler.copy()
+    z[rows[21:30]] = z[rows[20]]
+    (r,) = find_repeats(_with(m, z))
+    assert r.fixed is None and r.longest == 10
+    np.testing.assert_array_equal(r.rows, rows[21:30])
+
+
 def test_a_dead_receiver_is_left_out_whole() -> None:
     m = _recording(5)
     z = np.where(m.pair == 1, 0.0, m.doppler)
     (r,) = find_repeats(_with(m, z))
-    assert r.resolution is None and r.value == 0.0 and r.longest == r.measurements == r.repeats + 1
+    assert r.resolution is None and r.value == r.fixed == 0.0 and r.longest == r.measurements == r.repeats + 1
     kept = drop_repeats(_with(m, z))
     assert set(kept.pair.tolist()) == {0} and len(kept) == int(np.sum(m.pair == 0))
 

@@ -169,8 +169,8 @@ def _dropped_repeats(args: argparse.Namespace, meas: Any, geom: Geometry) -> tup
         print("--drop-repeats: no pair repeats its values more often than noise allows; every measurement kept",
               file=sys.stderr)
     for r in found:
-        what = ("each equal to the one before" if r.resolution is not None else
-                "every one: it gives one value throughout")
+        what = ("each equal to the one before" if r.fixed is None else
+                f"the repeats and every {r.fixed:g} m/s (a fixed value)")
         print(f"--drop-repeats: left out {r.rows.size} of pair {geom.pair_label(r.pair)}'s {r.measurements} "
               f"measurements, {what}", file=sys.stderr)
     return drop_repeats(meas, found), {"dropped_repeats": {str(r.pair): int(r.rows.size) for r in found}}

@@ -228,18 +228,26 @@ def repeat_reasons(measurements: Measurements, model: TrackingModel) -> list[Rea
     for r in found:
         grid = (f"a resolution of {r.resolution:.2g} m/s" if r.resolution is not None
                 else "a resolution as coarse as that (it gives one value throughout)")
-        parts.append(
-            f"pair {label(r.pair)} repeats its previous Doppler in {r.repeats} of its {r.measurements} measurements "
-            f"(the longest run: {r.value:g} m/s {r.longest} times, t = {time_text(r.start)}..{time_text(r.end)} s); "
-            f"noise of sigma {r.sigma:.2g} m/s on {grid} repeats so often with chance {r.chance:.1g}")
-    share = sum(r.repeats for r in found) / len(measurements)
+        said = []
+        if r.repeats:
+            said.append(
+                f"repeats its previous Doppler in {r.repeats} of its {r.measurements} measurements (the longest "
+                f"run: {r.value:g} m/s {r.longest} times, t = {time_text(r.start)}..{time_text(r.end)} s; chance "
+                f"{r.chance:.1g})")
+        if r.fixed is not None:
+            said.append(f"gives {r.fixed:g} m/s throughout" if r.resolution is None else
+                        f"gives {r.fixed:g} m/s in {r.fixed_count} separate runs (chance at most "
+                        f"{r.fixed_chance:.1g})")
+        parts.append(f"pair {label(r.pair)} {' and '.join(said)}, where noise of sigma {r.sigma:.2g} m/s on {grid} "
+                     "would not")
+    share = sum(r.rows.size for r in found) / len(measurements)
     status: Status = "doubtful" if share > REJECT_DOUBTFUL else "ok"
     tail = ("" if status == "doubtful" else
             f"; they are {100 * share:.1f} % of the measurements, too few to make the track doubtful")
     return [Reason(code="data", status=status, message=(
         "; ".join(parts) + ": a receiver that holds its last value, or writes a fixed one, when it has no "
         f"detection — repeats are not measurements: {REPEATS_ADVICE} keeps the first of each run and leaves "
-        f"out a pair with one value throughout; fgdoppler.repeats.drop_repeats) or the pair{tail}"))]
+        f"out every measurement of a fixed value; fgdoppler.repeats.drop_repeats) or the pair{tail}"))]
 
 
 def _one_line_reason(used: NDArray[np.int64], dim: int) -> Reason:
