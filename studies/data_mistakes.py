@@ -51,7 +51,8 @@ Three mistakes, each checked on the same recordings:
   nothing of the kind on the manoeuvring recordings or with a receiver misplaced (the table's last column).
 * **A receiver that holds or writes a fixed value.**  Every third of pair 1's measurements the one before it
   (``pair 1 holds a third of its values``: a receiver holding its last value without a detection), or pair 1
-  reading 0 throughout (``pair 1 reads 0 throughout``: a dead one); each also with the repeats the verdict finds
+  reading 0 throughout (``pair 1 reads 0 throughout``: a dead one), or 0 at every tenth of its measurements
+  (``pair 1 reads 0 at a tenth of its scans``: one that writes 0 without a detection); each also with the repeats the verdict finds
   left out (``... (repeats dropped)``, as ``track --drop-repeats`` does: :mod:`fgdoppler.repeats`).  The
   smoother's ``data`` finding should name the repeats (the table's last column) and nothing on the other
   versions.
@@ -178,6 +179,16 @@ def _dead(m: fd.Measurements, g: fd.Geometry, late: float, *, dropped: bool) -> 
     return drop_repeats(out, find_repeats(out, level=LEVEL)) if dropped else out
 
 
+def _gaps(m: fd.Measurements, g: fd.Geometry, late: float, *, dropped: bool) -> fd.Measurements:
+    """``m`` with 0 in every tenth of pair 1's measurements, from its third (a receiver writing 0 where it has no
+    detection); ``dropped``: then without what the verdict finds (``track --drop-repeats``)."""
+    rows = np.flatnonzero(m.pair == 1)[2::10]
+    z = m.doppler.copy()
+    z[rows] = 0.0
+    out = fd.Measurements(time=m.time, pair=m.pair, doppler=z, sigma=m.sigma)
+    return drop_repeats(out, find_repeats(out, level=LEVEL)) if dropped else out
+
+
 def _late(m: fd.Measurements, seconds: float) -> fd.Measurements:
     """``m`` with pair 1's times ``seconds`` late (its receiver's clock off)."""
     return fd.Measurements.from_arrays(np.where(m.pair == 1, m.time + seconds, m.time), m.pair, m.doppler, m.sigma,
@@ -191,6 +202,7 @@ MANOEUVRE = "target manoeuvres"
 #: A receiver holding its last value (every third of pair 1's measurements the one before), and a dead one.
 HELD = "pair 1 holds a third of its values"
 DEAD = "pair 1 reads 0 throughout"
+GAPS = "pair 1 reads 0 at a tenth of its scans"
 
 #: The versions of each recording: name -> (the data given the geometry and the clock's lateness in s, the change
 #: of the data that a mistake finding should name given the geometry, as it words it — "" for none —, whether the
@@ -213,6 +225,8 @@ VERSIONS: dict[str, tuple[Callable[[fd.Measurements, fd.Geometry, float], fd.Mea
     f"{HELD} (repeats dropped)": (functools.partial(_held, dropped=True), lambda g: "", False),
     DEAD: (functools.partial(_dead, dropped=False), lambda g: "", False),
     f"{DEAD} (repeats dropped)": (functools.partial(_dead, dropped=True), lambda g: "", False),
+    GAPS: (functools.partial(_gaps, dropped=False), lambda g: "", False),
+    f"{GAPS} (repeats dropped)": (functools.partial(_gaps, dropped=True), lambda g: "", False),
 }
 
 #: The version whose geometry gives the sensors in kilometres (the data as simulated): a ``units`` finding is right.
