@@ -30,7 +30,7 @@ throughout.
 Neither :math:`q` nor the noise is taken on trust, so that right data are not called repeating:
 
 - :math:`q` is the step of the grid the pair's values lie on (:func:`grid_step`: the smallest gap between its
-  distinct values divided by the smallest whole number that puts every gap on the grid), or, for values
+  distinct values divided by the smallest whole number that puts the gaps on the grid), or, for values
   written to full precision, that gap over :data:`GRID_DIVISORS`: coarser than their true resolution, which
   only makes the test conservative; a pair with one value throughout takes :math:`q = \sigma` (the
   coarsest resolution tested);
@@ -43,7 +43,9 @@ Neither :math:`q` nor the noise is taken on trust, so that right data are not ca
   repeat whenever the truth moves less than a grid step.
 
 Under continuous noise written to full precision equal successive values do not occur; on the paper's six
-scenarios no pair is found repeating.
+scenarios no pair is found repeating.  ``python studies/repeats_test.py`` measures the false alarms on right data
+rounded to grids of up to one sigma and the power against held and fixed values (docs/concepts.md, the verdict
+table's ``data`` row).
 """
 
 from __future__ import annotations
@@ -57,7 +59,8 @@ from scipy.stats import binom, norm
 
 from fgdoppler.measurements import Measurements
 
-__all__ = ["GRID_DIVISORS", "GRID_GAPS", "GRID_TOLERANCE", "Repeats", "drop_repeats", "find_repeats", "grid_step", "repeat_probability"]
+__all__ = ["GRID_DIVISORS", "GRID_GAPS", "GRID_TOLERANCE", "Repeats", "drop_repeats", "find_repeats", "grid_step",
+           "repeat_probability"]
 
 FloatArray = NDArray[np.float64]
 

@@ -108,7 +108,7 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--drop-repeats", action="store_true",
                    help="leave out the repeats of every pair found repeating its Doppler more often than noise allows "
                         "(a receiver that holds its last value, or writes a fixed one, without a detection: the data "
-                        "finding); the first measurement of each run stays")
+                        "finding): the first measurement of each run stays, every measurement of a fixed value goes")
     p.add_argument("--truth", type=Path, default=None, help="truth CSV (time,x,y,vx,vy; 3-D time,x,y,z,vx,vy,vz) for --plot and errors")
     p.add_argument("--out", type=Path, default=None, help="write the track as CSV (and .json beside it)")
     p.add_argument("--json", action="store_true", help="machine-readable result on stdout")
@@ -352,8 +352,9 @@ def mistake_hint(reasons: Any) -> str | None:
     ``sign``, ``swapped`` or ``radial`` change of the data, the geometry in kilometres or the times in another
     unit) and another advises a zone or a half plane: that advice reads the mistaken data or units as given.
     Likewise to give the right sigma first where the manoeuvre finding says they look too small, and to track with
-    the Huber loss first where the initiation window fits without a few outliers (an ``outliers`` finding).
-    ``None`` otherwise."""
+    the Huber loss first where the initiation window fits without a few outliers (an ``outliers`` finding), and
+    before all of these to leave out repeated values where a ``data`` finding says a pair repeats them (every other
+    finding reads them as measurements).  ``None`` otherwise."""
     # a track's findings carry its initiation's under the "initiation-" prefix; both name the mistake alike
     if any(r.status != "ok" and REPEATS_ADVICE in r.message for r in reasons):
         return ("a pair repeats its values (the data finding above): track again with --drop-repeats, or without "

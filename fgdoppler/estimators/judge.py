@@ -60,7 +60,8 @@ the status is the worst of them, :mod:`fgdoppler.estimators.verdict`).
     values more often than noise on the file's resolution allows
     (:func:`repeat_reasons`, :mod:`fgdoppler.repeats`): a receiver that holds
     its last value, or writes a fixed one, without a detection; ``"doubtful"``
-    where the repeats are more than :data:`REJECT_DOUBTFUL` of the data.
+    where what ``--drop-repeats`` would leave out is more than
+    :data:`REJECT_DOUBTFUL` of the data.
 ``zone`` — ``"doubtful"`` when a smoothed track starts more than
     :data:`ZONE_TOLERANCE` outside the zone: the initiation assumed a start
     inside it, and the whole recording says otherwise (or cannot place the
@@ -218,8 +219,9 @@ def _data_reasons(measurements: Measurements, model: TrackingModel, half_plane: 
 def repeat_reasons(measurements: Measurements, model: TrackingModel) -> list[Reason]:
     """The ``data`` finding of pairs that repeat their values more often than their noise allows
     (:func:`~fgdoppler.repeats.find_repeats` at :data:`LEVEL`): a receiver that holds its last value, or writes
-    a fixed one, when it has no detection.  ``"doubtful"`` where the repeats are more than
-    :data:`REJECT_DOUBTFUL` of the measurements, as rejections would be; informational below."""
+    a fixed one, when it has no detection.  ``"doubtful"`` where what :func:`~fgdoppler.repeats.drop_repeats`
+    leaves out is more than :data:`REJECT_DOUBTFUL` of the measurements, as rejections would be; informational
+    below."""
     found = find_repeats(measurements, level=LEVEL)
     if not found:
         return []
