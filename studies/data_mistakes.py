@@ -162,6 +162,11 @@ def _sigma_scaled(m: fd.Measurements, g: fd.Geometry, late: float, *, factor: fl
     return fd.Measurements(time=m.time, pair=m.pair, doppler=m.doppler, sigma=factor * m.sigma)
 
 
+def _dropped(m: fd.Measurements) -> fd.Measurements:
+    """``m`` without what the verdict finds repeated (``track --drop-repeats``)."""
+    return drop_repeats(m, find_repeats(m, level=LEVEL))
+
+
 def _held(m: fd.Measurements, g: fd.Geometry, late: float, *, dropped: bool) -> fd.Measurements:
     """``m`` with every third measurement of pair 1 the one before it (a receiver holding its last value where it
     has no detection); ``dropped``: then without the repeats the verdict finds (``track --drop-repeats``)."""
@@ -169,14 +174,14 @@ def _held(m: fd.Measurements, g: fd.Geometry, late: float, *, dropped: bool) -> 
     rows = np.flatnonzero(m.pair == 1)
     z[rows[3::3]] = z[rows[2::3][:rows[3::3].size]]
     out = fd.Measurements(time=m.time, pair=m.pair, doppler=z, sigma=m.sigma)
-    return drop_repeats(out, find_repeats(out, level=LEVEL)) if dropped else out
+    return _dropped(out) if dropped else out
 
 
 def _dead(m: fd.Measurements, g: fd.Geometry, late: float, *, dropped: bool) -> fd.Measurements:
     """``m`` with pair 1 reading 0 throughout (a dead receiver whose software writes 0 without a detection);
     ``dropped``: then without the repeats the verdict finds (``track --drop-repeats``: all of pair 1)."""
     out = fd.Measurements(time=m.time, pair=m.pair, doppler=np.where(m.pair == 1, 0.0, m.doppler), sigma=m.sigma)
-    return drop_repeats(out, find_repeats(out, level=LEVEL)) if dropped else out
+    return _dropped(out) if dropped else out
 
 
 def _gaps(m: fd.Measurements, g: fd.Geometry, late: float, *, dropped: bool) -> fd.Measurements:
@@ -186,7 +191,7 @@ def _gaps(m: fd.Measurements, g: fd.Geometry, late: float, *, dropped: bool) -> 
     z = m.doppler.copy()
     z[rows] = 0.0
     out = fd.Measurements(time=m.time, pair=m.pair, doppler=z, sigma=m.sigma)
-    return drop_repeats(out, find_repeats(out, level=LEVEL)) if dropped else out
+    return _dropped(out) if dropped else out
 
 
 def _late(m: fd.Measurements, seconds: float) -> fd.Measurements:
