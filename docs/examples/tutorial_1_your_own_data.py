@@ -111,6 +111,32 @@ for ax, (name, r) in zip(axes, results.items(), strict=True):
     ax.set_title(f"{name}: {r.status}", fontsize="small")
 
 # %%
+# A receiver that holds its last value
+# ------------------------------------
+# Some receivers repeat their last value when they have no detection, or
+# write a fixed one (often 0).  Those rows are not measurements, and a track
+# through them can be confidently wrong.  Noise makes two successive values
+# equal only on a coarse grid, so every track tests each pair for values
+# repeated more often than noise on the file's resolution allows and says so
+# in a ``data`` finding; :func:`fgdoppler.repeats.drop_repeats` (``fgdoppler
+# track --drop-repeats``) leaves them out.  Here pair 2 holds every fourth
+# value.
+from fgdoppler.repeats import drop_repeats, find_repeats
+
+held = meas.doppler.copy()
+rows = np.flatnonzero(meas.pair == 2)
+held[rows[4::4]] = held[rows[3::4]][: rows[4::4].size]
+stale = fd.Measurements(time=meas.time, pair=meas.pair, doppler=held, sigma=meas.sigma)
+stale_track = fd.track(stale, geometry, "smoother")
+print("held values:", stale_track.status)
+for reason in stale_track.reasons:
+    if reason.code == "data":
+        print("   ", reason.message[:160], "...")
+print(find_repeats(stale))
+kept = drop_repeats(stale)
+print(f"{len(stale) - len(kept)} repeats left out:", fd.track(kept, geometry, "smoother").status)
+
+# %%
 # Writing the result
 # ------------------
 # ``to_csv`` writes time, state and the covariance's upper triangle;
