@@ -59,8 +59,8 @@ from scipy.stats import binom, norm
 
 from fgdoppler.measurements import Measurements
 
-__all__ = ["GRID_DIVISORS", "GRID_GAPS", "GRID_TOLERANCE", "Repeats", "drop_repeats", "find_repeats", "grid_step",
-           "repeat_probability"]
+__all__ = ["GRID_DIVISORS", "GRID_GAPS", "GRID_TOLERANCE", "Repeats", "Rounding", "coarse_rounding", "drop_repeats",
+           "find_repeats", "grid_step", "repeat_probability"]
 
 FloatArray = NDArray[np.float64]
 
@@ -216,6 +216,46 @@ def _modal(i: NDArray[np.intp], z: FloatArray, k: int) -> tuple[NDArray[np.intp]
     value = np.full(k, np.nan)
     value[ir[starts][best]] = zr[starts][best]
     return count, value
+
+
+@dataclass(frozen=True, kw_only=True)
+class Rounding:
+    """A pair whose values lie on a grid coarse against its sigma (:func:`coarse_rounding`).
+
+    Attributes
+    ----------
+    pair
+        The pair's index.
+    step
+        The grid's step :math:`q` (m/s, :func:`grid_step`).
+    sigma
+        The pair's stated sigma (root mean square, m/s).
+    with_rounding
+        :math:`\\sqrt{\\sigma^2 + q^2/12}`: the sigma with the rounding's noise in it (m/s).
+    """
+
+    pair: int
+    step: float
+    sigma: float
+    with_rounding: float
+
+
+def coarse_rounding(measurements: Measurements, *, share: float = 0.05) -> tuple[Rounding, ...]:
+    r"""The pairs whose values lie on a grid so coarse that rounding adds at least ``share`` of the stated
+    variance: a value rounded to a step :math:`q` carries a rounding error uniform over :math:`\pm q/2`, of
+    variance :math:`q^2/12`, which a sigma stated for the receiver's noise alone leaves out (a grid of two sigma
+    adds a third to the variance, and the whole-track χ² test of a long recording fails by that).
+
+    Values written to full precision lie on no grid (:func:`grid_step` then bounds the step far below sigma).
+    """
+    m = measurements
+    pairs, idx, counts = np.unique(m.pair, return_inverse=True, return_counts=True)
+    q = _resolution(idx, m.doppler, pairs.size)
+    sigma = np.sqrt(np.bincount(idx, weights=m.sigma ** 2, minlength=pairs.size) / counts)
+    coarse = np.isfinite(q) & (q ** 2 / 12.0 >= share * sigma ** 2)
+    return tuple(Rounding(pair=int(pairs[j]), step=float(q[j]), sigma=float(sigma[j]),
+                          with_rounding=float(np.sqrt(sigma[j] ** 2 + q[j] ** 2 / 12.0)))
+                 for j in np.flatnonzero(coarse))
 
 
 def _resolution(idx: NDArray[np.intp], z: FloatArray, k: int) -> FloatArray:

@@ -12,9 +12,10 @@ from scipy.stats import norm
 
 import fgdoppler as fd
 from fgdoppler.cli.main import main
-from fgdoppler.estimators.judge import LEVEL, REJECT_DOUBTFUL, REPEATS_ADVICE
+from fgdoppler.estimators.judge import LEVEL, REJECT_DOUBTFUL, REPEATS_ADVICE, ROUNDING_ADVICE
 from fgdoppler.repeats import (
     GRID_DIVISORS,
+    coarse_rounding,
     drop_repeats,
     find_repeats,
     grid_step,
@@ -219,3 +220,26 @@ def test_track_drops_repeats_when_asked(tmp_path: Path, capsys: pytest.CaptureFi
 def test_level_out_of_range_is_refused() -> None:
     with pytest.raises(ValueError, match="level"):
         find_repeats(_recording(0), level=1.0)
+
+
+def test_values_rounded_coarsely_explain_a_misfit_and_sigma_with_the_rounding_mend_it() -> None:
+    # Two minutes of case a rounded to 2 m/s with sigma 1 m/s stated: the residuals' variance is 1 + 4/12 times
+    # the model's, which the 476-dof fit test sees; sigma sqrt(1 + 1/3) state it and the track fits.
+    m = _recording(0, x0=(45e3, 2e3, 10.0, -100.0), duration=120.0)
+    coarse = _with(m, np.round(m.doppler / 2.0) * 2.0)
+    (r0, r1) = coarse_rounding(coarse)
+    assert (r0.pair, r1.pair) == (0, 1) and r0.step == pytest.approx(2.0)
+    assert r0.with_rounding == pytest.approx(np.sqrt(1.0 + 4.0 / 12.0))
+    result = fd.track(coarse, A, "smoother")
+    assert any(x.code == "fit" and x.status == "doubtful" for x in result.reasons)
+    (finding,) = [x for x in result.reasons if ROUNDING_ADVICE in x.message]
+    assert finding.code == "data" and finding.status == "ok" and "sigma 1.15 m/s with the rounding" in finding.message
+    mended = fd.track(_with(coarse, coarse.doppler, np.full(len(m), r0.with_rounding)), A, "smoother")
+    assert not any(x.code == "fit" and x.status != "ok" for x in mended.reasons)
+    assert not any(ROUNDING_ADVICE in x.message for x in mended.reasons)
+
+
+def test_fine_rounding_and_full_precision_are_not_coarse() -> None:
+    m = _recording(1)
+    assert not coarse_rounding(m)
+    assert not coarse_rounding(_with(m, np.round(m.doppler / 0.5) * 0.5))  # 0.25/12 = 2 % of sigma^2

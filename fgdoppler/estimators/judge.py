@@ -109,11 +109,11 @@ from fgdoppler.geometry import pair_labels, principal_line
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import DopplerModel
 from fgdoppler.models.tracking import TrackingModel
-from fgdoppler.repeats import find_repeats
+from fgdoppler.repeats import coarse_rounding, find_repeats
 from fgdoppler.zone import ZoneBox
 
 __all__ = ["COVARIANCE_RATIO", "LEVEL", "LOST", "MIN_FIT_DOF", "MIN_MEASUREMENTS", "REJECT_DOUBTFUL", "REJECT_FAILED",
-           "REJECT_ROBUST", "REMOTE_FACTOR", "REPEATS_ADVICE", "SPEED_FACTOR", "ZONE_TOLERANCE", "judge",
+           "REJECT_ROBUST", "REMOTE_FACTOR", "REPEATS_ADVICE", "ROUNDING_ADVICE", "SPEED_FACTOR", "ZONE_TOLERANCE", "judge",
            "needed_speed", "repeat_reasons", "track_reference"]
 
 #: Level of the verdict's χ² tests: a consistent track fails one in a thousand times.
@@ -141,6 +141,8 @@ MIN_MEASUREMENTS = 20
 ZONE_TOLERANCE = 100.0
 #: What the ``data`` finding of repeated values advises (``track``'s hint looks for it).
 REPEATS_ADVICE = "leave the repeats out (fgdoppler track --drop-repeats"
+#: What the ``data`` finding of coarsely rounded values advises.
+ROUNDING_ADVICE = "give sigma with the rounding in them (the sigma column, or --sigma)"
 
 
 def judge(result: TrackResult, measurements: Measurements, model: TrackingModel,
@@ -164,6 +166,7 @@ def judge(result: TrackResult, measurements: Measurements, model: TrackingModel,
         reasons += _reference_reasons(result.primary, reference)
     reasons += _data_reasons(measurements, model, half_plane)
     reasons += repeat_reasons(measurements, model)
+    reasons += _rounding_reasons(reasons, measurements, model)
     reasons += _zone_reasons(result, model)
     reasons += _speed_reasons(measurements, model)
     reasons += _unit_reasons(result, model)
@@ -250,6 +253,23 @@ def repeat_reasons(measurements: Measurements, model: TrackingModel) -> list[Rea
         "; ".join(parts) + ": a receiver that holds its last value, or writes a fixed one, when it has no "
         f"detection — repeats are not measurements: {REPEATS_ADVICE} keeps the first of each run and leaves "
         f"out every measurement of a fixed value; fgdoppler.repeats.drop_repeats) or the pair{tail}"))]
+
+
+def _rounding_reasons(reasons: list[Reason], measurements: Measurements, model: TrackingModel) -> list[Reason]:
+    """Where the track fails its fit test, the pairs whose values are rounded coarsely against their sigma
+    (:func:`~fgdoppler.repeats.coarse_rounding`): part of the misfit is the rounding's noise, which the stated
+    sigma leave out (an ``ok`` ``data`` finding beside the ``fit`` one)."""
+    if not any(r.code == "fit" and r.status != "ok" for r in reasons):
+        return []
+    coarse = coarse_rounding(measurements)
+    if not coarse:
+        return []
+    label = pair_labels(model.observation)
+    each = "; ".join(f"pair {label(c.pair)} on a grid of {c.step:.3g} m/s against sigma {c.sigma:.3g} m/s: "
+                     f"sigma {c.with_rounding:.3g} m/s with the rounding" for c in coarse)
+    return [Reason(code="data", status="ok", message=(
+        f"the Doppler values are rounded coarsely ({each}): rounding to a step q adds noise of variance q^2/12 "
+        f"that the stated sigma leave out, and the misfit above may be that, in part or whole; {ROUNDING_ADVICE}"))]
 
 
 def _one_line_reason(used: NDArray[np.int64], dim: int) -> Reason:
