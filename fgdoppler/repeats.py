@@ -42,6 +42,10 @@ Neither :math:`q` nor the noise is taken on trust, so that right data are not ca
 - a pair whose resolution is coarser than that :math:`\sigma` (:math:`q > \sigma`) is not tested: its values
   repeat whenever the truth moves less than a grid step.
 
+The same grid tells how much noise the file's rounding adds: a value rounded to a step :math:`q` carries an
+error uniform over :math:`\pm q/2`, of variance :math:`q^2/12`, that a sigma stated for the receiver alone leaves
+out (:func:`coarse_rounding`).
+
 Under continuous noise written to full precision equal successive values do not occur; on the paper's six
 scenarios no pair is found repeating.  ``python studies/repeats_test.py`` measures the false alarms on right data
 rounded to grids of up to one sigma and the power against held and fixed values (docs/concepts.md, the verdict
