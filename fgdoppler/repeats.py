@@ -153,6 +153,8 @@ def find_repeats(measurements: Measurements, *, level: float = 0.999) -> tuple[R
     if not 0.0 < level < 1.0:
         raise ValueError(f"level must lie in (0, 1), got {level:g}")
     m = measurements
+    if len(m) < 2:
+        return ()
     pairs, idx, counts = np.unique(m.pair, return_inverse=True, return_counts=True)
     order = np.lexsort((m.time, idx))  # each pair's measurements together, in time order
     i, z = idx[order], m.doppler[order]

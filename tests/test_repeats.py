@@ -217,6 +217,16 @@ def test_track_drops_repeats_when_asked(tmp_path: Path, capsys: pytest.CaptureFi
     assert "every measurement kept" in out.err and json.loads(out.out)["dropped_repeats"] == {}
 
 
+def test_too_few_measurements_to_repeat() -> None:
+    none = fd.Measurements(time=np.array([]), pair=np.array([], dtype=int), doppler=np.array([]), sigma=np.array([]))
+    one = _recording(0).subset(np.array([0]))
+    two = fd.Measurements(time=np.array([0.0, 1.0]), pair=np.array([0, 0]), doppler=np.array([3.0, 3.0]),
+                          sigma=np.array([1.0, 1.0]))
+    for m in (none, one, two):  # two equal values of one pair: chance 0.27 with the resolution unknown
+        assert find_repeats(m) == () and len(drop_repeats(m)) == len(m)
+    assert coarse_rounding(none) == coarse_rounding(one) == ()
+
+
 def test_level_out_of_range_is_refused() -> None:
     with pytest.raises(ValueError, match="level"):
         find_repeats(_recording(0), level=1.0)
