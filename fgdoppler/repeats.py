@@ -298,14 +298,19 @@ def grid_step(gaps: ArrayLike, scale: float = 0.0) -> float:
     # grid pass by chance with odds of GRID_TOLERANCE to that power) at a fixed cost on long recordings.
     g = np.sort(np.asarray(gaps, dtype=float).reshape(-1))[:GRID_GAPS]
     g0 = float(g[0])
-    for first in range(1, GRID_DIVISORS + 1, 64):
-        j = np.arange(first, min(first + 64, GRID_DIVISORS + 1))
-        ratio = g[:, None] * j[None, :] / g0
-        # a gap of two values each rounded once is off its multiple by a few units in the last place of the values
-        tol = GRID_TOLERANCE + 8.0 * np.finfo(float).eps * scale * j / g0
-        on = np.all(np.abs(ratio - np.rint(ratio)) <= tol[None, :], axis=0)
-        if on.any():
-            return g0 / float(j[np.argmax(on)])
+    j = np.arange(1, GRID_DIVISORS + 1)
+    # a gap of two values each rounded once is off its multiple by a few units in the last place of the values
+    tol = GRID_TOLERANCE + 8.0 * np.finfo(float).eps * scale * j / g0
+
+    def on_grid(part: FloatArray, js: NDArray[np.int64], tols: FloatArray) -> NDArray[np.bool_]:
+        ratio = part[:, None] * js[None, :] / g0
+        return np.asarray(np.all(np.abs(ratio - np.rint(ratio)) <= tols[None, :], axis=0))
+
+    # the few smallest gaps leave almost no divisor standing on values that lie on no grid; the rest confirm
+    candidates = np.flatnonzero(on_grid(g[:8], j, tol))
+    for c in candidates:
+        if on_grid(g, j[c:c + 1], tol[c:c + 1])[0]:
+            return g0 / float(j[c])
     return g0 / GRID_DIVISORS
 
 
