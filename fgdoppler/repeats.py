@@ -197,7 +197,7 @@ def _grid_and_noise(m: Measurements, idx: NDArray[np.intp], i: NDArray[np.intp],
                     ) -> tuple[FloatArray, FloatArray]:
     """Each pair's grid step :math:`q` and noise :math:`\\sigma` as the tests take them (module docstring)."""
     k = resolution.size
-    stated = np.sqrt(np.bincount(idx, weights=m.sigma ** 2, minlength=k) / counts)
+    stated = _stated_sigma(m, idx, counts)
     # each step is the difference of two rounded noisy values: variance 2 sigma^2 + q^2 / 6 (Sheppard)
     n_steps = np.bincount(i[1:][same], minlength=k)
     step_ms = np.bincount(i[1:][same], weights=step[same] ** 2, minlength=k) / np.maximum(n_steps, 1)
@@ -205,6 +205,11 @@ def _grid_and_noise(m: Measurements, idx: NDArray[np.intp], i: NDArray[np.intp],
     scatter = np.sqrt(np.maximum(step_ms - finite_q ** 2 / 6.0, 0.0) / 2.0)
     sigma = np.where(scatter > 0.0, np.minimum(stated, scatter), stated)
     return np.where(np.isfinite(resolution), resolution, sigma), sigma
+
+
+def _stated_sigma(m: Measurements, idx: NDArray[np.intp], counts: NDArray[np.intp]) -> FloatArray:
+    """Each pair's stated sigma, the root mean square over its measurements (``idx``: their pair's place)."""
+    return np.sqrt(np.bincount(idx, weights=m.sigma ** 2, minlength=counts.size) / counts)
 
 
 def _modal(i: NDArray[np.intp], z: FloatArray, k: int) -> tuple[NDArray[np.intp], FloatArray]:
@@ -257,7 +262,7 @@ def coarse_rounding(measurements: Measurements, *, share: float = 0.05) -> tuple
     m = measurements
     pairs, idx, counts = np.unique(m.pair, return_inverse=True, return_counts=True)
     q = _resolution(idx, m.doppler, pairs.size)
-    sigma = np.sqrt(np.bincount(idx, weights=m.sigma ** 2, minlength=pairs.size) / counts)
+    sigma = _stated_sigma(m, idx, counts)
     coarse = np.isfinite(q) & (q ** 2 / 12.0 >= share * sigma ** 2)
     return tuple(Rounding(pair=int(pairs[j]), step=float(q[j]), sigma=float(sigma[j]),
                           with_rounding=float(np.sqrt(sigma[j] ** 2 + q[j] ** 2 / 12.0)))
