@@ -54,8 +54,12 @@ Three mistakes, each checked on the same recordings:
   reading 0 throughout (``pair 1 reads 0 throughout``: a dead one), or 0 at every tenth of its measurements
   (``pair 1 reads 0 at a tenth of its scans``: one that writes 0 without a detection); each also with the repeats the verdict finds
   left out (``... (repeats dropped)``, as ``track --drop-repeats`` does: :mod:`fgdoppler.repeats`).  The
-  smoother's ``data`` finding should name the repeats (the table's last column) and nothing on the other
+  smoother's ``data`` finding should name the repeats (the table's repeats column) and nothing on the other
   versions.
+* **Values rounded coarsely.**  Every Doppler rounded to twice its sigma (``Doppler rounded to twice sigma``: a
+  receiver's coarse output), its sigma as stated, and with sigma that include the rounding's noise (``... (sigma
+  with the rounding)``).  Where the track's fit test fails, its ``data`` finding should say the rounding adds
+  noise (the table's last column).
 * **A receiver's clock off.**  Pair 1's times ``--late`` seconds late (default 0.5; one clock for
   every pair is assumed).  Not looked for: where such data fit another track, no finding can tell.
   With ``--clock-sigma S`` the estimator is told each pair's clock may be off by S (1 sigma;
@@ -116,7 +120,7 @@ from monostatic_layouts import draw as radar_draw
 from random_layouts import draw, one_blas_thread, recorded
 
 import fgdoppler as fd
-from fgdoppler.estimators.judge import LEVEL, REPEATS_ADVICE
+from fgdoppler.estimators.judge import LEVEL, REPEATS_ADVICE, ROUNDING_ADVICE
 from fgdoppler.estimators.later_mistakes import MISTAKE_CODES, UNCONFIRMED, is_mistake_finding
 from fgdoppler.estimators.manoeuvre import SIGMA_ADVICE
 from fgdoppler.estimators.registry import estimator_info
@@ -194,6 +198,14 @@ def _gaps(m: fd.Measurements, g: fd.Geometry, late: float, *, dropped: bool) -> 
     return _dropped(out) if dropped else out
 
 
+def _rounded(m: fd.Measurements, g: fd.Geometry, late: float, *, with_rounding: bool) -> fd.Measurements:
+    """``m`` with every Doppler rounded to twice its sigma (a receiver's coarse output); ``with_rounding``: with
+    sigma that include the rounding's noise, sqrt(sigma^2 + q^2 / 12)."""
+    q = 2.0 * m.sigma
+    sigma = np.sqrt(m.sigma ** 2 + q ** 2 / 12.0) if with_rounding else m.sigma
+    return fd.Measurements(time=m.time, pair=m.pair, doppler=np.round(m.doppler / q) * q, sigma=sigma)
+
+
 def _late(m: fd.Measurements, seconds: float) -> fd.Measurements:
     """``m`` with pair 1's times ``seconds`` late (its receiver's clock off)."""
     return fd.Measurements.from_arrays(np.where(m.pair == 1, m.time + seconds, m.time), m.pair, m.doppler, m.sigma,
@@ -208,6 +220,7 @@ MANOEUVRE = "target manoeuvres"
 HELD = "pair 1 holds a third of its values"
 DEAD = "pair 1 reads 0 throughout"
 GAPS = "pair 1 reads 0 at a tenth of its scans"
+ROUNDED = "Doppler rounded to twice sigma"
 
 #: The versions of each recording: name -> (the data given the geometry and the clock's lateness in s, the change
 #: of the data that a mistake finding should name given the geometry, as it words it — "" for none —, whether the
@@ -232,6 +245,8 @@ VERSIONS: dict[str, tuple[Callable[[fd.Measurements, fd.Geometry, float], fd.Mea
     f"{DEAD} (repeats dropped)": (functools.partial(_dead, dropped=True), lambda g: "", False),
     GAPS: (functools.partial(_gaps, dropped=False), lambda g: "", False),
     f"{GAPS} (repeats dropped)": (functools.partial(_gaps, dropped=True), lambda g: "", False),
+    ROUNDED: (functools.partial(_rounded, with_rounding=False), lambda g: "", False),
+    f"{ROUNDED} (sigma with the rounding)": (functools.partial(_rounded, with_rounding=True), lambda g: "", False),
 }
 
 #: The version whose geometry gives the sensors in kilometres (the data as simulated): a ``units`` finding is right.
@@ -387,7 +402,8 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
                        sigma_small=any(x.code == "manoeuvre" and SIGMA_ADVICE in x.message for x in r.reasons),
                        repeats=any(x.code == "data" and REPEATS_ADVICE in x.message for x in r.reasons),
                        but_repeats=status_of(x for x in r.reasons
-                                             if not (x.code == "data" and REPEATS_ADVICE in x.message)))
+                                             if not (x.code == "data" and REPEATS_ADVICE in x.message)),
+                       rounding=any(x.code == "data" and ROUNDING_ADVICE in x.message for x in r.reasons))
         out[name] = row
     return out
 
@@ -425,8 +441,9 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) 
                                                  f"window's finding ranked by the {estimator} (the change made "
                                                  f"first) | the window's finding unconfirmed by the {estimator} | "
                                                  f"the {estimator}'s manoeuvre finding (saying the sigma are too "
-                                                 f"small) | the {estimator}'s repeats finding (ok but for it, beyond 3 sigma) |" if track else ""),
-             "|---|---|---|---|---|" + ("---|---|---|---|---|---|---|" if track else "")]
+                                                 f"small) | the {estimator}'s repeats finding (ok but for it, beyond 3 sigma) | its rounding finding |"
+                                                 if track else ""),
+             "|---|---|---|---|---|" + ("---|---|---|---|---|---|---|---|" if track else "")]
     for name in ALL_VERSIONS:
         got = [r[where][name] for r in rows if where in r and name in r[where] and "refused" not in r[where][name]]
         if not got:
@@ -447,7 +464,8 @@ def _table(rows: list[dict[str, Any]], where: str, track: bool, estimator: str) 
             line += (f" {len(ok)} | {wrong} | {len(later)} ({sum(x == w for x, w in later) if wanted else '—'}) | "
                      f"{len(ranked)} ({sum(x == w for x, w in ranked) if wanted else '—'}) | "
                      f"{sum(bool(g.get('unconfirmed')) for g in got)} | {sum(bool(g.get('manoeuvre')) for g in got)} "
-                     f"({sum(bool(g.get('sigma_small')) for g in got)}) | {_repeats_cell(got)} |")
+                     f"({sum(bool(g.get('sigma_small')) for g in got)}) | {_repeats_cell(got)} | "
+                     f"{sum(bool(g.get('rounding')) for g in got)} |")
         lines.append(line)
     return [*lines, ""]
 
