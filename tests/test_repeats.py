@@ -253,3 +253,24 @@ def test_fine_rounding_and_full_precision_are_not_coarse() -> None:
     m = _recording(1)
     assert not coarse_rounding(m)
     assert not coarse_rounding(_with(m, np.round(m.doppler / 0.5) * 0.5))  # 0.25/12 = 2 % of sigma^2
+
+
+def test_a_dead_pair_is_named_before_any_change_of_the_data() -> None:
+    # Four pairs far apart (draw 7 of studies/random_layouts.py, rounded), pair 1 reading 0 throughout: its window
+    # fits with pairs 2 and 3 exchanged, which is no mistake of the file; the repeats come first, and no change is
+    # named, by the window or the track.
+    from fgdoppler.estimators.window_mistakes import find_mistake
+
+    pairs = [((250.0, 26480.0), (22260.0, -17410.0)), ((38060.0, 18760.0), (-12640.0, 2320.0)),
+             ((-38850.0, 11760.0), (2410.0, -3570.0)), ((-7380.0, 18850.0), (39990.0, 37570.0))]
+    g = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=np.array(t), rx=np.array(r)) for t, r in pairs))
+    m = _recording(1, geometry=g, x0=(49081.0, 5187.0, -24.0, 70.0))
+    dead = _with(m, np.where(m.pair == 1, 0.0, m.doppler))
+    window = dead.first_per_pair(10)
+    init = fd.initiate(window, g)
+    found = find_mistake(window, fd.TrackingModel.of(g), fd.InitiationSettings(), init)
+    assert found is not None and found.code == "swapped"  # what the window alone would name
+    assert init.mistake is None and not any(r.code in ("sign", "swapped", "radial") for r in init.reasons)
+    result = fd.run_estimator("smoother", dead, g, init)
+    assert not any(r.code in ("sign", "swapped", "radial") for r in result.reasons)
+    assert any(r.code == "data" and REPEATS_ADVICE in r.message and r.status == "doubtful" for r in result.reasons)

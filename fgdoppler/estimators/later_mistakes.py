@@ -112,6 +112,7 @@ from fgdoppler.estimators.window_mistakes import (
 )
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
+from fgdoppler.repeats import find_repeats
 
 __all__ = ["CONFIRMED_AT_MOST", "LATER_WINDOWS", "MISTAKE_CODES", "UNCONFIRMED", "WHOLE_CODES", "WHOLE_PER_PAIR",
            "is_mistake_finding", "later_mistakes"]
@@ -141,7 +142,9 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
                    reference: TrackResult | None = None) -> list[Reason]:
     r"""A ``sign``, ``swapped``, ``radial`` or ``units`` finding from later in the recording, where the track
     does not fit (``reasons``, the track's, hold a ``fit`` finding that is not ``ok``) and ``init`` did not find
-    the geometry in kilometres or the times in other units (the module docstring: those are tried first).
+    the geometry in kilometres or the times in other units (the module docstring: those are tried first), nor
+    a pair repeating its values (:func:`~fgdoppler.repeats.find_repeats`, which the track's ``data`` finding
+    names: a held or dead receiver misfits every track).
 
     Where the track fits but ``init`` named a change, an ``unconfirmed`` finding where the data do not need it
     (:func:`_unconfirmed`).  Where ``init`` names a change
@@ -207,6 +210,8 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
             else _unconfirmed(measurements, model, init, huber_k, reference)
     if init.mistake is None and any(is_mistake_finding(r) for r in init.reasons):
         return []  # a units finding explains the misfit
+    if find_repeats(measurements, level=VERDICT_LEVEL):
+        return []  # so do a pair's repeated values, which the track's data finding names
     if reference is not None and windows == LATER_WINDOWS and _misfits(reference.reasons) \
             and reference.settings.huber_k == huber_k:
         # the same windows, fits and votes: the answer depends on nothing else

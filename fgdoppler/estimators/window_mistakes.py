@@ -33,6 +33,7 @@ from fgdoppler.estimators.verdict import Reason
 from fgdoppler.geometry import Geometry, pair_labels
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
+from fgdoppler.repeats import find_repeats
 
 __all__ = [
     "HUBER_TRIED",
@@ -165,6 +166,8 @@ def with_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
     r"""``result`` with a ``sign``, ``swapped`` or ``radial`` finding and its
     :attr:`~fgdoppler.estimators.initiation.Initiation.mistake` where the window fits only with its data
     changed as a common mistake in writing a measurement file would have changed them (else ``result``).
+    No change is looked for where a pair repeats its values (:func:`~fgdoppler.repeats.find_repeats`): a held
+    or dead receiver misfits every track, and the track's ``data`` finding names it.
 
     * **Sign.**  Negating a pair's Doppler is not a change of the target's
       state: the bistatic range rate :math:`\dot r = \mathbf v \cdot
@@ -223,7 +226,10 @@ def with_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
         or time_units_reason(measurements, model, settings, result)
     if units is not None:
         return replace(result, reasons=(*result.reasons, units))
-    found = find_mistake(measurements, model, settings, result)
+    # a pair repeating its values (a held or dead receiver) misfits any track: that, which the track's data finding
+    # names, comes before any change of the data (a dead pair's window fitted with two other pairs exchanged)
+    found = None if find_repeats(measurements, level=VERDICT_LEVEL) else \
+        find_mistake(measurements, model, settings, result)
     named = outliers_reason(measurements, model, settings, result) if found is None \
         else mistake_reason(found, result.cost, settings.confidence)
     if named is None:
