@@ -142,13 +142,11 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
                    reference: TrackResult | None = None) -> list[Reason]:
     r"""A ``sign``, ``swapped``, ``radial`` or ``units`` finding from later in the recording, where the track
     does not fit (``reasons``, the track's, hold a ``fit`` finding that is not ``ok``) and ``init`` did not find
-    the geometry in kilometres or the times in other units (the module docstring: those are tried first), nor
-    a pair repeating its values (:func:`~fgdoppler.repeats.find_repeats`, which the track's ``data`` finding
-    names: a held or dead receiver misfits every track).
+    the geometry in kilometres or the times in other units (the module docstring: those are tried first); no
+    change of the data where a pair repeats its values (:func:`_changes`).
 
     Where the track fits but ``init`` named a change, an ``unconfirmed`` finding where the data do not need it
-    (:func:`_unconfirmed`).  Where ``init`` names a change
-    (:attr:`~fgdoppler.estimators.initiation.Initiation.mistake`), the
+    (:func:`_unconfirmed`).  Where ``init`` names a change (:attr:`~.initiation.Initiation.mistake`), the
     :data:`WHOLE_PER_PAIR` measurements a pair spread over the whole
     recording are initiated as given and, where they fail the verdict's χ²
     test, with each of the window's changes; the one under which they pass
@@ -210,8 +208,6 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
             else _unconfirmed(measurements, model, init, huber_k, reference)
     if init.mistake is None and any(is_mistake_finding(r) for r in init.reasons):
         return []  # a units finding explains the misfit
-    if find_repeats(measurements, level=VERDICT_LEVEL):
-        return []  # so do a pair's repeated values, which the track's data finding names
     if reference is not None and windows == LATER_WINDOWS and _misfits(reference.reasons) \
             and reference.settings.huber_k == huber_k:
         # the same windows, fits and votes: the answer depends on nothing else
@@ -219,8 +215,17 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     whole = _Whole(measurements, model, init, huber_k)
     if init.mistake is not None:
         return _ranked_on_whole(model, whole, init.mistake)
-    return _units_on_whole(model, whole) or _from_windows(measurements, model, init, windows, whole) \
-        or _from_whole(model, whole, WHOLE_CODES)
+    return _units_on_whole(model, whole) or _changes(measurements, model, init, windows, whole)
+
+
+def _changes(measurements: Measurements, model: TrackingModel, init: Initiation, windows: int, whole: _Whole
+             ) -> list[Reason]:
+    """The change of the data from later windows, or else from the whole recording's spread measurements
+    (:func:`later_mistakes`); none where a pair repeats its values (:func:`~fgdoppler.repeats.find_repeats`): a
+    held or dead receiver misfits every track, which the track's ``data`` finding names."""
+    if find_repeats(measurements, level=VERDICT_LEVEL):
+        return []
+    return _from_windows(measurements, model, init, windows, whole) or _from_whole(model, whole, WHOLE_CODES)
 
 
 def is_mistake_finding(reason: Reason) -> bool:
