@@ -196,6 +196,13 @@ class Measurements:
                 f"({geometry.n_pairs} pair(s), indices 0..{geometry.n_pairs - 1})"
             )
 
+    def rms_per_pair(self, values: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+        r"""The pairs that reported (ascending) and the root mean square of ``values`` (one per entry) over each
+        pair's entries, :math:`\sqrt{\sum_{i \in k} v_i^2 / n_k}`."""
+        pairs, at, counts = np.unique(self.pair, return_inverse=True, return_counts=True)
+        v = np.asarray(values, dtype=float)
+        return pairs, np.sqrt(np.bincount(at, weights=v * v, minlength=pairs.size) / counts)
+
     def subset(self, mask: ArrayLike) -> Measurements:
         """The entries selected by a boolean mask or index array (order kept)."""
         idx = np.asarray(mask)

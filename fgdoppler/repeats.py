@@ -164,7 +164,7 @@ def find_repeats(measurements: Measurements, *, level: float = 0.999) -> tuple[R
     k = pairs.size
     repeats = np.bincount(i[1:][equal], minlength=k)
     resolution = _resolution(idx, m.doppler, k)
-    q, sigma = _grid_and_noise(m, idx, i, step, same, resolution, counts)
+    q, sigma = _grid_and_noise(m, i, step, same, resolution)
     tested = (q <= sigma) & (counts > 1)
     bound = (1.0 - level) / (2 * max(int(tested.sum()), 1))
     chance = np.where(repeats > 0, binom.sf(repeats - 1, counts - 1, repeat_probability(q / (sigma * np.sqrt(2.0)))),
@@ -192,12 +192,11 @@ def find_repeats(measurements: Measurements, *, level: float = 0.999) -> tuple[R
     return tuple(out)
 
 
-def _grid_and_noise(m: Measurements, idx: NDArray[np.intp], i: NDArray[np.intp], step: FloatArray,
-                    same: NDArray[np.bool_], resolution: FloatArray, counts: NDArray[np.intp]
-                    ) -> tuple[FloatArray, FloatArray]:
+def _grid_and_noise(m: Measurements, i: NDArray[np.intp], step: FloatArray, same: NDArray[np.bool_],
+                    resolution: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Each pair's grid step :math:`q` and noise :math:`\\sigma` as the tests take them (module docstring)."""
     k = resolution.size
-    stated = _stated_sigma(m, idx, counts)
+    stated = m.rms_per_pair(m.sigma)[1]
     # each step is the difference of two rounded noisy values: variance 2 sigma^2 + q^2 / 6 (Sheppard)
     n_steps = np.bincount(i[1:][same], minlength=k)
     step_ms = np.bincount(i[1:][same], weights=step[same] ** 2, minlength=k) / np.maximum(n_steps, 1)
@@ -205,11 +204,6 @@ def _grid_and_noise(m: Measurements, idx: NDArray[np.intp], i: NDArray[np.intp],
     scatter = np.sqrt(np.maximum(step_ms - finite_q ** 2 / 6.0, 0.0) / 2.0)
     sigma = np.where(scatter > 0.0, np.minimum(stated, scatter), stated)
     return np.where(np.isfinite(resolution), resolution, sigma), sigma
-
-
-def _stated_sigma(m: Measurements, idx: NDArray[np.intp], counts: NDArray[np.intp]) -> FloatArray:
-    """Each pair's stated sigma, the root mean square over its measurements (``idx``: their pair's place)."""
-    return np.sqrt(np.bincount(idx, weights=m.sigma ** 2, minlength=counts.size) / counts)
 
 
 def _modal(i: NDArray[np.intp], z: FloatArray, k: int) -> tuple[NDArray[np.intp], FloatArray]:
@@ -260,9 +254,9 @@ def coarse_rounding(measurements: Measurements, *, share: float = 0.05) -> tuple
     Values written to full precision lie on no grid (:func:`grid_step` then bounds the step far below sigma).
     """
     m = measurements
-    pairs, idx, counts = np.unique(m.pair, return_inverse=True, return_counts=True)
+    pairs, idx = np.unique(m.pair, return_inverse=True)
     q = _resolution(idx, m.doppler, pairs.size)
-    sigma = _stated_sigma(m, idx, counts)
+    sigma = m.rms_per_pair(m.sigma)[1]
     coarse = np.isfinite(q) & (q ** 2 / 12.0 >= share * sigma ** 2)
     return tuple(Rounding(pair=int(pairs[j]), step=float(q[j]), sigma=float(sigma[j]),
                           with_rounding=float(np.sqrt(sigma[j] ** 2 + q[j] ** 2 / 12.0)))

@@ -259,8 +259,7 @@ def _scatter_per_pair(measurements: Measurements, model: TrackingModel, r: Float
     from fgdoppler.geometry import pair_labels
 
     label = pair_labels(model.observation)
-    pairs, at = np.unique(measurements.pair, return_inverse=True)
-    rms = np.sqrt(np.bincount(at, weights=r**2) / np.bincount(at))
+    pairs, rms = measurements.rms_per_pair(r)
     return ", ".join(f"pair {label(int(p))} {v:.1f}" for p, v in zip(pairs, rms, strict=True))
 
 
