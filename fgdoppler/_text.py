@@ -1,12 +1,13 @@
-"""Short texts for messages and reports: exceptions, times, distances."""
+"""Short texts for messages and reports: exceptions, times, distances, pairs."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from typing import SupportsFloat
 
 import numpy as np
 
-__all__ = ["distance_text", "first_line", "plain_number", "time_text"]
+__all__ = ["distance_text", "first_line", "pairs_text", "plain_number", "time_text"]
 
 
 def first_line(exc: BaseException) -> str:
@@ -62,3 +63,20 @@ def distance_text(metres: SupportsFloat, km_decimals: int = 1) -> str:
     if abs(v) >= 10.0 or v == 0.0:
         return f"{v:.0f} m"
     return f"{v:.2g} m"
+
+
+def pairs_text(which: Sequence[int], label: Callable[[int], str] = str, *, every: bool = False) -> str:
+    """``"every pair"`` (``every``: ``which`` is every pair that reported), ``"pair 1"`` or ``"pairs 0, 2 and 3"``,
+    each pair as ``label`` gives it (:meth:`~fgdoppler.geometry.Geometry.pair_label`: ``"pair 1 (south)"`` where
+    the geometry names its pairs, as the measurement file may).
+
+    Examples
+    --------
+    >>> pairs_text([1]), pairs_text([0, 2, 3]), pairs_text([0, 1], every=True)
+    ('pair 1', 'pairs 0, 2 and 3', 'every pair')
+    """
+    if every:
+        return "every pair"
+    if len(which) == 1:
+        return f"pair {label(which[0])}"
+    return f"pairs {', '.join(map(label, which[:-1]))} and {label(which[-1])}"

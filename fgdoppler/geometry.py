@@ -34,6 +34,7 @@ __all__ = [
     "pair_labels",
     "paper_geometry",
     "principal_line",
+    "reflected",
 ]
 
 #: Lattice (m) the sensors are snapped to in their own frame (:meth:`Geometry.in_frame`).
@@ -78,12 +79,27 @@ def principal_line(points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.f
 
 
 def mirrored(states: ArrayLike, geometry: Geometry) -> NDArray[np.float64]:
-    r"""2-D states reflected across the least-squares line through the sensors (every pair's Tx and Rx).
+    """2-D states reflected across the least-squares line through the sensors (every pair's Tx and Rx):
+    :func:`reflected` across the line through their centroid along their principal direction.  With every
+    sensor on that line the reflected track gives exactly the same Doppler.
 
-    With :math:`\mathbf c` the sensors' centroid and :math:`\mathbf n` the unit normal of their principal
-    direction, :math:`\mathbf p \to \mathbf c + \mathbf M(\mathbf p - \mathbf c)` and
+    Raises
+    ------
+    ValueError
+        For states other than 2-D ``(n, 4)``.
+    """
+    c, u, _ = principal_line(np.vstack([geometry.tx, geometry.rx])[:, :2])
+    return reflected(states, c, u)
+
+
+def reflected(states: ArrayLike, point: ArrayLike, direction: ArrayLike) -> NDArray[np.float64]:
+    r"""2-D states reflected across the line through ``point`` along the unit vector ``direction``.
+
+    With :math:`\mathbf c` the point and :math:`\mathbf n` the line's unit normal,
+    :math:`\mathbf p \to \mathbf c + \mathbf M(\mathbf p - \mathbf c)` and
     :math:`\mathbf v \to \mathbf M\mathbf v`, :math:`\mathbf M = \mathbf I - 2\mathbf n\mathbf n^\top`.
-    With every sensor on that line the reflected track gives exactly the same Doppler.
+    Distances and range rates to every point of the line are unchanged, so every pair whose Tx and Rx lie
+    on it sees the reflected track with the same Doppler.
 
     Raises
     ------
@@ -92,8 +108,9 @@ def mirrored(states: ArrayLike, geometry: Geometry) -> NDArray[np.float64]:
     """
     x = np.asarray(states, dtype=float)
     if x.ndim != 2 or x.shape[1] != 4:
-        raise ValueError(f"mirrored takes 2-D states (n, 4), got {x.shape}")
-    c, u, _ = principal_line(np.vstack([geometry.tx, geometry.rx])[:, :2])
+        raise ValueError(f"reflected takes 2-D states (n, 4), got {x.shape}")
+    c = np.asarray(point, dtype=float)
+    u = np.asarray(direction, dtype=float)
     m = np.eye(2) - 2.0 * np.outer([-u[1], u[0]], [-u[1], u[0]])
     return np.column_stack([c + (x[:, :2] - c) @ m, x[:, 2:] @ m])
 

@@ -919,6 +919,43 @@ def test_one_pairs_mirror_is_settled_by_the_half_plane_the_hint_gives(
     assert np.sign(result["states"][-1][1] - origin[1]) == np.sign(truth.states[-1, 1])
 
 
+def test_a_side_that_one_measurement_settles_gets_the_half_planes_of_its_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Pair 0 whole and one measurement of pair 1: the track's mirror image across pair 0's baseline fits all of
+    pair 0's data exactly as well, and only that one measurement tells them apart.  The ``competing`` finding
+    names pair 0's line (``mirror="pairs"``), the hint gives that line's two half planes (the baseline y = 0),
+    and with the truth's one the track is on the truth's side and the finding is gone."""
+    import re
+
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--case", "a", "--start-x", "25000", "--start-y", "2000", "--seed", "1",
+                 "--out", str(sim)]) == 0
+    text = (sim / "measurements.csv").read_text().splitlines()
+    ones = [r for r in text[1:] if r.split(",")[1] == "1"]
+    few = tmp_path / "few.csv"
+    few.write_text("\n".join([text[0], *(r for r in text[1:] if r.split(",")[1] == "0" or r == ones[len(ones) // 2])])
+                   + "\n")
+    args = ["track", str(few), "--geometry", str(sim / "geometry.toml"), "--estimator", "smoother", "--json"]
+    capsys.readouterr()
+    assert main(args) == 0
+    captured = capsys.readouterr()
+    found = [r for r in json.loads(captured.out)["reasons"] if r.get("mirror") == "pairs"]
+    assert [(r["code"], r["status"], r["pairs"]) for r in found] == [("competing", "doubtful", [0])]
+    hint = re.search(r"--half-plane (\S+) (\S+) (\S+) (\S+) puts .* --half-plane (\S+) (\S+) (\S+) (\S+) on",
+                     captured.err)
+    assert hint is not None
+    planes = np.array(hint.groups(), dtype=float).reshape(2, 4)
+    np.testing.assert_allclose(planes[:, 1], 0.0, rtol=0, atol=5e-4)
+    np.testing.assert_allclose(np.abs(planes[:, 3]), 1.0, rtol=0, atol=1e-9)
+    truth = fd.Trajectory.from_csv(sim / "truth.csv")
+    holds = [k for k in range(2) if planes[k, 2:] @ (truth.states[0, :2] - planes[k, :2]) > 0]
+    assert len(holds) == 1
+    assert main([*args, "--half-plane", *hint.groups()[4 * holds[0]:4 * holds[0] + 4]]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert not any(r.get("mirror") == "pairs" for r in result["reasons"])
+    assert np.sign(result["states"][-1][1]) == np.sign(truth.states[-1, 1])
+
+
 def test_a_measurement_file_may_name_its_pairs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A geometry file that names its pairs: ``simulate`` keeps the names in the geometry it writes, ``track``
     reads a file that gives the pairs by name (rows in another order) as the one with indices, and records the

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from fgdoppler._text import plain_number, time_text
+from fgdoppler._text import pairs_text, plain_number, time_text
 from fgdoppler.cli.common import (
     CLIError,
     add_huber_option,
@@ -310,16 +310,22 @@ def _print_verdict(status: str, reasons: Any) -> None:
 def _print_half_plane_hint(reasons: Any, geom: Geometry, args: argparse.Namespace, pairs: Any) -> None:
     """Where a finding says a mirror image fits the data (:attr:`~fgdoppler.estimators.verdict.Reason.mirror`),
     the ``--half-plane`` options of either side of the line it is taken across, in the user's coordinates: the
-    least-squares line of every sensor (the smoother's mirror rival, the initiation's mirror start) or the line
-    the sensors of the reporting ``pairs`` lie on (the ``data`` finding)."""
+    least-squares line of every sensor (the smoother's mirror rival, the initiation's mirror start), the line
+    the sensors of the reporting ``pairs`` lie on (the ``data`` finding), or the one the finding's own pairs lie
+    on (a side that few measurements of the other pairs settle)."""
     if args.half_plane is not None or geom.dim != 2:
         return
     # a settled ambiguity (the filters' hypotheses) needs none
-    mirrors = {r.mirror for r in reasons if r.status != "ok" and r.mirror is not None}
-    if "reporting" in mirrors:
+    mirrored = {r.mirror: r for r in reversed(list(reasons)) if r.status != "ok" and r.mirror is not None}
+    line = "the sensors' line"
+    if "reporting" in mirrored:
         used = np.unique(np.asarray(pairs, dtype=int))
         sensors = np.vstack([geom.tx[used], geom.rx[used]])
-    elif "sensors" in mirrors:  # a mirror rival: competing, ambiguous
+    elif "pairs" in mirrored:  # the side rests on few measurements of the other pairs
+        on = list(mirrored["pairs"].pairs or ())
+        sensors = np.vstack([geom.tx[on], geom.rx[on]])
+        line = f"the line of the sensors of {pairs_text(on, geom.pair_label)}"
+    elif "sensors" in mirrored:  # a mirror rival: competing, ambiguous
         sensors = np.vstack([geom.tx, geom.rx])
     else:
         return
@@ -330,7 +336,7 @@ def _print_half_plane_hint(reasons: Any, geom: Geometry, args: argparse.Namespac
     at = [plain_number(v, 3) for v in c]
     side = " ".join([*at, *(f"{v:.6g}" for v in n)])
     other = " ".join([*at, *(f"{v:.6g}" for v in 0.0 - n)])
-    print(f"  hint: the sensors' line passes through ({at[0]}, {at[1]}) along ({u[0]:.6g}, {u[1]:.6g}); "
+    print(f"  hint: {line} passes through ({at[0]}, {at[1]}) along ({u[0]:.6g}, {u[1]:.6g}); "
           f"--half-plane {side} puts the target on one side of it, --half-plane {other} on the other",
           file=sys.stderr)
 

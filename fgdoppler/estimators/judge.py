@@ -102,9 +102,10 @@ from fgdoppler._text import distance_text, time_text
 from fgdoppler.estimators.calibration import shifted_by
 from fgdoppler.estimators.grid import speed_lower_bound
 from fgdoppler.estimators.initiation import OUTLIER_CUT, inlier_statistic
+from fgdoppler.estimators.mirror_side import side_reason
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import TrackerSettings
-from fgdoppler.estimators.verdict import Reason, Status, message_of, status_of
+from fgdoppler.estimators.verdict import MIRRORS, Reason, Status, message_of, status_of
 from fgdoppler.geometry import pair_labels, principal_line
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import DopplerModel
@@ -165,6 +166,7 @@ def judge(result: TrackResult, measurements: Measurements, model: TrackingModel,
     if reference is not None:
         reasons += _reference_reasons(result.primary, reference)
     reasons += _data_reasons(measurements, model, half_plane)
+    reasons += _side_reasons(result, measurements, model, half_plane, reasons)
     reasons += repeat_reasons(measurements, model)
     reasons += _rounding_reasons(reasons, measurements, model)
     reasons += _zone_reasons(result, model)
@@ -294,11 +296,12 @@ def _reference_reasons(est: Estimates, reference: TrackResult) -> list[Reason]:
     if worst != "ok":
         setting = [r for r in own if r.status == worst]
         advised = [r.zone for r in setting if r.zone is not None]
-        mirrors = {r.mirror for r in setting if r.mirror is not None}
+        mirrored = {r.mirror: r for r in reversed(setting) if r.mirror is not None}
+        kind = next((m for m in MIRRORS if m in mirrored), None)  # the CLI's order of preference
         out.append(Reason(code="reference", status="doubtful", message=(
             f"the offline smoother of the same data is {worst}: {message_of(own)}"),
             zone=functools.reduce(ZoneBox.union, advised) if advised else None,
-            mirror=next((m for m in ("reporting", "sensors") if m in mirrors), None)))
+            mirror=kind, pairs=None if kind is None else mirrored[kind].pairs))
     ref = reference.primary
     if not (len(est) and len(ref) and abs(est.times[-1] - ref.times[-1]) < 1e-9 and est.cov_ok[-1] and ref.cov_ok[-1]):
         return out
@@ -387,13 +390,32 @@ def _residual(result: TrackResult, measurements: Measurements, model: TrackingMo
     est = result.primary
     if len(est) != len(measurements.scans()):  # not a state per scan: nothing to test
         return 0, 0.0, 0, 0, None
-    fitted = 0
-    if result.offsets is not None:
-        measurements = shifted_by(measurements, -result.offsets.full(model.observation.n_channels))
-        fitted = result.offsets.pairs.size
+    fitted = 0 if result.offsets is None else result.offsets.pairs.size
+    measurements = _calibrated(result, measurements, model)
     statistic, outliers = inlier_statistic(model, measurements, est.states, est.times)
     inlier = len(measurements) - outliers
     return inlier, statistic, max(inlier - model.n - fitted, 1), len(measurements), None
+
+
+def _calibrated(result: TrackResult, measurements: Measurements, model: TrackingModel) -> Measurements:
+    """``measurements`` less the calibration offsets ``result`` estimated with its track (as given without)."""
+    if result.offsets is None:
+        return measurements
+    return shifted_by(measurements, -result.offsets.full(model.observation.n_channels))
+
+
+def _side_reasons(result: TrackResult, measurements: Measurements, model: TrackingModel, half_plane: bool,
+                  reasons: list[Reason]) -> list[Reason]:
+    """The ``competing`` finding of :func:`~fgdoppler.estimators.mirror_side.side_reason`: a 2-D track's side of a
+    line of sensors settled by a single measurement or none — not with a half plane, which settles it, nor where
+    one of ``reasons`` already says a mirror image fits about as well."""
+    est = result.primary
+    if half_plane or model.dim != 2 or len(est) != len(measurements.scans()) or not np.all(np.isfinite(est.states)):
+        return []
+    if any(r.status != "ok" and r.mirror is not None for r in reasons):
+        return []
+    found = side_reason(_calibrated(result, measurements, model), model, est.states)
+    return [] if found is None else [found]
 
 
 def _fit_reasons(statistic: float, dof: int, n: int, rejected: int, lost: int | None, robust: bool,

@@ -493,7 +493,8 @@ def _with_initiation_reasons(result: TrackResult, init: Initiation, *, native: b
     inherited = tuple(
         Reason(code=f"initiation-{r.code}",
                status="ok" if (informational and r.code in START_COVARIANCE_FINDINGS) else r.status,
-               message=f"initiation: {r.message}", zone=r.zone, mirror=r.mirror)
+               message=f"initiation: {r.message}", zone=r.zone, mirror=r.mirror,
+               pairs=r.pairs)
         for r in init.reasons if r.code != "ambiguous")
     return replace(result, reasons=inherited + result.reasons) if inherited else result
 

@@ -400,7 +400,7 @@ def draft_smoother(
         # The solution cannot explain the data (a wrong basin inherited from the window):
         # offline, every measurement is available, so initiate again from all of them.
         notes.append(f"{misfit}: re-initiated from the whole recording")
-        again = _reinitiate(measurements, model, settings, progress, memo=memo)
+        again = _reinitiate(measurements, model, settings, progress, memo=memo, half_plane=init.half_plane)
         if again is not None and again.cost < sol.cost:
             discarded.append(sol)
             sol = again

@@ -58,15 +58,17 @@ class _Mode(Protocol):
 
 def _reinitiate(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
                 progress: Progress | None = None, per_pair: int = REINITIATE_PER_PAIR,
-                memo: SearchMemo | None = None) -> SmootherSolution | None:
+                memo: SearchMemo | None = None, half_plane: HalfPlane | None = None) -> SmootherSolution | None:
     """Multi-start deterministic-CV ML over the whole recording, then the full smoother from its best solution.
 
-    The grid scores ``per_pair`` measurements of each pair, evenly spread over the recording.  ``None`` where
-    no start can be found — also when the recording needs a speed above the zone's bound, which the grid
-    refuses to search (the verdict's ``zone`` finding says so, :mod:`fgdoppler.estimators.judge`).
+    The grid scores ``per_pair`` measurements of each pair, evenly spread over the recording, on the side of
+    ``half_plane`` (the initiation's) where one is given.  ``None`` where no start can be found — also when the
+    recording needs a speed above the zone's bound, which the grid refuses to search (the verdict's ``zone``
+    finding says so, :mod:`fgdoppler.estimators.judge`).
     """
     try:
-        starts = _recording_starts(measurements, model, settings, progress, per_pair=per_pair, memo=memo)
+        starts = _recording_starts(measurements, model, settings, progress, per_pair=per_pair,
+                                   half_plane=half_plane, memo=memo)
     except ValueError:
         return None
     found = _smooth_from(measurements, model, settings, starts[:1], progress, memo)

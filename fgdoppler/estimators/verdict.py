@@ -32,13 +32,14 @@ from typing import Literal
 
 from fgdoppler.zone import ZoneBox
 
-__all__ = ["NOT_CONVERGED", "STATUSES", "Event", "Judged", "Mirror", "Reason", "Status", "message_of", "status_of"]
+__all__ = ["MIRRORS", "NOT_CONVERGED", "STATUSES", "Event", "Judged", "Mirror", "Reason", "Status", "message_of", "status_of"]
 
 Status = Literal["ok", "doubtful", "failed"]
-#: Which line a mirror image is taken across: that of every sensor (least squares), or the one the sensors of
-#: the pairs that reported lie on exactly.
-Mirror = Literal["sensors", "reporting"]
-MIRRORS: tuple[Mirror, ...] = ("sensors", "reporting")
+#: Which line a mirror image is taken across: the one the sensors of the pairs that reported lie on exactly, the
+#: one the sensors of the finding's ``pairs`` lie on exactly, or that of every sensor (least squares) — in the
+#: order the command line's half-plane hint prefers them.
+Mirror = Literal["reporting", "pairs", "sensors"]
+MIRRORS: tuple[Mirror, ...] = ("reporting", "pairs", "sensors")
 #: The status vocabulary, from best to worst.
 STATUSES: tuple[Status, ...] = ("ok", "doubtful", "failed")
 
@@ -66,9 +67,14 @@ class Reason:
         of sensors fits the data (as well, or nearly): ``"sensors"``, the
         least-squares line of every sensor (a rival track or start that is
         the answer's mirror image); ``"reporting"``, the line the sensors of
-        the pairs that reported lie on exactly (any track's image fits).  A
-        half plane on either side of that line settles it.  ``None`` for
-        most findings.
+        the pairs that reported lie on exactly (any track's image fits);
+        ``"pairs"``, the line the sensors of :attr:`pairs` lie on exactly (the
+        image fits their measurements exactly, and few others tell the two
+        apart).  A half plane on either side of that line settles it.
+        ``None`` for most findings.
+    pairs
+        The pairs (indices) whose sensors' line a ``mirror="pairs"`` finding
+        is about; ``None`` for other findings.
     """
 
     code: str
@@ -76,20 +82,25 @@ class Reason:
     message: str
     zone: ZoneBox | None = None
     mirror: Mirror | None = None
+    pairs: tuple[int, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
             raise ValueError(f"status must be one of {STATUSES}, got {self.status!r}")
         if self.mirror is not None and self.mirror not in MIRRORS:
             raise ValueError(f"mirror must be None or one of {MIRRORS}, got {self.mirror!r}")
+        if (self.mirror == "pairs") != (self.pairs is not None and len(self.pairs) > 0):
+            raise ValueError("mirror='pairs' needs the pairs of its line, and pairs go only with it")
 
     def to_dict(self) -> dict[str, object]:
-        """JSON-ready form (``zone`` and ``mirror`` only where the finding has them)."""
+        """JSON-ready form (``zone``, ``mirror`` and ``pairs`` only where the finding has them)."""
         out: dict[str, object] = {"code": self.code, "status": self.status, "message": self.message}
         if self.zone is not None:
             out["zone"] = self.zone.to_dict()
         if self.mirror is not None:
             out["mirror"] = self.mirror
+        if self.pairs is not None:
+            out["pairs"] = list(self.pairs)
         return out
 
 

@@ -11,7 +11,6 @@ windows of a track that fits poorly is
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Literal
 
@@ -19,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from fgdoppler._text import distance_text, time_text
+from fgdoppler._text import distance_text, pairs_text, time_text
 from fgdoppler.estimators.initiation import (
     OUTLIER_CUT,
     VERDICT_LEVEL,
@@ -355,7 +354,7 @@ def find_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
     label = pair_labels(model.observation)
 
     def scaled(code: MistakeCode, which: list[int], factor: float) -> None:
-        tried.append(Mistake(code=code, which=_named(which, label, every=which == pairs), cost=np.nan, factor=factor,
+        tried.append(Mistake(code=code, which=pairs_text(which, label, every=which == pairs), cost=np.nan, factor=factor,
                              pairs=tuple(which)))
 
     for flipped in [pairs] + ([[k] for k in pairs] if len(pairs) > 1 else []) if "sign" in codes else []:
@@ -366,7 +365,7 @@ def find_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
             scaled("radial", group, factor)
     for i, a in enumerate(pairs if "swapped" in codes else []):
         for b in pairs[i + 1:]:
-            tried.append(Mistake(code="swapped", which=_named([a, b], label), cost=np.nan, factor=1.0,
+            tried.append(Mistake(code="swapped", which=pairs_text([a, b], label), cost=np.nan, factor=1.0,
                                  pairs=(a, b)))
     return _least_cost(measurements, model, settings, tried)
 
@@ -513,16 +512,6 @@ def radar_pairs(model: TrackingModel) -> tuple[int, ...]:
     geometry = getattr(model.observation, "geometry", None)
     return tuple(int(k) for k in geometry.radars) if isinstance(geometry, Geometry) else ()
 
-
-def _named(which: list[int], label: Callable[[int], str] = str, *, every: bool = False) -> str:
-    """``"every pair"`` (``every``: ``which`` is every pair that reported), ``"pair 1"`` or ``"pairs 0, 2 and 3"``,
-    each pair as ``label`` gives it (:meth:`~fgdoppler.geometry.Geometry.pair_label`: ``"pair 1 (south)"`` where
-    the geometry names its pairs, as the measurement file may)."""
-    if every:
-        return "every pair"
-    if len(which) == 1:
-        return f"pair {label(which[0])}"
-    return f"pairs {', '.join(map(label, which[:-1]))} and {label(which[-1])}"
 
 
 def mistake_reason(found: Mistake, cost: float, confidence: float, *, what: str = "the window") -> Reason:
