@@ -80,6 +80,12 @@ the status is the worst of them, :mod:`fgdoppler.estimators.verdict`).
     kilometres is named more directly where the data fit with it scaled:
     :func:`~fgdoppler.estimators.window_mistakes.units_reason`, a ``units``
     finding of the initiation or of the track.)
+``competing`` — (2-D) ``"doubtful"`` where the track's mirror image across
+    the line of some reporting pairs' sensors fits their data exactly as well
+    and, without a single measurement of the other pairs, about as well as
+    the track (:mod:`fgdoppler.estimators.mirror_side`): one wrong value
+    there puts the track on the wrong side.  Not with a half plane, nor where
+    another finding already says a mirror image fits.
 
 The initiation's findings are added by
 :func:`~fgdoppler.estimators.registry.run_estimator` (``initiation-…``; its
