@@ -414,11 +414,11 @@ def _side_reasons(result: TrackResult, measurements: Measurements, model: Tracki
                   reasons: list[Reason]) -> list[Reason]:
     """The ``competing`` finding of :func:`~fgdoppler.estimators.mirror_side.side_reason`: a 2-D track's side of a
     line of sensors settled by a single measurement or none — not with a half plane, which settles it, nor where
-    one of ``reasons`` already says a mirror image fits about as well."""
+    one of ``reasons`` of the whole recording (not the window's) already says a mirror image fits about as well."""
     est = result.primary
     if half_plane or model.dim != 2 or len(est) != len(measurements.scans()) or not np.all(np.isfinite(est.states)):
         return []
-    if any(r.status != "ok" and r.mirror is not None for r in reasons):
+    if any(r.status != "ok" and r.mirror is not None and not r.code.startswith("initiation-") for r in reasons):
         return []
     found = side_reason(_calibrated(result, measurements, model), model, est.states)
     return [] if found is None else [found]
