@@ -113,3 +113,21 @@ def test_the_verdict_says_so_and_a_half_plane_settles_it() -> None:
         Reason(code="competing", status="doubtful", message="m", mirror="pairs")
     with pytest.raises(ValueError, match="needs the pairs"):
         Reason(code="competing", status="doubtful", message="m", pairs=(1,))
+
+
+def test_a_dead_pairs_one_value_left_cannot_make_a_wrong_side_ok() -> None:
+    """Case a at 25 km with pair 1 dead (every value 0) and all but its first value left out, as by hand: that
+    one value alone decides the side of pair 0's baseline, and the smoother ended 21.4 km from the truth, ``ok``
+    with no finding, before this finding existed.  Now its verdict names pair 0's line and is not ``ok``."""
+    scenario = fd.paper_scenario("a", 25e3)
+    sim = fd.simulate(scenario, np.random.default_rng(0))
+    m = sim.measurements
+    doppler = np.where(m.pair == 1, 0.0, m.doppler)
+    first = np.flatnonzero(m.pair == 1)[0]
+    kept = fd.Measurements.from_arrays(m.time, m.pair, doppler, m.sigma).subset(
+        (m.pair == 0) | (np.arange(len(m)) == first))
+    result = fd.track(kept, scenario.geometry, "smoother")
+    error = np.hypot(*(result.primary.states[-1, :2] - sim.truth.at(result.primary.times[-1:])[0, :2]))
+    assert error > 10e3  # the wrong side, which that value favours: the verdict must say so
+    assert result.status == "doubtful"
+    assert [r.pairs for r in result.reasons if r.mirror == "pairs"] == [(0,)]
