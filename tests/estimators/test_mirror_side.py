@@ -43,7 +43,7 @@ def test_a_reflection_keeps_the_doppler_of_every_pair_on_its_line() -> None:
     image = reflected(states, *LINE)
     before, after = fd.bistatic_doppler(states, GEOMETRY), fd.bistatic_doppler(image, GEOMETRY)
     np.testing.assert_allclose(after[:, 1:], before[:, 1:], rtol=1e-12, atol=1e-9)
-    assert np.min(np.abs(after[:, 0] - before[:, 0])) >= 0.0 and np.median(np.abs(after[:, 0] - before[:, 0])) > 1.0
+    assert np.median(np.abs(after[:, 0] - before[:, 0])) > 1.0  # pair 0, off the line, sees the image apart
     np.testing.assert_allclose(reflected(image, *LINE), states, rtol=0, atol=1e-9)
     c, u, _ = principal_line(np.vstack([GEOMETRY.tx, GEOMETRY.rx]))
     np.testing.assert_allclose(mirrored(states, GEOMETRY), reflected(states, c, u), rtol=0, atol=1e-9)
