@@ -108,7 +108,7 @@ from fgdoppler._text import distance_text, time_text
 from fgdoppler.estimators.calibration import shifted_by
 from fgdoppler.estimators.grid import speed_lower_bound
 from fgdoppler.estimators.initiation import OUTLIER_CUT, inlier_statistic
-from fgdoppler.estimators.mirror_side import side_reason
+from fgdoppler.estimators.mirror_side import ON_LINE, side_reason
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import TrackerSettings
 from fgdoppler.estimators.verdict import MIRRORS, Reason, Status, message_of, status_of
@@ -222,7 +222,7 @@ def _data_reasons(measurements: Measurements, model: TrackingModel, half_plane: 
         g = model.observation.geometry
         used = np.unique(measurements.pair)
         _, _, spread = principal_line(np.vstack([g.tx[used], g.rx[used]]))
-        if spread.size < 2 or spread[1] <= 1e-9 * max(spread[0], 1.0):
+        if spread.size < 2 or spread[1] <= ON_LINE * max(spread[0], 1.0):
             out.append(_one_line_reason(used, g.dim))
     return out
 

@@ -56,7 +56,8 @@ __all__ = ["ON_LINE", "SideMargin", "sensor_lines", "side_margins", "side_reason
 
 FloatArray = NDArray[np.float64]
 
-#: A sensor lies on a line when its distance from it is at most this share of the sensors' extent.
+#: A sensor lies on a line when its distance from it is at most this share of the sensors' extent (the judge's
+#: one-line `data` finding takes the same share of their spread along the line).
 ON_LINE = 1e-9
 
 
