@@ -92,6 +92,8 @@ class _Posterior:
         self.logw = np.empty(0)
         self.logpost = np.empty(0)
         self.label = np.empty(0, dtype=np.intp)
+        # Kish's effective sample size of the last one-step importance draw (sample_from with tempered=False)
+        self.proposal_ess = float("nan")
         # calibration offsets integrated out (None: calibrated): each particle's per-pair statistics s and the
         # data's information a since the anchor (:mod:`fgdoppler.estimators.offset_posterior`)
         self.offsets = OffsetPrior.independent(settings.bias_sigma, model.observation.n_channels, model.n)
@@ -195,7 +197,8 @@ class _Posterior:
         4,096 on the paper's windows, and with sensors on one line it put
         all the mass on one of two mirror modes of equal mass.
         ``tempered=False`` keeps that one step (importance weights
-        :math:`\pi/q`, resampled).  Returns the last moves' acceptance rate,
+        :math:`\pi/q`, resampled; their effective sample size is left in
+        ``proposal_ess``).  Returns the last moves' acceptance rate,
         or ``None`` when no draw has a finite posterior (the particles are
         then left unchanged).
         """
@@ -220,6 +223,7 @@ class _Posterior:
         self.x, self.label, self.logpost, self.s = x, label, logpost, s
         if not tempered:
             self.logw = logpost - log_q(x)
+            self.proposal_ess = self.ess()
             self.resample(rng)
             return self.move(moves, rng)
         self.logw = np.where(np.isfinite(logpost), 0.0, -np.inf)
