@@ -645,16 +645,20 @@ def _sample_reaching(post: _Posterior, x0: FloatArray, P0: FloatArray, ratio: fl
     """:func:`_sample_about` of the smoother's first state, from the broad proposal in 2-D where the probe's
     ``ratio`` lies beyond :data:`BEND_LIMIT` or the narrow draw leaves fewer than :data:`ESS_MIN` effective
     samples; with the words that say which ("" for the narrow proposal), or ``None`` when nothing can be drawn."""
+    narrow = None
     if dim == 2 and not 1.0 / BEND_LIMIT <= ratio <= BEND_LIMIT:
         why = "the valley bends far"
     else:
-        drawn = _sample_about(post, x0, P0, SAMPLES, MOVES, rng)
-        if drawn is None or dim != 2 or post.proposal_ess >= ESS_MIN:
-            return None if drawn is None else (*drawn, "")
+        narrow = _sample_about(post, x0, P0, SAMPLES, MOVES, rng)
+        if narrow is None or dim != 2 or post.proposal_ess >= ESS_MIN:
+            return None if narrow is None else (*narrow, "")
         why = f"a draw about the estimate left only {post.proposal_ess:.0f} effective samples"
     broad = _sample_about(post, x0, P0, SAMPLES, MOVES, rng, broad=True)
-    return None if broad is None else (*broad, f"tempered from a proposal six Laplace standard deviations wide "
-                                                f"and again from the samples' own spread, as {why}; ")
+    if broad is None:  # no broad draw has a finite posterior: the narrow proposal's samples stand
+        narrow = narrow if narrow is not None else _sample_about(post, x0, P0, SAMPLES, MOVES, rng)
+        return None if narrow is None else (*narrow, "")
+    return (*broad, f"tempered from a proposal six Laplace standard deviations wide and again from the samples' own "
+                    f"spread, as {why}; ")
 
 
 def _sample_about(post: _Posterior, x0: FloatArray, P0: FloatArray, samples: int, moves: int,

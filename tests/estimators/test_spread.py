@@ -283,6 +283,34 @@ def test_a_valley_that_reaches_far_is_sampled_as_far_as_the_exact_posterior_reac
     assert ratio_narrow < 0.7 and nees_narrow > chi2.ppf(0.999, 4)
 
 
+def test_where_the_broad_proposal_draws_nothing_the_narrow_ones_samples_stand(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Both routes to the broad proposal (a probe ratio beyond the bend limit, too few effective samples) fall back
+    to the narrow proposal's samples, exactly as drawn without the broad one, where it draws nothing finite."""
+    sim = fd.simulate(fd.Scenario(geometry=RADAR_AND_PAIR, x0=(-27335.4, 16782.9, 6.9, -82.7), duration=30.0,
+                                  dt=0.5), np.random.default_rng(0))
+    model = fd.TrackingModel.of(RADAR_AND_PAIR)
+    e = fd.track(sim.measurements, RADAR_AND_PAIR, "smoother",
+                 settings=fd.SmootherSettings(sampled_covariance=False)).primary
+    x0, P0 = e.states[0], e.covariances[0]
+    real = spread._sample_about
+
+    def narrow_only(*args: object, broad: bool = False, **kwargs: object) -> object:
+        return None if broad else real(*args, **kwargs)  # type: ignore[arg-type]
+
+    def drawn(ratio: float, ess_min: float) -> tuple[np.ndarray, float, str] | None:
+        post, _ = _posterior(sim.measurements, model, float(e.times[0]), None, 0, spread.SAMPLES)
+        monkeypatch.setattr(spread, "ESS_MIN", ess_min)
+        return spread._sample_reaching(post, x0, P0, ratio, 2, np.random.default_rng(3))
+
+    plain = drawn(5.0, 0.0)  # inside both limits: the narrow proposal alone
+    assert plain is not None and plain[2] == ""
+    monkeypatch.setattr(spread, "_sample_about", narrow_only)
+    for ratio, ess_min in [(5.0, 4096.0), (2.0 * spread.BEND_LIMIT, 0.0)]:
+        fallback = drawn(ratio, ess_min)
+        assert fallback is not None and fallback[2] == ""
+        np.testing.assert_array_equal(fallback[0], plain[0])  # the same generator: the same samples
+
+
 def _truth_nees(sim: fd.Simulation, e: fd.Estimates, after: float = 10.0) -> float:
     """The truth's NEES averaged over the estimates from ``after`` seconds on."""
     d = e.states - sim.truth.at(e.times)
