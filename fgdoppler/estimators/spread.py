@@ -117,26 +117,28 @@ The importance proposal :math:`\mathcal N(\hat{\mathbf x}_0, 4\mathbf P_0)`
 reaches two Laplace standard deviations, and 20 Metropolis sweeps from it
 move the samples a few of their own widths.  Where a radar's Doppler leaves
 the track's rotation about it to one other pair, the valley reaches
-kilometres further: on a radar and one bistatic pair (20 recordings) the
-samples' second moment put the truth at a NEES of 43-467 in 14 of them,
-while the exact posterior's second moment about the same estimate
-(``benchmarks/_exact.py``, adaptive importance sampling, no code shared)
-put it at 1.8-10.8.  Two signs mark such a valley: the probe's ratio
-beyond :data:`BEND_LIMIT`, or a one-step importance draw from the narrow
-proposal that leaves fewer than :data:`ESS_MIN` effective samples (30 of
-4,096 in the first recording).  There (in 2-D) the samples are drawn from
-a broad proposal instead (:func:`_sample_reaching`): tempered into the
-posterior (:meth:`~fgdoppler.estimators.particle_posterior._Posterior.sample_from`)
+kilometres further.  Measured with ``python studies/sampled_spread_check.py
+--draws 150 --narrow 1`` (2026-11-30), against the exact posterior's second
+moment about the same estimate (``benchmarks/_exact.py``, adaptive
+importance sampling, no code shared): on a radar and one bistatic pair
+(150 recordings) the samples' second moment put the truth beyond a NEES of
+18.5 (χ²₄ at 99.9 %) in 102, in 83 of them where the exact one held it
+(median NEES 193 against 5.9; the major standard deviation a median 0.56
+of the exact one's); on random and radar layouts in 7 of 96 sampled
+tracks.  Two signs mark such a valley: the probe's ratio beyond
+:data:`BEND_LIMIT`, or a one-step importance draw from the narrow proposal
+that leaves fewer than :data:`ESS_MIN` effective samples.  There (in 2-D)
+the samples are drawn from a broad proposal instead
+(:func:`_sample_reaching`): tempered into the posterior
+(:meth:`~fgdoppler.estimators.particle_posterior._Posterior.sample_from`)
 from :math:`\mathcal N(\hat{\mathbf x}_0, 36\,\mathbf P_0)` and moved,
 then drawn again the same way from four times their own standard
 deviations about their mean, so that the second pass covers what the first
-found.  Measured with ``python studies/sampled_spread_check.py --draws 150``
-(7 min on 2 cores, 2026-11-30; the same 150 draws of each family before
-and after): the broad proposal ran on 41 of the 96 sampled tracks of
-random and radar layouts, and the tracks whose reported covariance missed
-the truth (NEES above 18.5, χ²₄ at 99.9 %) while the exact posterior's
-held it fell from 7 to 2, no track going the other way; on the radar and
-pair above, from 14 of 20 to 4.  It never runs on the paper's recordings
+found.  The same draws with it (``--narrow 0``, 9 min on 2 cores): it ran
+on 133 of the 150 radar-and-pair tracks and on 41 of the 96 others; the
+misses where the exact posterior holds fell from 83 to 23 (median NEES
+7.9, standard deviation ratio 0.99) and from 7 to 2, 65 tracks now holding
+the truth and none the other way.  It never runs on the paper's recordings
 (none of the accuracy benchmark's 400 sampled ones, case a 5 km and case b
 45 km with seeds 2026 and 7: probe ratio at most 11.8, effective samples
 at least 150), whose covariances are unchanged to the bit.  It costs 0.7-0.9 s
@@ -310,15 +312,16 @@ SAMPLING_LIMIT = 3.0
 TRUST_LIMIT = 100.0
 #: Probe ratio beyond which (or below whose inverse) the valley bends out of the reach of the importance
 #: proposal :math:`\mathcal N(\hat{\mathbf x}_0, 4\mathbf P_0)` and of local moves from it: the samples are drawn
-#: from a broad proposal instead (:func:`_sample_about`; module docstring, "Valleys that reach far").  Measured
-#: (``studies/sampled_spread_check.py``): at most 11.8 on the accuracy benchmark's 400 sampled recordings (case a
-#: 5 km and case b 45 km, seeds 2026 and 7), 18-2,500 where the samples fell short of the exact posterior's
-#: spread on random and radar layouts.
+#: from a broad proposal instead (:func:`_sample_reaching`; module docstring, "Valleys that reach far").  Measured
+#: 2026-11-30: at most 11.8 on the accuracy benchmark's 400 sampled recordings (case a 5 km and case b 45 km, 100
+#: runs each with seeds 2026 and 7; the default smoother on each, a script not kept); 18-2,500 on random and radar
+#: layouts where the samples fell short of the exact posterior's spread (``studies/sampled_spread_check.py``).
 BEND_LIMIT = 15.0
 #: Effective sample size of the one-step importance draw from :math:`\mathcal N(\hat{\mathbf x}_0, 4\mathbf P_0)`
-#: below which its moments rest on too few draws and the broad proposal is used too.  Measured: at least 150
-#: (1 % quantile 177) on the benchmark's 400 sampled recordings; 4-74 in 16 of the 22 random, radar and
-#: radar-and-pair tracks whose samples fell short of the exact posterior's spread.
+#: below which its moments rest on too few draws and the broad proposal is used too.  Measured 2026-11-30 (a
+#: script recording ``proposal_ess`` in the smoother's runs, not kept): at least 150 (1 % quantile 177) on the
+#: benchmark's 400 sampled recordings; 4-74 in 16 of 22 tracks (150 draws each of the study's random and radar
+#: layouts, 20 of the radar and pair) whose samples fell short of the exact posterior's spread.
 ESS_MIN = 100.0
 #: The broad proposal's covariance in units of :math:`4\mathbf P_0`: standard deviations six times the Laplace
 #: covariance's.
