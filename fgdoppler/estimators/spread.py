@@ -297,8 +297,9 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.robust import huber_weights
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["ADAPTED", "BEND_LIMIT", "BROAD", "ESS_MIN", "FILTER_MOVES", "FILTER_SAMPLES", "MAX_SPAN", "MEAN_SHIFT_MIN", "SAMPLES", "SAMPLING_LIMIT", "TRUST_LIMIT",
-           "FilteredSpread", "PosteriorSpread", "filtered_spread", "posterior_spread"]
+__all__ = ["ADAPTED", "BEND_LIMIT", "BROAD", "ESS_MIN", "FILTER_MOVES", "FILTER_SAMPLES", "MAX_SPAN", "MEAN_SHIFT_MIN",
+           "SAMPLES", "SAMPLING_LIMIT", "TRUST_LIMIT", "FilteredSpread", "PosteriorSpread", "filtered_spread",
+           "posterior_spread"]
 
 FloatArray = NDArray[np.float64]
 
@@ -660,8 +661,8 @@ def _sample_reaching(post: _Posterior, x0: FloatArray, P0: FloatArray, ratio: fl
     if broad is None:  # no broad draw has a finite posterior: the narrow proposal's samples stand
         narrow = narrow if narrow is not None else _sample_about(post, x0, P0, SAMPLES, MOVES, rng)
         return None if narrow is None else (*narrow, "")
-    return (*broad, f"tempered from a proposal six Laplace standard deviations wide and again from the samples' own "
-                    f"spread, as {why}; ")
+    return (*broad, f"tempered from a proposal {2.0 * np.sqrt(BROAD):g} Laplace standard deviations wide and again "
+                    f"from the samples' own spread, as {why}; ")
 
 
 def _sample_about(post: _Posterior, x0: FloatArray, P0: FloatArray, samples: int, moves: int,
@@ -672,7 +673,9 @@ def _sample_about(post: _Posterior, x0: FloatArray, P0: FloatArray, samples: int
     and are tempered into the posterior (:meth:`~fgdoppler.estimators.particle_posterior._Posterior.sample_from`)
     and moved, then drawn again the same way from :math:`\mathcal N(\bar{\mathbf x}, 4\,\mathrm{ADAPTED}\,\mathbf S)`,
     the first pass's mean and covariance: a valley that reaches beyond the narrow proposal still gets its share
-    of them, and the second pass covers what the first found.  Returns :math:`\frac1n\sum_i(\mathbf x_i - \mathbf x_0)(\mathbf x_i - \mathbf x_0)^\top` and the
+    of them, and the second pass covers what the first found.
+
+    Returns :math:`\frac1n\sum_i(\mathbf x_i - \mathbf x_0)(\mathbf x_i - \mathbf x_0)^\top` and the
     Metropolis acceptance rate, or ``None`` when no draw has a finite posterior.
     """
     rate = post.sample_from([(x0, BROAD * P0 if broad else P0)], samples, moves, rng, tempered=broad)
