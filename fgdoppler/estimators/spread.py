@@ -124,8 +124,8 @@ importance sampling, no code shared): on a radar and one bistatic pair
 (150 recordings) the samples' second moment put the truth beyond a NEES of
 18.5 (χ²₄ at 99.9 %) in 102, in 83 of them where the exact one held it
 (median NEES 193 against 5.9; the major standard deviation a median 0.56
-of the exact one's); on random and radar layouts in 7 of 96 sampled
-tracks.  Two signs mark such a valley: the probe's ratio beyond
+of the exact one's); on random and radar layouts 7 of 96 sampled tracks
+were such misses.  Two signs mark such a valley: the probe's ratio beyond
 :data:`BEND_LIMIT`, or a one-step importance draw from the narrow proposal
 that leaves fewer than :data:`ESS_MIN` effective samples.  There (in 2-D)
 the samples are drawn from a broad proposal instead
