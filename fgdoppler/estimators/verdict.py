@@ -32,7 +32,8 @@ from typing import Literal
 
 from fgdoppler.zone import ZoneBox
 
-__all__ = ["MIRRORS", "NOT_CONVERGED", "STATUSES", "Event", "Judged", "Mirror", "Reason", "Status", "message_of", "status_of"]
+__all__ = ["MIRRORS", "NOT_CONVERGED", "STATUSES", "Event", "Judged", "Mirror", "Reason", "Status", "message_of",
+           "status_of"]
 
 Status = Literal["ok", "doubtful", "failed"]
 #: Which line a mirror image is taken across: the one the sensors of the pairs that reported lie on exactly, the

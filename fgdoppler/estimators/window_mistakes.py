@@ -354,8 +354,8 @@ def find_mistake(measurements: Measurements, model: TrackingModel, settings: Ini
     label = pair_labels(model.observation)
 
     def scaled(code: MistakeCode, which: list[int], factor: float) -> None:
-        tried.append(Mistake(code=code, which=pairs_text(which, label, every=which == pairs), cost=np.nan, factor=factor,
-                             pairs=tuple(which)))
+        tried.append(Mistake(code=code, which=pairs_text(which, label, every=which == pairs), cost=np.nan,
+                             factor=factor, pairs=tuple(which)))
 
     for flipped in [pairs] + ([[k] for k in pairs] if len(pairs) > 1 else []) if "sign" in codes else []:
         scaled("sign", flipped, -1.0)
@@ -511,7 +511,6 @@ def radar_pairs(model: TrackingModel) -> tuple[int, ...]:
     for a model without a geometry)."""
     geometry = getattr(model.observation, "geometry", None)
     return tuple(int(k) for k in geometry.radars) if isinstance(geometry, Geometry) else ()
-
 
 
 def mistake_reason(found: Mistake, cost: float, confidence: float, *, what: str = "the window") -> Reason:
