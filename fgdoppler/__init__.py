@@ -14,68 +14,105 @@ The names here are what a first track needs::
 """
 
 from importlib.metadata import PackageNotFoundError, version
+from typing import TYPE_CHECKING
 
-from fgdoppler.analysis.observability import observability_measure
-from fgdoppler.estimators import (
-    ESTIMATORS,
-    METHODS,
-    STATUSES,
-    EKFSettings,
-    Estimates,
-    Event,
-    FixedLagSettings,
-    Initiation,
-    InitiationSettings,
-    ISAM2Settings,
-    MapSettings,
-    OffsetEstimate,
-    ParticleSettings,
-    Reason,
-    SmootherSettings,
-    TrackerSettings,
-    TrackResult,
-    initiate,
-    run_estimator,
-    run_estimators,
-    track,
-)
-from fgdoppler.estimators.grid import GridSpec, HalfPlane
-from fgdoppler.frames import Frame
-from fgdoppler.geodetic import GeodeticOrigin
-from fgdoppler.geometry import (
-    BistaticPair,
-    Geometry,
-    bistatic_range,
-    ellipse_tangent,
-    paper_geometry,
-    resolve_geometry,
-)
-from fgdoppler.measurements import MeasurementError, Measurements
-from fgdoppler.models import (
-    ConstantVelocity,
-    DopplerModel,
-    MeasurementModel,
-    StackedTimes,
-    TrackingModel,
-    bistatic_doppler,
-    bistatic_doppler_and_jacobian,
-    bistatic_doppler_jacobian,
-    cv_doppler,
-    cv_doppler_and_jacobian,
-    cv_doppler_jacobian,
-    cv_information,
-)
-from fgdoppler.progress import Progress, TqdmProgress
-from fgdoppler.simulation import (
-    Manoeuvre,
-    Scenario,
-    Simulation,
-    Trajectory,
-    paper_scenario,
-    paper_scenarios,
-    simulate,
-)
-from fgdoppler.zone import Zone, ZoneBox
+from fgdoppler._lazy import attach
+
+#: Where each public name lives: its module is imported on first use (:mod:`fgdoppler._lazy`), so that
+#: ``fgdoppler --help`` loads no estimator.  Type checkers read the same names from the imports below.
+_HOMES: dict[str, tuple[str, ...]] = {
+    "fgdoppler.analysis.observability": ("observability_measure",),
+    "fgdoppler.estimators": (
+        "ESTIMATORS", "METHODS", "STATUSES", "EKFSettings", "Estimates", "Event", "FixedLagSettings",
+        "Initiation", "InitiationSettings", "ISAM2Settings", "MapSettings", "OffsetEstimate",
+        "ParticleSettings", "Reason", "SmootherSettings", "TrackerSettings", "TrackResult", "initiate",
+        "run_estimator", "run_estimators", "track",
+    ),
+    "fgdoppler.estimators.grid": ("GridSpec", "HalfPlane"),
+    "fgdoppler.frames": ("Frame",),
+    "fgdoppler.geodetic": ("GeodeticOrigin",),
+    "fgdoppler.geometry": (
+        "BistaticPair", "Geometry", "bistatic_range", "ellipse_tangent", "paper_geometry",
+        "resolve_geometry",
+    ),
+    "fgdoppler.measurements": ("MeasurementError", "Measurements"),
+    "fgdoppler.models": (
+        "ConstantVelocity", "DopplerModel", "MeasurementModel", "StackedTimes", "TrackingModel",
+        "bistatic_doppler", "bistatic_doppler_and_jacobian", "bistatic_doppler_jacobian", "cv_doppler",
+        "cv_doppler_and_jacobian", "cv_doppler_jacobian", "cv_information",
+    ),
+    "fgdoppler.progress": ("Progress", "TqdmProgress"),
+    "fgdoppler.simulation": (
+        "Manoeuvre", "Scenario", "Simulation", "Trajectory", "paper_scenario", "paper_scenarios",
+        "simulate",
+    ),
+    "fgdoppler.zone": ("Zone", "ZoneBox"),
+}
+
+if TYPE_CHECKING:
+    from fgdoppler.analysis.observability import observability_measure
+    from fgdoppler.estimators import (
+        ESTIMATORS,
+        METHODS,
+        STATUSES,
+        EKFSettings,
+        Estimates,
+        Event,
+        FixedLagSettings,
+        Initiation,
+        InitiationSettings,
+        ISAM2Settings,
+        MapSettings,
+        OffsetEstimate,
+        ParticleSettings,
+        Reason,
+        SmootherSettings,
+        TrackerSettings,
+        TrackResult,
+        initiate,
+        run_estimator,
+        run_estimators,
+        track,
+    )
+    from fgdoppler.estimators.grid import GridSpec, HalfPlane
+    from fgdoppler.frames import Frame
+    from fgdoppler.geodetic import GeodeticOrigin
+    from fgdoppler.geometry import (
+        BistaticPair,
+        Geometry,
+        bistatic_range,
+        ellipse_tangent,
+        paper_geometry,
+        resolve_geometry,
+    )
+    from fgdoppler.measurements import MeasurementError, Measurements
+    from fgdoppler.models import (
+        ConstantVelocity,
+        DopplerModel,
+        MeasurementModel,
+        StackedTimes,
+        TrackingModel,
+        bistatic_doppler,
+        bistatic_doppler_and_jacobian,
+        bistatic_doppler_jacobian,
+        cv_doppler,
+        cv_doppler_and_jacobian,
+        cv_doppler_jacobian,
+        cv_information,
+    )
+    from fgdoppler.progress import Progress, TqdmProgress
+    from fgdoppler.simulation import (
+        Manoeuvre,
+        Scenario,
+        Simulation,
+        Trajectory,
+        paper_scenario,
+        paper_scenarios,
+        simulate,
+    )
+    from fgdoppler.zone import Zone, ZoneBox
+else:
+    __getattr__, __dir__ = attach(__name__, _HOMES)
 
 try:
     __version__ = version("fgdoppler")

@@ -41,7 +41,8 @@ from numpy.typing import NDArray
 from fgdoppler._io import atomic_write_text
 from fgdoppler.analysis.metrics import errors, nees, nees_band, rmse
 from fgdoppler.analysis.workers import one_blas_thread
-from fgdoppler.estimators.initiation import METHODS, InitiationSettings, Method
+from fgdoppler.estimators.initiation import InitiationSettings
+from fgdoppler.estimators.names import DEFAULT_ESTIMATORS, METHODS, Method
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
 from fgdoppler.estimators.settings import FixedLagSettings, SmootherSettings, TrackerSettings
 from fgdoppler.estimators.verdict import STATUSES
@@ -57,8 +58,6 @@ __all__ = ["DEFAULT_ESTIMATORS", "NEES_FROM", "MonteCarloResult", "MonteCarloSpe
 
 FloatArray = NDArray[np.float64]
 
-#: Default estimator set of the paper study: every initiation method, then every tracker.
-DEFAULT_ESTIMATORS: tuple[str, ...] = (*METHODS, *ESTIMATORS)
 
 
 def _lag(name: str) -> float | None:

@@ -7,7 +7,6 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from fgdoppler.analysis.montecarlo import DEFAULT_ESTIMATORS
 from fgdoppler.cli.common import (
     CLIError,
     add_huber_option,
@@ -24,6 +23,7 @@ from fgdoppler.cli.common import (
     per_pair,
     scenario,
 )
+from fgdoppler.estimators.names import DEFAULT_ESTIMATORS
 
 __all__ = ["add_montecarlo"]
 

@@ -26,19 +26,8 @@ from fgdoppler.cli.common import (
     per_pair,
     taking,
 )
-from fgdoppler.estimators.initiation import METHODS
-from fgdoppler.estimators.judge import LEVEL, REPEATS_ADVICE, repeat_reasons
-from fgdoppler.estimators.later_mistakes import UNCONFIRMED, is_mistake_finding
-from fgdoppler.estimators.manoeuvre import SIGMA_ADVICE
-from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
-from fgdoppler.estimators.window_mistakes import (
-    IN_KILOMETRES,
-    IN_SECONDS,
-    OR_OUTSIDE_THE_ZONE,
-    WITH_OUTLIERS,
-)
+from fgdoppler.estimators.names import ALIASES, METHODS, SUMMARIES
 from fgdoppler.geometry import Geometry, principal_line
-from fgdoppler.repeats import drop_repeats, find_repeats
 from fgdoppler.zone import ZoneBox
 
 __all__ = ["add_track"]
@@ -59,9 +48,9 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    help="the paper's a or b, or a geometry TOML file (default: geometry.toml beside FILE)")
     # the offline smoother by default: a track of the whole recording, the most accurate and consistent
     # answer (README "Results"); the initiation alone is asked for by name
-    p.add_argument("--estimator", choices=("init", *ESTIMATORS, *ALIASES), default="smoother",
+    p.add_argument("--estimator", choices=("init", *SUMMARIES, *ALIASES), default="smoother",
                    help="what to run: init (initiation only), " + ", ".join(
-                       f"{k} ({v.summary})" for k, v in ESTIMATORS.items())
+                       f"{k} ({v})" for k, v in SUMMARIES.items())
                    + "; batch is the old name of smoother (default smoother)")
     p.add_argument("--sigma", type=float, default=None,
                    help="default Doppler sigma when FILE has no sigma column, in its Doppler column's unit (m/s; Hz "
@@ -162,6 +151,9 @@ def _sigma_note(args: argparse.Namespace, names: tuple[str, ...]) -> None:
 def _dropped_repeats(args: argparse.Namespace, meas: Any, geom: Geometry) -> tuple[Any, dict[str, Any]]:
     """``meas`` without the repeats of the pairs found repeating (``--drop-repeats``; the verdict's level), said
     on stderr, and the JSON's ``dropped_repeats`` entry (pair index -> repeats left out); as read otherwise."""
+    from fgdoppler.estimators.judge import LEVEL
+    from fgdoppler.repeats import drop_repeats, find_repeats
+
     if not args.drop_repeats:
         return meas, {}
     found = find_repeats(meas, level=LEVEL)
@@ -213,6 +205,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
 def _run(args: argparse.Namespace) -> int:
     from fgdoppler.csvfile import header_names
     from fgdoppler.estimators.initiation import initiate
+    from fgdoppler.estimators.judge import repeat_reasons
     from fgdoppler.measurements import Measurements
     from fgdoppler.simulation import Trajectory
 
@@ -361,6 +354,16 @@ def mistake_hint(reasons: Any) -> str | None:
     the Huber loss first where the initiation window fits without a few outliers (an ``outliers`` finding), and
     before all of these to leave out repeated values where a ``data`` finding says a pair repeats them (every other
     finding reads them as measurements).  ``None`` otherwise."""
+    from fgdoppler.estimators.judge import REPEATS_ADVICE
+    from fgdoppler.estimators.later_mistakes import UNCONFIRMED, is_mistake_finding
+    from fgdoppler.estimators.manoeuvre import SIGMA_ADVICE
+    from fgdoppler.estimators.window_mistakes import (
+        IN_KILOMETRES,
+        IN_SECONDS,
+        OR_OUTSIDE_THE_ZONE,
+        WITH_OUTLIERS,
+    )
+
     # a track's findings carry its initiation's under the "initiation-" prefix; both name the mistake alike
     if any(r.status != "ok" and REPEATS_ADVICE in r.message for r in reasons):
         return ("a pair repeats its values (the data finding above): track again with --drop-repeats, or without "
@@ -405,6 +408,8 @@ def _print_hints(reasons: Any, geom: Geometry, args: argparse.Namespace, pairs: 
     """The ``hint:`` lines after the verdict: to correct a likely mistake first (:func:`mistake_hint`), or else
     the half planes of a mirror ambiguity and the zone holding every zone the findings advise — also after the
     mistake's hint where the data fit as given with a start outside the zone too."""
+    from fgdoppler.estimators.window_mistakes import OR_OUTSIDE_THE_ZONE
+
     first = mistake_hint(reasons)
     if first is not None:
         print(f"  hint: {first}", file=sys.stderr)
@@ -502,6 +507,7 @@ def _plot_landscape(args: argparse.Namespace, init: Any, window: Any, geom: Any,
 
 def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
     """The settings of tracker ``name`` from the options (a CLIError for values it rejects)."""
+    from fgdoppler.estimators.registry import ESTIMATORS
     from fgdoppler.estimators.settings import FixedLagSettings, ParticleSettings, SmootherSettings
 
     k = huber(args)

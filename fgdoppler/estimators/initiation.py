@@ -78,6 +78,7 @@ from fgdoppler.estimators.grid import (
     grid_states,
 )
 from fgdoppler.estimators.marginals import marginal_covariances
+from fgdoppler.estimators.names import METHODS, Method
 from fgdoppler.estimators.verdict import Event, Judged, Reason
 from fgdoppler.factors import X, region_factor
 from fgdoppler.frames import Frame
@@ -95,9 +96,6 @@ __all__ = ["EVIDENCE_DRAWS", "METHODS", "Candidate", "Initiation", "InitiationSe
            "lm_params", "residual_landscape", "whitened_residuals", "window_grid", "window_log_evidence"]
 
 FloatArray = NDArray[np.float64]
-Method = Literal["grid", "ils", "lm"]
-#: The refinement methods, also the initiation-only "estimators" of Monte Carlo studies.
-METHODS: tuple[Method, ...] = get_args(Method)
 WindowModel = Literal["ncv", "cv"]
 #: Level of the χ² test behind the verdict (the paper's 95 % test is reported as well; on its own it
 #: would call one well-posed window in twenty doubtful).

@@ -35,6 +35,7 @@ from fgdoppler.estimators.initiation import Initiation, InitiationSettings, init
 from fgdoppler.estimators.isam2 import run_isam2
 from fgdoppler.estimators.judge import judge, track_reference
 from fgdoppler.estimators.later_mistakes import later_mistakes
+from fgdoppler.estimators.names import ALIASES, SUMMARIES
 from fgdoppler.estimators.particle import run_map, run_particle
 from fgdoppler.estimators.restart import FreshFits, with_restarts
 from fgdoppler.estimators.results import TrackResult
@@ -105,25 +106,22 @@ class EstimatorInfo:
 
 ESTIMATORS: Mapping[str, EstimatorInfo] = MappingProxyType({
     "ekf": EstimatorInfo(name="ekf", run=run_ekf, settings=EKFSettings, resolution="likelihood", online=True,
-                         summary="extended Kalman filter (the paper's dynamic estimator)"),
+                         summary=SUMMARIES["ekf"]),
     "isam2": EstimatorInfo(name="isam2", run=run_isam2, settings=ISAM2Settings, resolution="likelihood",
-                           online=True, summary="iSAM2: the factor graph updated scan by scan"),
+                           online=True, summary=SUMMARIES["isam2"]),
     "fixed-lag": EstimatorInfo(name="fixed-lag", run=run_fixed_lag, settings=FixedLagSettings,
                                resolution="likelihood", online=False,
-                               summary="fixed-lag smoother: each state estimated lag seconds after its time"),
+                               summary=SUMMARIES["fixed-lag"]),
     "smoother": EstimatorInfo(name="smoother", run=run_smoother, settings=SmootherSettings, resolution="cost",
-                              online=False, summary="offline smoother: the whole recording by Levenberg-Marquardt",
+                              online=False, summary=SUMMARIES["smoother"],
                               stages=CostStages(draft=draft_smoother, finish=finish_smoother,
                                                 join=SmootherDraft.joined)),
     "particle": EstimatorInfo(name="particle", run=run_particle, settings=ParticleSettings, resolution="native",
                               online=True,
-                              summary="particle filter: the posterior by sequential Monte Carlo (resample-move)"),
+                              summary=SUMMARIES["particle"]),
     "map": EstimatorInfo(name="map", run=run_map, settings=MapSettings, resolution="native", online=True,
-                         summary="filtered MAP: the particle posterior's mode given all data so far"),
+                         summary=SUMMARIES["map"]),
 })
-
-#: Old names still accepted (the documentation used them), with a DeprecationWarning.
-ALIASES: Mapping[str, str] = MappingProxyType({"batch": "smoother"})
 
 
 def estimator_info(name: str) -> EstimatorInfo:
