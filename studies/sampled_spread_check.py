@@ -30,9 +30,10 @@ Four families of draws (``--draws`` each, seeded):
   draw ``i`` its noise seeded ``i``: the longest valleys.
 
 With ``--narrow 1`` the samples are drawn as before 2026-11-30, from the
-narrow proposal alone (:data:`fgdoppler.estimators.spread.BEND_LIMIT` and
-:data:`~fgdoppler.estimators.spread.ESS_MIN` set so that the broad one never
-runs): the same draws, to compare.
+narrow proposal alone (:data:`fgdoppler.estimators.spread.BEND_LIMIT`,
+:data:`~fgdoppler.estimators.spread.ESS_MIN` and
+:data:`~fgdoppler.estimators.spread.GROWTH_LIMIT` set so that the broad one
+never runs): the same draws, to compare.
 
 Printed per family: tracks, sampled ones (a curved valley, or a skewed one
 whose mean is reported), how many of those drew from the broad proposal,
@@ -42,7 +43,7 @@ covariance and under :math:`\mathbf M` (the share a perfect covariance
 about this estimate would still miss), and under the reported one only
 (the samples' shortfall).
 
-Run: ``python studies/sampled_spread_check.py [--draws 40] [--narrow 0] [--out DIR]`` (150 draws: 9 min on 2
+Run: ``python studies/sampled_spread_check.py [--draws 40] [--narrow 0] [--out DIR]`` (150 draws: 7-12 min on 2
 cores).
 """
 
@@ -126,7 +127,7 @@ def checked(family: str, i: int) -> dict[str, Any]:
 @one_blas_thread
 def one(i: int, narrow: float = 0.0) -> list[dict[str, Any]]:
     if narrow:  # this worker process only: the narrow proposal alone, as before 2026-11-30
-        spread.BEND_LIMIT, spread.ESS_MIN = math.inf, 0.0
+        spread.BEND_LIMIT, spread.ESS_MIN, spread.GROWTH_LIMIT = math.inf, 0.0, math.inf
     return [checked(f, i) for f in FAMILIES]
 
 
