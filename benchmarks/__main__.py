@@ -20,13 +20,15 @@ from benchmarks import (
     bench_particle,
     bench_scaling,
     bench_shared_reference,
+    bench_startup,
     bench_widening,
 )
 
 BENCHES = {"grid": bench_grid, "ekf": bench_ekf, "scaling": bench_scaling, "montecarlo": bench_montecarlo,
            "long": bench_long, "particle": bench_particle, "modes": bench_mode_search,
            "motion": bench_motion_check, "shared": bench_shared_reference, "widening": bench_widening,
-           "accuracy": bench_accuracy, "factors": bench_factors, "io": bench_io}
+           "accuracy": bench_accuracy, "factors": bench_factors, "io": bench_io,
+           "startup": bench_startup}
 
 
 def main() -> None:
