@@ -9,7 +9,7 @@ GTSAM holds the GIL, so processes, not threads, give the speed-up; a Dask
 ``distributed`` cluster works too (``fgdoppler[distributed]``).
 
 Estimators
-    ``"grid"``, ``"ils"``, ``"lm"`` (:data:`~fgdoppler.estimators.initiation.METHODS`):
+    ``"grid"``, ``"ils"``, ``"lm"`` (:data:`~fgdoppler.estimators.names.METHODS`):
     initiation only; the estimate at time *t* is the constant-velocity
     extrapolation of the initiation's initial state (the paper's "batch
     initial estimate").
@@ -57,7 +57,6 @@ NEES_FROM = 10.0
 __all__ = ["DEFAULT_ESTIMATORS", "NEES_FROM", "MonteCarloResult", "MonteCarloSpec", "run_monte_carlo"]
 
 FloatArray = NDArray[np.float64]
-
 
 
 def _lag(name: str) -> float | None:

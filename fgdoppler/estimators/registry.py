@@ -2,8 +2,10 @@
 
 :data:`ESTIMATORS` maps a name to an :class:`EstimatorInfo` (the runner, its
 settings class, how an ambiguous initiation is resolved, a one-line
-summary).  The command line's choices, Monte Carlo studies and the paper
-reproduction all read it.  Every runner has the signature
+summary).  Monte Carlo studies and the paper reproduction read it; the
+names, summaries and aliases are those of :mod:`fgdoppler.estimators.names`,
+which the command line's choices read without loading an estimator.  Every
+runner has the signature
 ``run(measurements, model, init, settings, *, progress=None) -> TrackResult``.
 """
 
