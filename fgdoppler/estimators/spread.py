@@ -334,8 +334,9 @@ from fgdoppler.models.robust import huber_weights
 from fgdoppler.models.tracking import TrackingModel
 
 __all__ = ["ADAPTED", "ADAPTED_PASSES", "BEND_LIMIT", "BROAD", "ESS_MIN", "FILTER_MOVES", "FILTER_SAMPLES",
-           "GROWTH_LIMIT", "MAX_ADAPTED_PASSES", "MAX_SPAN", "MEAN_SHIFT_MIN", "PASS_GROWTH", "PROBE_MOVES", "PROBE_PASSES", "PROBE_SAMPLES", "SAMPLES",
-           "SAMPLING_LIMIT", "TRUST_LIMIT", "FilteredSpread", "PosteriorSpread", "filtered_spread", "posterior_spread"]
+           "GROWTH_LIMIT", "MAX_ADAPTED_PASSES", "MAX_SPAN", "MEAN_SHIFT_MIN", "PASS_GROWTH", "PROBE_MOVES",
+           "PROBE_PASSES", "PROBE_SAMPLES", "SAMPLES", "SAMPLING_LIMIT", "TRUST_LIMIT", "FilteredSpread",
+           "PosteriorSpread", "filtered_spread", "posterior_spread"]
 
 FloatArray = NDArray[np.float64]
 
@@ -575,7 +576,7 @@ def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
     d = mean0 - x0
     w = float(d @ info @ d)
     spread = _weighted_cov(post.x, np.full(post.x.shape[0], 1.0 / post.x.shape[0]))
-    carried = _carried(model, laplace, spread - own, times, min(1.0, _smallest_whitened(own, spread)))
+    carried = _carried(model, laplace, spread - own, times, min(1.0, float(_whitened_eigenvalues(own, spread)[0])))
     t0 = float(times[0])
     shifted = np.asarray(states, dtype=float) + model.motion.propagate(d, np.asarray(times, dtype=float) - t0)
     pos = slice(0, model.dim)
@@ -686,10 +687,12 @@ def _carried(model: TrackingModel, laplace: FloatArray, excess: FloatArray, time
     return np.asarray(carried, dtype=float)
 
 
-def _smallest_whitened(P: FloatArray, S: FloatArray) -> float:
-    """The smallest eigenvalue of ``S`` whitened by ``P`` (``P`` positive definite): how far ``S`` narrows it."""
+def _whitened_eigenvalues(P: FloatArray, S: FloatArray) -> FloatArray:
+    r"""The eigenvalues of ``S`` whitened by ``P`` (positive definite), ascending: of
+    :math:`\mathbf L^{-1}\mathbf S\mathbf L^{-\top}`, :math:`\mathbf P = \mathbf L\mathbf L^\top`; the smallest says
+    how far ``S`` narrows ``P``, the largest how far it reaches beyond it."""
     Li = np.linalg.inv(np.linalg.cholesky(P))
-    return float(np.linalg.eigvalsh(_symmetric(Li @ S @ Li.T))[0])
+    return np.asarray(np.linalg.eigvalsh(_symmetric(Li @ S @ Li.T)), dtype=float)
 
 
 def _symmetric(M: FloatArray) -> FloatArray:
@@ -706,9 +709,10 @@ def _posterior(measurements: Measurements, model: TrackingModel, t0: float, hube
 
 def _sample_reaching(post: _Posterior, x0: FloatArray, P0: FloatArray, ratio: float, dim: int,
                      rng: np.random.Generator) -> tuple[FloatArray, float, str] | None:
-    """:func:`_sample_about` of the smoother's first state, from the broad proposal in 2-D where the probe's
-    ``ratio`` lies beyond :data:`BEND_LIMIT` or the narrow draw leaves fewer than :data:`ESS_MIN` effective
-    samples; with the words that say which ("" for the narrow proposal), or ``None`` when nothing can be drawn."""
+    """:func:`_sample_about` of the smoother's first state, or in 2-D :func:`_sample_broad` where the probe's
+    ``ratio`` lies beyond :data:`BEND_LIMIT`, the narrow draw leaves fewer than :data:`ESS_MIN` effective samples
+    or a probe from the narrow samples' spread reaches beyond :data:`GROWTH_LIMIT` times theirs (:func:`_growth`);
+    with the words that say which ("" for the narrow proposal), or ``None`` when nothing can be drawn."""
     narrow = None
     if dim == 2 and not 1.0 / BEND_LIMIT <= ratio <= BEND_LIMIT:
         why = "the valley bends far"
@@ -745,21 +749,30 @@ def _growth(post: _Posterior, x0: FloatArray, P0: FloatArray, second: FloatArray
     kept = post.x, post.logpost, post.label, post.s, post.logw  # sample_from binds new arrays: these stay intact
     try:
         for _ in range(PROBE_PASSES):
-            S = _weighted_cov(post.x, np.full(post.x.shape[0], 1.0 / post.x.shape[0]))
-            if post.sample_from([(post.x.mean(axis=0), ADAPTED * S)], PROBE_SAMPLES, PROBE_MOVES, rng,
-                                tempered=True) is None:
+            if _from_own_spread(post, PROBE_SAMPLES, PROBE_MOVES, rng) is None:
                 return 1.0
-        d = post.x - x0
-        return _whitened_major(d.T @ d / d.shape[0], P0) / _whitened_major(second, P0)
+        return _reach(post, x0, P0) / float(_whitened_eigenvalues(P0, second)[-1])
     finally:
         post.x, post.logpost, post.label, post.s, post.logw = kept
 
 
-def _whitened_major(M: FloatArray, P: FloatArray) -> float:
-    r"""The largest eigenvalue of ``M`` in the metric of ``P``: of :math:`\mathbf L^{-1}\mathbf M\mathbf L^{-\top}`,
-    :math:`\mathbf P = \mathbf L\mathbf L^\top`."""
-    Li = np.linalg.inv(np.linalg.cholesky(P))
-    return float(np.linalg.eigvalsh(_symmetric(Li @ M @ Li.T))[-1])
+def _second_moment(post: _Posterior, x0: FloatArray) -> FloatArray:
+    r"""The samples' second moment about ``x0``, :math:`\frac1n\sum_i(\mathbf x_i - \mathbf x_0)(\mathbf x_i - \mathbf x_0)^\top`."""
+    d = post.x - x0
+    return np.asarray(d.T @ d / d.shape[0], dtype=float)
+
+
+def _reach(post: _Posterior, x0: FloatArray, P0: FloatArray) -> float:
+    """The largest eigenvalue of the samples' second moment about ``x0`` in the metric of ``P0``."""
+    return float(_whitened_eigenvalues(P0, _second_moment(post, x0))[-1])
+
+
+def _from_own_spread(post: _Posterior, samples: int, moves: int, rng: np.random.Generator) -> float | None:
+    r"""One pass from the samples' own spread: ``samples`` tempered into the posterior from
+    :math:`\mathcal N(\bar{\mathbf x}, 4\,\mathrm{ADAPTED}\,\mathbf S)`, the samples' mean and covariance, and
+    moved ``moves`` times; the acceptance rate, or ``None`` (the samples unchanged) when nothing finite is drawn."""
+    S = _weighted_cov(post.x, np.full(post.x.shape[0], 1.0 / post.x.shape[0]))
+    return post.sample_from([(post.x.mean(axis=0), ADAPTED * S)], samples, moves, rng, tempered=True)
 
 
 def _sample_about(post: _Posterior, x0: FloatArray, P0: FloatArray, samples: int, moves: int,
@@ -770,10 +783,7 @@ def _sample_about(post: _Posterior, x0: FloatArray, P0: FloatArray, samples: int
     Metropolis acceptance rate, or ``None`` when no draw has a finite posterior.
     """
     rate = post.sample_from([(x0, P0)], samples, moves, rng, tempered=False)
-    if rate is None:
-        return None
-    d = post.x - x0
-    return d.T @ d / samples, rate
+    return None if rate is None else (_second_moment(post, x0), rate)
 
 
 def _sample_broad(post: _Posterior, x0: FloatArray, P0: FloatArray, samples: int, moves: int,
@@ -794,19 +804,15 @@ def _sample_broad(post: _Posterior, x0: FloatArray, P0: FloatArray, samples: int
     rate = post.sample_from([(x0, BROAD * P0)], samples, moves, rng, tempered=True)
     if rate is None:
         return None
-    d = post.x - x0
-    reach = _whitened_major(d.T @ d / samples, P0)
-    passes = 0
+    reach, passes = _reach(post, x0, P0), 0
     while passes < MAX_ADAPTED_PASSES:
-        S = _weighted_cov(post.x, np.full(post.x.shape[0], 1.0 / post.x.shape[0]))
-        again = post.sample_from([(post.x.mean(axis=0), ADAPTED * S)], samples, moves, rng, tempered=True)
+        again = _from_own_spread(post, samples, moves, rng)
         rate = rate if again is None else again  # where nothing could be drawn the last pass's samples stand
         passes += 1
-        d = post.x - x0
-        reach, before = _whitened_major(d.T @ d / samples, P0), reach
+        reach, before = _reach(post, x0, P0), reach
         if passes >= ADAPTED_PASSES and reach < PASS_GROWTH * before:
             break
-    return d.T @ d / samples, rate, passes
+    return _second_moment(post, x0), rate, passes
 
 
 def filtered_spread(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
