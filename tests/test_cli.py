@@ -435,8 +435,9 @@ def test_track_reports_the_verdict_on_stderr_and_exits_3_when_failed(tmp_path: P
     assert main(["track", str(sim / "noisy.csv"), "--estimator", "ekf", "--allow-failed"]) == 0
 
 
-def test_track_particle_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """--particles and --particle-seed reach the particle estimators; the seed alone changes the random numbers."""
+def test_track_particle_and_seed_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--particles reaches the particle estimators and --seed (old name --particle-seed) every tracker; the seed
+    alone changes the random numbers."""
     sim = tmp_path / "sim"
     main(["simulate", "--case", "b", "--start-x", "5000", "--seed", "3", "--out", str(sim)])
     capsys.readouterr()
@@ -447,16 +448,20 @@ def test_track_particle_options(tmp_path: Path, capsys: pytest.CaptureFixture[st
         d = json.loads(capsys.readouterr().out)
         return d["states"][-1], " ".join(e["message"] for e in d["events"])
 
-    x1, events = last_state("--estimator", "map", "--particles", "256", "--particle-seed", "3")
+    x1, events = last_state("--estimator", "map", "--particles", "256", "--seed", "3")
     assert "256 particles" in events
-    assert last_state("--estimator", "map", "--particles", "256", "--particle-seed", "3")[0] == x1
-    x2, _ = last_state("--estimator", "particle", "--particles", "256", "--particle-seed", "3")
-    x3, _ = last_state("--estimator", "particle", "--particles", "256", "--particle-seed", "4")
+    assert last_state("--estimator", "map", "--particles", "256", "--particle-seed", "3")[0] == x1  # the old name
+    x2, _ = last_state("--estimator", "particle", "--particles", "256", "--seed", "3")
+    x3, _ = last_state("--estimator", "particle", "--particles", "256", "--seed", "4")
     assert x2 != x3  # another seed, another Monte Carlo sample of the same posterior
+    assert main([*base, "--estimator", "ekf", "--seed", "9"]) == 0
+    assert json.loads(capsys.readouterr().out)["settings"]["seed"] == 9  # every tracker takes it
     for bad, msg in ((["--estimator", "particle", "--particles", "10"], "n_particles must be >= 64"),
                      (["--estimator", "map", "--particle-seed", "-1"], "seed must be a whole number"),
+                     (["--estimator", "smoother", "--seed", "-2"], "seed must be a whole number"),
                      (["--estimator", "ekf", "--particles", "512"], "not to ekf"),
                      (["--estimator", "init", "--particles", "512"], "not to init"),
+                     (["--estimator", "init", "--seed", "1"], "not to init"),
                      (["--particles", "512"], "not to smoother")):
         assert main([*base[:-1], *bad]) == 2  # without --json the initiation would print the geometry first
         captured = capsys.readouterr()

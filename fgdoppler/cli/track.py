@@ -72,9 +72,11 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--lag", type=float, default=None, help="fixed-lag smoother lag in s (default 5)")
     p.add_argument("--particles", type=int, default=None, metavar="N",
                    help="particle and map estimators: number of particles (default 4096)")
-    p.add_argument("--particle-seed", type=int, default=None, metavar="S",
-                   help="particle and map estimators: seed of their random numbers (default 0; the same seed gives "
-                        "the same track, another seed shows the Monte Carlo spread)")
+    p.add_argument("--seed", "--particle-seed", dest="seed", type=int, default=None, metavar="S",
+                   help="seed of the estimator's random numbers (default 0): the particle estimators' particles, the "
+                        "sampled posteriors behind the filters' Gaussian sums and every sampled covariance, the "
+                        "reference smoother's included; the same seed gives the same answer, another shows its Monte "
+                        "Carlo spread (--particle-seed: its old name)")
     p.add_argument("--most-likely", action="store_true",
                    help="smoother: always report the most likely track (by default, where the posterior is skewed "
                         "about it, the posterior mean, which is closer to the truth on average)")
@@ -213,8 +215,10 @@ def _run(args: argparse.Namespace) -> int:
     tracker = None
     if args.estimator != "init":  # bad tracker options are reported before any work
         tracker = _tracker_settings(args, ALIASES.get(args.estimator, args.estimator))
-    elif args.particles is not None or args.particle_seed is not None:
-        raise CLIError("--particles and --particle-seed apply to --estimator particle or map, not to init")
+    elif args.particles is not None:
+        raise CLIError("--particles applies to --estimator particle or map, not to init")
+    elif args.seed is not None:
+        raise CLIError("--seed applies to the trackers, not to init (the initiation draws no random numbers)")
     elif args.lag is not None:
         raise CLIError("--lag applies to fixed-lag, not to init")
     elif args.mode_candidates is not None or args.most_likely or args.estimate_offsets:
@@ -511,9 +515,9 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
     from fgdoppler.estimators.settings import FixedLagSettings, ParticleSettings, SmootherSettings
 
     k = huber(args)
-    particle = {key: v for key, v in (("n_particles", args.particles), ("seed", args.particle_seed)) if v is not None}
+    particle = {} if args.particles is None else {"n_particles": args.particles}
     if particle and not issubclass(ESTIMATORS[name].settings, ParticleSettings):
-        raise CLIError(f"--particles and --particle-seed apply to the particle estimators "
+        raise CLIError(f"--particles applies to the particle estimators "
                        f"({', '.join(n for n, i in ESTIMATORS.items() if issubclass(i.settings, ParticleSettings))}), "
                        f"not to {name}")
     for given, option in ((args.most_likely, "--most-likely"), (args.mode_candidates is not None, "--mode-candidates"),
@@ -524,15 +528,17 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
         raise CLIError(f"--lag applies to fixed-lag, not to {name}")
     if args.estimate_offsets and args.bias_sigma is None:
         raise CLIError("--estimate-offsets needs --bias-sigma (each pair's offset prior)")
-    offsets: dict[str, Any] = {}
+    if args.seed is not None and args.seed < 0:
+        raise CLIError(f"--seed must be a whole number >= 0, got {args.seed}")
+    shared: dict[str, Any] = {} if args.seed is None else {"seed": args.seed}
     for values, option, field in ((args.bias_sigma, "--bias-sigma", "bias_sigma"),
                                   (args.clock_sigma, "--clock-sigma", "clock_sigma")):
         if values is not None and name not in taking(field):
             raise CLIError(f"{option} applies to {', '.join(taking(field))}, not to {name}")
         if values is not None:
-            offsets[field] = values[0] if len(values) == 1 else tuple(values)
+            shared[field] = values[0] if len(values) == 1 else tuple(values)
     try:
-        ESTIMATORS[name].settings(huber_k=k, **offsets)
+        ESTIMATORS[name].settings(huber_k=k, **shared)
     except ValueError as exc:
         raise offset_sigma_error(exc) from None
     if name == "smoother":
@@ -543,15 +549,15 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
             modes = {"mode_search": False} if args.mode_candidates == 0 else {"mode_candidates": args.mode_candidates}
         try:
             return SmootherSettings(huber_k=k, posterior_mean=not args.most_likely, estimate_offsets=args.estimate_offsets,
-                                    **modes, **offsets)
+                                    **modes, **shared)
         except ValueError as exc:  # offsets to estimate where every pair's bias_sigma is 0
             raise CLIError(f"--estimate-offsets: {exc}") from None
     try:
         lag = {} if args.lag is None else {"lag": args.lag}
-        return (FixedLagSettings(huber_k=k, **lag, **offsets) if name == "fixed-lag"
-                else ESTIMATORS[name].settings(huber_k=k, **particle, **offsets))
+        return (FixedLagSettings(huber_k=k, **lag, **shared) if name == "fixed-lag"
+                else ESTIMATORS[name].settings(huber_k=k, **particle, **shared))
     except ValueError as exc:
-        raise CLIError(f"--{'lag' if name == 'fixed-lag' else 'particles/--particle-seed'}: {exc}") from None
+        raise CLIError(f"--{'lag' if name == 'fixed-lag' else 'particles'}: {exc}") from None
 
 
 def _run_tracker(args: argparse.Namespace, settings: Any, init: Any, meas: Any, model: Any, truth: Any,

@@ -260,12 +260,13 @@ def _declared_offsets(settings: TrackerSettings, model: TrackingModel
 def _reference(measurements: Measurements, model: TrackingModel, init: Initiation, settings: TrackerSettings,
                given: TrackResult | None, per_pair: NDArray[np.float64], resolve_ambiguity: bool,
                progress: Progress | None) -> TrackResult:
-    """The offline smoother a tracker is held against: ``given``, or run here with the tracker's gate and loss;
+    """The offline smoother a tracker is held against: ``given``, or run here with the tracker's gate, loss and seed;
     with calibration offsets declared (``per_pair``), its findings read with them in the model
     (:func:`~fgdoppler.estimators.smoother.with_offset_findings`)."""
     reference = given
     if reference is None:
-        ref_settings = SmootherSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k)
+        ref_settings = SmootherSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k,
+                                        seed=settings.seed)
         reference = run_estimator("smoother", measurements, model, init, ref_settings,
                                   resolve_ambiguity=resolve_ambiguity, progress=prefixed(progress, "reference"))
     return with_offset_findings(reference, measurements, model, tuple(float(v) for v in per_pair),
@@ -286,9 +287,9 @@ def run_estimators(
     """Run several estimators on the same data and initiation, each as :func:`run_estimator` would.
 
     The filters' ``reference`` check needs the offline smoother with the
-    filter's gate and loss (``SmootherSettings(gate_probability=...,
-    huber_k=...)``); :func:`run_estimator` runs it once per filter.  Here it
-    runs once per distinct gate and loss and is shared — the smoother's own
+    filter's gate, loss and seed (``SmootherSettings(gate_probability=...,
+    huber_k=..., seed=...)``); :func:`run_estimator` runs it once per filter.  Here it
+    runs once per distinct gate, loss and seed and is shared — the smoother's own
     result where its settings are those — so comparing every estimator costs
     one smoother run, not one per filter, with the same results.  The
     filters' restart checks share their fits of the data so far
@@ -314,7 +315,7 @@ def run_estimators(
     fits = FreshFits(measurements)
 
     def reference(s: TrackerSettings) -> TrackResult:
-        key = SmootherSettings(gate_probability=s.gate_probability, huber_k=s.huber_k)
+        key = SmootherSettings(gate_probability=s.gate_probability, huber_k=s.huber_k, seed=s.seed)
         if key not in references:
             references[key] = _run_estimator("smoother", measurements, model, init, key,
                                              resolve_ambiguity=resolve_ambiguity, verify=True, reference=None,
@@ -327,7 +328,7 @@ def run_estimators(
                                          resolve_ambiguity=resolve_ambiguity, verify=verify, reference=None,
                                          progress=progress, fits=fits)
         own = chosen["smoother"]
-        if own == SmootherSettings(gate_probability=own.gate_probability, huber_k=own.huber_k):
+        if own == SmootherSettings(gate_probability=own.gate_probability, huber_k=own.huber_k, seed=own.seed):
             references[own] = out["smoother"]
     for name, s in chosen.items():
         if name not in out:  # a filter: its primary estimate is not the smoothed one
@@ -360,7 +361,7 @@ def _hypotheses(info: EstimatorInfo, measurements: Measurements, model: Tracking
     k = getattr(settings, "components", 1)
     if info.resolution == "likelihood" and k > 1 and _nonlinear(init) and model.zone is not None:
         try:
-            return posterior_hypotheses(init, measurements, model, k, huber_k=settings.huber_k)
+            return posterior_hypotheses(init, measurements, model, k, huber_k=settings.huber_k, seed=settings.seed)
         except ValueError:  # nothing in the zone explains the window: keep the initiation's own answer
             pass
     return (hypotheses(init), hypothesis_weights(init)) if init.ambiguous else ([init], None)
@@ -409,7 +410,8 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
         kept = measurements.subset(~drop)
     widened = filtered_spread(kept, model, e.times, e.states, e.covariances, e.cov_ok,
                               interval=settings.sampling_interval, lag=settings.look_ahead,
-                              huber_k=settings.huber_k, linearised_everywhere=settings.linearised_everywhere,
+                              huber_k=settings.huber_k, seed=settings.seed,
+                              linearised_everywhere=settings.linearised_everywhere,
                               reference=None if reference is None or not len(reference.primary)
                               else (reference.primary.times, reference.primary.states))
     if widened is None:

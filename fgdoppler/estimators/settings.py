@@ -57,8 +57,8 @@ def _count(value: int, name: str) -> None:
 
 @dataclass(frozen=True, kw_only=True)
 class TrackerSettings:
-    """Base of every tracker's settings: the measurement gate, the robust loss and the pairs' declared
-    calibration and clock uncertainty.
+    """Base of every tracker's settings: the measurement gate, the robust loss, the pairs' declared
+    calibration and clock uncertainty, and the seed of the estimator's random numbers.
 
     Parameters
     ----------
@@ -80,12 +80,25 @@ class TrackerSettings:
         Each pair's clock uncertainty (s, one standard deviation; one value
         for every pair or one per pair); what each estimator does with it is
         said in its own settings.
+    seed : int, default 0
+        Seed of every random number the estimator draws: the particle
+        estimators' particles, the sampled posterior whose Gaussian sum
+        starts the filters where the initiation is ``nonlinear``, the
+        filters' sampled covariance checks, the smoother's sampled
+        covariance and posterior mean, and those of the reference smoother
+        that a filter's verdict runs.  The same input and seed give the same
+        answer to the bit on one machine; another seed shows the Monte Carlo
+        spread of what was sampled (a well-observed track samples nothing
+        and does not move).  Floating-point arithmetic differs between CPUs,
+        which acts as another seed.  The initiation draws no random numbers
+        of its own that depend on it (its zone share is a fixed quadrature).
     """
 
     gate_probability: float | None = 0.9999
     huber_k: float | None = None
     bias_sigma: float | tuple[float, ...] = 0.0
     clock_sigma: float | tuple[float, ...] = 0.0
+    seed: int = 0
 
     def __post_init__(self) -> None:
         p = self.gate_probability
@@ -95,6 +108,8 @@ class TrackerSettings:
             _positive(self.huber_k, "huber_k")
         object.__setattr__(self, "bias_sigma", _bias_sigma(self.bias_sigma))
         object.__setattr__(self, "clock_sigma", _clock_sigma(self.clock_sigma))
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ValueError(f"seed must be a whole number >= 0, got {self.seed!r}")
 
     @property
     def gate(self) -> float:
@@ -635,8 +650,8 @@ class ParticleSettings(TrackerSettings):
     n_particles : int, default 4096
         Number of particles.
     seed : int, default 0
-        Seed of the estimator's random numbers (the same input gives the
-        same track).
+        Seed of the estimator's random numbers (see :class:`TrackerSettings`):
+        the same input gives the same track.
     ess_threshold : float, default 0.5
         Resample and move when the effective sample size falls below this
         fraction of ``n_particles``.
@@ -690,7 +705,6 @@ class ParticleSettings(TrackerSettings):
     """
 
     n_particles: int = 4096
-    seed: int = 0
     ess_threshold: float = 0.5
     move_steps: int = 5
     start_move_steps: int = 20
@@ -707,8 +721,6 @@ class ParticleSettings(TrackerSettings):
         _count(self.n_particles, "n_particles")
         if self.n_particles < 64:
             raise ValueError(f"n_particles must be >= 64, got {self.n_particles}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ValueError(f"seed must be a whole number >= 0, got {self.seed!r}")
         if not 0 < self.ess_threshold <= 1:
             raise ValueError(f"ess_threshold must be in (0, 1], got {self.ess_threshold!r}")
         for name in ("move_steps", "start_move_steps"):

@@ -225,7 +225,7 @@ def _reported(measurements: Measurements, model: TrackingModel, settings: Smooth
     if has_covs and settings.sampled_covariance:
         assert sol.covariances is not None
         sampled = posterior_spread(measurements, model, sol.times, sol.states, sol.covariances,
-                                   huber_k=settings.huber_k, mean=settings.posterior_mean)
+                                   huber_k=settings.huber_k, mean=settings.posterior_mean, seed=settings.seed)
         if sampled is not None:
             states, covs = list(sampled.states), list(sampled.covariances)
             reasons.append(sampled.reason)
