@@ -488,8 +488,10 @@ def test_track_most_likely_reports_the_smoothers_mode(tmp_path: Path, capsys: py
     said = [r["message"] for r in mean["reasons"] if r["code"] == "nonlinear"]
     assert len(said) == 1 and "posterior mean" in said[0]
     assert not any(r["code"] == "nonlinear" for r in mode["reasons"])
-    apart = np.linalg.norm(np.subtract(mean["states"][0][:2], mode["states"][0][:2]))
-    assert 10.0 < apart < 1000.0  # measured 46 m (0.33 sigma, most of it in velocity); sigma ~1.4 km
+    # apart by more than a fifth of a sigma (the rule's squared whitened shift 0.05) and far less than one:
+    # measured 0.110-0.128 with sampler seeds 0-5, whose Monte Carlo error moves the position alone by 4-46 m
+    d = np.subtract(mean["states"][0], mode["states"][0])
+    assert 0.05 < d @ np.linalg.solve(np.array(mode["covariances"][0]), d) < 1.0
     assert main(["track", str(sim / "measurements.csv"), "--geometry", "a", "--estimator", "ekf",
                  "--most-likely"]) == 2
     captured = capsys.readouterr()

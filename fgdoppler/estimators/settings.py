@@ -88,10 +88,12 @@ class TrackerSettings:
         covariance and posterior mean, and those of the reference smoother
         that a filter's verdict runs.  The same input and seed give the same
         answer to the bit on one machine; another seed shows the Monte Carlo
-        spread of what was sampled (a well-observed track samples nothing
-        and does not move).  Floating-point arithmetic differs between CPUs,
-        which acts as another seed.  The initiation draws no random numbers
-        of its own that depend on it (its zone share is a fixed quadrature).
+        spread of what was sampled (in the paper's well-observed scenarios no
+        track of the Gaussian trackers moved; in its curved valleys a
+        filter's error moved by a tenth of itself: docs/concepts.md, "Random
+        numbers and the seed").  Floating-point arithmetic differs between
+        CPUs, which acts as another seed.  The initiation draws no random
+        numbers that depend on it.
     """
 
     gate_probability: float | None = 0.9999

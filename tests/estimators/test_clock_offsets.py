@@ -141,8 +141,9 @@ def test_the_particle_estimators_take_the_clock_share_with_their_own_random_numb
     # clock_sigma (the share is a consider covariance), every covariance grows, and the final position's NEES
     # goes from beyond chi-square(2)'s 99.9 % level (measured 45-63 over four recordings) to inside its 99 %
     # (0.76-0.88).  The reruns on delayed data use the estimator's own random numbers, so a clock known to
-    # 0.1 ms adds next to nothing (measured 0.04-0.5 % of the position variance at 4,096 particles): reruns
-    # with other random numbers would add their Monte Carlo spread instead.
+    # 0.1 ms adds next to nothing (measured 0.04-0.5 % of the position variance at 4,096 particles; at the
+    # 1,024 here at most 0.7-1.1 % with sampler seeds 0-5, the reruns' own Monte Carlo error on slightly
+    # different data): reruns with other random numbers would add their Monte Carlo spread instead.
     base = fd.paper_scenario("a", 45e3)
     model = fd.TrackingModel.of(base.geometry)
     sim = fd.simulate(dataclasses.replace(base, clock_error=(0.0, 0.5)), np.random.default_rng([7, 0]))
@@ -160,4 +161,4 @@ def test_the_particle_estimators_take_the_clock_share_with_their_own_random_numb
         assert np.all(np.linalg.eigvalsh(e.covariances - plain.covariances) > -1e-9)
     assert nees[0.0] > chi2.ppf(0.999, 2) and nees[0.5] < chi2.ppf(0.99, 2)
     tiny = np.trace(runs[1e-4].covariances[:, :2, :2], axis1=1, axis2=2)
-    assert np.all(tiny <= 1.01 * np.trace(plain.covariances[:, :2, :2], axis1=1, axis2=2))
+    assert np.all(tiny <= 1.02 * np.trace(plain.covariances[:, :2, :2], axis1=1, axis2=2))

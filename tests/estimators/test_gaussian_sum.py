@@ -49,9 +49,9 @@ def _assert_same(times: np.ndarray, x: np.ndarray, P: np.ndarray, ref: fd.Estima
 
 
 @pytest.mark.parametrize(("name", "case", "start", "run"), [
-    ("isam2", "a", 5e3, 79),      # eight terms, three stop along the way
+    ("isam2", "a", 5e3, 79),      # 7-8 terms by seed, some stopping along the way
     ("ekf", "a", 5e3, 79),
-    ("fixed-lag", "b", 45e3, 3),  # eight terms, all live to the end
+    ("fixed-lag", "b", 45e3, 3),  # eight terms (seed 0), all live to the end
 ])
 def test_fed_scan_by_scan_it_equals_the_registry_from_the_same_initiation(name: str, case: str, start: float,
                                                                          run: int) -> None:
@@ -59,11 +59,18 @@ def test_fed_scan_by_scan_it_equals_the_registry_from_the_same_initiation(name: 
     # tracker runs them side by side, one scan at a time.  From the initiation of the same
     # held window, with restarts off (this tracker has none), the two must agree: every
     # filtered mixture, and the final trajectory (iSAM2 smoothed, fixed-lag lagged).
+    # iSAM2 must also show terms stopping along the way; whether any does depends on the sampled
+    # split (measured on this recording, sampler seeds 0-7: in 5 of 8), so seeds are tried in turn.
     sim, model = _recording(case, start, run)
     m = sim.measurements
-    settings = SETTINGS[name](restarts=False)
-    tracker = GaussianSumTracker(model, name, settings)
-    out = _stream(tracker, m)
+    for seed in range(8):
+        settings = SETTINGS[name](restarts=False, seed=seed)
+        tracker = GaussianSumTracker(model, name, settings)
+        out = _stream(tracker, m)
+        if name != "isam2" or any("stopped" in e.message for e in tracker.events):
+            break
+    else:
+        pytest.fail("no iSAM2 term stopped with sampler seeds 0-7")
     init = tracker.initiation
     assert init is not None
     held = [o for o in out if o[3]]
@@ -73,20 +80,17 @@ def test_fed_scan_by_scan_it_equals_the_registry_from_the_same_initiation(name: 
     ref_settings = replace(settings, sampled_covariance=False) \
         if isinstance(settings, SampledCovarianceSettings) else settings
     ref = fd.run_estimator(name, m, model, init, ref_settings, verify=False)
-    assert len(tracker.weights) == 8 and abs(tracker.weights.sum() - 1.0) < 1e-12
+    hyps, _ = hypotheses_of(name, m.subset(m.time <= init.t_end), model, init, settings)
+    assert len(tracker.weights) == len(hyps) >= 7 and abs(tracker.weights.sum() - 1.0) < 1e-12  # 7-8 by seed
     live = [o for o in out if not o[3]]
     assert live[0][0] == pytest.approx(init.t_end)
     times = np.array([o[0] for o in live])
     _assert_same(times, np.array([o[1] for o in live]), np.array([o[2] for o in live]),
                  ref.estimate("filtered"), f"{name} filtered")
-    if name == "isam2":
-        assert any("stopped" in e.message for e in tracker.events)
     # the most likely term alone is the heaviest hypothesis's own run
     best = int(np.argmax(tracker.weights))
     x_mode, _ = tracker.mode
     if name == "ekf":
-        window = m.subset(m.time <= init.t_end)
-        hyps, _ = hypotheses_of(name, window, model, init, settings)
         alone = run_ekf(m, model, hyps[best], settings).primary
         np.testing.assert_allclose(x_mode, alone.states[-1], rtol=0, atol=1e-6)
     assert tracker.nis.shape[1] == 4 and tracker.nis[-1, 0] == pytest.approx(times[-1])
@@ -202,12 +206,16 @@ def test_it_restarts_online_where_the_registry_does() -> None:
     # has seen, and restarts there too; the EKF's estimates then agree to rounding.  (iSAM2
     # restarts at the same time, but the restart's sampled window split and its relinearisation
     # thresholds turn rounding-level differences into millimetres: see the module docstring.)
+    # The registry's check of the filtered covariances against posterior samples is not the
+    # tracker's: compare with it off (with sampler seed 0 it widened nothing here, with seed 1 it
+    # widens them by up to 77 % of their diagonal scale: compared with it on, this held by luck).
     sim, model = _recording("a", 5e3, 32)
     m = sim.measurements
     tracker = GaussianSumTracker(model, "ekf")
     out = _stream(tracker, m)
     assert tracker.initiation is not None
-    ref = fd.run_estimator("ekf", m, model, tracker.initiation, fd.EKFSettings(), verify=False)
+    ref = fd.run_estimator("ekf", m, model, tracker.initiation, fd.EKFSettings(sampled_covariance=False),
+                           verify=False)
     ours = [e for e in tracker.events if e.message.startswith("online re-initiation")]
     theirs = [e for e in ref.events if e.message.startswith("online re-initiation")]
     assert len(ours) == len(theirs) >= 1

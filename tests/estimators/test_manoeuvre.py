@@ -65,12 +65,17 @@ def test_a_manoeuvre_that_fools_every_estimator_is_reported() -> None:
     untested = fd.run_estimator("smoother", m, g, init, fd.SmootherSettings(motion_check=False))
     off = {"smoother": untested, "ekf": fd.run_estimator("ekf", m, g, init, reference=untested)}
     on = fd.run_estimators(names, m, g, init)
-    # without the test both end kilometres off by their own covariance, the smoother 'ok': the case the test is
+    # without the test both end kilometres off, the smoother by its own covariance and 'ok': the case the test is
     # for.  The EKF is doubtful without it too since the reference check reads the whole track (2026-11-26): on
-    # its way it strayed tens of kilometres from the smoother's track, not only from the truth.
-    assert all(_wrong(off[name], sim.truth) for name in names)
+    # its way it strayed tens of kilometres from the smoother's track, not only from the truth.  (How far off and
+    # how sure depends on its sampled start: with sampler seeds 0-5 it ends 19-23 km off, beyond 3 sigma with
+    # all but seed 1, and with some seeds its residual test fails too, chi-square 156 against 151.9 with seed
+    # 2; the whole-track reference finding is the one every seed gives.)
+    assert _wrong(off["smoother"], sim.truth)
+    e = off["ekf"].primary
+    assert np.linalg.norm(e.states[-1, :2] - sim.truth.at(e.times[-1:])[0, :2]) > 10e3
     assert off["smoother"].status == "ok", off["smoother"].message
-    assert [r.code for r in off["ekf"].reasons if r.status != "ok"] == ["reference"], off["ekf"].message
+    assert "reference" in [r.code for r in off["ekf"].reasons if r.status != "ok"], off["ekf"].message
     assert "lay on average" in off["ekf"].message
     smoother = on["smoother"]
     assert smoother.status == "doubtful"

@@ -314,13 +314,18 @@ def test_map_reports_when_its_mode_moves_to_another_peak() -> None:
 
     The recording (``fgdoppler reproduce --seed 2026``'s run 16 of case a
     25 km) has two peaks a likelihood ratio of about 3 apart, 20 km from
-    each other along the valley: the mode leaves for the far one at 11 s and
-    comes back at 15.5 s (docs/concepts.md, "The filtered mode").  Each
-    event's distance is between the previous mode carried to the scan's time
-    and the new one, so the reported track moves by that distance give or
-    take one scan's travel and the new peak's climb (under 5 % + 300 m
-    here); between other scans it moves by far less.  The closing event
-    counts them; the particle estimator (the mean) never reports one.
+    each other along the valley: where the particles find the far one the
+    mode leaves for it at 11-11.5 s and comes back at 15.5 s (docs/concepts.md,
+    "The filtered mode").  Whether they find it is luck: 3 of sampler seeds
+    0-7 at the default 4,096 particles, 7 of 8 at 16,384 (measured
+    2026-11-30), so seeds are tried in turn until one does.  Each event's
+    distance is between the previous mode carried to the scan's time and the
+    new one, so the reported track moves by that distance give or take one
+    scan's travel and the new peak's climb (under 5 % + 300 m here); between
+    other scans it moves by far less than the far jumps.  (Some seeds also
+    report a jump of tens of metres between two close maxima, which the same
+    bound covers.)  The closing event counts them; the particle estimator
+    (the mean) never reports one.
     """
     import re
 
@@ -330,11 +335,16 @@ def test_map_reports_when_its_mode_moves_to_another_peak() -> None:
     sim = fd.simulate(scen, np.random.default_rng(seq))
     model = fd.TrackingModel.of(scen.geometry)
     init = fd.initiate(sim.measurements.first_per_pair(10), model)
-    res = run_map(sim.measurements, model, init)
     pattern = re.compile(r"the mode moved to another peak of the posterior, (\d+) m away, "
                          r"more probable by a factor ([\d.e+]+) \(log density \+([\d.]+)\)")
-    jumps = [(e.time, *pattern.match(e.message).groups()) for e in res.events if pattern.match(e.message)]
-    assert len(jumps) >= 1
+    for seed in range(4):  # all four missing it: a chance of about (1/8)^4
+        res = run_map(sim.measurements, model, init, fd.MapSettings(n_particles=16384, seed=seed))
+        jumps = [(e.time, *pattern.match(e.message).groups()) for e in res.events if pattern.match(e.message)]
+        far = [float(j[1]) for j in jumps if float(j[1]) > 10e3]
+        if far:
+            break
+    else:
+        pytest.fail("no sampler seed of 0-3 found the far peak")
     assert f"the mode moved to another peak {len(jumps)} time(s)" in res.events[-1].message
     track = res.primary
     step = np.linalg.norm(np.diff(track.states[:, :2], axis=0), axis=1)
@@ -344,7 +354,7 @@ def test_map_reports_when_its_mode_moves_to_another_peak() -> None:
         assert abs(step[k] - float(metres)) < 0.05 * float(metres) + 300.0
         assert float(factor) > 1.0 and float(factor) == pytest.approx(np.exp(float(gain)), rel=1e-2)
     others = np.delete(step, sorted(at))
-    assert others.max() < 0.25 * min(float(j[1]) for j in jumps)
+    assert others.max() < 0.25 * min(far)
     mean = run_particle(sim.measurements, model, init)
     assert not any("another peak" in e.message for e in mean.events)
 

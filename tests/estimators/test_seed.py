@@ -57,8 +57,10 @@ def test_every_sampled_part_moves_with_the_seed_and_only_with_it(monkeypatch: py
 
 
 def test_a_well_observed_track_draws_nothing_that_the_seed_could_move() -> None:
-    """Case a 45 km: the initiation's Gaussian describes its likelihood, the smoother's curvature probe finds the
-    cost quadratic and the filters' checks widen nothing, so no seed changes any state or covariance."""
+    """Case a 45 km: the initiation's Gaussian describes its likelihood (no Gaussian sum) and the smoother's
+    curvature probe finds the cost quadratic, so no seed moves a state; on this recording the filters' sampled
+    checks widen nothing either, so no covariance moves (on others of the scenario one widens an EKF covariance
+    now and then: docs/concepts.md, "Random numbers and the seed")."""
     m, g, init = _recording("a", 45e3)
     zero, seven = (fd.run_estimators(TRACKERS, m, g, init, _seeded(s)) for s in (0, 7))
     for n in TRACKERS:

@@ -11,9 +11,11 @@ errors with metre-sized sigmas that a verdict must never call ok.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pytest
+from scipy.stats import chi2
 
 import fgdoppler as fd
 
@@ -230,13 +232,17 @@ def test_a_track_confidently_elsewhere_for_a_while_is_doubtful_though_it_ends_we
     untouched) makes the EKF doubtful, by the mean of the per-time
     chi-squares (about 100 x 17 / 52); moved at two times only (about
     100 x 2 / 52), the mean stays below the chi-square quantile, 18.5.  Real: three pairs
-    around a 40 x 30 km area, seed 4: the EKF ran 10-11 km from the truth
-    with a position sigma of 0.2-0.7 km from 12 to 25 s (truth NEES 1e5),
-    restarted at 25 s and ended 0.24 km from the truth — 'ok' before, as its
-    final state agrees with the smoother's.  The particle estimator, whose
-    whole track is consistent there (truth NEES 1.8), stays 'ok'.  The
-    finding reads the EKF's covariances without the enclosure built from the
-    smoother's track (``linearised_everywhere``), which hold the error.
+    around a 40 x 30 km area, seed 4: the EKF ran 9-12 km from the truth
+    from 12 to 25 s, restarted at 25 s and ended 0.24 km from the truth.
+    With sampler seed 0 its covariances there (position sigma 0.5-0.7 km,
+    truth NEES 1e5) miss the error — 'ok' before this finding, as its final
+    state agrees with the smoother's; with seed 1 the sampled checks widen
+    them to hold it (median truth NEES 2.2, in 6 of seeds 0-7 they do not)
+    and 'ok' is right.  The finding must follow the covariances, whichever
+    the seed.  The particle estimator, whose whole track is consistent there
+    (truth NEES 1.8), stays 'ok'.  The finding reads the EKF's covariances
+    without the enclosure built from the smoother's track
+    (``linearised_everywhere``), which hold the error.
     """
     from dataclasses import replace
 
@@ -270,22 +276,35 @@ def test_a_track_confidently_elsewhere_for_a_while_is_doubtful_though_it_ends_we
                                fd.BistaticPair(tx=(5e3, 30e3), rx=(0.0, 0.0))))
     sim = fd.simulate(fd.Scenario(geometry=three, x0=(20e3, 10e3, -60.0, 70.0)), np.random.default_rng(4))
     init = fd.initiate(sim.measurements.first_per_pair(10), three)
-    results = fd.run_estimators(["ekf", "particle"], sim.measurements, three, init)
-    ekf, particle = results["ekf"], results["particle"]
-    error = np.linalg.norm(ekf.primary.states[:, :2] - sim.truth.at(ekf.primary.times)[:, :2], axis=1)
-    assert error[-1] < 500.0 and np.max(error) > 5e3
-    assert ekf.status == "doubtful"
-    assert [r.code for r in ekf.reasons if "lay on average" in r.message] == ["reference"], ekf.message
-    assert particle.status == "ok", particle.message
-    # the reported covariances, widened towards the posterior linearised about the smoother's track
-    # (linearised_everywhere, the default), hold the error there (truth NEES 4.4 over t >= 10 s, 47,526 without)
-    # and so cannot disagree with that track: the finding reads them without that enclosure, and says the same
-    assert fd.EKFSettings().linearised_everywhere
-    plain = fd.run_estimator("ekf", sim.measurements, three, init, fd.EKFSettings(linearised_everywhere=False))
-    d = ekf.primary.states - sim.truth.at(ekf.primary.times)
-    nees = np.einsum("ki,ki->k", d, np.linalg.solve(ekf.primary.covariances, d[..., None])[..., 0])
-    assert float(nees[ekf.primary.times >= 10.0].mean()) < 10.0
-    assert [r for r in ekf.reasons if r.code == "reference"] == [r for r in plain.reasons if r.code == "reference"]
+    for seed in (0, 1):
+        results = fd.run_estimators(["ekf", "particle"], sim.measurements, three, init, {"ekf": fd.EKFSettings(seed=seed)})
+        ekf, particle = results["ekf"], results["particle"]
+        error = np.linalg.norm(ekf.primary.states[:, :2] - sim.truth.at(ekf.primary.times)[:, :2], axis=1)
+        assert error[-1] < 500.0 and np.max(error) > 5e3
+        assert particle.status == "ok", particle.message
+        # the finding reads the covariances without the enclosure built from the smoother's track
+        plain = fd.run_estimator("ekf", sim.measurements, three, init,
+                                 fd.EKFSettings(seed=seed, linearised_everywhere=False))
+        assert [r for r in ekf.reasons if r.code == "reference"] == [r for r in plain.reasons if r.code == "reference"]
+        held = _truth_nees(plain.primary, sim.truth, 12.0, 25.0)
+        if held > 1e3:  # those covariances miss the error kilometres wide: the finding must say so
+            assert ekf.status == "doubtful"
+            assert [r.code for r in ekf.reasons if "lay on average" in r.message] == ["reference"], ekf.message
+        else:  # the sampled checks alone widened them to hold it: nothing to report
+            assert held < chi2.ppf(0.999, 4) and ekf.status == "ok", ekf.message
+        # the reported covariances, widened towards the posterior linearised about the smoother's track
+        # (linearised_everywhere, the default), hold the error there (sampler seed 0: truth NEES 4.4 over
+        # t >= 10 s, 47,526 without)
+        assert fd.EKFSettings().linearised_everywhere
+        assert _truth_nees(ekf.primary, sim.truth, 10.0, np.inf, np.mean) < 10.0
+    # on the machine this was written on, both: seed 0 doubtful (median NEES 1e5), seed 1 ok (2.2)
+
+
+def _truth_nees(e: fd.Estimates, truth: fd.Trajectory, t0: float, t1: float, over: Any = np.median) -> float:
+    """``over`` (median by default) of the truth's NEES under ``e``'s covariances at its times in [t0, t1]."""
+    d = e.states - truth.at(e.times)
+    nees = np.einsum("ki,ki->k", d, np.linalg.solve(e.covariances, d[..., None])[..., 0])
+    return float(over(nees[(e.times >= t0) & (e.times <= t1)]))
 
 
 def test_monte_carlo_records_every_verdict(tmp_path) -> None:
