@@ -16,7 +16,7 @@ runs it).  Per scenario and estimator:
 - the run-averaged NEES over t ≥ 10 s for each seed.
 
 Run: ``python studies/seed_spread.py [--runs 20] [--seeds 4] [--seed 2026] [--out DIR]``
-(16 minutes on 2 cores with the defaults).
+(15 minutes on 2 cores with the defaults).
 """
 
 from __future__ import annotations
