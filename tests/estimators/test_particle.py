@@ -148,11 +148,16 @@ def test_window_posterior_weighs_mirror_modes_alike() -> None:
     """With sensors on one line the posterior is symmetric about it: half its mass on either side.
 
     The zone and the weak prior are symmetric too (both centred on the line).
-    Four recordings, two sampler seeds each: the spread of one sample's mass
-    was measured at about 0.1, so the mean of eight lies within 0.15 of 0.5
-    and each within 0.3 (3 σ).  Before, importance sampling in one step and
-    a mirror image started wider than its twin (no weak prior in its
-    covariance) put 0.96-1.0 of the mass on one side in two of them.
+    Four recordings, two sampler seeds each.  One sample's mass south of the
+    line, measured over sampler seeds 0-11 of the four recordings (48
+    samples): mean 0.516, standard deviation 0.136, 0.16-0.97, one of the 48
+    beyond 0.15-0.85.  So the mean of eight lies within 0.15 of 0.5 (3 σ) and
+    at most one of the eight beyond 0.15-0.85 (two: a chance of about 1 %).
+    Before, importance sampling in one step and a mirror image started wider
+    than its twin (no weak prior in its covariance) put 0.96-1.0 of the mass
+    on one side in two of them.  (The bound of before, each sample within 0.3
+    of 0.5 from a spread measured at about 0.1 on these eight, failed with
+    sampler seeds 10 and 11: 0.16.)
     """
     south = []
     for y0, seed in [(200.0, 0), (200.0, 1), (1000.0, 0), (1000.0, 4)]:
@@ -162,7 +167,7 @@ def test_window_posterior_weighs_mirror_modes_alike() -> None:
         for s in range(2):
             post = window_posterior(sim.measurements, model, init, fd.ParticleSettings(seed=s))
             south.append(float(post.weights @ (post.states[:, 1] < 0)))
-    assert abs(np.mean(south) - 0.5) < 0.15 and np.all(np.abs(np.array(south) - 0.5) < 0.3), south
+    assert abs(np.mean(south) - 0.5) < 0.15 and np.sum(np.abs(np.array(south) - 0.5) > 0.35) <= 1, south
 
 
 def test_window_posterior_keeps_to_the_initiations_half_plane() -> None:

