@@ -168,16 +168,15 @@ def _run_one(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.random.SeedSe
     out: dict[str, Any] = {}
     verdicts: dict[str, str] = {}
     timing: dict[str, float] = {}
-    references: dict[str, Any] = {}
+    references: dict[SmootherSettings, Any] = {}
 
     def reference(estimator: str, settings: Any) -> Any:
-        """The smoother's result with the gate and loss of ``settings``, shared by the filters (verify only)."""
+        """The smoother's result with the gate, loss and seed of ``settings``, shared by the filters (verify only)."""
         if not spec.verify or estimator == "smoother":
             return None
-        key = f"{settings.gate_probability}/{settings.huber_k}"
+        key = SmootherSettings.reference_for(settings)
         if key not in references:
-            ref_settings = SmootherSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k)
-            references[key] = run_estimator("smoother", meas, model, init_of("lm"), ref_settings)
+            references[key] = run_estimator("smoother", meas, model, init_of("lm"), key)
         return references[key]
 
     for name in spec.estimators:

@@ -265,9 +265,7 @@ def _reference(measurements: Measurements, model: TrackingModel, init: Initiatio
     (:func:`~fgdoppler.estimators.smoother.with_offset_findings`)."""
     reference = given
     if reference is None:
-        ref_settings = SmootherSettings(gate_probability=settings.gate_probability, huber_k=settings.huber_k,
-                                        seed=settings.seed)
-        reference = run_estimator("smoother", measurements, model, init, ref_settings,
+        reference = run_estimator("smoother", measurements, model, init, SmootherSettings.reference_for(settings),
                                   resolve_ambiguity=resolve_ambiguity, progress=prefixed(progress, "reference"))
     return with_offset_findings(reference, measurements, model, tuple(float(v) for v in per_pair),
                                 half_plane=init.half_plane is not None)
@@ -287,8 +285,8 @@ def run_estimators(
     """Run several estimators on the same data and initiation, each as :func:`run_estimator` would.
 
     The filters' ``reference`` check needs the offline smoother with the
-    filter's gate, loss and seed (``SmootherSettings(gate_probability=...,
-    huber_k=..., seed=...)``); :func:`run_estimator` runs it once per filter.  Here it
+    filter's gate, loss and seed (``SmootherSettings.reference_for``);
+    :func:`run_estimator` runs it once per filter.  Here it
     runs once per distinct gate, loss and seed and is shared — the smoother's own
     result where its settings are those — so comparing every estimator costs
     one smoother run, not one per filter, with the same results.  The
@@ -315,7 +313,7 @@ def run_estimators(
     fits = FreshFits(measurements)
 
     def reference(s: TrackerSettings) -> TrackResult:
-        key = SmootherSettings(gate_probability=s.gate_probability, huber_k=s.huber_k, seed=s.seed)
+        key = SmootherSettings.reference_for(s)
         if key not in references:
             references[key] = _run_estimator("smoother", measurements, model, init, key,
                                              resolve_ambiguity=resolve_ambiguity, verify=True, reference=None,
@@ -328,7 +326,7 @@ def run_estimators(
                                          resolve_ambiguity=resolve_ambiguity, verify=verify, reference=None,
                                          progress=progress, fits=fits)
         own = chosen["smoother"]
-        if own == SmootherSettings(gate_probability=own.gate_probability, huber_k=own.huber_k, seed=own.seed):
+        if own == SmootherSettings.reference_for(own):
             references[own] = out["smoother"]
     for name, s in chosen.items():
         if name not in out:  # a filter: its primary estimate is not the smoothed one

@@ -637,6 +637,12 @@ class SmootherSettings(TrackerSettings):
         """Settings of the EKF pass that starts the smoother (its gate: this one, everywhere)."""
         return EKFSettings.gating_as(self)
 
+    @classmethod
+    def reference_for(cls, settings: TrackerSettings) -> SmootherSettings:
+        """The offline smoother a tracker's verdict holds it against: the tracker's gate, loss and seed, every other
+        setting the default (one such smoother serves every tracker that shares those three)."""
+        return cls(gate_probability=settings.gate_probability, huber_k=settings.huber_k, seed=settings.seed)
+
 
 @dataclass(frozen=True, kw_only=True)
 class ParticleSettings(TrackerSettings):
