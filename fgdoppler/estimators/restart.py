@@ -36,7 +36,23 @@ initiation over *all* data up to :math:`t_c`:
    basin *is* the fresh solution's: the filter had not got stuck in another
    mode, it lagged 4 km behind the maximum of its own posterior, 4–13 σ by
    its own covariance (squared distances 19–181 at the four checkpoints)
-   and 8–17 σ by the fit's.
+   and 8–17 σ by the fit's;
+4. the restart starts from the fit *and* from the running estimate: the
+   latter, :math:`\mathbf x_o` and :math:`\mathbf P_o` carried back to the
+   fit's window start, joins the fit's solutions as one more alternative
+   with its data cost over the same measurements.  A long, flat valley of
+   the likelihood can put the fit far from the truth while the data favour
+   it over the running estimate by little (on the slow three-pair track of
+   :mod:`benchmarks.bench_long`, sampler seed 6 of recording 3: a fit at
+   25 s 17.8 km from the truth, the EKF 0.9 km from it, data costs 168.2
+   and 173.9; the Laplace covariance of the fit put the EKF 25 sigma off).
+   So neither is dropped: the restarted tracker's Gaussian sum
+   (:mod:`fgdoppler.estimators.ambiguity`) weighs both by the data — by
+   their window costs, or by the sampled window posterior, which the
+   running estimate now also proposes from, where the fit's window is
+   non-Gaussian — and the later measurements decide.  Measured with
+   ``python studies/slow_track_check.py`` and the accuracy benchmark
+   (docs/concepts.md, "Online re-initiation").
 
 A half plane the user gave the first initiation
 (:attr:`~fgdoppler.estimators.initiation.Initiation.half_plane`) binds both
@@ -82,7 +98,13 @@ from scipy.stats import chi2
 
 from fgdoppler._text import time_text
 from fgdoppler.estimators.grid import GridResult, HalfPlane
-from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate, window_grid
+from fgdoppler.estimators.initiation import (
+    Candidate,
+    Initiation,
+    InitiationSettings,
+    initiate,
+    window_grid,
+)
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.search_memo import RecordingMemo
 from fgdoppler.estimators.settings import TrackerSettings
@@ -269,9 +291,39 @@ def fresh_start(measurements: Measurements, model: TrackingModel, settings: Trac
     if not m2 > chi2.ppf(DISAGREEMENT, model.n):
         return None
     where = "in its own basin" if best is basin else f"of lower cost ({new.cost:.1f} vs {basin.cost:.1f})"
-    return best, (f"online re-initiation over the {len(data)} measurements up to t = {time_text(tc)} s: the running "
-                  f"estimate is {np.sqrt(m2):.1f} sigma from the best fit of all the data so far, {where}; "
-                  "the tracker restarts there")
+    kept = _running_estimate(model, best, x_back, P_old, own.costs[0], tc, half_plane)
+    also = "" if kept is None else (f", carrying its running estimate along (data cost {kept.cost:.1f} against "
+                                    f"{best.cost:.1f})")
+    return (best if kept is None else replace(best, alternatives=(*best.alternatives, kept))), (
+        f"online re-initiation over the {len(data)} measurements up to t = {time_text(tc)} s: the running "
+        f"estimate is {np.sqrt(m2):.1f} sigma from the best fit of all the data so far, {where}; "
+        f"the tracker restarts there{also}")
+
+
+def _running_estimate(model: TrackingModel, best: Initiation, x_back: FloatArray, P_old: FloatArray, cost: float,
+                      tc: float, half_plane: HalfPlane | None) -> Candidate | None:
+    r"""The running estimate as one more solution of the restart's start (step 4 of the module docstring).
+
+    Its state and covariance at the fit's window start, :math:`\mathbf F^{-1}\mathbf x_o` and
+    :math:`\mathbf F^{-1}\mathbf P_o\mathbf F^{-\top}` (:math:`\mathbf F` the constant-velocity transition
+    from there to :math:`t_c`), with its data cost :math:`c_o` over the same data and, where the fit's
+    solutions have their shares of the window's posterior
+    (:meth:`~fgdoppler.estimators.initiation.Initiation.posterior_shares`), a log evidence
+    :math:`\log Z_b - (c_o - c_b)/2` beside them.  ``None`` when it lies outside the user's half plane
+    (the half plane is the only thing that can send a tracker back from the mirror side) or its
+    covariance is not finite.
+    """
+    if half_plane is not None and not bool(half_plane.contains(x_back)):
+        return None
+    Fi = np.linalg.inv(model.motion.F(tc - best.t_start))
+    P_back = Fi @ P_old @ Fi.T
+    if not (np.isfinite(cost) and np.all(np.isfinite(P_back))):
+        return None
+    # Weighed against the fit by the likelihood ratio of the data alone, as if its basin held as much of the
+    # posterior as the fit's; the fit's own solutions keep their shares of the window's posterior.
+    evidence = None if best.log_evidence is None else best.log_evidence - 0.5 * (float(cost) - best.cost)
+    return Candidate(state=x_back, cost=float(cost), passes_chi2=bool(cost <= best.chi2_threshold), covariance=P_back,
+                     log_evidence=evidence)
 
 
 def _splice_estimates(old: Estimates, new: Estimates, tc: float) -> Estimates:
