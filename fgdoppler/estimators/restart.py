@@ -45,7 +45,7 @@ initiation over *all* data up to :math:`t_c`:
    it over the running estimate by little (on the slow three-pair track of
    :mod:`benchmarks.bench_long`, sampler seed 6 of recording 3: a fit at
    25 s 17.8 km from the truth, the EKF 0.9 km from it, data costs 168.2
-   and 173.9; the Laplace covariance of the fit put the EKF 25 sigma off).
+   and 174.0; the Laplace covariance of the fit put the EKF 25 sigma off).
    So neither is dropped: the restarted tracker's Gaussian sum
    (:mod:`fgdoppler.estimators.ambiguity`) weighs both by the data — by
    their window costs, or by the sampled window posterior, which the
