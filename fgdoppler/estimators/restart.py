@@ -315,8 +315,8 @@ def _running_estimate(model: TrackingModel, best: Initiation, x_back: FloatArray
     """
     if half_plane is not None and not bool(half_plane.contains(x_back)):
         return None
-    Fi = np.linalg.inv(model.motion.F(tc - best.t_start))
-    P_back = Fi @ P_old @ Fi.T
+    F_back = model.motion.F(best.t_start - tc)  # the constant-velocity transition run backwards: F(-dt) = F(dt)^-1
+    P_back = F_back @ P_old @ F_back.T
     if not (np.isfinite(cost) and np.all(np.isfinite(P_back))):
         return None
     # Weighed against the fit by the likelihood ratio of the data alone, as if its basin held as much of the
