@@ -495,7 +495,30 @@ def test_track_most_likely_reports_the_smoothers_mode(tmp_path: Path, capsys: py
     assert main(["track", str(sim / "measurements.csv"), "--geometry", "a", "--estimator", "ekf",
                  "--most-likely"]) == 2
     captured = capsys.readouterr()
-    assert "--most-likely applies to the smoother, not to ekf" in captured.err and "geometry" not in captured.out
+    assert "--most-likely applies to the smoother and map, not to ekf" in captured.err and "geometry" not in captured.out
+
+
+def test_track_most_likely_reports_maps_mode_at_every_scan(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Case a 25 km: ``map`` reports the posterior mean where it is skewed, ``--most-likely`` the mode throughout.
+
+    Both runs draw the same particles, so where the default reports the mode the two tracks agree to the bit,
+    and the closing event says which read-out was used.
+    """
+    sim = tmp_path / "sim"
+    main(["simulate", "--case", "a", "--start-x", "25000", "--seed", "2", "--out", str(sim)])
+    capsys.readouterr()
+    base = ["track", str(sim / "measurements.csv"), "--geometry", "a", "--estimator", "map", "--json"]
+
+    def run(*extra: str) -> dict:
+        assert main([*base, *extra]) == 0
+        return json.loads(capsys.readouterr().out)
+
+    default, mode = run(), run("--most-likely")
+    assert "or at its mean where the posterior is skewed" in default["events"][-1]["message"]
+    assert "estimates at the posterior mode;" in mode["events"][-1]["message"] + ";"
+    assert "its mean" not in mode["events"][-1]["message"]
+    same = np.all(np.equal(default["states"], mode["states"]), axis=1)
+    assert 0 < np.sum(~same) and mode["settings"]["posterior_mean"] is False
 
 
 def test_track_mode_candidates_reach_the_smoothers_settings(tmp_path: Path, capsys: pytest.CaptureFixture[str]

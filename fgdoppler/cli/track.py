@@ -78,8 +78,8 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                         "reference smoother's included; the same seed gives the same answer, another shows its Monte "
                         "Carlo spread (--particle-seed: its old name)")
     p.add_argument("--most-likely", action="store_true",
-                   help="smoother: always report the most likely track (by default, where the posterior is skewed "
-                        "about it, the posterior mean, which is closer to the truth on average)")
+                   help="smoother, map: always report the most likely track or state (by default, where the "
+                        "posterior is skewed about it, the posterior mean, which is closer to the truth on average)")
     p.add_argument("--mode-candidates", type=int, default=None, metavar="N",
                    help="smoother: grid candidates its whole-recording mode search refines (default 20; 0 turns "
                         "the search off: faster, but a track in a wrong mode of the likelihood can be reported ok)")
@@ -221,9 +221,10 @@ def _run(args: argparse.Namespace) -> int:
         raise CLIError("--seed applies to the trackers, not to init (the initiation draws no random numbers)")
     elif args.lag is not None:
         raise CLIError("--lag applies to fixed-lag, not to init")
-    elif args.mode_candidates is not None or args.most_likely or args.estimate_offsets:
-        option = ("--mode-candidates" if args.mode_candidates is not None else
-                  "--most-likely" if args.most_likely else "--estimate-offsets")
+    elif args.most_likely:
+        raise CLIError("--most-likely applies to the smoother and map, not to init")
+    elif args.mode_candidates is not None or args.estimate_offsets:
+        option = "--mode-candidates" if args.mode_candidates is not None else "--estimate-offsets"
         raise CLIError(f"{option} applies to the smoother, not to init")
     elif args.bias_sigma is not None or args.clock_sigma is not None:
         option, field = ("--bias-sigma", "bias_sigma") if args.bias_sigma is not None else \
@@ -520,7 +521,9 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
         raise CLIError(f"--particles applies to the particle estimators "
                        f"({', '.join(n for n, i in ESTIMATORS.items() if issubclass(i.settings, ParticleSettings))}), "
                        f"not to {name}")
-    for given, option in ((args.most_likely, "--most-likely"), (args.mode_candidates is not None, "--mode-candidates"),
+    if args.most_likely and name not in ("smoother", "map"):
+        raise CLIError(f"--most-likely applies to the smoother and map, not to {name}")
+    for given, option in ((args.mode_candidates is not None, "--mode-candidates"),
                           (args.estimate_offsets, "--estimate-offsets")):
         if given and name != "smoother":
             raise CLIError(f"{option} applies to the smoother, not to {name}")
@@ -554,8 +557,9 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
             raise CLIError(f"--estimate-offsets: {exc}") from None
     try:
         lag = {} if args.lag is None else {"lag": args.lag}
+        read_out = {"posterior_mean": False} if args.most_likely else {}  # map only (checked above)
         return (FixedLagSettings(huber_k=k, **lag, **shared) if name == "fixed-lag"
-                else ESTIMATORS[name].settings(huber_k=k, **particle, **shared))
+                else ESTIMATORS[name].settings(huber_k=k, **particle, **read_out, **shared))
     except ValueError as exc:
         raise CLIError(f"--{'lag' if name == 'fixed-lag' else 'particles'}: {exc}") from None
 

@@ -41,6 +41,7 @@ seed 7), windows with ratio ≤ 10 have mean NEES 3.9 and 1.4 % beyond the
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -74,8 +75,8 @@ def probe_axis(P: FloatArray) -> tuple[FloatArray, float]:
     return P[:, :k] @ v / sd, sd
 
 
-def probe_rises(cost: Callable[[FloatArray], float], x: FloatArray, P: FloatArray,
-                information: FloatArray) -> tuple[float, float, float, float]:
+def probe_rises(cost: Callable[[FloatArray], Any], x: FloatArray, P: FloatArray,
+                information: FloatArray, *, rows: bool = False) -> tuple[float, float, float, float]:
     r"""Cost rises at ``x ∓ 3δ`` less the linear term, the quadratic model's rise, and the position σ along δ.
 
     ``information`` is :math:`\mathbf J^\top\mathbf J` of the whitened
@@ -85,25 +86,34 @@ def probe_rises(cost: Callable[[FloatArray], float], x: FloatArray, P: FloatArra
     that is not an optimum (a grid node) the rises first lose the linear
     term :math:`\pm 3\,\nabla c^\top\boldsymbol\delta` (slope by a central
     difference), so that only curvature is compared; at an optimum that term
-    is zero.
+    is zero.  With ``rows`` the cost takes the five probe points as the rows
+    of one array and returns their five costs (one call of a vectorised
+    cost instead of five).
     """
     d, sd = probe_axis(P)
+    h = 1e-3
+    steps = np.array([0.0, h, -h, -PROBE_SIGMAS, PROBE_SIGMAS])
 
     def at(step: float) -> float:
         try:
-            c = cost(x + step * d)
+            c = cost(x + step * d) if not rows else cost((x + step * d)[None])[0]
         except ValueError:  # a trajectory through a sensor
             return np.inf
         return float(c) if np.isfinite(c) else np.inf
 
-    c0 = at(0.0)
-    h = 1e-3
-    slope = (at(h) - at(-h)) / (2.0 * h)
+    try:
+        costs = np.asarray(cost(x + steps[:, None] * d), dtype=float) if rows else None
+    except ValueError:  # one of them through a sensor: each alone
+        costs = None
+    if costs is None:
+        costs = np.array([at(float(step)) for step in steps])
+    c0, ch, cmh, clo, chi = np.where(np.isfinite(costs), costs, np.inf)
+    slope = (ch - cmh) / (2.0 * h)
     slope = slope if np.isfinite(slope) else 0.0
-    lo = at(-PROBE_SIGMAS) - c0 + PROBE_SIGMAS * slope
-    hi = at(PROBE_SIGMAS) - c0 - PROBE_SIGMAS * slope
+    lo = clo - c0 + PROBE_SIGMAS * slope
+    hi = chi - c0 - PROBE_SIGMAS * slope
     step = PROBE_SIGMAS * d
-    return lo, hi, float(step @ information @ step), sd
+    return float(lo), float(hi), float(step @ information @ step), sd
 
 
 def curvature_reason(cost: Callable[[FloatArray], float], x: FloatArray, P: FloatArray,
