@@ -25,7 +25,7 @@ SUMMARIES: Mapping[str, str] = MappingProxyType({
     "fixed-lag": "fixed-lag smoother: each state estimated lag seconds after its time",
     "smoother": "offline smoother: the whole recording by Levenberg-Marquardt",
     "particle": "particle filter: the posterior by sequential Monte Carlo (resample-move)",
-    "map": "filtered MAP: the particle posterior's mode given all data so far",
+    "map": "filtered MAP: the particle posterior's mode given all data so far (its mean where skewed)",
 })
 
 #: Old names still accepted (the documentation used them), with a DeprecationWarning.
