@@ -107,13 +107,14 @@ def probe_rises(cost: Callable[[FloatArray], Any], x: FloatArray, P: FloatArray,
         costs = None
     if costs is None:
         costs = np.array([at(float(step)) for step in steps])
-    c0, ch, cmh, clo, chi = np.where(np.isfinite(costs), costs, np.inf)
+    # Python floats: inf - inf is nan without a warning, as the five scalar calls always gave
+    c0, ch, cmh, clo, chi = (float(c) if np.isfinite(c) else np.inf for c in costs)
     slope = (ch - cmh) / (2.0 * h)
     slope = slope if np.isfinite(slope) else 0.0
     lo = clo - c0 + PROBE_SIGMAS * slope
     hi = chi - c0 - PROBE_SIGMAS * slope
     step = PROBE_SIGMAS * d
-    return float(lo), float(hi), float(step @ information @ step), sd
+    return lo, hi, float(step @ information @ step), sd
 
 
 def curvature_reason(cost: Callable[[FloatArray], float], x: FloatArray, P: FloatArray,

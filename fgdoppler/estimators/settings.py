@@ -771,7 +771,9 @@ class MapSettings(ParticleSettings):
         long valley, the track is 344-385 m closer to the truth than the mode's
         (accuracy benchmark, 100 runs, seeds 2026 and 7) and at most 4 m
         farther elsewhere (docs/concepts.md, "The filtered mode"); ``False``
-        reports the mode at every scan.
+        reports the mode at every scan, as does ``map`` with calibration
+        offsets integrated out (``bias_sigma`` > 0), where the prior pulls the
+        mean along the offsets' ridge.
     """
 
     move_steps: int = 3

@@ -325,6 +325,19 @@ def test_map_reports_the_mean_where_the_posterior_is_skewed_and_the_mode_where_i
         assert n_mean == 0
 
 
+def test_map_with_offsets_integrated_out_reports_its_mode_throughout() -> None:
+    """With ``bias_sigma`` the read-out is the mode at every scan, to the bit, and the closing event says so.
+
+    Case a 25 km, where without offsets the mean is reported at most scans (the test above).
+    """
+    sim, model, init = _case("a", 25e3, 4)
+    default = run_map(sim.measurements, model, init, fd.MapSettings(bias_sigma=1.0))
+    mode = run_map(sim.measurements, model, init, fd.MapSettings(bias_sigma=1.0, posterior_mean=False))
+    np.testing.assert_array_equal(default.primary.states, mode.primary.states)
+    summary = [e.message for e in default.events if "resample-move steps" in e.message]
+    assert len(summary) == 1 and "estimates at the posterior mode" in summary[0] and "its mean" not in summary[0]
+
+
 @pytest.mark.parametrize(("case", "x", "seed"), MODE_CASES)
 def test_the_mean_shift_is_measured_in_the_window_optimums_own_covariance(case: str, x: float, seed: int) -> None:
     """``mean_shift``'s w is d'P⁻¹d with P GTSAM's Laplace covariance of the same objective, and its probe agrees.
