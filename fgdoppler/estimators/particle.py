@@ -130,7 +130,8 @@ from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.progress import Progress, advance, start_task
 
-__all__ = ["WindowPosterior", "run_map", "run_particle", "window_posterior"]
+__all__ = ["MEAN_SHIFT_FAR", "MEAN_SHIFT_NOISE", "WindowPosterior", "mean_is_the_better_point", "run_map", "run_particle",
+           "window_posterior"]
 
 FloatArray = NDArray[np.float64]
 
@@ -218,9 +219,9 @@ def run_map(
     centre (docs/concepts.md, "Calibration offsets"), and in the paper's
     well-observed scenarios the rule's track was 91-153 m farther from the
     truth than the mode's (time-averaged RMSE, 100 runs each, seeds 2026
-    and 7).  So is it given plain
-    :class:`ParticleSettings`, which have no such choice.  docs/concepts.md ("The filtered mode") says which
-    scenario is which, measured.  When the mode leaves one peak
+    and 7).  So is it given plain :class:`ParticleSettings`, which have no
+    such choice.  docs/concepts.md ("The filtered mode") says which scenario
+    is which, measured.  When the mode leaves one peak
     of the posterior for another (a higher one that a particle revealed),
     the run says so in an event — where, how far, and how much more
     probable the new peak is — since such a jump can be kilometres for a

@@ -765,8 +765,9 @@ class MapSettings(ParticleSettings):
         estimator does) instead of the mode: where the mean lies beyond the
         particles' Monte Carlo scatter about the mode and either within one
         standard deviation of it or in a valley that stays near-quadratic
-        three standard deviations out (the offline smoother's rule for the
-        same choice; :func:`~fgdoppler.estimators.particle.mean_is_the_better_point`).
+        three standard deviations out (the offline smoother's limit for a
+        near-quadratic valley;
+        :func:`~fgdoppler.estimators.particle.mean_is_the_better_point`).
         Measured on the paper's 25 km scenarios, where the zone truncates a
         long valley, the track is 344-385 m closer to the truth than the mode's
         (accuracy benchmark, 100 runs, seeds 2026 and 7) and at most 4 m
