@@ -250,34 +250,13 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
     rates = [rate]
     scans = stream.scans()
     start_task(progress, name, len(scans))
-    last_mode: tuple[float, FloatArray] | None = None  # (anchor time, anchor state) of the previous report's mode
-    jumps: list[float] = []  # log-density gains of the mode's moves to another peak
     # with calibration offsets integrated out the mean is pulled along the offsets' ridge by the prior (module
     # docstring of run_map): the mode throughout
-    skewed_mean = mode and isinstance(settings, MapSettings) and settings.posterior_mean and post.offsets is None
-    means = 0  # reports where the posterior mean was the read-out (skewed posterior)
+    skewed_mean = isinstance(settings, MapSettings) and settings.posterior_mean and post.offsets is None
+    reader = _ModeReadOut(post, events, skewed_mean=skewed_mean) if mode else None
 
     def report(t: float) -> tuple[FloatArray, FloatArray]:
-        nonlocal last_mode, means
-        if not mode:
-            return post.moments(t)
-        previous = None
-        if last_mode is not None:
-            ta, xa = last_mode
-            previous = post.model.motion.propagate(xa, post.t_anchor - ta) if ta != post.t_anchor else xa
-        x_mode, gain = post.mode_and_switch(previous)
-        if gain is not None and previous is not None:
-            jumps.append(gain)
-            here, there = (post.model.motion.propagate(v, t - post.t_anchor) for v in (previous, x_mode))
-            events.append(Event(time=t, message=(
-                f"the mode moved to another peak of the posterior, "
-                f"{float(np.linalg.norm((there - here)[:post.model.dim])):.0f} m away, "
-                f"more probable by a factor {_factor(gain)} (log density +{gain:.2f})")))
-        last_mode = (post.t_anchor, x_mode)
-        if skewed_mean and mean_is_the_better_point(*post.mean_shift(x_mode, probe_beyond=MEAN_SHIFT_FAR)):
-            means += 1
-            return post.moments(t)
-        return post.spread_about(x_mode, t)
+        return post.moments(t) if reader is None else reader.report(t)
 
     times, states, covs, loglik = [init.t_end], [], [], [0.0]
     point, cov = report(init.t_end)
@@ -305,12 +284,11 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         covs.append(cov)
         loglik.append(total)
         advance(progress)
-    read_out = ("" if not mode else "; estimates at the posterior mode" + (
-        f", or at its mean where the posterior is skewed ({means} of {len(times)})" if skewed_mean else ""))
+    read_out, jumps = ("", []) if reader is None else (reader.phrase(len(times)), reader.jumps)
     events.append(Event(time=times[-1], message=_summary(settings, rates, n_resample, n_reanchor, read_out, jumps)))
     offsets = None
     if post.offsets is not None:
-        offsets = _offsets_at_end(post, last_mode[1] if mode and last_mode is not None else None)
+        offsets = _offsets_at_end(post, None if reader is None or reader.last_mode is None else reader.last_mode[1])
         events.append(Event(time=times[-1], message="calibration offsets at the end: " + offsets.describe(pair_labels(model.observation))))
     return TrackResult(
         estimator=name,
@@ -324,6 +302,46 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         wall_time=time.perf_counter() - t_begin,
         offsets=offsets,
     )
+
+
+class _ModeReadOut:
+    """``map``'s read-out at each report: the mode (and its jumps between peaks), or the mean where skewed.
+
+    Holds what one report leaves to the next: the previous mode (anchor time and state), the gains of the mode's
+    jumps to another peak, and how many reports were read at the mean.
+    """
+
+    def __init__(self, post: _Posterior, events: list[Event], *, skewed_mean: bool) -> None:
+        self.post, self.events, self.skewed_mean = post, events, skewed_mean
+        self.last_mode: tuple[float, FloatArray] | None = None
+        self.jumps: list[float] = []  # log-density gains of the mode's moves to another peak
+        self.means = 0
+
+    def report(self, t: float) -> tuple[FloatArray, FloatArray]:
+        """The estimate and covariance at ``t`` (:func:`run_map`)."""
+        post = self.post
+        previous = None
+        if self.last_mode is not None:
+            ta, xa = self.last_mode
+            previous = post.model.motion.propagate(xa, post.t_anchor - ta) if ta != post.t_anchor else xa
+        x_mode, gain = post.mode_and_switch(previous)
+        if gain is not None and previous is not None:
+            self.jumps.append(gain)
+            here, there = (post.model.motion.propagate(v, t - post.t_anchor) for v in (previous, x_mode))
+            self.events.append(Event(time=t, message=(
+                f"the mode moved to another peak of the posterior, "
+                f"{float(np.linalg.norm((there - here)[:post.model.dim])):.0f} m away, "
+                f"more probable by a factor {_factor(gain)} (log density +{gain:.2f})")))
+        self.last_mode = (post.t_anchor, x_mode)
+        if self.skewed_mean and mean_is_the_better_point(*post.mean_shift(x_mode, probe_beyond=MEAN_SHIFT_FAR)):
+            self.means += 1
+            return post.moments(t)
+        return post.spread_about(x_mode, t)
+
+    def phrase(self, reports: int) -> str:
+        """The closing event's words on the read-out, of ``reports`` reports."""
+        return "; estimates at the posterior mode" + (
+            f", or at its mean where the posterior is skewed ({self.means} of {reports})" if self.skewed_mean else "")
 
 
 def _offsets_at_end(post: _Posterior, x_mode: FloatArray | None) -> OffsetEstimate:
