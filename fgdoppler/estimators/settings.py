@@ -743,7 +743,7 @@ class ParticleSettings(TrackerSettings):
 
 @dataclass(frozen=True, kw_only=True)
 class MapSettings(ParticleSettings):
-    """The filtered MAP (:func:`fgdoppler.estimators.particle.run_map`): :class:`ParticleSettings` with fewer moves.
+    """The filtered MAP (:func:`fgdoppler.estimators.particle.run_map`): :class:`ParticleSettings` with fewer moves, and its read-out.
 
     The mode reads the particles only for its covariance (their second
     moment about it) and for where to start a second climb, so it needs
@@ -754,6 +754,8 @@ class MapSettings(ParticleSettings):
     (docs/concepts.md, "The filtered mode", with the numbers).  Every other parameter means what it means in
     :class:`ParticleSettings`; ``MapSettings(move_steps=5)`` runs on the
     same particles and random numbers as the particle estimator's defaults.
+    (Where ``map`` reads the mean, its fewer moves leave it 11-20 m behind
+    ``particle`` in the paper's 25 km scenarios, 0.6-1.1 %; 2026-12-01.)
 
     Parameters
     ----------
