@@ -754,8 +754,10 @@ class MapSettings(ParticleSettings):
     (docs/concepts.md, "The filtered mode", with the numbers).  Every other parameter means what it means in
     :class:`ParticleSettings`; ``MapSettings(move_steps=5)`` runs on the
     same particles and random numbers as the particle estimator's defaults.
-    (Where ``map`` reads the mean, its fewer moves leave it 11-20 m behind
-    ``particle`` in the paper's 25 km scenarios, 0.6-1.1 %; 2026-12-01.)
+    (The mean read from these particles is the particle estimator's to
+    within 6 m in the paper's 25 km scenarios; ``map`` is 11-20 m behind
+    ``particle`` there because its rule keeps the mode at some reports
+    where the mean was the better point.  2026-12-01.)
 
     Parameters
     ----------
