@@ -187,7 +187,8 @@ def run_map(
     report's mode, and from the particle of highest posterior density where
     that stands higher
     (:meth:`~fgdoppler.estimators.particle_posterior._Posterior.mode`),
-    finds :math:`\hat{\mathbf x}_a`, the most probable anchor state, and
+    finds :math:`\hat{\mathbf x}_a`, the most probable anchor state of
+    the most probable basin, and
     the estimate is :math:`\mathbf F(t - t_a)\hat{\mathbf x}_a` with the
     particles' second moment about it
     (:meth:`~fgdoppler.estimators.particle_posterior._Posterior.spread_about`)
@@ -222,10 +223,13 @@ def run_map(
     and 7).  So is it given plain :class:`ParticleSettings`, which have no
     such choice.  docs/concepts.md ("The filtered mode") says which scenario
     is which, measured.  When the mode leaves one peak
-    of the posterior for another (a higher one that a particle revealed),
-    the run says so in an event — where, how far, and how much more
-    probable the new peak is — since such a jump can be kilometres for a
-    likelihood ratio of a few.  After a re-anchoring
+    of the posterior for another (one that a particle revealed, standing
+    higher and holding more of the posterior by the Laplace approximation:
+    :meth:`~fgdoppler.estimators.particle_posterior._Posterior.basin_log_mass`;
+    a narrow peak at the zone's walls can stand higher than the broad valley
+    that holds nearly every particle, and is not taken), the run says so in
+    an event — where, how far, and how much more probable the new basin is —
+    since such a jump can be kilometres for a probability ratio of a few.  After a re-anchoring
     (``max_span``) the older data are a Gaussian summary centred on the
     particles' mean, so on long recordings the two read-outs converge.
 
@@ -331,7 +335,7 @@ class _ModeReadOut:
             self.events.append(Event(time=t, message=(
                 f"the mode moved to another peak of the posterior, "
                 f"{float(np.linalg.norm((there - here)[:post.model.dim])):.0f} m away, "
-                f"more probable by a factor {_factor(gain)} (log density +{gain:.2f})")))
+                f"its basin more probable by a factor {_factor(gain)} (log mass +{gain:.2f})")))
         self.last_mode = (post.t_anchor, x_mode)
         if self.skewed_mean and mean_is_the_better_point(*post.mean_shift(x_mode, probe_beyond=MEAN_SHIFT_FAR)):
             self.means += 1

@@ -60,6 +60,9 @@ MODE_DAMPING_TRIES = 12
 #: A climb stops when a step raises the log posterior by less than this (then it lies about
 #: :math:`\sqrt{2\cdot 10^{-6}}` ≈ 0.0014 standard deviations from the optimum).
 MODE_TOLERANCE = 1e-6
+#: Draws of a peak's Laplace Gaussian that measure the share of it inside the prior's support
+#: (:meth:`_Posterior.basin_log_mass`; as many as the initiation's evidence takes).
+BASIN_DRAWS = 4096
 
 
 @dataclass
@@ -109,12 +112,14 @@ class _Posterior:
         return np.asarray(np.sum(E * E, axis=0), dtype=float)
 
     # -- target -------------------------------------------------------------------------
-    def log_prior(self, x: FloatArray) -> FloatArray:
+    def log_prior(self, x: FloatArray, *, bounded: bool = True) -> FloatArray:
+        """The prior's log density of every row of ``x``: its Gaussian terms, ``-inf`` off the support unless not
+        ``bounded`` (then the Gaussian terms alone, as if the zone had no walls)."""
         if self.gauss is not None:
             m, Li = self.gauss
             e = (x - m) @ Li.T
             return -0.5 * np.einsum("ij,ij->i", e, e)
-        out = np.where(self.supported(x), 0.0, -np.inf)
+        out = np.where(self.supported(x) | (not bounded), 0.0, -np.inf)
         prior = self.model.prior()
         if prior is not None:
             Li = np.linalg.inv(np.linalg.cholesky(prior[1]))
@@ -159,12 +164,15 @@ class _Posterior:
                 sums[a:a + step] = np.where(np.isfinite(r), r, 0.0) @ E
         return out, sums
 
-    def log_target(self, x: FloatArray) -> FloatArray:
-        return self.log_target_and_stats(x)[0]
+    def log_target(self, x: FloatArray, *, bounded: bool = True) -> FloatArray:
+        return self.log_target_and_stats(x, bounded=bounded)[0]
 
-    def log_target_and_stats(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
-        r"""The log target of every row of ``x`` and, with offsets, their statistics :math:`\mathbf s` ``(N, P)``."""
-        lp = self.log_prior(x)
+    def log_target_and_stats(self, x: FloatArray, *, bounded: bool = True) -> tuple[FloatArray, FloatArray]:
+        r"""The log target of every row of ``x`` and, with offsets, their statistics :math:`\mathbf s` ``(N, P)``.
+
+        Not ``bounded``: without the prior's support (:meth:`log_prior`).
+        """
+        lp = self.log_prior(x, bounded=bounded)
         ok = np.isfinite(lp)
         out = np.full(x.shape[0], -np.inf)
         s = np.zeros((x.shape[0], self.s.shape[1]))
@@ -406,20 +414,23 @@ class _Posterior:
         The climb from ``previous`` (the last report's mode, which the new data
         move a little) ends on a local maximum of value :math:`v`; a particle
         standing higher than :math:`v` lies in another basin, and only then is
-        a second climb run from the highest particle, the higher end kept.
-        Without ``previous`` the climb starts from the highest particle.  Either
-        way the mode stands at least as high as every particle.
+        a second climb run from the highest particle.  Its end is kept if it
+        stands higher and its basin holds more of the posterior
+        (:meth:`basin_log_mass`): a narrow peak at the zone's edge can top the
+        broad one that holds nearly all the particles.  Without ``previous``
+        the climb starts from the highest particle.
         """
         return self.mode_and_switch(previous)[0]
 
     def mode_and_switch(self, previous: FloatArray | None = None) -> tuple[FloatArray, float | None]:
-        r""":meth:`mode`, and by how much the new basin's peak stands higher (log density) when it left ``previous``'s.
+        r""":meth:`mode`, and by how much more of the posterior the new basin holds when the mode left ``previous``'s.
 
         The second element is ``None`` when the mode stayed in the basin of
         ``previous`` (or there was none); otherwise the gain
-        :math:`\log\pi_k(\text{new}) - \log\pi_k(\text{old})`, so
-        :math:`e^{\text{gain}}` is how much more probable the new peak is: a
-        small gain means two peaks the data barely tell apart.
+        :math:`\log Z_\text{new} - \log Z_\text{old}` of the basins' masses
+        (:meth:`basin_log_mass`; their peaks' log densities where a mass is
+        undefined), so :math:`e^{\text{gain}}` is how much more probable the
+        new basin is: a small gain means two peaks the data barely tell apart.
         """
         best = self.x[int(np.argmax(self.logpost))]
         if previous is None:
@@ -428,8 +439,59 @@ class _Posterior:
         if float(np.max(self.logpost)) > value:
             y, other = self._climb(np.array(best, dtype=float))
             if other > value:
-                return y, other - value
+                here, there = self.basin_log_mass(x, value), self.basin_log_mass(y, other)
+                gain = other - value if here is None or there is None else there - here
+                if gain > 0.0:
+                    return y, gain
         return x, None
+
+    def basin_log_mass(self, x_peak: FloatArray, value: float) -> float | None:
+        r"""The log of the posterior's mass in the basin of the peak ``x_peak`` (Laplace), up to a shared constant.
+
+        With :math:`v = \log\pi_k(\hat{\mathbf x})` (``value``) and the
+        Gauss–Newton information :math:`\mathbf A` there (:meth:`mean_shift`),
+
+        .. math::
+
+            \log Z \approx v - \tfrac12\log\det\mathbf A
+            + \log\Pr_{\mathbf x\sim\mathcal N(\hat{\mathbf x},\,(\mathbf A^{-1})_{xx})}
+              [\mathbf x \in \text{support}],
+
+        the last term from :data:`BASIN_DRAWS` draws (at least half a draw):
+        what the zone's walls leave of the basin, as in the initiation's
+        evidence (:func:`~fgdoppler.estimators.initiation.window_log_evidence`).
+        A narrow peak can stand higher than a broad one and yet hold far less
+        of the posterior.  ``None`` where the information is singular.
+        """
+        A = self._information(x_peak)
+        if A is None:
+            return None
+        sign, logdet = np.linalg.slogdet(A)
+        if sign <= 0:
+            return None
+        n = x_peak.size
+        C = np.linalg.inv(A)[:n, :n]
+        try:
+            L = np.linalg.cholesky(0.5 * (C + C.T))
+        except np.linalg.LinAlgError:
+            return None
+        draws = x_peak + np.random.default_rng(0).standard_normal((BASIN_DRAWS, n)) @ L.T
+        share = max(float(np.mean(self.supported(draws))), 0.5 / BASIN_DRAWS)
+        return float(value - 0.5 * logdet + np.log(share))
+
+    def _information(self, x: FloatArray) -> FloatArray | None:
+        r""":math:`\mathbf A = \mathbf J^\top\mathbf W\mathbf J` + the prior's quadratic term at ``x`` (joint with offsets).
+
+        ``None`` off the support.
+        """
+        quad = self._prior_quadratic()
+        value, r, Jw = self._linearised(x, quad)
+        if not np.isfinite(value):
+            return None
+        A = Jw.T @ (huber_weights(r, self.settings.huber_k)[:, None] * Jw)
+        if quad is not None:
+            A[:x.size, :x.size] += quad[1].T @ quad[1]
+        return np.asarray(A, dtype=float)
 
     def mean_shift(self, x_mode: FloatArray, probe_beyond: float = 0.0) -> tuple[float, float]:
         r"""How far the particles' mean lies from the mode ``x_mode``, and how the cost bends about the mode.
@@ -451,23 +513,24 @@ class _Posterior:
           cost rise three standard deviations of :math:`\mathbf I^{-1}` to
           either side of the mode along the position's major axis, over the
           quadratic model's :math:`9`; above 1 the valley bends away from the
-          straight line, infinite where a side leaves the prior's support.
+          straight line.  The probe's cost leaves out the prior's support (the
+          zone's walls and the half plane: :meth:`log_prior` not ``bounded``),
+          as the smoother's probe does (:mod:`~fgdoppler.estimators.spread`):
+          a wall truncates the valley, which is what the mean then corrects
+          for, and says nothing of how it bends; infinite only where a side's
+          track passes through a sensor.
 
         The probe costs five evaluations of the target; it is made only where
         :math:`w` exceeds ``probe_beyond`` (else the ratio is NaN).  ``(inf, inf)``
         where the information is singular.
         """
         x_mode = np.asarray(x_mode, dtype=float)
-        quad = self._prior_quadratic()
-        value, r, Jw = self._linearised(x_mode, quad)
         n = x_mode.size
-        if not np.isfinite(value):
+        A = self._information(x_mode)
+        if A is None:
             return np.inf, np.inf
-        A = Jw.T @ (huber_weights(r, self.settings.huber_k)[:, None] * Jw)
-        if quad is not None:
-            A[:n, :n] += quad[1].T @ quad[1]
         try:
-            P = np.linalg.inv(A)[:n, :n]
+            P = np.asarray(np.linalg.inv(A)[:n, :n], dtype=float)
             info = np.linalg.inv(P)
         except np.linalg.LinAlgError:
             return np.inf, np.inf
@@ -478,7 +541,7 @@ class _Posterior:
             return w, np.nan
 
         def cost(x: FloatArray) -> FloatArray:
-            return -2.0 * self.log_target(x)
+            return -2.0 * self.log_target(x, bounded=False)
 
         lo, hi, rise, _ = probe_rises(cost, x_mode, P, info, rows=True)
         return w, (min(lo, hi) / rise if rise > 0 else np.inf)
