@@ -65,9 +65,14 @@ def test_a_guess_and_the_initiation_reach_the_same_window_optimum_at_50_hz() -> 
     # 50 scans/s from the model's broad prior.  Streamed one scan per update from the true
     # state (the warm-up off), iSAM2's first Gauss-Newton steps throw the unobserved directions
     # to the prior's mean: at 4.5 s the control is kilometres off with a stated sd of
-    # metres-to-hundreds (measured: 9.0 km at sd 95 m).  With the warm-up, the first 4.5 s are
-    # solved together; from the true state (LM) and from nothing (multi-start initiation, then
-    # LM) the tracker reaches the same optimum of the window graph, two independent starts.
+    # metres-to-hundreds, farther off than the warm-up's estimate from the same guess.  How far
+    # depends on the machine's rounding in this ill-conditioned start (measured: 9.0 km at sd
+    # 95 m on 2026-11-2x; 3.6 km at sd 88 m on an AMD EPYC on 2026-12-01, where the warm-up's
+    # estimate was 1.7 km off at sd 1.3 km), so the control asserts the failure itself: worse
+    # than the warm-up by kilometres and over-confident tenfold.  With the warm-up, the first
+    # 4.5 s are solved together; from the true state (LM) and from nothing (multi-start
+    # initiation, then LM) the tracker reaches the same optimum of the window graph, two
+    # independent starts.
     sc = fd.Scenario(geometry=fd.paper_geometry("a"), x0=(45e3, 4.5e3, -100.0, -20.0), duration=4.6, dt=0.02)
     sim = fd.simulate(sc, np.random.default_rng(0))
     model = fd.TrackingModel.of(sc.geometry)
@@ -79,11 +84,11 @@ def test_a_guess_and_the_initiation_reach_the_same_window_optimum_at_50_hz() -> 
         assert not warming and P is not None
         k = int(np.argmin(np.abs(sim.truth.times - t)))
         ends.append((x, P, np.hypot(*(x - sim.truth.states[k])[:2])))
-    (xg, Pg, _), (xn, _, _), (_, Pc, err_cold) = ends
+    (xg, Pg, err_warm), (xn, _, _), (_, Pc, err_cold) = ends
     sd = np.sqrt(np.diag(Pg))
     assert np.all(np.abs(xg - xn) <= 1e-3 * sd)
     # the control: the scenario does exercise the failure the warm-up removes
-    assert err_cold > 5e3 and np.sqrt(Pc[0, 0] + Pc[1, 1]) < 0.1 * err_cold
+    assert err_cold > err_warm + 1e3 and np.sqrt(Pc[0, 0] + Pc[1, 1]) < 0.1 * err_cold
 
 
 def test_warm_up_edges() -> None:
