@@ -55,3 +55,16 @@ def paper_geom(request: pytest.FixtureRequest) -> fd.Geometry:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(20260621)
+
+
+def benchmark_recording(scenario: int, run: int, seed: int = 2026) -> tuple[fd.Simulation, fd.TrackingModel]:
+    """Run ``run`` of paper scenario ``scenario`` as ``python -m benchmarks.bench_accuracy --seed seed`` records it."""
+    scen = fd.paper_scenarios()[scenario]
+    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([seed, scenario, run])))
+    return sim, fd.TrackingModel.of(scen.geometry)
+
+
+def benchmark_run(scenario: int, run: int, seed: int = 2026) -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation]:
+    """:func:`benchmark_recording` and the benchmark's start: the initiation on each pair's first 10 measurements."""
+    sim, model = benchmark_recording(scenario, run, seed)
+    return sim, model, fd.initiate(sim.measurements.first_per_pair(10), model)

@@ -418,7 +418,12 @@ class _Posterior:
         stands higher and its basin holds more of the posterior
         (:meth:`basin_log_mass`): a narrow peak at the zone's edge can top the
         broad one that holds nearly all the particles.  Without ``previous``
-        the climb starts from the highest particle.
+        (the first report) there is no basin to keep to: one climb starts from
+        the highest particle and one from the particles' weighted mean, which
+        lies where most of the posterior is; where they end on different peaks
+        (more than a standard deviation of the first one's Laplace covariance
+        apart) the one whose basin holds more of the posterior is kept,
+        whichever stands higher.
         """
         return self.mode_and_switch(previous)[0]
 
@@ -432,18 +437,43 @@ class _Posterior:
         undefined), so :math:`e^{\text{gain}}` is how much more probable the
         new basin is: a small gain means two peaks the data barely tell apart.
         """
-        best = self.x[int(np.argmax(self.logpost))]
+        best = np.array(self.x[int(np.argmax(self.logpost))], dtype=float)
         if previous is None:
-            return self._climb(np.array(best, dtype=float))[0], None
+            # no basin to keep to yet: the highest particle's, or that of the particles' mean if it holds more
+            x, value = self._climb(best)
+            y, other = self._climb(np.asarray(self.weights() @ self.x, dtype=float))
+            if self._same_peak(x, y):
+                return x, None
+            return (y if self._log_mass_gain(x, value, y, other) > 0.0 else x), None
         x, value = self._climb(np.array(previous, dtype=float))
         if float(np.max(self.logpost)) > value:
-            y, other = self._climb(np.array(best, dtype=float))
+            y, other = self._climb(best)
             if other > value:
-                here, there = self.basin_log_mass(x, value), self.basin_log_mass(y, other)
-                gain = other - value if here is None or there is None else there - here
+                gain = self._log_mass_gain(x, value, y, other)
                 if gain > 0.0:
                     return y, gain
         return x, None
+
+    def _same_peak(self, x: FloatArray, y: FloatArray) -> bool:
+        """Whether two climbs ended on one peak: within a standard deviation of its Laplace covariance at ``x``."""
+        A = self._information(x)
+        if A is None:
+            return bool(np.array_equal(x, y))
+        try:
+            info = np.linalg.inv(np.linalg.inv(A)[:x.size, :x.size])
+        except np.linalg.LinAlgError:
+            return bool(np.array_equal(x, y))
+        d = y - x
+        return float(d @ info @ d) <= 1.0
+
+    def _log_mass_gain(self, x: FloatArray, value: float, y: FloatArray, other: float) -> float:
+        """How much more of the posterior the basin of the peak ``y`` holds than that of ``x`` (log; densities if undefined)."""
+        if not np.isfinite(other):
+            return -np.inf
+        if not np.isfinite(value):
+            return np.inf
+        here, there = self.basin_log_mass(x, value), self.basin_log_mass(y, other)
+        return other - value if here is None or there is None else there - here
 
     def basin_log_mass(self, x_peak: FloatArray, value: float) -> float | None:
         r"""The log of the posterior's mass in the basin of the peak ``x_peak`` (Laplace), up to a shared constant.
