@@ -26,6 +26,7 @@ from benchmarks.bench_accuracy import (
     load_records,
     save_records,
 )
+from tests.conftest import benchmark_recording
 
 
 def _records() -> list[dict[str, object]]:
@@ -138,9 +139,8 @@ def test_the_reproduction_page_reads_back_the_goals_the_benchmark_writes(tmp_pat
 
 def _paper_simulation(s: int, r: int, seed: int = 2026) -> tuple[fd.TrackingModel, fd.Simulation]:
     """Run ``r`` of paper scenario ``s``, as the accuracy benchmark simulates it."""
-    scen = fd.paper_scenarios()[s]
-    return fd.TrackingModel.of(scen.geometry), fd.simulate(scen, np.random.default_rng(
-        np.random.SeedSequence([seed, s, r])))
+    sim, model = benchmark_recording(s, r, seed)
+    return model, sim
 
 
 def _paper_run(s: int, r: int, seed: int = 2026) -> tuple[fd.TrackingModel, fd.Measurements, np.ndarray]:

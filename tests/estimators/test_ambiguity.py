@@ -8,13 +8,12 @@ import pytest
 import fgdoppler as fd
 import fgdoppler.estimators.ambiguity as amb
 from fgdoppler.estimators.smoother_modes import MODES_PER_PAIR
+from tests.conftest import benchmark_run
 
 
 def _case(s: int, r: int) -> tuple[fd.Measurements, fd.TrackingModel, fd.Initiation]:
-    scen = fd.paper_scenarios()[s]
-    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([2026, s, r])))
-    model = fd.TrackingModel.of(scen.geometry)
-    return sim.measurements, model, fd.initiate(sim.measurements.first_per_pair(10), model)
+    sim, model, init = benchmark_run(s, r)
+    return sim.measurements, model, init
 
 
 def _assert_same_report(judged: fd.TrackResult, alone: fd.TrackResult) -> None:

@@ -12,6 +12,7 @@ import fgdoppler as fd
 from fgdoppler.estimators.ekf import ExtendedKalmanFilter
 from fgdoppler.estimators.gating import SAG_LIMIT, NISGate, sag_ratio
 from fgdoppler.estimators.settings import EKFSettings
+from tests.conftest import benchmark_run
 
 
 def _rotation(theta: float) -> np.ndarray:
@@ -115,10 +116,8 @@ def test_ekf_keeps_a_large_genuine_innovation_only_where_its_gaussian_fits(updat
 def _recording(scenario: int, seed: int, run: int
                ) -> tuple[fd.Simulation, fd.Measurements, fd.TrackingModel, fd.Initiation]:
     """Run ``run`` of the accuracy benchmark's recordings (``benchmarks.bench_accuracy``) and its initiation."""
-    sc = fd.paper_scenarios()[scenario]
-    sim = fd.simulate(sc, np.random.default_rng(np.random.SeedSequence([seed, scenario, run])))
-    model = fd.TrackingModel.of(sc.geometry)
-    return sim, sim.measurements, model, fd.initiate(sim.measurements.first_per_pair(10), model)
+    sim, model, init = benchmark_run(scenario, run, seed)
+    return sim, sim.measurements, model, init
 
 
 def _rms_error(result: fd.TrackResult, sim: fd.Simulation) -> float:

@@ -12,6 +12,7 @@ from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.gaussian_sum import GaussianSumTracker
 from fgdoppler.estimators.registry import hypotheses_of
 from fgdoppler.estimators.settings import SampledCovarianceSettings
+from tests.conftest import benchmark_recording
 from tests.test_three_d import AIRCRAFT
 
 SETTINGS = {"ekf": fd.EKFSettings, "isam2": fd.ISAM2Settings, "fixed-lag": fd.FixedLagSettings}
@@ -21,8 +22,7 @@ def _recording(case: str, start: float, run: int) -> tuple[fd.Simulation, fd.Tra
     # the accuracy benchmark's recordings (seed 2026)
     scens = fd.paper_scenarios()
     s = next(i for i, sc in enumerate(scens) if sc.name == f"case {case}, start {start / 1e3:g} km")
-    sim = fd.simulate(scens[s], np.random.default_rng(np.random.SeedSequence([2026, s, run])))
-    return sim, fd.TrackingModel.of(scens[s].geometry)
+    return benchmark_recording(s, run)
 
 
 def _stream_each(tracker: GaussianSumTracker, m: fd.Measurements):

@@ -11,15 +11,10 @@ from scipy.stats import chi2
 import fgdoppler as fd
 from fgdoppler.estimators.later_mistakes import MISTAKE_CODES, later_mistakes
 from fgdoppler.estimators.verdict import Reason
+from tests.conftest import benchmark_recording
 
 #: A track's finding that its residuals fail the whole-track chi-square test, as the verdict writes it.
 MISFIT = (Reason(code="fit", status="doubtful", message="the residuals fail the chi-square test"),)
-
-
-def _paper(s: int, r: int) -> tuple[fd.Simulation, fd.TrackingModel]:
-    scen = fd.paper_scenarios()[s]
-    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([2026, s, r])))
-    return sim, fd.TrackingModel.of(scen.geometry)
 
 
 def _negated(m: fd.Measurements) -> fd.Measurements:
@@ -30,7 +25,7 @@ def _negated(m: fd.Measurements) -> fd.Measurements:
 def negated() -> tuple[fd.Measurements, fd.TrackingModel, fd.Initiation, list[Reason], fd.TrackResult]:
     """Case a 25 km, run 0 (seed 2026) with every pair's Doppler negated: the recording, model, initiation, the
     later windows' finding for a track that misfits, and the EKF's result (``verify=False``)."""
-    sim, model = _paper(1, 0)
+    sim, model = benchmark_recording(1, 0)
     m = _negated(sim.measurements)
     init = fd.initiate(m.first_per_pair(10), model)
     return m, model, init, later_mistakes(m, model, init, MISFIT), fd.run_estimator("ekf", m, model, init,
@@ -68,7 +63,7 @@ def test_data_as_simulated_get_no_mistake_named_even_where_the_track_misfits(s: 
     windows later in the recording fit as given, or fail with no change of sign or labels making them fit, so
     no mistake is named (a false finding would send the user to change correct data)."""
     for r in (0, 1):
-        sim, model = _paper(s, r)
+        sim, model = benchmark_recording(s, r)
         init = fd.initiate(sim.measurements.first_per_pair(10), model)
         assert later_mistakes(sim.measurements, model, init, MISFIT) == []
 
@@ -81,7 +76,7 @@ def test_where_the_initiation_named_the_mistake_the_whole_recording_confirms_it(
     An initiation with the finding in words but without its ``mistake`` (made elsewhere) gets nothing more."""
     import fgdoppler.estimators.later_mistakes as module
 
-    sim, model = _paper(2, 0)
+    sim, model = benchmark_recording(2, 0)
     m = _negated(sim.measurements)
     init = fd.initiate(m.first_per_pair(10), model)
     assert [r.code for r in init.reasons if r.code in MISTAKE_CODES] == ["sign"]
@@ -249,7 +244,6 @@ def test_a_radars_radial_velocity_that_no_window_tells_is_named_from_the_whole_r
     assert later_mistakes(m0, model, init0, MISFIT) == []
 
 
-
 def test_a_change_the_windows_name_is_named_only_where_the_whole_recording_fits_with_it(
         negated: tuple[fd.Measurements, fd.TrackingModel, fd.Initiation, list[Reason], fd.TrackResult],
         monkeypatch: pytest.MonkeyPatch) -> None:
@@ -406,7 +400,7 @@ def test_a_window_change_the_whole_recording_does_not_need_is_called_unconfirmed
     assert "do not confirm the initiation window's sign finding (the Doppler of pair 2 negated)" in found.message
     assert later_mistakes(m, model, init, ()) == [found]
     assert later_mistakes(m, model, replace(init, mistake=None), ()) == []
-    sim, a = _paper(2, 0)
+    sim, a = benchmark_recording(2, 0)
     negated_init = fd.initiate(_negated(sim.measurements).first_per_pair(10), a)
     assert negated_init.mistake is not None and later_mistakes(_negated(sim.measurements), a, negated_init, ()) == []
 

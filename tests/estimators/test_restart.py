@@ -16,14 +16,7 @@ from fgdoppler.estimators import restart
 from fgdoppler.estimators.ambiguity import hypotheses
 from fgdoppler.estimators.registry import hypotheses_of
 from fgdoppler.estimators.restart import DISAGREEMENT, GROWTH, MODE_MARGIN, checkpoints, fresh_start
-
-
-def _benchmark_run(s: int, r: int, seed: int = 2026) -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation]:
-    """Run ``r`` of scenario ``s`` exactly as the accuracy benchmark draws it."""
-    scen = fd.paper_scenarios()[s]
-    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([seed, s, r])))
-    model = fd.TrackingModel.of(scen.geometry)
-    return sim, model, fd.initiate(sim.measurements.first_per_pair(10), model)
+from tests.conftest import benchmark_run
 
 
 def _end_error(sim: fd.Simulation, res: fd.TrackResult) -> float:
@@ -33,7 +26,7 @@ def _end_error(sim: fd.Simulation, res: fd.TrackResult) -> float:
 
 
 def test_checkpoints_grow_geometrically_from_the_window() -> None:
-    sim, _, init = _benchmark_run(0, 0)
+    sim, _, init = benchmark_run(0, 0)
     m = sim.measurements
     t = np.sort(m.time)
     n0 = int(np.count_nonzero(t <= init.t_end))
@@ -51,7 +44,7 @@ def test_a_lagging_gaussian_sum_restarts_and_recovers() -> None:
     # Run 32 of case a 5 km (benchmark seed 2026): all eight terms of the EKF's Gaussian sum lag kilometres
     # behind the maximum of their own posterior; the best fit of the first 7 s is 4.3 sigma away by the EKF's
     # covariance and the tracker restarts there.
-    sim, model, init = _benchmark_run(0, 32)
+    sim, model, init = benchmark_run(0, 32)
     m = sim.measurements
     plain = fd.run_estimator("ekf", m, model, init, fd.EKFSettings(restarts=False), verify=False)
     res = fd.run_estimator("ekf", m, model, init, verify=False)
@@ -67,7 +60,7 @@ def test_a_lagging_gaussian_sum_restarts_and_recovers() -> None:
 
 def test_restarts_stay_online() -> None:
     # The estimate at t must not depend on data after t: cutting the recording at 20 s changes nothing before it.
-    sim, model, init = _benchmark_run(0, 32)
+    sim, model, init = benchmark_run(0, 32)
     m = sim.measurements
     cut = 20.0
     full = fd.run_estimator("ekf", m, model, init, verify=False)
@@ -81,7 +74,7 @@ def test_restarts_stay_online() -> None:
 @pytest.mark.parametrize("estimator", ["ekf", "fixed-lag"])
 def test_a_well_observed_track_never_restarts(estimator: str) -> None:
     # case a 45 km: the trackers sit on the best fit of the data; the restart test changes nothing at all
-    sim, model, init = _benchmark_run(2, 0)
+    sim, model, init = benchmark_run(2, 0)
     m = sim.measurements
     settings = fd.ESTIMATORS[estimator].settings
     plain = fd.run_estimator(estimator, m, model, init, settings(restarts=False), verify=False)
@@ -178,7 +171,7 @@ def test_a_restart_carries_the_running_estimate_along() -> None:
     # Run 32 of case a 5 km restarts at its first checkpoint.  The restart's start holds the fit of the data so
     # far and, as one more solution, the running estimate carried back to the fit's window start, with its data
     # cost over the same measurements on the fit's own scale: the restarted tracker weighs the two by the data.
-    sim, model, init = _benchmark_run(0, 32)
+    sim, model, init = benchmark_run(0, 32)
     m = sim.measurements
     plain = fd.run_estimator("ekf", m, model, init, fd.EKFSettings(restarts=False), verify=False)
     tc = checkpoints(m, init)[0]
@@ -233,7 +226,7 @@ def test_the_trackers_of_one_call_share_their_fresh_fits(monkeypatch: pytest.Mon
     # and their tracks are those of one run_estimator call each, to the bit.  Run 32 of case a 5 km (the EKF
     # restarts there), with the geometry rotated and moved 830 km, so that every tracker computes in the
     # geometry's own frame and the fits are shared through one local model.
-    sim, _, _ = _benchmark_run(0, 32)
+    sim, _, _ = benchmark_run(0, 32)
     m = sim.measurements
     g = _rotated(sim.scenario.geometry, 0.37, (3.2e5, -7.7e5))
     init = fd.initiate(m.first_per_pair(10), g)
@@ -262,7 +255,7 @@ def test_the_trackers_of_one_call_share_their_fresh_fits(monkeypatch: pytest.Mon
 
 
 def test_fresh_fits_serve_one_recording() -> None:
-    sim, model, _ = _benchmark_run(0, 0)
+    sim, model, _ = benchmark_run(0, 0)
     fits = restart.FreshFits(sim.measurements)
     other = sim.measurements.subset(sim.measurements.time <= 20.0)
     with pytest.raises(ValueError, match="one recording"):

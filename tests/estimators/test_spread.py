@@ -31,6 +31,7 @@ from fgdoppler.estimators.spread import (
     posterior_spread,
 )
 from fgdoppler.simulation import PAPER_CASE_B_OFFSET
+from tests.conftest import benchmark_run
 
 
 def test_enclosing_is_the_larger_covariance_in_every_direction() -> None:
@@ -147,13 +148,6 @@ def test_after_a_gap_the_smoothers_sampled_covariance_does_not_call_the_filters_
         assert run.status == "ok", (name, run.message)
 
 
-def _run(s: int, r: int, seed: int = 2026) -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation]:
-    scen = fd.paper_scenarios()[s]
-    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([seed, s, r])))
-    model = fd.TrackingModel.of(scen.geometry)
-    return sim, model, fd.initiate(sim.measurements.first_per_pair(10), model)
-
-
 @pytest.mark.parametrize("r", [0, 1, 2])
 def test_well_observed_tracks_keep_the_laplace_covariance(r: int) -> None:
     """Case a 45 km: the quadratic model holds (probe ratio 1.1-1.7) and the posterior mean is the estimate.
@@ -161,7 +155,7 @@ def test_well_observed_tracks_keep_the_laplace_covariance(r: int) -> None:
     Nothing is sampled beyond the importance-sampling check of the mean
     (squared shift 0.006-0.02 in 100 runs, limit 0.05).
     """
-    sim, model, init = _run(2, r)
+    sim, model, init = benchmark_run(2, r)
     e = fd.run_estimator("smoother", sim.measurements, model, init, verify=False).primary
     assert posterior_spread(sim.measurements, model, e.times, e.states, e.covariances) is None
 
@@ -180,7 +174,7 @@ def test_a_skewed_valley_reports_the_posterior_mean_and_it_is_the_exact_one(s: i
     the most likely one shifted by the constant-velocity image of one start
     offset, ``F(t - t0) d``, at every time (exactly: the map is linear).
     """
-    sim, model, init = _run(s, r)
+    sim, model, init = benchmark_run(s, r)
     mean = fd.run_estimator("smoother", sim.measurements, model, init, verify=False)
     mode = fd.run_estimator("smoother", sim.measurements, model, init, fd.SmootherSettings(posterior_mean=False),
                             verify=False)
@@ -209,7 +203,7 @@ def test_a_curved_valley_widens_the_covariance_and_the_truth_moves_inside_it() -
     (the estimate is right); the sampled covariance encloses the Laplace one
     and brings the truth's NEES down by a factor of about 8 (measured 43).
     """
-    sim, model, init = _run(0, 79)
+    sim, model, init = benchmark_run(0, 79)
     before = fd.run_estimator("smoother", sim.measurements, model, init, fd.SmootherSettings(sampled_covariance=False),
                               verify=False)
 
@@ -361,7 +355,7 @@ def test_the_broad_passes_follow_a_valley_while_it_opens_up() -> None:
             followed += 1
             assert err @ np.linalg.solve(result.primary.covariances[0], err) < chi2.ppf(0.999, 4)
     assert followed >= 5
-    sim, model, init = _run(0, 79)
+    sim, model, init = benchmark_run(0, 79)
     e = fd.run_estimator("smoother", sim.measurements, model, init, fd.SmootherSettings(sampled_covariance=False),
                          verify=False).primary
     post, _ = _posterior(sim.measurements, model, float(e.times[0]), None, 0, spread.SAMPLES)
@@ -410,7 +404,7 @@ def _plain_and_widened(name: str, s: int, r: int, seed: int = 0) -> tuple[fd.Sim
     The estimates and where covariances exist are the filter's; the checked
     covariances enclose the filter's at every time (whitened eigenvalues >= 1).
     """
-    sim, model, init = _run(s, r)
+    sim, model, init = benchmark_run(s, r)
     kinds: dict[str, type[fd.EKFSettings | fd.ISAM2Settings | fd.FixedLagSettings]] = {
         "ekf": fd.EKFSettings, "isam2": fd.ISAM2Settings, "fixed-lag": fd.FixedLagSettings}
     off = kinds[name](sampled_covariance=False, seed=seed)
@@ -505,7 +499,7 @@ def test_a_lagged_check_reads_the_data_up_to_one_lag_after_its_time(monkeypatch:
     """
     import fgdoppler.estimators.spread as spread
 
-    sim, model, init = _run(1, 78)
+    sim, model, init = benchmark_run(1, 78)
     e = fd.run_estimator("fixed-lag", sim.measurements, model, init, fd.FixedLagSettings(sampled_covariance=False)).primary
     m = sim.measurements
     seen: list[tuple[float, float]] = []
@@ -538,7 +532,7 @@ def _widened_track(name: str = "isam2", lag: float = 0.0
     """Case a 5 km, seed 2026, run 79: ``name``'s estimates without the sampled check, and the first sampler seed
     (0-3) with which the check widens them.  The track starts from a sampled Gaussian sum, and with some seeds it
     is one its checks leave alone (sampler streams shifted by 20: 1 of 4); the tests below need one they widen."""
-    sim, model, init = _run(0, 79)
+    sim, model, init = benchmark_run(0, 79)
     kind = {"isam2": fd.ISAM2Settings, "fixed-lag": fd.FixedLagSettings}[name]
     for seed in range(4):
         e = fd.run_estimator(name, sim.measurements, model, init, kind(sampled_covariance=False, seed=seed)).primary
@@ -574,7 +568,7 @@ def test_well_observed_filters_keep_their_gaussian_covariance() -> None:
     assert FILTER_WIDEN_MIN == 2.0
     before, after = [], []
     for r in range(5):
-        sim, model, init = _run(2, r)
+        sim, model, init = benchmark_run(2, r)
         e = fd.run_estimator("isam2", sim.measurements, model, init, fd.ISAM2Settings(sampled_covariance=False),
                              verify=False).primary
         w = filtered_spread(sim.measurements, model, e.times, e.states, e.covariances, e.cov_ok, interval=5.0)
@@ -586,7 +580,7 @@ def test_well_observed_filters_keep_their_gaussian_covariance() -> None:
 @pytest.mark.parametrize("name", ["isam2", "ekf"])
 def test_the_filtered_check_leaves_out_what_the_gate_rejected(monkeypatch: pytest.MonkeyPatch, name: str) -> None:
     """A 40-sigma outlier is rejected by the filter's gate and is not among the measurements the samples see."""
-    sim, model, init = _run(2, 0)
+    sim, model, init = benchmark_run(2, 0)
     m = sim.measurements
     j = int(np.flatnonzero(m.time > 12.0)[0])
     doppler = m.doppler.copy()
@@ -691,7 +685,7 @@ def test_linearised_everywhere_encloses_the_linearised_posterior_at_every_time(n
     samples and the smoother's; the fixed-lag smoother: with seeds 0-5 it
     does but with seed 2), so seeds are tried until it does.
     """
-    sim, model, init = _run(0, 79)
+    sim, model, init = benchmark_run(0, 79)
     m = sim.measurements
     for seed in range(4):
         settings = {"isam2": fd.ISAM2Settings, "fixed-lag": fd.FixedLagSettings}[name](sampled_covariance=False,
@@ -739,7 +733,7 @@ def test_linearised_everywhere_holds_isam2s_error_between_the_checks() -> None:
     registry's default.
     """
     assert fd.ISAM2Settings().linearised_everywhere
-    sim, model, init = _run(1, 75)
+    sim, model, init = benchmark_run(1, 75)
     m = sim.measurements
     ref = fd.run_estimator("smoother", m, model, init)
     plain = fd.run_estimator("isam2", m, model, init, fd.ISAM2Settings(linearised_everywhere=False), reference=ref)
@@ -765,7 +759,7 @@ def test_the_whole_track_finding_reads_the_covariances_without_the_linearised_en
         return real(est, ref)
 
     monkeypatch.setattr(registry, "track_reference", spy)
-    sim, model, init = _run(1, 75)
+    sim, model, init = benchmark_run(1, 75)
     m = sim.measurements
     ref = fd.run_estimator("smoother", m, model, init)
     runs = {}
