@@ -456,15 +456,11 @@ class _Posterior:
 
     def _same_peak(self, x: FloatArray, y: FloatArray) -> bool:
         """Whether two climbs ended on one peak: within a standard deviation of its Laplace covariance at ``x``."""
-        A = self._information(x)
-        if A is None:
-            return bool(np.array_equal(x, y))
-        try:
-            info = np.linalg.inv(np.linalg.inv(A)[:x.size, :x.size])
-        except np.linalg.LinAlgError:
+        laplace = self._state_laplace(x)
+        if laplace is None:
             return bool(np.array_equal(x, y))
         d = y - x
-        return float(d @ info @ d) <= 1.0
+        return float(d @ laplace[1] @ d) <= 1.0
 
     def _log_mass_gain(self, x: FloatArray, value: float, y: FloatArray, other: float) -> float:
         """How much more of the posterior the basin of the peak ``y`` holds than that of ``x`` (log; densities if undefined)."""
@@ -508,6 +504,20 @@ class _Posterior:
         draws = x_peak + np.random.default_rng(0).standard_normal((BASIN_DRAWS, n)) @ L.T
         share = max(float(np.mean(self.supported(draws))), 0.5 / BASIN_DRAWS)
         return float(value - 0.5 * logdet + np.log(share))
+
+    def _state_laplace(self, x: FloatArray) -> tuple[FloatArray, FloatArray] | None:
+        r"""The state's Laplace covariance :math:`(\mathbf A^{-1})_{xx}` at ``x`` and its inverse (offsets profiled out).
+
+        ``None`` off the support or where :math:`\mathbf A` (:meth:`_information`) is singular.
+        """
+        A = self._information(x)
+        if A is None:
+            return None
+        try:
+            P = np.asarray(np.linalg.inv(A)[:x.size, :x.size], dtype=float)
+            return P, np.asarray(np.linalg.inv(P), dtype=float)
+        except np.linalg.LinAlgError:
+            return None
 
     def _information(self, x: FloatArray) -> FloatArray | None:
         r""":math:`\mathbf A = \mathbf J^\top\mathbf W\mathbf J` + the prior's quadratic term at ``x`` (joint with offsets).
@@ -555,15 +565,10 @@ class _Posterior:
         where the information is singular.
         """
         x_mode = np.asarray(x_mode, dtype=float)
-        n = x_mode.size
-        A = self._information(x_mode)
-        if A is None:
+        laplace = self._state_laplace(x_mode)
+        if laplace is None:
             return np.inf, np.inf
-        try:
-            P = np.asarray(np.linalg.inv(A)[:n, :n], dtype=float)
-            info = np.linalg.inv(P)
-        except np.linalg.LinAlgError:
-            return np.inf, np.inf
+        P, info = laplace
         d = self.weights() @ self.x - x_mode
         w = float(d @ info @ d)
 
