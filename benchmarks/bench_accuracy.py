@@ -18,8 +18,10 @@ scenario and estimator:
   runs side by side gave wall times 2.1-3.9 times longer (median 2.5),
   which flipped goal 2's verdicts, and a run beside a test suite, at a
   load of 4-5 on 2 cores, CPU times 1.0-1.7 times (median 1.25).  Not
-  immune, then: time the goals on a quiet machine.  The wall times are kept
-  in the per-run records;
+  immune, then: goal 2's budget is a tenth of the run time of a particle
+  filter timed in the same benchmark run (below), so that both sides of the
+  ratio see the same machine.  The wall times are kept in the per-run
+  records;
 * how many runs each verdict got (fgdoppler) or failed to run (peers), and
   of the runs whose own NEES, averaged over t ≥ 10 s, lies beyond the χ²₄
   99.9 % quantile (the truth outside the stated 99.9 % ellipsoid on
@@ -37,6 +39,14 @@ scenario and estimator:
   covariance of the data's posterior enclose it, and goal 4's second
   clause counts such runs apart.  The filtered and lagged rows have no
   RMSE in the table (they are sampled from 10 s on, every 2.5 s, only).
+* row ``stonesoup-pf`` (with the extra ``stonesoup``): Stone Soup's
+  resample-move particle filter (:func:`benchmarks._peers.run_stonesoup_pf`,
+  20,000 particles) on the first ``--pf-timing-runs`` runs of each scenario
+  (3 by default), for its CPU time only: goal 2 asks for a tenth of the
+  particle filter's run time, and the issue's 9 s were measured on another
+  machine.  Its accuracy is not the issue's (it collapses in case a 45 km),
+  so goal 2's RMSE stays the issue's and the table shows this row's time
+  alone.
 
 Then the goals of the accuracy issue are checked on the table.
 
@@ -85,6 +95,10 @@ EXACT_STEP = 2.5
 EXACT_OF: dict[str, str] = {"smoother": "exact-smoothed", "fixed-lag": "exact-lagged"}
 #: Rows sampled at a few times from ``T_NEES`` on only: NEES but no time-averaged RMSE in the table.
 SPARSE: tuple[str, ...] = ("exact-filtered", "exact-lagged")
+#: Stone Soup's particle filter, timed on a few runs per scenario for goal 2's budget (module docstring).
+PF_ROW = "stonesoup-pf"
+#: Runs per scenario (the first ones) on which :data:`PF_ROW` is timed by default.
+PF_TIMING_RUNS = 3
 
 
 def _on_grid(truth_t: FloatArray, t: FloatArray, x: FloatArray, P: FloatArray, truth: FloatArray,
@@ -111,12 +125,12 @@ def _on_grid(truth_t: FloatArray, t: FloatArray, x: FloatArray, P: FloatArray, t
 
 
 @one_blas_thread
-def one_run(args: tuple[int, int, int, bool]) -> dict[str, Any]:
+def one_run(args: tuple[int, int, int, bool, bool]) -> dict[str, Any]:
     """Simulate, initiate and run every estimator and peer on run ``r`` of scenario ``s`` (one BLAS thread),
-    and with ``exact`` sample the exact posterior (:func:`exact_rows`)."""
-    from benchmarks._peers import run_peers
+    with ``exact`` sample the exact posterior (:func:`exact_rows`) and with ``time_pf`` run :data:`PF_ROW`."""
+    from benchmarks._peers import run_peers, run_stonesoup_pf, stonesoup_available
 
-    s, r, seed, exact = args
+    s, r, seed, exact, time_pf = args
     scen = fd.paper_scenarios()[s]
     rng = np.random.default_rng(np.random.SeedSequence([seed, s, r]))
     sim = fd.simulate(scen, rng)
@@ -138,6 +152,10 @@ def one_run(args: tuple[int, int, int, bool]) -> dict[str, Any]:
         out[row] = {"se": se, "nees": ne, "seconds": cpu, "wall": res.wall_time, "status": str(res.status)}
     if exact:
         out.update(exact_rows(m, model, init, reference, tt, truth, seed=seed))
+    if time_pf and stonesoup_available():
+        t, x, P, sec = run_stonesoup_pf(model, m, seed=r)
+        se, ne = _on_grid(tt, t, x, P, truth)
+        out[PF_ROW] = {"se": se, "nees": ne, "seconds": sec, "wall": float("nan"), "status": "ran"}
     if init.P_end is None:
         return {"s": s, "r": r, "results": out, "peers_skipped": "initiation covariance indeterminate"}
     try:
@@ -291,6 +309,23 @@ ISSUE_PARTICLE_FILTER_SECONDS = 9.0
 ISSUE_PARTICLE_FILTER_RUNS = 10
 
 
+def _runs(n: int) -> str:
+    return f"{n} run" if n == 1 else f"{n} runs"
+
+
+def particle_filter_seconds(row: dict[str, Any]) -> tuple[float, str]:
+    """Goal 2's particle-filter run time in one scenario, and where it comes from.
+
+    The median CPU time of :data:`PF_ROW` where this benchmark run timed it
+    (same machine, same load as our estimators: the ratio the goal asks
+    for), else the issue's :data:`ISSUE_PARTICLE_FILTER_SECONDS`.
+    """
+    timed = row["estimators"].get(PF_ROW)
+    if timed is not None and np.isfinite(timed["seconds"]):
+        return float(timed["seconds"]), f"Stone Soup's PF timed here, median of {_runs(timed['runs'])}"
+    return ISSUE_PARTICLE_FILTER_SECONDS, "the issue's time"
+
+
 def _paired(row: dict[str, Any], ours: str, peer: str) -> str:
     """The paired-bootstrap difference ``ours - peer`` and whether the runs resolve it."""
     se = row.get("_se")
@@ -343,17 +378,18 @@ def goals(summary: dict[str, Any]) -> list[tuple[str, str, bool, str, str]]:
                         f"ekf {r['ekf']:.0f} vs EKF {r['filterpy-ekf']:.0f} / UKF {r['filterpy-ukf']:.0f}",
                         _paired(row, "ekf", peer)))
             # the best of the online estimators that run in a tenth of the particle filter's time
-            fast = [n for n in ONLINE if est[n]["seconds"] <= ISSUE_PARTICLE_FILTER_SECONDS / 10] or list(ONLINE)
+            pf_seconds, timed_by = particle_filter_seconds(row)
+            fast = [n for n in ONLINE if est[n]["seconds"] <= pf_seconds / 10] or list(ONLINE)
             best_online = min(fast, key=lambda n: r[n])
             pf = ISSUE_PARTICLE_FILTER.get(name, float("inf"))
             best_filter = min(best_peer, pf)
-            in_time = est[best_online]["seconds"] <= ISSUE_PARTICLE_FILTER_SECONDS / 10
+            in_time = est[best_online]["seconds"] <= pf_seconds / 10
             evidence = (_subset_share(row, best_online, pf, ISSUE_PARTICLE_FILTER_RUNS) if pf < best_peer
                         else _paired(row, best_online, peer))
             out.append(("2: best online <= best peer filter incl. PF, <= 1/10 PF time", name,
                         r[best_online] <= best_filter and in_time,
                         f"{best_online} {r[best_online]:.0f} in {est[best_online]['seconds']:.2f} s vs "
-                        f"{best_filter:.0f} (PF {pf:.0f} in {ISSUE_PARTICLE_FILTER_SECONDS:g} s)", evidence))
+                        f"{best_filter:.0f} (PF {pf:.0f} in {pf_seconds:.1f} s: {timed_by})", evidence))
             smoothers = [n for n in SMOOTHERS if n in r]
             best_sm = min(smoothers, key=lambda n: r[n])
             out.append(("3: smoother <= best peer smoother", name, r["smoother"] <= r[best_sm],
@@ -387,7 +423,7 @@ def markdown(summary: dict[str, Any], seed: int, wall: float) -> str:
              f"t >= {T_RMSE:g} s (m); NEES averaged over runs and t >= {T_NEES:g} s (95 % band {lo:.2f}-{hi:.2f}); "
              "median CPU time per run (s)." + _load_note(summary), "",
              "| estimator | " + " | ".join(short) + " |", "|---|" + "---|" * len(short)]
-    for n in names:
+    for n in (n for n in names if n != PF_ROW):  # timed only: its accuracy is not the issue's PF's
         cells = []
         for sn in scen_names:
             e = summary["scenarios"][sn]["estimators"].get(n)
@@ -397,16 +433,20 @@ def markdown(summary: dict[str, Any], seed: int, wall: float) -> str:
         lines.append(f"| {label} | " + " | ".join(f"{summary['scenarios'][sn][key]:,.0f}" for sn in scen_names)
                      + " |")
     lines += ["", "| NEES | " + " | ".join(short) + " |", "|---|" + "---|" * len(short)]
-    for n in names:
+    for n in (n for n in names if n != PF_ROW):
         lines.append(f"| {n} | " + " | ".join(
             f"{summary['scenarios'][sn]['estimators'][n]['nees']:.3g}" for sn in scen_names) + " |")
     lines += ["", "| median CPU time (s) / verdicts | " + " | ".join(short) + " |", "|---|" + "---|" * len(short)]
     for n in names:
         cells = []
         for sn in scen_names:
-            e = summary["scenarios"][sn]["estimators"][n]
+            e = summary["scenarios"][sn]["estimators"].get(n)
+            if e is None:
+                cells.append("—")
+                continue
             v = e["verdicts"]
             ver = " ".join(f"{k[0]}{c}" for k, c in v.items()) if set(v) != {"ran"} else ""
+            ver = f"({_runs(e['runs'])})" if n == PF_ROW else ver
             cells.append(f"{e['seconds']:.3f} {ver}".strip())
         lines.append(f"| {n} | " + " | ".join(cells) + " |")
     lines += ["", *goal_table(goals(summary))]
@@ -432,11 +472,12 @@ def _load_note(summary: dict[str, Any]) -> str:
                    else ".")
 
 
-def study(runs: int, seed: int, workers: int, *, exact: bool = True
+def study(runs: int, seed: int, workers: int, *, exact: bool = True, pf_runs: int = PF_TIMING_RUNS
           ) -> tuple[dict[str, Any], float, list[dict[str, Any]]]:
     """Run every (scenario, run); the summary, the wall time and the per-run records.  ``exact=False``
-    leaves out the exact posterior (about half the run time) and with it goal 4's count of shared misses."""
-    tasks = [(s, r, seed, exact) for s in range(len(fd.paper_scenarios())) for r in range(runs)]
+    leaves out the exact posterior (about half the run time) and with it goal 4's count of shared misses;
+    :data:`PF_ROW` is timed on the first ``pf_runs`` runs of each scenario."""
+    tasks = [(s, r, seed, exact, r < pf_runs) for s in range(len(fd.paper_scenarios())) for r in range(runs)]
     t0 = time.perf_counter()
     if workers > 1:
         with ProcessPoolExecutor(max_workers=workers) as pool:
@@ -512,6 +553,9 @@ def main() -> None:
     p.add_argument("--out", type=Path, default=Path("output/bench_accuracy"))
     p.add_argument("--no-exact", action="store_true",
                    help="leave out the exact posterior's rows (about half the run time)")
+    p.add_argument("--pf-timing-runs", type=int, default=PF_TIMING_RUNS,
+                   help="time Stone Soup's particle filter on the first K runs of each scenario, goal 2's "
+                        "budget (0: the issue's 9 s)")
     p.add_argument("--records", type=Path, default=None,
                    help="summarise the per-run records (.npz) of an earlier run again instead of running")
     args = p.parse_args()
@@ -523,7 +567,8 @@ def main() -> None:
         summary, wall = summarise(records, runs), float("nan")
         print(f"re-summarised {len(records)} records in {time.perf_counter() - t0:.1f} s")
     else:
-        summary, wall, records = study(args.runs, args.seed, args.workers, exact=not args.no_exact)
+        summary, wall, records = study(args.runs, args.seed, args.workers, exact=not args.no_exact,
+                                       pf_runs=args.pf_timing_runs)
         save_records(records, args.out / f"accuracy_seed{args.seed}.npz")
     text = markdown(summary, args.seed, wall)
     (args.out / f"accuracy_seed{args.seed}.md").write_text(text)

@@ -345,3 +345,49 @@ def test_compare_outputs_leaves_out_run_times_and_names_every_other_difference(t
     (new / "montecarlo.json").unlink()
     assert main([str(old), str(new)]) == 1
     assert "DIFFERS montecarlo.json: only in" in capsys.readouterr().out
+
+
+def _goal_two_summary(pf_seconds: float | None) -> dict[str, object]:
+    """Case b 45 km where ``map`` beats the issue's particle filter (1,162 m) in 0.8 s per run."""
+    from benchmarks.bench_accuracy import OURS, PF_ROW
+
+    est: dict[str, dict[str, object]] = {n: {"rmse": 2000.0, "nees": 4.0, "seconds": 0.01, "inconsistent": 0,
+                                             "unflagged": 0} for n in OURS}
+    est["map"].update(rmse=1100.0, seconds=0.8)
+    for peer in ("filterpy-ekf", "filterpy-ukf", "filterpy-urts"):
+        est[peer] = {"rmse": 1900.0, "nees": 4.0, "seconds": 0.05}
+    if pf_seconds is not None:
+        est[PF_ROW] = {"rmse": 5000.0, "nees": 40.0, "seconds": pf_seconds, "runs": 2}
+    return {"nees_band": (3.46, 4.57), "scenarios": {"case b, start 45 km": {"estimators": est}}}
+
+
+@pytest.mark.parametrize(("pf_seconds", "met", "by"), [
+    (None, True, "map 1100 in 0.80 s vs 1162 (PF 1162 in 9.0 s: the issue's time)"),
+    (6.0, False, "in 6.0 s: Stone Soup's PF timed here, median of 2 runs"),
+    (12.0, True, "map 1100 in 0.80 s vs 1162 (PF 1162 in 12.0 s: Stone Soup's PF timed here"),
+])
+def test_goal_two_holds_our_time_to_a_tenth_of_the_particle_filter_timed_in_the_same_run(
+        pf_seconds: float | None, met: bool, by: str) -> None:
+    """The same 0.8 s passes against the issue's 9 s or a PF timed at 12 s beside it, and fails against one
+    timed at 6 s; the PF's own accuracy never enters (its RMSE here is the worst of all)."""
+    from benchmarks.bench_accuracy import goals
+
+    row = next(g for g in goals(_goal_two_summary(pf_seconds)) if g[0].startswith("2:"))
+    assert row[2] is met and by in row[3]
+    if not met:  # the fast ones' best is then the online estimator to compare
+        assert not row[3].startswith("map")
+
+
+def test_the_stone_soup_particle_filter_reports_every_scan_with_the_truth_inside_its_spread() -> None:
+    """The particle filter timed for goal 2 is a working filter: one state per scan time, and in the
+    well-observed case a 45 km its last position error within three of its stated standard deviations
+    (2,000 particles here against the benchmark's 20,000, for the test's time)."""
+    pytest.importorskip("stonesoup")
+    from benchmarks._peers import run_stonesoup_pf
+
+    sim, model = benchmark_recording(2, 0)
+    t, x, P, seconds = run_stonesoup_pf(model, sim.measurements, n_particles=2000)
+    np.testing.assert_array_equal(t, np.unique(sim.measurements.time))
+    assert x.shape == (t.size, 4) and P.shape == (t.size, 4, 4) and seconds > 0
+    truth = sim.truth.states[np.searchsorted(sim.truth.times, t[-1])]
+    assert np.linalg.norm(x[-1, :2] - truth[:2]) < 3 * np.sqrt(P[-1, 0, 0] + P[-1, 1, 1])
