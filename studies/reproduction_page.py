@@ -107,7 +107,9 @@ Which goals of the accuracy issue hold, scenario by scenario, on the
 accuracy benchmark ({runs.group(1) if runs else "?"} runs per scenario, seeds {" and ".join(seeds)}):
 fgdoppler's estimators against FilterPy's EKF, UKF and URTS and Stone Soup's
 EKF + RTS and UKF + URTS started from fgdoppler's initiation, and against the
-issue's particle filter (its published 10-run numbers).  "no" is the goal as
+issue's particle filter (its published 10-run RMSEs; its run time is that
+of Stone Soup's particle filter timed in the same benchmark run, so that
+goal 2's tenth is a ratio measured on one machine).  "no" is the goal as
 the issue states it, on these runs; the benchmark's own tables give the
 numbers and, beside each comparison, whether the runs resolve it (paired
 bootstrap) or it is a tie, and docs/concepts.md ("How sure is each
