@@ -51,8 +51,10 @@ scenario and estimator:
 Then the goals of the accuracy issue are checked on the table.
 
 Run: ``python -m benchmarks.bench_accuracy --runs 100 --seed 2026`` (30
-minutes on 2 cores, 16 of them without the exact posterior, ``--no-exact``);
-results go to ``output/bench_accuracy/`` (JSON and a Markdown table).
+minutes on 2 cores, 16 of them without the exact posterior, ``--no-exact``,
+2026-11-24; on a slower machine on 2026-12-01, with the particle filter's
+timing, 27 and 30 min with ``--no-exact``); results go to
+``output/bench_accuracy/`` (JSON and a Markdown table).
 """
 
 from __future__ import annotations
