@@ -325,7 +325,7 @@ def particle_filter_seconds(row: dict[str, Any]) -> tuple[float, str]:
     timed = row["estimators"].get(PF_ROW)
     if timed is not None and np.isfinite(timed["seconds"]):
         return float(timed["seconds"]), f"Stone Soup's PF timed here, median of {_runs(timed['runs'])}"
-    return ISSUE_PARTICLE_FILTER_SECONDS, "the issue's time"
+    return ISSUE_PARTICLE_FILTER_SECONDS, "the issue's"
 
 
 def _paired(row: dict[str, Any], ours: str, peer: str) -> str:
@@ -391,7 +391,8 @@ def goals(summary: dict[str, Any]) -> list[tuple[str, str, bool, str, str]]:
             out.append(("2: best online <= best peer filter incl. PF, <= 1/10 PF time", name,
                         r[best_online] <= best_filter and in_time,
                         f"{best_online} {r[best_online]:.0f} in {est[best_online]['seconds']:.2f} s vs "
-                        f"{best_filter:.0f} (PF {pf:.0f} in {pf_seconds:.1f} s: {timed_by})", evidence))
+                        f"{best_filter:.0f} (the issue's PF {pf:.0f}; PF time {pf_seconds:.1f} s, {timed_by})",
+                        evidence))
             smoothers = [n for n in SMOOTHERS if n in r]
             best_sm = min(smoothers, key=lambda n: r[n])
             out.append(("3: smoother <= best peer smoother", name, r["smoother"] <= r[best_sm],
