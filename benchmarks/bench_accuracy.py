@@ -420,13 +420,14 @@ def markdown(summary: dict[str, Any], seed: int, wall: float) -> str:
     scen_names = list(summary["scenarios"])
     short = [n.replace("case ", "").replace(", start ", "-").replace(" km", "") for n in scen_names]
     names = list(dict.fromkeys(n for row in summary["scenarios"].values() for n in row["estimators"]))
+    scored = [n for n in names if n != PF_ROW]  # the PF row is timed only: its accuracy is not the PF's
     lo, hi = summary["nees_band"]
     took = f"{wall:.0f} s" if np.isfinite(wall) else "summarised from saved per-run records"
     lines = [f"{summary['runs']} runs per scenario, seed {seed}, {took}.  Position RMSE averaged over "
              f"t >= {T_RMSE:g} s (m); NEES averaged over runs and t >= {T_NEES:g} s (95 % band {lo:.2f}-{hi:.2f}); "
              "median CPU time per run (s)." + _load_note(summary), "",
              "| estimator | " + " | ".join(short) + " |", "|---|" + "---|" * len(short)]
-    for n in (n for n in names if n != PF_ROW):  # timed only: its accuracy is not the PF's
+    for n in scored:
         cells = []
         for sn in scen_names:
             e = summary["scenarios"][sn]["estimators"].get(n)
@@ -436,7 +437,7 @@ def markdown(summary: dict[str, Any], seed: int, wall: float) -> str:
         lines.append(f"| {label} | " + " | ".join(f"{summary['scenarios'][sn][key]:,.0f}" for sn in scen_names)
                      + " |")
     lines += ["", "| NEES | " + " | ".join(short) + " |", "|---|" + "---|" * len(short)]
-    for n in (n for n in names if n != PF_ROW):
+    for n in scored:
         lines.append(f"| {n} | " + " | ".join(
             f"{summary['scenarios'][sn]['estimators'][n]['nees']:.3g}" for sn in scen_names) + " |")
     lines += ["", "| median CPU time (s) / verdicts | " + " | ".join(short) + " |", "|---|" + "---|" * len(short)]
