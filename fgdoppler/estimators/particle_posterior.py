@@ -104,6 +104,8 @@ class _Posterior:
         n_off = 0 if self.offsets is None else self.offsets.size
         self.s = np.empty((0, n_off))
         self.a = np.zeros(n_off) if self.offsets is None else self._info(data.pair, data.sigma)
+        # the information at the ends of the last climbs (:meth:`_information`), with what it was computed from
+        self._peaks: list[_PeakInformation] = []
 
     def _info(self, pair: NDArray[np.intp], sigma: FloatArray) -> FloatArray:
         """The offsets' information :math:`a_p` of the given measurements."""
@@ -522,10 +524,22 @@ class _Posterior:
     def _information(self, x: FloatArray) -> FloatArray | None:
         r""":math:`\mathbf A = \mathbf J^\top\mathbf W\mathbf J` + the prior's quadratic term at ``x`` (joint with offsets).
 
-        ``None`` off the support.
+        ``None`` off the support.  At the end of one of the last two climbs
+        (:meth:`_climb`), with the same data, prior and offsets, it is that
+        climb's last linearisation, not a new one: a report asks for the
+        information at its mode once or twice (:meth:`mean_shift`,
+        :meth:`basin_log_mass`, :meth:`_same_peak`) right after climbing there.
         """
+        for peak in self._peaks:
+            if peak.holds(self, x):
+                return None if peak.A is None else peak.A.copy()
         quad = self._prior_quadratic()
         value, r, Jw = self._linearised(x, quad)
+        return self._information_from(x, value, r, Jw, quad)
+
+    def _information_from(self, x: FloatArray, value: float, r: FloatArray, Jw: FloatArray,
+                          quad: tuple[FloatArray, FloatArray] | None) -> FloatArray | None:
+        """:meth:`_information` from a linearisation at ``x`` (:meth:`_linearised`'s value, residuals and Jacobian)."""
         if not np.isfinite(value):
             return None
         A = Jw.T @ (huber_weights(r, self.settings.huber_k)[:, None] * Jw)
@@ -645,7 +659,13 @@ class _Posterior:
                 lam *= 4.0
             if gain < MODE_TOLERANCE:
                 break
+        self._remember(x, self._information_from(x, value, r, Jw, quad))
         return x, value
+
+    def _remember(self, x: FloatArray, A: FloatArray | None) -> None:
+        """Keep the information ``A`` at a climb's end ``x`` for :meth:`_information` (the last two climbs')."""
+        self._peaks = [*self._peaks[-1:], _PeakInformation(x=x.copy(), A=A, t=self.data.t, gauss=self.gauss,
+                                                           offsets=self.offsets)]
 
     def reanchor(self, t: float, rng: np.random.Generator) -> None:
         """Move the anchor to ``t``: propagate with process noise, summarise the older data by a Gaussian."""
@@ -666,6 +686,26 @@ class _Posterior:
         self.data = _Data(t=np.empty(0), pair=np.empty(0, dtype=np.intp), z=np.empty(0), sigma=np.empty(0))
         # no data since the anchor: the offsets add nothing (OffsetPrior.extra is 0 at s = a = 0)
         self.logpost = self.log_prior(self.x)
+
+
+@dataclass(frozen=True, kw_only=True)
+class _PeakInformation:
+    """The information at a climb's end ``x``, and the data, prior summary and offsets it was computed with.
+
+    Held by reference, so an object :meth:`_Posterior.reanchor` or :meth:`_Data.add` has replaced cannot be
+    mistaken for its successor.
+    """
+
+    x: FloatArray
+    A: FloatArray | None
+    t: FloatArray
+    gauss: tuple[FloatArray, FloatArray] | None
+    offsets: object
+
+    def holds(self, post: _Posterior, x: FloatArray) -> bool:
+        """Whether this is the information of ``post`` at ``x`` as it stands now."""
+        return (post.data.t is self.t and post.gauss is self.gauss and post.offsets is self.offsets
+                and bool(np.array_equal(self.x, x)))
 
 
 def _next_temperature(delta: FloatArray, beta: float, target_ess: float) -> float:

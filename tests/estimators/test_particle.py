@@ -487,6 +487,39 @@ def test_a_basins_log_mass_is_the_log_of_its_integral(wall: tuple[str, float] | 
         assert abs(error) < abs(error - np.log(share))
 
 
+def test_the_information_at_a_climbs_end_is_that_of_the_posterior_as_it_stands() -> None:
+    """At a climb's end the information is the climb's last linearisation, to the bit; new data or a new anchor undo it.
+
+    A report asks for the information at its mode right after climbing there
+    (``mean_shift``, ``basin_log_mass``); ``_information`` then reuses the
+    climb's last linearisation instead of making another.  Compared with
+    the information formed afresh from ``_linearised`` at the same point:
+    equal to the bit; after one more measurement (``_Data.add``) or a move
+    of the anchor, that of the new data or prior, not the climb's.
+    """
+    sim, model, init = _case("a", 45e3, 1)
+    post, _ = _window_posterior(sim.measurements, model, init, fd.ParticleSettings(), np.random.default_rng(0))
+
+    def fresh(x: np.ndarray) -> np.ndarray | None:
+        quad = post._prior_quadratic()
+        return post._information_from(x, *post._linearised(x, quad), quad)
+
+    mode = post.mode()
+    kept = post._information(mode)
+    assert kept is not None
+    np.testing.assert_array_equal(kept, fresh(mode))
+    d = post.data
+    post.data.add(d.t[-1:], d.pair[-1:], d.z[-1:], d.sigma[-1:])
+    more = post._information(mode)
+    assert more is not None and not np.array_equal(more, kept)
+    np.testing.assert_array_equal(more, fresh(mode))
+    post.mode(mode)  # a climb on the data as they now stand, then a new anchor
+    post.reanchor(post.t_anchor + 1.0, np.random.default_rng(1))
+    moved = post._information(mode)
+    assert moved is not None
+    np.testing.assert_array_equal(moved, fresh(mode))
+
+
 def test_map_settings_differ_from_the_particle_estimators_only_in_moves() -> None:
     """Every default but ``move_steps`` is the particle estimator's; the checks are the same."""
     import dataclasses
