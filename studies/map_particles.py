@@ -26,13 +26,12 @@ Run: python studies/map_particles.py [--particles 4096 2048] [--runs 100] [--see
 
 from __future__ import annotations
 
-import json
 import time
 import warnings
 from typing import Any
 
 import numpy as np
-from _common import each_run, paper_run
+from _common import each_run, paper_run, save_table
 
 import fgdoppler as fd
 from benchmarks.bench_accuracy import T_NEES, T_RMSE, _mean_after, _on_grid
@@ -95,10 +94,7 @@ def main() -> None:
     text = (f"{args.runs} runs per scenario, seed {args.seed}; `map` with "
             + ", ".join(f"{n:,}" for n in args.particles) + " particles\n\n"
             + summary(rows, args.particles) + "\n")
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / f"map_particles_seed{args.seed}.md").write_text(text)
-    (args.out / f"map_particles_seed{args.seed}.json").write_text(json.dumps(rows))
-    print(text)
+    save_table(args.out, f"map_particles_seed{args.seed}", text, rows)
 
 
 if __name__ == "__main__":
