@@ -183,12 +183,13 @@ def test_montecarlo_starts_targets_at_latitudes_and_longitudes(tmp_path: Path,
     """``montecarlo --start-lat-lon``: one scenario per latitude-longitude pair, each the scenario of
     ``--start-x/--start-y`` at that point's metres east and north of the origin (the same runs, to the bit: a
     scenario's random streams follow its position, so each point is compared where it comes first); refused with
-    a metric geometry, an odd count or beside ``--start-x``."""
+    a metric geometry, an odd count or beside ``--start-x``.  The initiation alone (``lm``) is enough to compare:
+    its rows are the RMSE and NEES of each run's window, so another start or another draw changes them."""
     site = _write(tmp_path)
     origin = GeodeticOrigin(latitude=51.5, longitude=-0.12)
     points = [(51.7, 0.1), (51.62, -0.05)]
     common = ["montecarlo", "--geometry", str(site), "--velocity", "-60", "40", "--runs", "2", "--workers", "1",
-              "--estimators", "lm", "ekf", "--json"]
+              "--estimators", "lm", "--json"]
 
     def rows(args: list[str]) -> tuple[list[str], list[dict]]:
         assert main([*common, *args, "--out", str(tmp_path / "mc")]) == 0

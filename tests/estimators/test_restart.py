@@ -112,6 +112,16 @@ def test_a_mode_barely_better_than_the_trackers_own_does_not_displace_it() -> No
     np.testing.assert_array_equal(res.primary.covariances, plain.primary.covariances)
 
 
+def test_a_decisively_better_fit_restarts_the_slow_track() -> None:
+    # Seed 3 of the same recording with sampler seed 0, the first of the study below: the EKF restarts and its RMSE
+    # falls from 7.4 to 2.8 km (measured 2026-12-01; sampler seeds 1-3 fire too, seed 4 does not).
+    sim, plain, res = _slow_run(3, 0)
+    assert any("online re-initiation" in e.message for e in res.events)
+    assert _rmse(sim, res) < 0.85 * _rmse(sim, plain)
+
+
+# Eight sampled starts (30 s on one core): run with -m slow; by default the test above checks the first.
+@pytest.mark.slow
 def test_a_decisively_better_fit_still_restarts_the_slow_track() -> None:
     # Seed 3 of the same recording: the EKF, started from a sampled Gaussian sum, ends up far from the best fit of
     # the data so far by both covariances, and restarting there cuts its error, so the guards have not switched
