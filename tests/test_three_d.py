@@ -317,7 +317,8 @@ def test_a_3d_recording_goes_through_the_command_line(tmp_path: Path) -> None:
         assert doc["zone"]["altitude"] == [0.0, 12000.0]
     stem = tmp_path / "mc"
     assert main(["montecarlo", "--case", "b", "--altitude", "0", "12000", "--start-x", "5000", "--start-z", "2000",
-                 "--duration", "12", "--runs", "2", "--estimators", "ekf", "smoother", "--out", str(stem)]) == 0
+                 "--duration", "12", "--runs", "1", "--workers", "1", "--estimators", "ekf", "smoother", "--out",
+                 str(stem)]) == 0
     assert json.loads(stem.with_suffix(".json").read_text())["state_dim"] == 6
     # the reverse mismatch: a 2-D problem refuses a 3-D truth, exit status 2 and nothing written
     assert main(["track", str(sim / "measurements.csv"), "--geometry", "b", "--truth", str(sim / "truth.csv"),
