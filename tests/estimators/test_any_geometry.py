@@ -72,7 +72,8 @@ def test_a_target_outside_the_default_zone_is_tracked_in_a_zone_given_in_the_geo
     3 times the bound."""
     geometry, scen = _outside_the_default_zone(tmp_path)
     paper = fd.paper_geometry("a")
-    assert not paper.zone.contains(np.asarray(scen.x0)[None])[0] and geometry.zone.contains(np.asarray(scen.x0)[None])[0]
+    start = np.asarray(scen.x0)[None]
+    assert not paper.zone.contains(start)[0] and geometry.zone.contains(start)[0]
     sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence(5).spawn(20)[0]))
     held = fd.track(sim.measurements, paper, "smoother")
     assert held.status != "ok"
