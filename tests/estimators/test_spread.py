@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Callable
 from dataclasses import replace
@@ -577,15 +578,25 @@ def test_a_lagged_check_reads_the_data_up_to_one_lag_after_its_time(monkeypatch:
         filtered_spread(m, model, e.times, e.states, e.covariances, e.cov_ok, interval=5.0, lag=-1.0)
 
 
-def _widened_track(name: str = "isam2", lag: float = 0.0
-                   ) -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation, fd.Estimates, int]:
+@functools.cache
+def _run_79(name: str, seed: int) -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation, fd.TrackResult]:
+    """Case a 5 km, seed 2026, run 79 and ``name``'s result on it with sampler seed ``seed``: the smoother's with
+    its default settings, a filter's without the sampled check.  Computed once per process: several tests below
+    read the same runs (and only read them)."""
+    sim, model, init = benchmark_run(0, 79)
+    settings = fd.SmootherSettings(seed=seed) if name == "smoother" else {
+        "isam2": fd.ISAM2Settings, "fixed-lag": fd.FixedLagSettings}[name](sampled_covariance=False, seed=seed)
+    return sim, model, init, fd.run_estimator(name, sim.measurements, model, init, settings)
+
+
+@functools.cache
+def _widened_track(name: str, lag: float) -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation, fd.Estimates, int]:
     """Case a 5 km, seed 2026, run 79: ``name``'s estimates without the sampled check, and the first sampler seed
     (0-3) with which the check widens them.  The track starts from a sampled Gaussian sum, and with some seeds it
     is one its checks leave alone (sampler streams shifted by 20: 1 of 4); the tests below need one they widen."""
-    sim, model, init = benchmark_run(0, 79)
-    kind = {"isam2": fd.ISAM2Settings, "fixed-lag": fd.FixedLagSettings}[name]
     for seed in range(4):
-        e = fd.run_estimator(name, sim.measurements, model, init, kind(sampled_covariance=False, seed=seed)).primary
+        sim, model, init, result = _run_79(name, seed)
+        e = result.primary
         if filtered_spread(sim.measurements, model, e.times, e.states, e.covariances, e.cov_ok, interval=5.0,
                            lag=lag, seed=seed) is not None:
             return sim, model, init, e, seed
@@ -594,7 +605,7 @@ def _widened_track(name: str = "isam2", lag: float = 0.0
 
 def test_a_filtered_check_reads_only_the_data_up_to_its_time() -> None:
     """Changing every measurement after 15 s leaves the covariances up to 15 s exactly as they were."""
-    sim, model, _, e, seed = _widened_track()
+    sim, model, _, e, seed = _widened_track("isam2", 0.0)
     m = sim.measurements
     late = m.time > 15.0
     changed = fd.Measurements(time=m.time, pair=m.pair, doppler=np.where(late, m.doppler + 3.0 * m.sigma, m.doppler),
@@ -660,7 +671,7 @@ def test_no_check_where_the_process_noise_outgrows_the_filters_covariance() -> N
     before they are widened exactly as with the true covariances (on a slow 600 s track the
     noise term alone had widened a consistent filter, NEES 3.52 -> 2.73).
     """
-    sim, model, _, e, seed = _widened_track()
+    sim, model, _, e, seed = _widened_track("isam2", 0.0)
     late = e.times >= 19.5
     tiny = e.covariances.copy()
     tiny[late] *= 1e-4
@@ -688,9 +699,9 @@ def test_beyond_the_samples_reach_the_covariances_enclose_the_linearised_posteri
     covariance) up to the widening threshold: no whitened eigenvalue of that
     error above ``FILTER_WIDEN_MIN``.
     """
-    sim, model, init, e, seed = _widened_track(name, lag)
+    sim, model, _, e, seed = _widened_track(name, lag)
     m = sim.measurements
-    ref = fd.run_estimator("smoother", m, model, init, fd.SmootherSettings(seed=seed)).primary
+    ref = _run_79("smoother", seed)[3].primary
     late = e.times >= 19.5
     tiny = e.covariances.copy()
     tiny[late] *= 1e-4
@@ -735,13 +746,10 @@ def test_linearised_everywhere_encloses_the_linearised_posterior_at_every_time(n
     samples and the smoother's; the fixed-lag smoother: with seeds 0-5 it
     does but with seed 2), so seeds are tried until it does.
     """
-    sim, model, init = benchmark_run(0, 79)
-    m = sim.measurements
     for seed in range(4):
-        settings = {"isam2": fd.ISAM2Settings, "fixed-lag": fd.FixedLagSettings}[name](sampled_covariance=False,
-                                                                                      seed=seed)
-        e = fd.run_estimator(name, m, model, init, settings).primary
-        ref = fd.run_estimator("smoother", m, model, init, fd.SmootherSettings(seed=seed)).primary
+        sim, model, _, result = _run_79(name, seed)
+        m, e = sim.measurements, result.primary
+        ref = _run_79("smoother", seed)[3].primary
         check = {"interval": 5.0, "lag": lag, "seed": seed}
         one = filtered_spread(m, model, e.times, e.states, e.covariances, e.cov_ok, **check,
                               reference=(ref.times, ref.states))
