@@ -228,9 +228,12 @@ def east_north_of(geometry: Any, lat: float, lon: float, option: str) -> tuple[f
 
 
 def offset_sigma_error(exc: ValueError) -> CLIError:
-    """A tracker settings' refusal of ``bias_sigma`` or ``clock_sigma``, in the command line's words."""
+    """A tracker settings' refusal of ``bias_sigma``, ``clock_sigma`` or ``site_sigma``, in the command line's
+    words."""
     text = str(exc).replace("(huber_k=None)", "(no --huber)")
-    return CLIError(f"{'--clock-sigma' if text.startswith('clock_sigma') else '--bias-sigma'}: {text}")
+    option = next((o for f, o in (("clock_sigma", "--clock-sigma"), ("site_sigma", "--site-sigma"))
+                   if text.startswith(f)), "--bias-sigma")
+    return CLIError(f"{option}: {text}")
 
 
 def taking(setting: str) -> list[str]:

@@ -60,6 +60,11 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
                    help="clock uncertainty per pair in s (1 sigma; one value or one per pair): every estimator's "
                         "covariances include what a pair's times all off by that much would do (default 0; "
                         "simulate errors with --clock-error)")
+    p.add_argument("--site-sigma", type=float, nargs="+", default=None, metavar="M",
+                   help="sensor site position uncertainty in m (1 sigma in every coordinate; one value or one per "
+                        "site, in the order the pairs first name them): every estimator's covariances include what "
+                        "sites that far off would do (default 0; the runs simulate the sites where the geometry "
+                        "puts them)")
     p.add_argument("--estimate-offsets", action="store_true",
                    help="with --bias-sigma: the smoother estimates each pair's offset with the track instead")
     p.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS),
@@ -124,6 +129,7 @@ def _run(args: argparse.Namespace) -> int:
         raise CLIError("--estimate-offsets applies to the smoother, which is not among --estimators")
     settings = _with_per_pair_sigma(args, scen, settings, "bias_sigma", args.bias_sigma)
     settings = _with_per_pair_sigma(args, scen, settings, "clock_sigma", args.clock_sigma)
+    settings = _with_per_pair_sigma(args, scen, settings, "site_sigma", args.site_sigma)
     smoother = settings["smoother"]
     if args.estimate_offsets and isinstance(smoother, SmootherSettings):
         try:
@@ -160,13 +166,22 @@ def _run(args: argparse.Namespace) -> int:
 
 def _with_per_pair_sigma(args: argparse.Namespace, scen: list[Any], settings: dict[str, Any], field: str,
                          values: list[float] | None) -> dict[str, Any]:
-    """``settings`` with ``field`` (``bias_sigma`` or ``clock_sigma``, every estimator's) set to ``values`` in those
-    of the study's estimators (``settings`` itself where ``values`` is ``None``)."""
+    """``settings`` with ``field`` (``bias_sigma``, ``clock_sigma`` or ``site_sigma``, every estimator's) set to
+    ``values`` in those of the study's estimators (``settings`` itself where ``values`` is ``None``)."""
     if values is None:
         return settings
     option = "--" + field.replace("_", "-")
     for sc in scen:  # every geometry of the study must take the count given
-        sigma = per_pair(values, sc.geometry.n_pairs, option, f" in {sc.name}")
+        if field == "site_sigma":
+            from fgdoppler.estimators.site_offsets import site_sigmas
+
+            try:
+                site_sigmas(values[0] if len(values) == 1 else tuple(values), sc.geometry)
+            except ValueError as exc:
+                raise CLIError(f"{option} in {sc.name}: {exc}") from None
+            sigma = values[0] if len(values) == 1 else tuple(values)
+        else:
+            sigma = per_pair(values, sc.geometry.n_pairs, option, f" in {sc.name}")
     # the study's estimators only (lag:S is the fixed-lag smoother): another's refusal must not stop it
     chosen = {"fixed-lag" if e.startswith("lag:") else e for e in args.estimators}
     try:

@@ -92,6 +92,11 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    help="each pair's clock uncertainty in s (1 sigma; one value or one per pair): every "
                         "estimator's covariances include what a pair's measurement times all late or early by that "
                         "much would do to the track (default 0: every pair's times from one clock)")
+    p.add_argument("--site-sigma", type=float, nargs="+", default=None, metavar="M",
+                   help="each sensor site's position uncertainty in m (1 sigma in every coordinate; one value, or one "
+                        "per site in the order the pairs first name them: pair 0's tx, its rx, pair 1's tx, ..., a "
+                        "shared or monostatic site once): every estimator's covariances include what sites that "
+                        "far off would do to the track (default 0: the geometry's positions exact)")
     p.add_argument("--estimate-offsets", action="store_true",
                    help="smoother, with --bias-sigma: estimate each pair's offset with the track (the track moves, "
                         "the offsets are reported) instead of only widening the covariances")
@@ -226,9 +231,10 @@ def _run(args: argparse.Namespace) -> int:
     elif args.mode_candidates is not None or args.estimate_offsets:
         option = "--mode-candidates" if args.mode_candidates is not None else "--estimate-offsets"
         raise CLIError(f"{option} applies to the smoother, not to init")
-    elif args.bias_sigma is not None or args.clock_sigma is not None:
-        option, field = ("--bias-sigma", "bias_sigma") if args.bias_sigma is not None else \
-            ("--clock-sigma", "clock_sigma")
+    elif args.bias_sigma is not None or args.clock_sigma is not None or args.site_sigma is not None:
+        option, field = next((o, f) for v, o, f in ((args.bias_sigma, "--bias-sigma", "bias_sigma"),
+                                                    (args.clock_sigma, "--clock-sigma", "clock_sigma"),
+                                                    (args.site_sigma, "--site-sigma", "site_sigma")) if v is not None)
         raise CLIError(f"{option} applies to {', '.join(taking(field))}, not to init")
     if args.init_per_pair < 3:
         raise CLIError("--init-per-pair must be >= 3")
@@ -253,6 +259,13 @@ def _run(args: argparse.Namespace) -> int:
         per_pair(args.bias_sigma, geom.n_pairs, "--bias-sigma")
     if args.clock_sigma is not None:
         per_pair(args.clock_sigma, geom.n_pairs, "--clock-sigma")
+    if args.site_sigma is not None:
+        from fgdoppler.estimators.site_offsets import site_sigmas
+
+        try:
+            site_sigmas(args.site_sigma[0] if len(args.site_sigma) == 1 else tuple(args.site_sigma), geom)
+        except ValueError as exc:
+            raise CLIError(f"--site-sigma: {exc}") from None
     settings = _initiation_settings(args)
     window = meas.initiation_window(args.init_per_pair, args.init_seconds)
     try:
@@ -535,7 +548,8 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
         raise CLIError(f"--seed must be a whole number >= 0, got {args.seed}")
     shared: dict[str, Any] = {} if args.seed is None else {"seed": args.seed}
     for values, option, field in ((args.bias_sigma, "--bias-sigma", "bias_sigma"),
-                                  (args.clock_sigma, "--clock-sigma", "clock_sigma")):
+                                  (args.clock_sigma, "--clock-sigma", "clock_sigma"),
+                                  (args.site_sigma, "--site-sigma", "site_sigma")):
         if values is not None and name not in taking(field):
             raise CLIError(f"{option} applies to {', '.join(taking(field))}, not to {name}")
         if values is not None:

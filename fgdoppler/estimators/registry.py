@@ -52,6 +52,7 @@ from fgdoppler.estimators.settings import (
     SmootherSettings,
     TrackerSettings,
 )
+from fgdoppler.estimators.site_offsets import site_shares, site_sigmas
 from fgdoppler.estimators.smoother import (
     SmootherDraft,
     draft_smoother,
@@ -176,7 +177,9 @@ def run_estimator(
     the smoother adds its own; the particle estimators integrate the
     offsets out of their likelihood, :mod:`~fgdoppler.estimators.offset_posterior`),
     and with ``settings.clock_sigma`` a filter's or particle estimator's what
-    clock offsets would (:func:`~fgdoppler.estimators.clock_offsets.clock_shares`).
+    clock offsets would (:func:`~fgdoppler.estimators.clock_offsets.clock_shares`),
+    with ``settings.site_sigma`` what errors of the sensor sites would
+    (:func:`~fgdoppler.estimators.site_offsets.site_shares`).
     ``progress`` (:mod:`fgdoppler.progress`) is told of every task: each
     hypothesis's run, the reference smoother's, the runs on offset (or delayed) data.
 
@@ -209,7 +212,7 @@ def _run_estimator(name: str, measurements: Measurements, model: TrackingModel |
                                resolve_ambiguity=resolve_ambiguity, verify=verify, reference=local_ref,
                                progress=progress, fits=fits)
         return local.transformed(frame, to_world=True)
-    per_pair, offsets, clocks = _declared_offsets(settings, model)
+    per_pair, offsets, clocks, site_errors = _declared_offsets(settings, model)
     hyps, weights = _hypotheses(info, measurements, model, init, settings) if resolve_ambiguity else ([init], None)
     result = base = _solve(info, measurements, model, hyps, settings, progress, weights)
     if resolve_ambiguity and info.resolution == "likelihood" and getattr(settings, "restarts", False) \
@@ -224,9 +227,10 @@ def _run_estimator(name: str, measurements: Measurements, model: TrackingModel |
     checked = None  # the primary covariances without the enclosure built from the reference's track
     if isinstance(settings, SampledCovarianceSettings) and settings.sampled_covariance:
         judged, checked = _with_sampled_covariances(judged, measurements, model, settings, held)
-    if (offsets is not None and np.any(offsets > 0)) or (clocks is not None and np.any(clocks > 0)):
+    if any(v is not None and np.any(v > 0) for v in (offsets, clocks, site_errors)):
         judged, checked = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings, offsets,
-                                        clocks, prefixed(progress, "calibration and clock offsets"), checked=checked)
+                                        clocks, prefixed(progress, "calibration, clock and site offsets"),
+                                        checked=checked, sites=site_errors)
     if held is not None:
         judged = _with_track_reference(judged, checked, held)
     judged = _with_initiation_reasons(judged, hyps[0], native=info.resolution == "native")
@@ -244,17 +248,22 @@ def _with_later_mistakes(result: TrackResult, measurements: Measurements, model:
 
 
 def _declared_offsets(settings: TrackerSettings, model: TrackingModel
-                      ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None, NDArray[np.float64] | None]:
-    """The calibration uncertainty per pair, and those of it and of the clocks whose share the registry adds (a
-    filter's both; the particle estimators' clocks, since they integrate calibration offsets out themselves; the
-    smoother accounts for both itself).  Their counts are said here, before any work."""
+                      ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None, NDArray[np.float64] | None,
+                                 NDArray[np.float64] | None]:
+    """The calibration uncertainty per pair, and those of it, of the clocks (per pair) and of the sites (per site)
+    whose share the registry adds (a filter's all three; the particle estimators' clocks and sites, since they
+    integrate calibration offsets out themselves; the smoother accounts for all itself).  Their counts are said
+    here, before any work."""
     n_pairs = model.observation.n_channels
     per_pair = bias_sigmas(settings.bias_sigma, n_pairs)
-    if isinstance(settings, ParticleSettings):
-        return per_pair, None, clock_sigmas(settings.clock_sigma, n_pairs)
-    if not isinstance(settings, SampledCovarianceSettings):
-        return per_pair, None, None
-    return per_pair, per_pair, clock_sigmas(settings.clock_sigma, n_pairs)
+    declared = np.any(np.asarray(settings.site_sigma) > 0)
+    if not isinstance(settings, (ParticleSettings, SampledCovarianceSettings)):
+        if declared:
+            site_sigmas(settings.site_sigma, model)
+        return per_pair, None, None, None
+    site_errors = site_sigmas(settings.site_sigma, model) if declared else None
+    clocks = clock_sigmas(settings.clock_sigma, n_pairs)
+    return per_pair, None if isinstance(settings, ParticleSettings) else per_pair, clocks, site_errors
 
 
 def _reference(measurements: Measurements, model: TrackingModel, init: Initiation, settings: TrackerSettings,
@@ -423,10 +432,11 @@ def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, m
                   model: TrackingModel, hyps: list[Initiation], weights: NDArray[np.float64] | None,
                   settings: TrackerSettings, offsets: NDArray[np.float64] | None,
                   clocks: NDArray[np.float64] | None = None, progress: Progress | None = None, *,
-                  checked: NDArray[np.float64] | None = None) -> tuple[TrackResult, NDArray[np.float64] | None]:
-    """Every estimate's covariances with the calibration offsets' share (``offsets``: σ per pair, m/s) and the
-    clock offsets' (``clocks``: σ per pair, s) added; and ``checked`` (other primary covariances, or ``None``)
-    with the primary's share added too.
+                  checked: NDArray[np.float64] | None = None, sites: NDArray[np.float64] | None = None
+                  ) -> tuple[TrackResult, NDArray[np.float64] | None]:
+    """Every estimate's covariances with the calibration offsets' share (``offsets``: σ per pair, m/s), the
+    clock offsets' (``clocks``: σ per pair, s) and the site errors' (``sites``: σ per site, m) added; and
+    ``checked`` (other primary covariances, or ``None``) with the primary's share added too.
 
     The share is what the offsets do to ``base`` — the tracker's run from
     ``hyps`` before any restart — run again on the data with one pair
@@ -434,8 +444,9 @@ def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, m
     (:func:`~fgdoppler.estimators.calibration.moved_starts`,
     :func:`~fgdoppler.estimators.calibration.offset_shares`); a clock offset
     shifts the data along ``base``'s primary track
-    (:func:`~fgdoppler.estimators.clock_offsets.clock_shares`).  It is added
-    at the reported estimates' times, which a restart does not change.
+    (:func:`~fgdoppler.estimators.clock_offsets.clock_shares`), and so does
+    a site error (:func:`~fgdoppler.estimators.site_offsets.site_shares`).  It
+    is added at the reported estimates' times, which a restart does not change.
     """
     kinds = [e.kind for e in base.estimates]
     moved = moved_starts(hyps, measurements, model, huber_k=settings.huber_k)
@@ -448,10 +459,13 @@ def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, m
     shares = [np.zeros((*b.shape, b.shape[-1])) for b in baseline]
     if offsets is not None and np.any(offsets > 0):
         shares = [a + b for a, b in zip(shares, offset_shares(measurements, offsets, baseline, respond), strict=True)]
+    along = base.primary
     if clocks is not None and np.any(clocks > 0):
-        along = base.primary
         shares = [a + b for a, b in zip(shares, clock_shares(measurements, model, clocks, along.times, along.states,
                                                               baseline, respond), strict=True)]
+    if sites is not None and np.any(sites > 0):
+        shares = [a + b for a, b in zip(shares, site_shares(measurements, model, sites, along.times, along.states,
+                                                             baseline, respond), strict=True)]
     by_kind = dict(zip(kinds, shares, strict=True))
     estimates = []
     for e in result.estimates:

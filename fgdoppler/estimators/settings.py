@@ -28,15 +28,16 @@ def _flag(value: bool, name: str) -> None:
         raise ValueError(f"{name} must be True or False, got {value!r}")
 
 
-def _per_pair_sigma(value: Any, name: str, unit: str) -> float | tuple[float, ...]:
-    """``value`` as a float or a tuple of floats, each finite and >= 0 (``unit``); ``name`` in the refusal."""
+def _per_pair_sigma(value: Any, name: str, unit: str, each: str = "pair") -> float | tuple[float, ...]:
+    """``value`` as a float or a tuple of floats, each finite and >= 0 (``unit``); ``name`` and ``each`` (what
+    a tuple has one value per) in the refusal."""
     many = isinstance(value, (tuple, list))
     try:
         values = [float(v) for v in (value if many else [value])]
     except (TypeError, ValueError):
         values = []
     if not values or not all(math.isfinite(v) and v >= 0 for v in values):
-        raise ValueError(f"{name} must be a number >= 0 ({unit}) or one per pair, got {value!r}")
+        raise ValueError(f"{name} must be a number >= 0 ({unit}) or one per {each}, got {value!r}")
     return tuple(values) if many else values[0]
 
 
@@ -50,6 +51,11 @@ def _clock_sigma(value: Any) -> float | tuple[float, ...]:
     return _per_pair_sigma(value, "clock_sigma", "s")
 
 
+def _site_sigma(value: Any) -> float | tuple[float, ...]:
+    """``site_sigma`` as a float or a tuple of floats, each finite and >= 0 (m)."""
+    return _per_pair_sigma(value, "site_sigma", "m", "site")
+
+
 def _count(value: int, name: str) -> None:
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
         raise ValueError(f"{name} must be a whole number >= 1, got {value!r}")
@@ -58,7 +64,8 @@ def _count(value: int, name: str) -> None:
 @dataclass(frozen=True, kw_only=True)
 class TrackerSettings:
     """Base of every tracker's settings: the measurement gate, the robust loss, the pairs' declared
-    calibration and clock uncertainty, and the seed of the estimator's random numbers.
+    calibration and clock uncertainty, the sensor sites' declared position uncertainty, and the seed of the
+    estimator's random numbers.
 
     Parameters
     ----------
@@ -80,6 +87,18 @@ class TrackerSettings:
         Each pair's clock uncertainty (s, one standard deviation; one value
         for every pair or one per pair); what each estimator does with it is
         said in its own settings.
+    site_sigma : float or tuple of float, default 0.0
+        Each sensor site's position uncertainty (m, one standard deviation
+        in every coordinate; one value for every site or one per site, in
+        the order the pairs first name them:
+        :func:`~fgdoppler.estimators.site_offsets.sites`).  Every estimator's
+        reported covariances then include what such site errors would do to
+        its answer, a consider covariance
+        (:mod:`~fgdoppler.estimators.site_offsets`; four runs of the
+        estimator per site coordinate, added with the clock offsets' share,
+        last).  The track does not change, nor does the verdict but for a
+        filter's whole-track comparison with the reference smoother, which
+        reads the grown covariances.  Needs a Doppler model.
     seed : int, default 0
         Seed of every random number the estimator draws: the particle
         estimators' particles, the sampled posterior whose Gaussian sum
@@ -100,6 +119,7 @@ class TrackerSettings:
     huber_k: float | None = None
     bias_sigma: float | tuple[float, ...] = 0.0
     clock_sigma: float | tuple[float, ...] = 0.0
+    site_sigma: float | tuple[float, ...] = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -110,6 +130,7 @@ class TrackerSettings:
             _positive(self.huber_k, "huber_k")
         object.__setattr__(self, "bias_sigma", _bias_sigma(self.bias_sigma))
         object.__setattr__(self, "clock_sigma", _clock_sigma(self.clock_sigma))
+        object.__setattr__(self, "site_sigma", _site_sigma(self.site_sigma))
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"seed must be a whole number >= 0, got {self.seed!r}")
 
@@ -289,6 +310,14 @@ class SampledCovarianceSettings(GaussianSumSettings):
         comparison with the reference smoother, which reads the grown
         covariances: a track confidently elsewhere than the smoother's may
         be so no longer.
+    site_sigma : float or tuple of float, default 0.0
+        Each sensor site's position uncertainty (m; see
+        :class:`TrackerSettings`): the covariances of every estimate grow by
+        what such site errors would do to the answer, as for the clocks —
+        the tracker run again from its moved start on the data as they would
+        read with one site coordinate off at a time, made along its own
+        primary track (:func:`~fgdoppler.estimators.site_offsets.site_shares`;
+        four runs per site coordinate, added after the clock offsets' share).
     """
 
     sampled_covariance: bool = True
@@ -321,7 +350,7 @@ class EKFSettings(SampledCovarianceSettings):
         :class:`TrackerSettings`).
     components : int, default 8
         Gaussian-sum terms (see :class:`GaussianSumSettings`).
-    sampled_covariance, sampling_interval, linearised_everywhere, bias_sigma, clock_sigma
+    sampled_covariance, sampling_interval, linearised_everywhere, bias_sigma, clock_sigma, site_sigma
         See :class:`SampledCovarianceSettings`.
     update : {"sequential", "scan"}, default "sequential"
         ``"sequential"``: one scalar update per measurement, relinearising
@@ -407,7 +436,7 @@ class ISAM2Settings(StreamingSettings, SampledCovarianceSettings):
         (:meth:`~fgdoppler.estimators.isam2.ISAM2Tracker.finish`).
     smoothed_covariances : bool, default True
         Compute the marginal covariance of every smoothed state at the end.
-    sampled_covariance, sampling_interval, linearised_everywhere, bias_sigma, clock_sigma
+    sampled_covariance, sampling_interval, linearised_everywhere, bias_sigma, clock_sigma, site_sigma
         See :class:`SampledCovarianceSettings`.
     """
 
@@ -454,7 +483,7 @@ class FixedLagSettings(StreamingSettings, SampledCovarianceSettings):
         a stream from the prior, and the warm-up did not improve it
         (docs/concepts.md, "Feeding a tracker yourself").  Switch it on to feed the
         tracker without a guess of the first state.
-    sampled_covariance, sampling_interval, linearised_everywhere, bias_sigma, clock_sigma
+    sampled_covariance, sampling_interval, linearised_everywhere, bias_sigma, clock_sigma, site_sigma
         See :class:`SampledCovarianceSettings`: the lagged covariances are
         checked against posterior samples of the data up to ``lag``
         seconds after their time (measured on the paper's six scenarios,
@@ -604,6 +633,16 @@ class SmootherSettings(TrackerSettings):
         four Levenberg–Marquardt solves per pair, from the smoother's own
         solution on the data delayed along it, added after the calibration
         offsets' share).  The track and the verdict do not change.
+    site_sigma : float or tuple of float, default 0.0
+        Each sensor site's position uncertainty (m, one standard deviation
+        in every coordinate; one value or one per site, in the order of
+        :func:`~fgdoppler.estimators.site_offsets.sites`).  The reported
+        covariances then include what such site errors would do to the
+        answer (a consider covariance,
+        :func:`~fgdoppler.estimators.site_offsets.with_site_uncertainty`;
+        four Levenberg–Marquardt solves per site coordinate, from the
+        smoother's own solution on the data displaced along it, added after
+        the clock offsets' share).  The track and the verdict do not change.
     """
 
     max_iterations: int = 100
@@ -710,6 +749,14 @@ class ParticleSettings(TrackerSettings):
         The reruns' Monte Carlo error enters the share too: 0.04–0.5 % of
         the position variance's trace at ``clock_sigma=1e-4`` s (case a
         45 km, 12 recordings, 4,096 particles).
+    site_sigma : float or tuple of float, default 0.0
+        Each sensor site's position uncertainty (m; see
+        :class:`TrackerSettings`), as the clocks: the track does not change
+        and the covariances grow by what site errors would do to it, the
+        estimator run again with the same random numbers on the data as they
+        would read with one site coordinate off at a time
+        (:func:`~fgdoppler.estimators.site_offsets.site_shares`, added by
+        :func:`~fgdoppler.estimators.registry.run_estimator`).
     """
 
     n_particles: int = 4096

@@ -53,6 +53,7 @@ from fgdoppler.estimators.manoeuvre import manoeuvre_reason
 from fgdoppler.estimators.results import Estimates, OffsetEstimate, TrackResult
 from fgdoppler.estimators.search_memo import SearchMemo
 from fgdoppler.estimators.settings import SmootherSettings
+from fgdoppler.estimators.site_offsets import site_sigmas, with_site_uncertainty
 from fgdoppler.estimators.smoother_modes import _modes_2d, _reinitiate, _restarts_3d, _rival_reason
 from fgdoppler.estimators.smoother_solve import FloatArray, SmootherSolution, solve_smoother
 from fgdoppler.estimators.smoother_zone import _outside_findings, _released_reason
@@ -217,8 +218,9 @@ def _reported(measurements: Measurements, model: TrackingModel, settings: Smooth
     ``reasons``), with the calibration offsets' share (``settings.bias_sigma``) added — a consider covariance
     (:func:`~fgdoppler.estimators.calibration.with_bias_uncertainty`) or, with ``settings.estimate_offsets``, the
     joint solution's (``joint``, :func:`_joint`) shift and share (:mod:`~fgdoppler.estimators.smoother_offsets`;
-    its offsets are returned, what happened joins ``notes``), and the clock offsets' share (``settings.clock_sigma``,
-    :func:`~fgdoppler.estimators.clock_offsets.with_clock_uncertainty`, from the solution itself)."""
+    its offsets are returned, what happened joins ``notes``), the clock offsets' share (``settings.clock_sigma``,
+    :func:`~fgdoppler.estimators.clock_offsets.with_clock_uncertainty`, from the solution itself) and the site
+    errors' (``settings.site_sigma``, :func:`~fgdoppler.estimators.site_offsets.with_site_uncertainty`, so too)."""
     states = list(sol.states)
     covs: list[FloatArray | None] = list(sol.covariances) if sol.covariances is not None else [None] * sol.times.size
     has_covs = sol.covariances is not None and bool(np.all(np.isfinite(sol.covariances[0])))
@@ -235,6 +237,9 @@ def _reported(measurements: Measurements, model: TrackingModel, settings: Smooth
     if has_covs and np.any(np.asarray(settings.clock_sigma) > 0):
         covs = list(with_clock_uncertainty(measurements, model, sol.times, sol.states, np.array(covs),
                                            settings.clock_sigma, settings))
+    if has_covs and np.any(np.asarray(settings.site_sigma) > 0):
+        covs = list(with_site_uncertainty(measurements, model, sol.times, sol.states, np.array(covs),
+                                          settings.site_sigma, settings))
     return states, covs, off
 
 
@@ -388,6 +393,8 @@ def draft_smoother(
     settings = settings or SmootherSettings()
     bias_sigmas(settings.bias_sigma, model.observation.n_channels)  # a wrong count is said before any work
     clock_sigmas(settings.clock_sigma, model.observation.n_channels)
+    if np.any(np.asarray(settings.site_sigma) > 0):
+        site_sigmas(settings.site_sigma, model)
     t_begin = time.perf_counter()
     progress = prefixed(progress, "smoother")
     x_init = initial_trajectory(measurements, model, init, settings, progress)
