@@ -209,6 +209,42 @@ def _check_outputs(args: argparse.Namespace) -> None:
                            f"{', '.join(sorted(plotting.figure_formats()))})")
 
 
+def _refuse_tracker_options(args: argparse.Namespace) -> None:
+    """A CLIError for the first option given that only a tracker takes, with ``--estimator init``."""
+    if args.particles is not None:
+        raise CLIError("--particles applies to --estimator particle or map, not to init")
+    if args.seed is not None:
+        raise CLIError("--seed applies to the trackers, not to init (the initiation draws no random numbers)")
+    if args.lag is not None:
+        raise CLIError("--lag applies to fixed-lag, not to init")
+    if args.most_likely:
+        raise CLIError("--most-likely applies to the smoother and map, not to init")
+    if args.mode_candidates is not None or args.estimate_offsets:
+        option = "--mode-candidates" if args.mode_candidates is not None else "--estimate-offsets"
+        raise CLIError(f"{option} applies to the smoother, not to init")
+    for values, option, field in ((args.bias_sigma, "--bias-sigma", "bias_sigma"),
+                                  (args.clock_sigma, "--clock-sigma", "clock_sigma"),
+                                  (args.site_sigma, "--site-sigma", "site_sigma")):
+        if values is not None:
+            raise CLIError(f"{option} applies to {', '.join(taking(field))}, not to init")
+
+
+def _check_declared_counts(args: argparse.Namespace, geom: Geometry) -> None:
+    """A CLIError where ``--bias-sigma`` or ``--clock-sigma`` has neither one value nor one per pair of ``geom``,
+    or ``--site-sigma`` neither one value nor one per site."""
+    if args.bias_sigma is not None:
+        per_pair(args.bias_sigma, geom.n_pairs, "--bias-sigma")
+    if args.clock_sigma is not None:
+        per_pair(args.clock_sigma, geom.n_pairs, "--clock-sigma")
+    if args.site_sigma is not None:
+        from fgdoppler.estimators.site_offsets import site_sigmas
+
+        try:
+            site_sigmas(args.site_sigma[0] if len(args.site_sigma) == 1 else tuple(args.site_sigma), geom)
+        except ValueError as exc:
+            raise CLIError(f"--site-sigma: {exc}") from None
+
+
 def _run(args: argparse.Namespace) -> int:
     from fgdoppler.csvfile import header_names
     from fgdoppler.estimators.initiation import initiate
@@ -220,22 +256,8 @@ def _run(args: argparse.Namespace) -> int:
     tracker = None
     if args.estimator != "init":  # bad tracker options are reported before any work
         tracker = _tracker_settings(args, ALIASES.get(args.estimator, args.estimator))
-    elif args.particles is not None:
-        raise CLIError("--particles applies to --estimator particle or map, not to init")
-    elif args.seed is not None:
-        raise CLIError("--seed applies to the trackers, not to init (the initiation draws no random numbers)")
-    elif args.lag is not None:
-        raise CLIError("--lag applies to fixed-lag, not to init")
-    elif args.most_likely:
-        raise CLIError("--most-likely applies to the smoother and map, not to init")
-    elif args.mode_candidates is not None or args.estimate_offsets:
-        option = "--mode-candidates" if args.mode_candidates is not None else "--estimate-offsets"
-        raise CLIError(f"{option} applies to the smoother, not to init")
-    elif args.bias_sigma is not None or args.clock_sigma is not None or args.site_sigma is not None:
-        option, field = next((o, f) for v, o, f in ((args.bias_sigma, "--bias-sigma", "bias_sigma"),
-                                                    (args.clock_sigma, "--clock-sigma", "clock_sigma"),
-                                                    (args.site_sigma, "--site-sigma", "site_sigma")) if v is not None)
-        raise CLIError(f"{option} applies to {', '.join(taking(field))}, not to init")
+    else:
+        _refuse_tracker_options(args)
     if args.init_per_pair < 3:
         raise CLIError("--init-per-pair must be >= 3")
     if not (math.isfinite(args.init_seconds) and args.init_seconds >= 0):
@@ -255,17 +277,7 @@ def _run(args: argparse.Namespace) -> int:
             raise CLIError(f"{args.truth}: the truth is {truth.dim}-D but the problem is {geom.dim}-D: {hint}")
         truth.check_covers(meas.scans().times, str(args.truth))
     model = _model(args, geom)
-    if args.bias_sigma is not None:
-        per_pair(args.bias_sigma, geom.n_pairs, "--bias-sigma")
-    if args.clock_sigma is not None:
-        per_pair(args.clock_sigma, geom.n_pairs, "--clock-sigma")
-    if args.site_sigma is not None:
-        from fgdoppler.estimators.site_offsets import site_sigmas
-
-        try:
-            site_sigmas(args.site_sigma[0] if len(args.site_sigma) == 1 else tuple(args.site_sigma), geom)
-        except ValueError as exc:
-            raise CLIError(f"--site-sigma: {exc}") from None
+    _check_declared_counts(args, geom)
     settings = _initiation_settings(args)
     window = meas.initiation_window(args.init_per_pair, args.init_seconds)
     try:
