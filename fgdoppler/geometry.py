@@ -385,6 +385,58 @@ class Geometry:
         """Distinct sensor positions (Tx and Rx), shape ``(n_sensors, dim)``."""
         return np.unique(np.vstack([self._tx, self._rx]), axis=0)
 
+    def sites(self) -> tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.intp]]:
+        """The sensor sites and which site each pair's transmitter and receiver is.
+
+        A site is a distinct sensor position: a transmitter shared by two
+        pairs is one, and so is a monostatic radar.  Sites are numbered in
+        the order the pairs first name them (pair 0's transmitter, its
+        receiver, pair 1's transmitter, …); a position within
+        :data:`~fgdoppler.frames.SENSOR_EPS` of one already named is that
+        site.  The paper's case (a) has the sites Tx1, Rx, Tx2; case (b)
+        Tx, Rx1, Rx2.
+
+        Returns
+        -------
+        positions : ndarray, shape ``(n_sites, dim)``
+        tx_site, rx_site : ndarray of int, shape ``(n_pairs,)``
+        """
+        named: list[NDArray[np.float64]] = []
+
+        def site(point: NDArray[np.float64]) -> int:
+            for i, s in enumerate(named):
+                if np.linalg.norm(point - s) <= SENSOR_EPS:
+                    return i
+            named.append(point)
+            return len(named) - 1
+
+        tx_site, rx_site = [], []
+        for t, r in zip(self._tx, self._rx, strict=True):
+            tx_site.append(site(t))
+            rx_site.append(site(r))
+        return np.array(named), np.array(tx_site, dtype=np.intp), np.array(rx_site, dtype=np.intp)
+
+    def with_sites_moved(self, displacement: ArrayLike) -> Geometry:
+        """The same geometry with site ``s`` (:meth:`sites`) moved by ``displacement[s]`` (m).
+
+        ``displacement`` has ``dim`` numbers per site, ``(n_sites, dim)`` or flat (site-major).  The name,
+        zone, pair names, wavelengths and geodetic origin stay.
+
+        Raises
+        ------
+        ValueError
+            If ``displacement`` has not ``dim`` finite numbers per site.
+        """
+        positions, tx_site, rx_site = self.sites()
+        delta = np.asarray(displacement, dtype=float)
+        if delta.size != positions.size or not np.all(np.isfinite(delta)):
+            raise ValueError(f"a site displacement needs {self.dim} finite numbers per site ({positions.shape[0]} "
+                             f"sites: {positions.size} numbers), got {delta.size}")
+        delta = delta.reshape(positions.shape)
+        return replace(self, pairs=tuple(BistaticPair(tx=self._tx[i] + delta[tx_site[i]],
+                                                      rx=self._rx[i] + delta[rx_site[i]])
+                                         for i in range(self.n_pairs)))
+
     def pair_label(self, i: int) -> str:
         """Pair ``i`` as a measurement file names it: its 0-based index, with its name where the geometry gives
         one (``"1 (north)"``)."""

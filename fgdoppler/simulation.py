@@ -291,6 +291,16 @@ class Scenario:
         trackers assume.  The ``clock_sigma`` of the smoother's, the EKF's,
         iSAM2's and the fixed-lag smoother's settings accounts for errors of
         unknown size in their covariances.
+    site_error
+        Where the sensors truly are: site ``s``
+        (:meth:`~fgdoppler.geometry.Geometry.sites`, the order the pairs
+        first name them) sits ``site_error[s]`` metres off the geometry's
+        position, ``dim`` numbers per site (``(n_sites, dim)`` or flat,
+        site-major); ``()`` (default): every site where the geometry puts
+        it, which the trackers assume.  The measurements are those of the
+        moved sites; the scenario's geometry stays the declared one.  The
+        ``site_sigma`` of every estimator's settings accounts for errors of
+        unknown size in their covariances.
     name
         Label used in reports.
     """
@@ -305,6 +315,7 @@ class Scenario:
     manoeuvre: Manoeuvre | None = None
     bias: float | tuple[float, ...] = 0.0
     clock_error: float | tuple[float, ...] = 0.0
+    site_error: tuple[float, ...] | tuple[tuple[float, ...], ...] = ()
     name: str = ""
     _sigmas: NDArray[np.float64] = field(init=False, repr=False, compare=False)
     _biases: NDArray[np.float64] = field(init=False, repr=False, compare=False)
@@ -343,6 +354,12 @@ class Scenario:
         if clock.size not in (1, n) or not np.all(np.isfinite(clock)):
             raise ValueError(f"clock_error must be one finite value or one per pair ({n}) in s, got {self.clock_error}")
         object.__setattr__(self, "_clock_errors", np.broadcast_to(clock, (n,)).copy())
+        sites = np.asarray(self.site_error, dtype=float)
+        if sites.size:
+            self.geometry.with_sites_moved(sites)  # the count and finiteness are said now, in its words
+            object.__setattr__(self, "site_error", tuple(float(v) for v in sites.reshape(-1)))
+        else:
+            object.__setattr__(self, "site_error", ())
         if self.manoeuvre is not None and self.process_noise is not None and self.process_noise.q > 0:
             raise ValueError("a scenario takes a manoeuvre or process noise, not both")
         if self.manoeuvre is not None:
@@ -359,6 +376,19 @@ class Scenario:
     def biases(self) -> NDArray[np.float64]:
         """Constant Doppler offset per pair (m/s), shape ``(n_pairs,)``."""
         return self._biases.copy()
+
+    @property
+    def site_errors(self) -> NDArray[np.float64]:
+        """How far each site truly is from the geometry's position (m), shape ``(n_sites, dim)`` (zeros without
+        ``site_error``)."""
+        positions = self.geometry.sites()[0]
+        return (np.asarray(self.site_error, dtype=float).reshape(positions.shape) if self.site_error
+                else np.zeros(positions.shape))
+
+    @property
+    def true_geometry(self) -> Geometry:
+        """The geometry with every site where it truly is (``site_error``; the geometry itself without it)."""
+        return self.geometry.with_sites_moved(self.site_errors) if self.site_error else self.geometry
 
     @property
     def clock_errors(self) -> NDArray[np.float64]:
@@ -403,8 +433,9 @@ def simulate(scenario: Scenario, rng: np.random.Generator) -> Simulation:
     -------
     Simulation
         Measurements ``z = h(x(t)) + b_i + w``, ``w ~ N(0, sigma_i^2)`` (``b_i``
-        the scenario's ``bias`` of pair ``i``), recorded at ``t + c_i`` (``c_i``
-        its ``clock_error``), and the truth at every true and every recorded
+        the scenario's ``bias`` of pair ``i``; ``h`` of the sites where they
+        truly are, its ``site_error``), recorded at ``t + c_i`` (``c_i`` its
+        ``clock_error``), and the truth at every true and every recorded
         measurement time.
     """
     times = scenario.truth_times()
@@ -434,7 +465,7 @@ def simulate(scenario: Scenario, rng: np.random.Generator) -> Simulation:
     order = np.lexsort((p_all, t_all))
     t_all, p_all = t_all[order], p_all[order]
     idx = np.searchsorted(times, t_all)
-    clean = bistatic_doppler(states[idx], scenario.geometry)[np.arange(t_all.size), p_all]
+    clean = bistatic_doppler(states[idx], scenario.true_geometry)[np.arange(t_all.size), p_all]
     sig = scenario.sigmas[p_all]
     z = clean + sig * rng.standard_normal(t_all.size) + scenario.biases[p_all]
     recorded = t_all + scenario.clock_errors[p_all]

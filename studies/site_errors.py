@@ -1,7 +1,7 @@
 r"""Sensor sites off their declared positions: how far off the trackers go, and what ``site_sigma`` makes of it.
 
 Each recording of the paper's six scenarios is simulated with its three
-sites moved by draws of :math:`N(0, \sigma^2)` per coordinate (``--site-error``,
+sites moved by draws of :math:`N(0, \sigma^2)` per coordinate (``--site-error-sigma``,
 m) and tracked with the sites where the paper puts them, once as it is and
 once with ``site_sigma`` = the same σ declared (docs/concepts.md, "Sensor
 sites").  For each estimator and scenario the table gives the verdicts
@@ -11,7 +11,7 @@ NEES averaged over the runs (2 dimensions), and the mean CPU time per run
 with the verdict (the filters' reference smoother included).  The tracks are
 checked to be the same with and without (the share changes covariances only).
 
-Run: python studies/site_errors.py [--runs 10] [--seed 2026] [--site-error 30] [--estimators smoother ekf]
+Run: python studies/site_errors.py [--runs 10] [--seed 2026] [--site-error-sigma 30] [--estimators smoother ekf]
 [--workers 2] (about 5 minutes on 2 cores with the defaults)
 """
 
@@ -28,35 +28,25 @@ from scipy.stats import chi2
 import fgdoppler as fd
 from fgdoppler.analysis.workers import one_blas_thread
 from fgdoppler.estimators.registry import estimator_info
-from fgdoppler.estimators.site_offsets import sites
 
 #: The final position's NEES beyond which an answer is more than 3 sigma off (chi-square with 2 dof, 99.73 %).
 BEYOND_3_SIGMA = float(chi2.ppf(0.9973, 2))
 
 
-def moved_sites(geometry: fd.Geometry, delta: np.ndarray) -> fd.Geometry:
-    """``geometry`` with site ``s`` (:func:`~fgdoppler.estimators.site_offsets.sites`) moved by ``delta[s]``."""
-    _, tx_site, rx_site = sites(geometry)
-    return fd.Geometry(pairs=tuple(fd.BistaticPair(tx=geometry.tx[i] + delta[tx_site[i]],
-                                                   rx=geometry.rx[i] + delta[rx_site[i]])
-                                   for i in range(geometry.n_pairs)))
-
-
 @one_blas_thread
-def one_run(args: tuple[int, int, int], site_error: float, estimators: list[str]) -> dict[str, Any]:
+def one_run(args: tuple[int, int, int], site_error_sigma: float, estimators: list[str]) -> dict[str, Any]:
     """Run ``r`` of scenario ``s``: each estimator's status, final NEES and CPU without and with ``site_sigma``."""
     s, r, seed = args
     scen = fd.paper_scenarios()[s]
-    n_sites = sites(scen.geometry)[0].shape[0]
-    delta = site_error * np.random.default_rng(np.random.SeedSequence([seed, s, r, 1])).standard_normal((n_sites, 2))
-    sim = fd.simulate(dataclasses.replace(scen, geometry=moved_sites(scen.geometry, delta)),
-                      np.random.default_rng(np.random.SeedSequence([seed, s, r])))
+    n_sites = scen.geometry.sites()[0].shape[0]
+    delta = site_error_sigma * np.random.default_rng(np.random.SeedSequence([seed, s, r, 1])).standard_normal((n_sites, 2))
+    sim = fd.simulate(dataclasses.replace(scen, site_error=delta), np.random.default_rng(np.random.SeedSequence([seed, s, r])))
     model = fd.TrackingModel.of(scen.geometry)
     init = fd.initiate(sim.measurements.first_per_pair(10), model)
     row: dict[str, Any] = {"s": s}
     for name in estimators:
         states = []
-        for declared in (0.0, site_error):
+        for declared in (0.0, site_error_sigma):
             t0 = time.process_time()
             result = fd.run_estimator(name, sim.measurements, model, init,
                                       estimator_info(name).settings(site_sigma=declared))
@@ -74,10 +64,10 @@ def one_run(args: tuple[int, int, int], site_error: float, estimators: list[str]
 
 def main() -> None:
     args, rows = each_run(one_run, "site_errors.py", "studies", chunksize=1,
-                          options={"--site-error": {"type": float, "default": 30.0},
+                          options={"--site-error-sigma": {"type": float, "default": 30.0},
                                    "--estimators": {"nargs": "+", "default": ["smoother", "ekf"]}})
     names = [sc.name for sc in fd.paper_scenarios()]
-    lines = [f"{args.runs} runs of each paper scenario, seed {args.seed}, sites off by N(0, {args.site_error:g}^2) m "
+    lines = [f"{args.runs} runs of each paper scenario, seed {args.seed}, sites off by N(0, {args.site_error_sigma:g}^2) m "
              "per coordinate; ok / runs, ok beyond 3 sigma, final position NEES (2-D, mean), CPU s per run", "",
              "| scenario | estimator | site_sigma | ok | ok beyond 3 sigma | mean NEES | CPU s |", "|---|---|---|---|---|---|---|"]
     table = []
@@ -89,7 +79,7 @@ def main() -> None:
                 beyond = sum(c["nees"] > BEYOND_3_SIGMA for c in ok)
                 mean_nees = float(np.mean([c["nees"] for c in cells]))
                 cpu = float(np.mean([c["cpu"] for c in cells]))
-                sigma = args.site_error if declared else 0.0
+                sigma = args.site_error_sigma if declared else 0.0
                 lines.append(f"| {scenario} | {name} | {sigma:g} | {len(ok)} / {len(cells)} | {beyond} | "
                              f"{mean_nees:.2f} | {cpu:.2f} |")
                 table.append({"scenario": scenario, "estimator": name, "site_sigma": sigma, "ok": len(ok),

@@ -695,16 +695,28 @@ def test_a_late_clock_is_simulated_and_the_trackers_told_of_clock_uncertainty(
 
 def test_sites_off_their_declared_positions_and_the_trackers_told_of_site_uncertainty(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    # A recording simulated with case a's sites 30-60 m off (a geometry file of the true sites), tracked with the
-    # paper's: with --site-sigma 40 the smoother's track is the same and its covariances grow by what such sites
-    # do, so that the truth's final NEES falls inside chi-square(4)'s 99 % level from far beyond it; refused
-    # where it does not apply, and in a Monte Carlo study every estimator takes it
+    # A recording simulated with case a's sites 30-60 m off (simulate --site-error: Tx1, Rx, Tx2, the same data as
+    # a geometry file of the true sites gives), tracked with the paper's: with --site-sigma 40 the smoother's
+    # track is the same and its covariances grow by what such sites do, so that the truth's final NEES falls
+    # inside chi-square(4)'s 99 % level from far beyond it; refused where it does not apply, and in a Monte Carlo
+    # study every estimator takes it
     true_sites = tmp_path / "true_sites.toml"
     fd.Geometry(pairs=(fd.BistaticPair(tx=(50e3 + 40.0, -30.0), rx=(-35.0, 20.0)),
                        fd.BistaticPair(tx=(50e3 - 25.0, 1e3 + 60.0), rx=(-35.0, 20.0)))).to_toml(true_sites)
-    rec = tmp_path / "rec"
+    rec, same = tmp_path / "rec", tmp_path / "same"
+    assert main(["simulate", "--start-x", "45000", "--seed", "3", "--site-error", "40", "-30", "-35", "20", "-25",
+                 "60", "--out", str(rec)]) == 0
+    assert "sites moved by --site-error" in capsys.readouterr().out
     assert main(["simulate", "--geometry", str(true_sites), "--start-x", "45000", "--seed", "3",
-                 "--out", str(rec)]) == 0
+                 "--out", str(same)]) == 0
+    assert (rec / "measurements.csv").read_text() == (same / "measurements.csv").read_text()
+    written = fd.Geometry.from_toml(rec / "geometry.toml")  # the declared sites
+    np.testing.assert_array_equal(written.tx, fd.paper_geometry("a").tx)
+    np.testing.assert_array_equal(written.rx, fd.paper_geometry("a").rx)
+    assert main(["simulate", "--site-error", "1", "2", "3", "--out", str(tmp_path / "bad")]) == 2
+    assert "--site-error needs 2 finite numbers per site (3 sites" in capsys.readouterr().err
+    assert main(["observability", "--report", "45000", "--site-error", *["1"] * 6]) == 2
+    assert "--site-error does not apply to --report" in capsys.readouterr().err
     capsys.readouterr()
     m = str(rec / "measurements.csv")
     truth = fd.Trajectory.from_csv(rec / "truth.csv")

@@ -102,7 +102,7 @@ def geometry_with_zone(spec: str, args: argparse.Namespace) -> Any:
 
 #: The ``dest`` of every option :func:`add_scenario_options` adds.
 SCENARIO_OPTIONS = ("velocity", "duration", "dt", "offsets", "sigma", "process_noise", "turn_rate", "acceleration",
-                    "manoeuvre_onset", "bias", "clock_error")
+                    "manoeuvre_onset", "bias", "clock_error", "site_error")
 
 
 def add_scenario_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
@@ -135,6 +135,11 @@ def add_scenario_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
     g.add_argument("--clock-error", type=float, nargs="+", default=[0.0], metavar="S",
                    help="each pair's clock error in s: its measurements are recorded this much after they were "
                    "taken (a receiver's clock running late; negative: early), one value or one per pair (default 0)")
+    g.add_argument("--site-error", type=float, nargs="+", default=None, metavar="M",
+                   help="where the sensors truly are: each site's displacement from the geometry's position in m, "
+                   "DX DY (3-D: DX DY DZ) for every site in the order the pairs first name them (pair 0's tx, its "
+                   "rx, pair 1's tx, ...; a shared or monostatic site once); the measurements are those of the "
+                   "moved sites, the geometry written and tracked with the declared one (default: none)")
     return g
 
 
@@ -188,12 +193,14 @@ def scenario(args: argparse.Namespace, geometry: Any, start: tuple[float, ...], 
                               acceleration=args.acceleration)  # checked even where it does nothing
         return Scenario(geometry=geometry, x0=(*start, *velocity), duration=args.duration, dt=args.dt,
                         sigma=sigma, time_offsets=offsets, name=name, bias=bias, clock_error=clock,
+                        site_error=() if args.site_error is None else tuple(args.site_error),
                         manoeuvre=manoeuvre if manoeuvring else None,
                         process_noise=ConstantVelocity(q=args.process_noise) if args.process_noise > 0 else None)
     except ValueError as exc:
         msg = str(exc).replace("a scenario takes a manoeuvre or process noise, not both",
                                "--turn-rate/--acceleration and --process-noise cannot be combined")
         msg = msg.replace("bias must be", "--bias must be").replace("clock_error must be", "--clock-error must be")
+        msg = msg.replace("a site displacement needs", "--site-error needs")
         for field, option in _MANOEUVRE_OPTIONS.items():
             msg = msg.replace(f"Manoeuvre.{field}", option)
         raise CLIError(msg) from None

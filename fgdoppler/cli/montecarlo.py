@@ -63,8 +63,7 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--site-sigma", type=float, nargs="+", default=None, metavar="M",
                    help="sensor site position uncertainty in m (1 sigma in every coordinate; one value or one per "
                         "site, in the order the pairs first name them): every estimator's covariances include what "
-                        "sites that far off would do (default 0; the runs simulate the sites where the geometry "
-                        "puts them)")
+                        "sites that far off would do (default 0; simulate errors with --site-error)")
     p.add_argument("--estimate-offsets", action="store_true",
                    help="with --bias-sigma: the smoother estimates each pair's offset with the track instead")
     p.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS),

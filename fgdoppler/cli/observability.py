@@ -84,13 +84,15 @@ MODE_OPTIONS: dict[str, frozenset[str]] = {
     # the table and the slices show the paper's groups 2 and 4 themselves (--geometry and --offset for others)
     "table": frozenset({"offset", "speeds", "headings", "x", "samples", "interval", "pair_offsets"}),
     "slice": frozenset({"offset", "speed", "x", "samples", "interval", "pair_offsets"}),
-    "report": frozenset({"group", "offset", "start_z", *SCENARIO_OPTIONS}),
-    "report-lat-lon": frozenset({"start_z", *SCENARIO_OPTIONS}),
+    # the report is the information of the declared sites: a site error would change nothing it shows
+    "report": frozenset({"group", "offset", "start_z", *SCENARIO_OPTIONS} - {"site_error"}),
+    "report-lat-lon": frozenset({"start_z", *SCENARIO_OPTIONS} - {"site_error"}),
 }
 
 #: Each option's name on the command line, for the messages.
 _FLAGS = {"pair_offsets": "--pair-offsets", "start_z": "--start-z", "process_noise": "--process-noise",
-          "turn_rate": "--turn-rate", "manoeuvre_onset": "--manoeuvre-onset", "clock_error": "--clock-error"}
+          "turn_rate": "--turn-rate", "manoeuvre_onset": "--manoeuvre-onset", "clock_error": "--clock-error",
+          "site_error": "--site-error"}
 
 
 #: The options whose use is checked against the mode (``dest`` names).

@@ -85,10 +85,15 @@ def _run(args: argparse.Namespace) -> int:
         "states": int(sim.truth.times.size),
         "files": [str(out / f) for f in ("measurements.csv", "truth.csv", "geometry.toml")],
     }
+    if scen.site_error:
+        summary["site_error"] = scen.site_errors.tolist()
     if args.json:
         emit_json(summary)
     else:
         print(f"{scen.name}: {summary['measurements']} measurements, {summary['states']} truth states")
+        if scen.site_error:
+            print("  the measurements are those of the sites moved by --site-error; geometry.toml gives them where "
+                  "declared, as a tracker would be told")
         for f in summary["files"]:
             print(f"  wrote {f}")
     return 0

@@ -91,7 +91,7 @@ class TrackerSettings:
         Each sensor site's position uncertainty (m, one standard deviation
         in every coordinate; one value for every site or one per site, in
         the order the pairs first name them:
-        :func:`~fgdoppler.estimators.site_offsets.sites`).  Every estimator's
+        :meth:`~fgdoppler.geometry.Geometry.sites`).  Every estimator's
         reported covariances then include what such site errors would do to
         its answer, a consider covariance
         (:mod:`~fgdoppler.estimators.site_offsets`; four runs of the
@@ -636,7 +636,7 @@ class SmootherSettings(TrackerSettings):
     site_sigma : float or tuple of float, default 0.0
         Each sensor site's position uncertainty (m, one standard deviation
         in every coordinate; one value or one per site, in the order of
-        :func:`~fgdoppler.estimators.site_offsets.sites`).  The reported
+        :meth:`~fgdoppler.geometry.Geometry.sites`).  The reported
         covariances then include what such site errors would do to the
         answer (a consider covariance,
         :func:`~fgdoppler.estimators.site_offsets.with_site_uncertainty`;

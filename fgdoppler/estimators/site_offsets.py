@@ -14,8 +14,8 @@ A *site* is a distinct sensor position: a transmitter shared by two pairs is
 one site (its error moves both pairs' Doppler), and so is a monostatic
 radar.  Sites are numbered in the order the pairs first name them: pair 0's
 transmitter, its receiver, pair 1's transmitter, its receiver, … skipping a
-position already named (:func:`sites`); in the paper's case (a) the sites
-are Tx1, Rx and Tx2.
+position already named (:meth:`~fgdoppler.geometry.Geometry.sites`); in the
+paper's case (a) the sites are Tx1, Rx and Tx2.
 
 As for calibration and clock offsets (:mod:`~fgdoppler.estimators.calibration`,
 :mod:`~fgdoppler.estimators.clock_offsets`) the track is not changed and
@@ -49,47 +49,19 @@ from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.estimators.calibration import offset_shares, smoother_response
 from fgdoppler.estimators.settings import SmootherSettings
-from fgdoppler.frames import SENSOR_EPS
 from fgdoppler.geometry import BistaticPair, Geometry
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import DopplerModel
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["displaced_by", "site_directions", "site_shares", "site_sigmas", "sites", "with_site_uncertainty"]
+__all__ = ["displaced_by", "site_directions", "site_shares", "site_sigmas", "with_site_uncertainty"]
 
 FloatArray = NDArray[np.float64]
 
 
-def sites(geometry: Geometry) -> tuple[FloatArray, NDArray[np.intp], NDArray[np.intp]]:
-    """The distinct sensor sites of ``geometry`` and which site each pair's transmitter and receiver is.
-
-    Sites are numbered in the order the pairs first name them (pair 0's
-    transmitter, its receiver, pair 1's transmitter, …); a position within
-    :data:`~fgdoppler.frames.SENSOR_EPS` of one already named is that site.
-
-    Returns
-    -------
-    positions : ndarray, shape ``(n_sites, dim)``
-    tx_site, rx_site : ndarray of int, shape ``(n_pairs,)``
-    """
-    named: list[FloatArray] = []
-
-    def site(point: FloatArray) -> int:
-        for i, s in enumerate(named):
-            if np.linalg.norm(point - s) <= SENSOR_EPS:
-                return i
-        named.append(point)
-        return len(named) - 1
-
-    tx_site, rx_site = [], []
-    for t, r in zip(geometry.tx, geometry.rx, strict=True):
-        tx_site.append(site(t))
-        rx_site.append(site(r))
-    return np.array(named), np.array(tx_site, dtype=np.intp), np.array(rx_site, dtype=np.intp)
-
-
 def site_sigmas(site_sigma: float | tuple[float, ...], geometry: Geometry | TrackingModel) -> FloatArray:
-    """``site_sigma`` (m) for each of the sites (:func:`sites`) of ``geometry`` (or of a Doppler model's).
+    """``site_sigma`` (m) for each of the sites (:meth:`~fgdoppler.geometry.Geometry.sites`) of ``geometry`` (or of a
+    Doppler model's).
 
     Raises
     ------
@@ -97,7 +69,7 @@ def site_sigmas(site_sigma: float | tuple[float, ...], geometry: Geometry | Trac
         If it has neither one value nor one per site, or a value is negative or not finite; or the model is not
         a Doppler model.
     """
-    n = sites(geometry if isinstance(geometry, Geometry) else _doppler_geometry(geometry))[0].shape[0]
+    n = (geometry if isinstance(geometry, Geometry) else _doppler_geometry(geometry)).sites()[0].shape[0]
     s = np.asarray(site_sigma, dtype=float).reshape(-1)
     if s.size not in (1, n) or not np.all(np.isfinite(s) & (s >= 0)):
         raise ValueError(f"site_sigma must be one value >= 0 (m) or one per site ({n}: in the order the pairs first "
@@ -153,16 +125,15 @@ def displaced_by(measurements: Measurements, model: TrackingModel, times: ArrayL
     if t.size == 0 or x.ndim != 2 or x.shape[0] != t.size:
         raise ValueError(f"a track of {t.size} times needs as many states, got shape {x.shape}")
     d = x.shape[1] // 2
-    positions, tx_site, rx_site = sites(geometry)
+    n_sites = geometry.sites()[0].shape[0]
     delta = np.asarray(displacement, dtype=float)
-    if delta.size != positions.shape[0] * d:
-        raise ValueError(f"one displacement of {d} numbers per site ({positions.shape[0]}), got shape {delta.shape}")
+    if delta.size != n_sites * d:
+        raise ValueError(f"one displacement of {d} numbers per site ({n_sites}), got shape {delta.shape}")
     if len(measurements) == 0:
         return measurements
-    delta = delta.reshape(positions.shape[0], d)
-    tx, rx = geometry.positions(d)
-    moved = DopplerModel(geometry=Geometry(pairs=tuple(
-        BistaticPair(tx=tx[i] + delta[tx_site[i]], rx=rx[i] + delta[rx_site[i]]) for i in range(geometry.n_pairs))))
+    tx, rx = geometry.positions(d)  # a 2-D geometry serves 3-D states with its sites on the ground
+    moved = DopplerModel(geometry=Geometry(pairs=tuple(BistaticPair(tx=a, rx=b) for a, b in zip(tx, rx, strict=True)))
+                         .with_sites_moved(delta))
     now = model.motion.along(t, x, measurements.time)
     change = moved.predict(now, measurements.pair) - model.observation.predict(now, measurements.pair)
     return replace(measurements, doppler=measurements.doppler + change)
@@ -223,7 +194,8 @@ def with_site_uncertainty(measurements: Measurements, model: TrackingModel, time
     covariances
         Its covariances ``(n, 2d, 2d)``.
     site_sigma
-        :math:`\sigma_s` in m, one value for every site or one per site (:func:`sites`).
+        :math:`\sigma_s` in m, one value for every site or one per site
+        (:meth:`~fgdoppler.geometry.Geometry.sites`).
     settings
         The smoother's (its loss, iteration cap and zone wall are used for
         the solves of the displaced data).

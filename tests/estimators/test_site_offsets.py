@@ -18,30 +18,21 @@ from fgdoppler.estimators.site_offsets import (
     site_directions,
     site_shares,
     site_sigmas,
-    sites,
 )
 from fgdoppler.estimators.smoother import run_smoother
 from tests.estimators.test_trackers import PositionModel
 
 
-def _moved(geometry: fd.Geometry, delta: np.ndarray) -> fd.Geometry:
-    """``geometry`` with site ``s`` (:func:`sites`) moved by ``delta[s]``."""
-    _, tx_site, rx_site = sites(geometry)
-    return fd.Geometry(pairs=tuple(fd.BistaticPair(tx=geometry.tx[i] + delta[tx_site[i]],
-                                                   rx=geometry.rx[i] + delta[rx_site[i]])
-                                   for i in range(geometry.n_pairs)))
-
-
 def test_sites_are_numbered_as_the_pairs_first_name_them() -> None:
-    pos, tx_site, rx_site = sites(fd.paper_geometry("a"))  # Tx1, Rx (shared), Tx2
+    pos, tx_site, rx_site = fd.paper_geometry("a").sites()  # Tx1, Rx (shared), Tx2
     np.testing.assert_array_equal(pos, [[50e3, 0.0], [0.0, 0.0], [50e3, 1e3]])
     assert tx_site.tolist() == [0, 2] and rx_site.tolist() == [1, 1]
-    pos, tx_site, rx_site = sites(fd.paper_geometry("b"))  # Tx (shared), Rx1, Rx2
+    pos, tx_site, rx_site = fd.paper_geometry("b").sites()  # Tx (shared), Rx1, Rx2
     np.testing.assert_array_equal(pos, [[50e3, 0.0], [0.0, 0.0], [0.0, 1e3]])
     assert tx_site.tolist() == [0, 0] and rx_site.tolist() == [1, 2]
     radar = fd.Geometry(pairs=(fd.BistaticPair(tx=(0.0, 0.0), rx=(0.0, 0.0)),
                                fd.BistaticPair(tx=(3e3, 1e3, 20.0), rx=(0.0, 0.0))))
-    pos, tx_site, rx_site = sites(radar)  # a monostatic radar is one site, which the next pair's receiver shares
+    pos, tx_site, rx_site = radar.sites()  # a monostatic radar is one site, which the next pair's receiver shares
     np.testing.assert_array_equal(pos, [[0.0, 0.0, 0.0], [3e3, 1e3, 20.0]])
     assert tx_site.tolist() == [0, 1] and rx_site.tolist() == [0, 0]
 
@@ -79,7 +70,15 @@ def test_data_displaced_along_the_truth_are_those_of_the_moved_sites() -> None:
     model = fd.TrackingModel.of(scen.geometry)
     delta = np.array([[30.0, -20.0], [0.0, 15.0], [-40.0, 5.0]])
     plain = fd.simulate(scen, np.random.default_rng(3))
-    moved = fd.simulate(dataclasses.replace(scen, geometry=_moved(scen.geometry, delta)), np.random.default_rng(3))
+    moved = fd.simulate(dataclasses.replace(scen, site_error=delta), np.random.default_rng(3))
+    # the scenario's site errors are the geometry's sites moved; its geometry stays the declared one
+    elsewhere = dataclasses.replace(scen, geometry=scen.geometry.with_sites_moved(delta))
+    np.testing.assert_array_equal(moved.measurements.doppler, fd.simulate(elsewhere, np.random.default_rng(3))
+                                  .measurements.doppler)
+    assert moved.scenario.geometry == scen.geometry and moved.scenario.site_errors.tolist() == delta.tolist()
+    for bad in (np.zeros(4), [np.nan] * 6):
+        with pytest.raises(ValueError, match=r"a site displacement needs 2 finite numbers per site \(3 sites"):
+            dataclasses.replace(scen, site_error=bad)
     truth = plain.truth
     out = displaced_by(plain.measurements, model, truth.times, truth.states, delta.ravel())
     np.testing.assert_array_equal(out.time, plain.measurements.time)
@@ -154,7 +153,7 @@ def _sites_off(r: int, sigma: float) -> tuple[fd.Simulation, fd.TrackingModel, f
     the model and initiation of the geometry as declared."""
     base = fd.paper_scenario("a", 45e3)
     delta = sigma * np.random.default_rng([5, r]).standard_normal((3, 2))
-    sim = fd.simulate(dataclasses.replace(base, geometry=_moved(base.geometry, delta)), np.random.default_rng([7, r]))
+    sim = fd.simulate(dataclasses.replace(base, site_error=delta), np.random.default_rng([7, r]))
     model = fd.TrackingModel.of(base.geometry)
     return sim, model, fd.initiate(sim.measurements.first_per_pair(10), model)
 
