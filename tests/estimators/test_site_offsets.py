@@ -91,6 +91,25 @@ def test_data_displaced_along_the_truth_are_those_of_the_moved_sites() -> None:
         displaced_by(plain.measurements, model, truth.times, truth.states, np.zeros(4))
 
 
+def test_in_3d_the_sites_move_in_height_too() -> None:
+    # An aircraft over four ground sites (a transmitter shared by three receivers): each site moves by three
+    # numbers, a receiver raised 25 m among them, and the data made along the truth are the moved simulation's.
+    from tests.test_three_d import AIRCRAFT
+
+    g = AIRCRAFT.geometry
+    positions, tx_site, rx_site = g.sites()
+    assert positions.shape == (4, 3) and tx_site.tolist() == [0, 0, 0] and rx_site.tolist() == [1, 2, 3]
+    delta = np.array([[10.0, -5.0, 3.0], [0.0, 0.0, 25.0], [-20.0, 8.0, 0.0], [4.0, 4.0, -6.0]])
+    plain = fd.simulate(AIRCRAFT, np.random.default_rng(2))
+    moved = fd.simulate(dataclasses.replace(AIRCRAFT, site_error=delta), np.random.default_rng(2))
+    truth = plain.truth
+    out = displaced_by(plain.measurements, fd.TrackingModel.of(g), truth.times, truth.states, delta)
+    np.testing.assert_allclose(out.doppler - plain.measurements.doppler,
+                               moved.measurements.doppler - plain.measurements.doppler, rtol=0, atol=1e-9)
+    assert np.max(np.abs(out.doppler - plain.measurements.doppler)) > 1e-3
+    assert site_directions(np.ones(4), 3).shape == (12, 12)  # 48 reruns: four per site coordinate
+
+
 def test_for_small_errors_the_share_is_the_first_order_response() -> None:
     # At sigma = 0.05 m the smoother's response to one site coordinate is linear, so the five-point rule gives
     # sigma^2 g g' per direction, g the response's derivative by central differences of the solve itself.
