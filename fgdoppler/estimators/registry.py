@@ -256,12 +256,9 @@ def _declared_offsets(settings: TrackerSettings, model: TrackingModel
     here, before any work."""
     n_pairs = model.observation.n_channels
     per_pair = bias_sigmas(settings.bias_sigma, n_pairs)
-    declared = np.any(np.asarray(settings.site_sigma) > 0)
     if not isinstance(settings, (ParticleSettings, SampledCovarianceSettings)):
-        if declared:
-            site_sigmas(settings.site_sigma, model)
         return per_pair, None, None, None
-    site_errors = site_sigmas(settings.site_sigma, model) if declared else None
+    site_errors = site_sigmas(settings.site_sigma, model) if np.any(np.asarray(settings.site_sigma) > 0) else None
     clocks = clock_sigmas(settings.clock_sigma, n_pairs)
     return per_pair, None if isinstance(settings, ParticleSettings) else per_pair, clocks, site_errors
 

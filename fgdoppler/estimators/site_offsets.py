@@ -49,7 +49,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.estimators.calibration import offset_shares, smoother_response
 from fgdoppler.estimators.settings import SmootherSettings
-from fgdoppler.geometry import BistaticPair, Geometry
+from fgdoppler.geometry import Geometry
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.observation import DopplerModel
 from fgdoppler.models.tracking import TrackingModel
@@ -80,10 +80,8 @@ def site_sigmas(site_sigma: float | tuple[float, ...], geometry: Geometry | Trac
 def site_directions(sigmas: ArrayLike, dim: int) -> FloatArray:
     r"""One row per site :math:`s` with :math:`\sigma_s > 0` and coordinate :math:`c`: :math:`\sigma_s\mathbf e_{s,c}`,
     a displacement of every site's coordinates ``(n_directions, n_sites * dim)`` (site-major)."""
-    s = np.asarray(sigmas, dtype=float).reshape(-1)
-    rows = [np.where(np.arange(s.size * dim) == i * dim + c, s[i], 0.0) for i in np.flatnonzero(s > 0)
-            for c in range(dim)]
-    return np.array(rows).reshape(len(rows), s.size * dim)
+    scale = np.repeat(np.asarray(sigmas, dtype=float).reshape(-1), dim)
+    return np.diag(scale)[scale > 0]
 
 
 def _doppler_geometry(model: TrackingModel) -> Geometry:
@@ -109,31 +107,31 @@ def displaced_by(measurements: Measurements, model: TrackingModel, times: ArrayL
     model
         Its Doppler model (the sites are its geometry's, in its coordinates).
     times, states
-        The track: ``(n,)`` increasing times and ``(n, 2d)`` states.
+        The track: ``(n,)`` increasing times and ``(n, 2d)`` states, ``d`` the geometry's dimension.
     displacement
         Each site's displacement (m): ``(n_sites, d)``, or flat, site-major.
 
     Raises
     ------
     ValueError
-        If the model is not a Doppler model, the track is empty or its shapes disagree, or ``displacement`` has
-        not ``d`` numbers per site.
+        If the model is not a Doppler model, the track is empty, its shapes disagree or its states are not of
+        the geometry's dimension, or ``displacement`` has not ``d`` numbers per site.
     """
     geometry = _doppler_geometry(model)
     t = np.asarray(times, dtype=float).reshape(-1)
     x = np.asarray(states, dtype=float)
     if t.size == 0 or x.ndim != 2 or x.shape[0] != t.size:
         raise ValueError(f"a track of {t.size} times needs as many states, got shape {x.shape}")
-    d = x.shape[1] // 2
+    if x.shape[1] != geometry.state_dim:
+        raise ValueError(f"a {geometry.dim}-D geometry's track has states of {geometry.state_dim} numbers, got "
+                         f"{x.shape[1]}")
     n_sites = geometry.sites()[0].shape[0]
     delta = np.asarray(displacement, dtype=float)
-    if delta.size != n_sites * d:
-        raise ValueError(f"one displacement of {d} numbers per site ({n_sites}), got shape {delta.shape}")
+    if delta.size != n_sites * geometry.dim:
+        raise ValueError(f"one displacement of {geometry.dim} numbers per site ({n_sites}), got shape {delta.shape}")
     if len(measurements) == 0:
         return measurements
-    tx, rx = geometry.positions(d)  # a 2-D geometry serves 3-D states with its sites on the ground
-    moved = DopplerModel(geometry=Geometry(pairs=tuple(BistaticPair(tx=a, rx=b) for a, b in zip(tx, rx, strict=True)))
-                         .with_sites_moved(delta))
+    moved = DopplerModel(geometry=geometry.with_sites_moved(delta))
     now = model.motion.along(t, x, measurements.time)
     change = moved.predict(now, measurements.pair) - model.observation.predict(now, measurements.pair)
     return replace(measurements, doppler=measurements.doppler + change)
