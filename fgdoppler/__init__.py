@@ -22,6 +22,7 @@ from fgdoppler._lazy import attach
 #: ``fgdoppler --help`` loads no estimator.  Type checkers read the same names from the imports below.
 _HOMES: dict[str, tuple[str, ...]] = {
     "fgdoppler.analysis.observability": ("observability_measure",),
+    "fgdoppler.error_draws": ("ErrorDraws",),
     "fgdoppler.estimators": (
         "ESTIMATORS", "METHODS", "STATUSES", "EKFSettings", "Estimates", "Event", "FixedLagSettings",
         "Initiation", "InitiationSettings", "ISAM2Settings", "MapSettings", "OffsetEstimate",
@@ -51,6 +52,7 @@ _HOMES: dict[str, tuple[str, ...]] = {
 
 if TYPE_CHECKING:
     from fgdoppler.analysis.observability import observability_measure
+    from fgdoppler.error_draws import ErrorDraws
     from fgdoppler.estimators import (
         ESTIMATORS,
         METHODS,
@@ -127,6 +129,7 @@ __all__ = [
     "ConstantVelocity",
     "DopplerModel",
     "EKFSettings",
+    "ErrorDraws",
     "Estimates",
     "Event",
     "FixedLagSettings",

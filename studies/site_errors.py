@@ -17,7 +17,6 @@ Run: python studies/site_errors.py [--runs 10] [--seed 2026] [--site-error-sigma
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from typing import Any
 
@@ -38,9 +37,9 @@ def one_run(args: tuple[int, int, int], site_error_sigma: float, estimators: lis
     """Run ``r`` of scenario ``s``: each estimator's status, final NEES and CPU without and with ``site_sigma``."""
     s, r, seed = args
     scen = fd.paper_scenarios()[s]
-    n_sites = scen.geometry.sites()[0].shape[0]
-    delta = site_error_sigma * np.random.default_rng(np.random.SeedSequence([seed, s, r, 1])).standard_normal((n_sites, 2))
-    sim = fd.simulate(dataclasses.replace(scen, site_error=delta), np.random.default_rng(np.random.SeedSequence([seed, s, r])))
+    moved = fd.ErrorDraws(site_sigma=site_error_sigma).applied(
+        scen, np.random.default_rng(np.random.SeedSequence([seed, s, r, 1])))
+    sim = fd.simulate(moved, np.random.default_rng(np.random.SeedSequence([seed, s, r])))
     model = fd.TrackingModel.of(scen.geometry)
     init = fd.initiate(sim.measurements.first_per_pair(10), model)
     row: dict[str, Any] = {"s": s}

@@ -41,6 +41,7 @@ from numpy.typing import NDArray
 from fgdoppler._io import atomic_write_text
 from fgdoppler.analysis.metrics import errors, nees, nees_band, rmse
 from fgdoppler.analysis.workers import one_blas_thread
+from fgdoppler.error_draws import ErrorDraws
 from fgdoppler.estimators.initiation import InitiationSettings
 from fgdoppler.estimators.names import DEFAULT_ESTIMATORS, METHODS, Method
 from fgdoppler.estimators.registry import ALIASES, ESTIMATORS
@@ -99,6 +100,12 @@ class MonteCarloSpec:
     verify
         Give the filters' verdicts their check against the offline smoother
         (one smoother run per simulated run, shared by the filters).
+    error_draws
+        Sensor errors drawn afresh for every run and added to the scenario's
+        own (:class:`~fgdoppler.error_draws.ErrorDraws`): calibration offsets
+        and site displacements, from the run's own stream
+        (:meth:`scenario_of_run`); ``None`` (default): every run has the
+        scenario's errors.
     """
 
     scenarios: tuple[Scenario, ...]
@@ -111,6 +118,7 @@ class MonteCarloSpec:
     motion: ConstantVelocity = field(default_factory=default_motion)
     weak_prior: bool = True
     verify: bool = True
+    error_draws: ErrorDraws | None = None
 
     def __post_init__(self) -> None:
         if self.runs < 1:
@@ -127,6 +135,30 @@ class MonteCarloSpec:
             if name not in ESTIMATORS or type(st) is not ESTIMATORS[name].settings:
                 raise ValueError(f"settings for {name!r} must be a {ESTIMATORS[name].settings.__name__}"
                                  if name in ESTIMATORS else f"settings given for unknown estimator {name!r}")
+        if self.error_draws is not None:
+            for sc in self.scenarios:  # every scenario's geometry must take the counts given
+                try:
+                    self.error_draws.sigmas(sc)
+                except ValueError as exc:
+                    raise ValueError(f"error_draws in {sc.name or 'a scenario'}: {exc}") from None
+
+    def scenario_of_run(self, s_idx: int, r_idx: int) -> Scenario:
+        """Scenario ``s_idx`` as run ``r_idx`` simulates it: with that run's draw of :attr:`error_draws`.
+
+        The draws come from the first child of the run's stream (:func:`run_monte_carlo`), apart from the
+        stream that simulates its noise: a study with draws has the same noise as one without.
+        """
+        if not (0 <= s_idx < len(self.scenarios) and 0 <= r_idx < self.runs):
+            raise IndexError(f"no run {r_idx} of scenario {s_idx} in a study of {len(self.scenarios)} scenario(s) "
+                             f"x {self.runs} run(s)")
+        return self._drawn(s_idx, _run_stream(self.seed, s_idx * self.runs + r_idx))
+
+    def _drawn(self, s_idx: int, seq: np.random.SeedSequence) -> Scenario:
+        scen = self.scenarios[s_idx]
+        if self.error_draws is None or not self.error_draws.active:
+            return scen
+        child = np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, 0))
+        return self.error_draws.applied(scen, np.random.default_rng(child))
 
     def model(self, scenario: Scenario) -> TrackingModel:
         """The tracking model of a scenario (its geometry with this spec's motion and prior)."""
@@ -143,13 +175,18 @@ class MonteCarloSpec:
         return name, self.settings.get(name, ESTIMATORS[name].settings())
 
 
+def _run_stream(seed: int, index: int) -> np.random.SeedSequence:
+    """Run ``index``'s stream: the ``index``-th child of ``SeedSequence(seed)``, as ``spawn`` makes it."""
+    return np.random.SeedSequence(seed, spawn_key=(index,))
+
+
 @one_blas_thread
 def _run_one(spec: MonteCarloSpec, s_idx: int, r_idx: int, seq: np.random.SeedSequence) -> dict[str, Any]:
     """One simulated run of one scenario through every estimator (executed in a worker, one BLAS thread)."""
     from fgdoppler.estimators.initiation import initiate, window_grid
     from fgdoppler.estimators.registry import run_estimator
 
-    scen = spec.scenarios[s_idx]
+    scen = spec._drawn(s_idx, seq)
     sim = simulate(scen, np.random.default_rng(seq))
     meas = sim.measurements
     truth_t = sim.truth.times
@@ -219,7 +256,8 @@ class MonteCarloResult:
     ``pos_se[s][name]``, ``vel_se[s][name]`` and ``nees[s][name]`` are
     ``(runs, n_times)`` arrays for scenario index ``s``; ``times[s]`` the
     scenario's truth times; ``verdicts[s][name]`` the status of every run
-    (``"ok"``, ``"doubtful"``, ``"failed"``).
+    (``"ok"``, ``"doubtful"``, ``"failed"``); ``error_draws`` the sensor
+    errors drawn for each run (:attr:`MonteCarloSpec.error_draws`).
     """
 
     scenario_names: tuple[str, ...]
@@ -236,6 +274,7 @@ class MonteCarloResult:
     workers: int
     timing: dict[str, float]
     state_dim: int = 4
+    error_draws: ErrorDraws | None = None
 
     def pos_rmse(self, s: int, name: str) -> FloatArray:
         """Position RMSE over runs at each time of scenario ``s``."""
@@ -286,7 +325,8 @@ class MonteCarloResult:
         return {"runs": self.runs, "seed": self.seed, "workers": self.workers, "wall_time": self.wall_time,
                 "nees_from": NEES_FROM, "nees_band": list(self.nees_band()),
                 "scenarios": list(self.scenario_names), "estimators": list(self.estimators),
-                "ambiguous_fraction": self.ambiguous.tolist(), "timing_per_run": self.timing, "rows": rows}
+                "ambiguous_fraction": self.ambiguous.tolist(), "timing_per_run": self.timing, "rows": rows,
+                **({} if self.error_draws is None else {"error_draws": _draws_json(self.error_draws)})}
 
     def save(self, path: str | Path) -> tuple[Path, Path]:
         """Write ``path.npz`` (all arrays) and ``path.json`` (summary); returns both paths."""
@@ -308,6 +348,7 @@ class MonteCarloResult:
         meta = {"scenario_names": list(self.scenario_names), "estimators": list(self.estimators), "runs": self.runs,
                 "seed": self.seed, "wall_time": self.wall_time, "workers": self.workers, "timing": self.timing,
                 "state_dim": self.state_dim,
+                "error_draws": None if self.error_draws is None else _draws_json(self.error_draws),
                 "summary": self.summary()}
         js = path.with_suffix(".json")
         atomic_write_text(js, json.dumps(meta, indent=1, allow_nan=False, default=_json_default))
@@ -330,7 +371,15 @@ class MonteCarloResult:
             verdicts=tuple({e: data[f"verdict_{s}_{e}"] for e in ests} for s in range(n)),
             ambiguous=data["ambiguous"], wall_time=float(meta["wall_time"]), workers=int(meta["workers"]),
             timing=dict(meta["timing"]), state_dim=int(meta.get("state_dim", 4)),
+            error_draws=None if meta.get("error_draws") is None else ErrorDraws(
+                **{k: v if isinstance(v, float | int) else tuple(v) for k, v in meta["error_draws"].items()}),
         )
+
+
+def _draws_json(draws: ErrorDraws) -> dict[str, float | list[float]]:
+    """The standard deviations of ``draws`` as JSON values (a list where given per pair or per site)."""
+    return {k: v if isinstance(v, float) else list(v)
+            for k, v in (("bias_sigma", draws.bias_sigma), ("site_sigma", draws.site_sigma))}
 
 
 def _nanmean(x: FloatArray) -> float | None:
@@ -370,8 +419,7 @@ def run_monte_carlo(
 
     t_begin = time.perf_counter()
     n_s = len(spec.scenarios)
-    seqs = np.random.SeedSequence(spec.seed).spawn(n_s * spec.runs)
-    tasks = [(s, r, seqs[s * spec.runs + r]) for s in range(n_s) for r in range(spec.runs)]
+    tasks = [(s, r, _run_stream(spec.seed, s * spec.runs + r)) for s in range(n_s) for r in range(spec.runs)]
     show = sys.stderr.isatty() if progress is None else progress
     own = None
     if executor is None and workers > 1:
@@ -413,5 +461,6 @@ def run_monte_carlo(
         verdicts=tuple(ver),
         wall_time=time.perf_counter() - t_begin, workers=workers if executor is None or own is not None else -1,
         timing=timing, state_dim=spec.scenarios[0].geometry.state_dim if spec.scenarios else 4,
+        error_draws=spec.error_draws,
     )
 

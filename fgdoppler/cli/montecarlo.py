@@ -66,6 +66,13 @@ def add_montecarlo(sub: argparse._SubParsersAction) -> None:
                         "sites that far off would do (default 0; simulate errors with --site-error)")
     p.add_argument("--estimate-offsets", action="store_true",
                    help="with --bias-sigma: the smoother estimates each pair's offset with the track instead")
+    p.add_argument("--draw-bias", type=float, nargs="+", default=None, metavar="M/S",
+                   help="each run draws each pair's constant Doppler offset afresh from N(0, M/S^2) (one value or "
+                        "one per pair), added to --bias: to check --bias-sigma on average (default: none drawn)")
+    p.add_argument("--draw-site-error", type=float, nargs="+", default=None, metavar="M",
+                   help="each run draws each sensor site's displacement afresh from N(0, M^2) in every coordinate "
+                        "(one value or one per site, in the order the pairs first name them), added to "
+                        "--site-error: to check --site-sigma on average (default: none drawn)")
     p.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS),
                    help=f"estimators (default: {' '.join(DEFAULT_ESTIMATORS)}; also lag:SECONDS)")
     p.add_argument("--runs", type=int, default=100, help="runs per scenario (default 100)")
@@ -138,9 +145,10 @@ def _run(args: argparse.Namespace) -> int:
     try:
         spec = MonteCarloSpec(scenarios=tuple(scen), estimators=tuple(args.estimators), runs=args.runs, seed=args.seed,
                               initiation=InitiationSettings(grid=grid_spec(args), huber_k=k), settings=settings,
+                              error_draws=_error_draws(args),
                               **({} if args.q is None else {"motion": motion(args.q)}))
     except ValueError as exc:
-        raise CLIError(str(exc)) from exc
+        raise CLIError(_in_option_words(str(exc))) from exc
     pool, client = executor(args)
     try:
         res = run_monte_carlo(spec, executor=pool, workers=args.workers)
@@ -149,10 +157,14 @@ def _run(args: argparse.Namespace) -> int:
             client.close()
     npz, js = res.save(args.out)
     summ = res.summary()
+    draws = spec.error_draws
     if args.json:
         emit_json(summ)
     else:
         print(f"{res.runs} runs x {len(scen)} scenarios in {res.wall_time:.1f} s; wrote {npz} and {js}")
+        if draws is not None:
+            print(f"sensor errors drawn afresh for each run: offsets N(0, sigma^2) with sigma {draws.bias_sigma} m/s, "
+                  f"sites N(0, sigma^2) in every coordinate with sigma {draws.site_sigma} m")
         _print_summary(summ)
     if args.plot:
         from fgdoppler import plotting
@@ -161,6 +173,34 @@ def _run(args: argparse.Namespace) -> int:
                                 title=res.scenario_names[0])
         plotting.save(ax, args.plot)
     return 0
+
+
+def _error_draws(args: argparse.Namespace) -> Any:
+    """The study's :class:`~fgdoppler.error_draws.ErrorDraws` of ``--draw-bias`` and ``--draw-site-error``
+    (``None`` without either)."""
+    if args.draw_bias is None and args.draw_site_error is None:
+        return None
+    from fgdoppler.error_draws import ErrorDraws
+
+    def value(v: list[float] | None) -> float | tuple[float, ...]:
+        return 0.0 if v is None else v[0] if len(v) == 1 else tuple(v)
+    try:
+        return ErrorDraws(bias_sigma=value(args.draw_bias), site_sigma=value(args.draw_site_error))
+    except ValueError as exc:
+        raise CLIError(_in_option_words(str(exc))) from None
+
+
+def _in_option_words(message: str) -> str:
+    """An :class:`~fgdoppler.error_draws.ErrorDraws` refusal in the options' names (``bias_sigma`` is
+    ``--draw-bias``, ``site_sigma`` ``--draw-site-error``); any other message as it is."""
+    head = "error_draws in "
+    for field, option in (("bias_sigma", "--draw-bias"), ("site_sigma", "--draw-site-error")):
+        if message.startswith(f"{field} must"):
+            return f"{option}: it must{message[len(field) + len(' must'):]}"
+        if message.startswith(head) and f": {field} must" in message:
+            where, rest = message[len(head):].split(f": {field} must", 1)
+            return f"{option} in {where}: it must{rest}"
+    return message
 
 
 def _with_per_pair_sigma(args: argparse.Namespace, scen: list[Any], settings: dict[str, Any], field: str,
