@@ -47,6 +47,18 @@ def test_each_run_draws_its_own_errors_about_the_scenarios_with_the_declared_spr
         spec.scenario_of_run(0, spec.runs)
 
 
+def test_in_3d_every_site_moves_in_height_too() -> None:
+    # four ground sites under an aircraft (tests/test_three_d.py's): each run moves every site in x, y and z
+    from tests.test_three_d import AIRCRAFT
+
+    spec = MonteCarloSpec(scenarios=(AIRCRAFT,), runs=200, seed=1, error_draws=fd.ErrorDraws(site_sigma=20.0))
+    eps = np.array([spec.scenario_of_run(0, r).site_errors for r in range(spec.runs)])
+    assert eps.shape == (200, 4, 3)
+    var = np.mean(eps**2, axis=0) / 20.0**2
+    lo, hi = chi2.ppf([0.0005, 0.9995], spec.runs) / spec.runs
+    assert np.all((lo < var) & (var < hi)), var
+
+
 def test_the_draws_leave_the_runs_noise_as_it_was() -> None:
     # run r's noise comes from its stream and the draws from that stream's first child: with drawn offsets the
     # recording is the one without, shifted by each pair's draw (to rounding), the truth the same
