@@ -60,11 +60,6 @@ class ErrorDraws:
                 raise ValueError(f"{name} must be one value >= 0 ({unit}) or one per {each}, got {value!r}")
             object.__setattr__(self, name, float(v[0]) if np.ndim(value) == 0 else tuple(float(x) for x in v))
 
-    @property
-    def active(self) -> bool:
-        """Whether any error is drawn (a standard deviation above zero)."""
-        return any(np.any(np.asarray(getattr(self, n)) > 0) for n in ("bias_sigma", "site_sigma"))
-
     def sigmas(self, scenario: Scenario) -> tuple[FloatArray, FloatArray]:
         """The standard deviations per pair (m/s) and per site (m) of ``scenario``'s geometry.
 

@@ -155,7 +155,7 @@ class MonteCarloSpec:
 
     def _drawn(self, s_idx: int, seq: np.random.SeedSequence) -> Scenario:
         scen = self.scenarios[s_idx]
-        if self.error_draws is None or not self.error_draws.active:
+        if self.error_draws is None:
             return scen
         child = np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, 0))
         return self.error_draws.applied(scen, np.random.default_rng(child))

@@ -163,8 +163,10 @@ def _run(args: argparse.Namespace) -> int:
     else:
         print(f"{res.runs} runs x {len(scen)} scenarios in {res.wall_time:.1f} s; wrote {npz} and {js}")
         if draws is not None:
-            print(f"sensor errors drawn afresh for each run: offsets N(0, sigma^2) with sigma {draws.bias_sigma} m/s, "
-                  f"sites N(0, sigma^2) in every coordinate with sigma {draws.site_sigma} m")
+            drawn = [f"offsets N(0, sigma^2) with sigma {draws.bias_sigma} m/s" if args.draw_bias else "",
+                     f"sites N(0, sigma^2) in every coordinate with sigma {draws.site_sigma} m"
+                     if args.draw_site_error else ""]
+            print("sensor errors drawn afresh for each run: " + ", ".join(d for d in drawn if d))
         _print_summary(summ)
     if args.plot:
         from fgdoppler import plotting
