@@ -184,9 +184,9 @@ def scenario(args: argparse.Namespace, geometry: Any, start: tuple[float, ...], 
         offsets = tuple(args.offsets)
     else:
         offsets = (0.0, PAPER_CASE_B_OFFSET) if geometry.name == "b" else (0.0,) * geometry.n_pairs
-    sigma = args.sigma[0] if len(args.sigma) == 1 else tuple(args.sigma)
-    bias = args.bias[0] if len(args.bias) == 1 else tuple(args.bias)
-    clock = args.clock_error[0] if len(args.clock_error) == 1 else tuple(args.clock_error)
+    sigma = one_or_each(args.sigma)
+    bias = one_or_each(args.bias)
+    clock = one_or_each(args.clock_error)
     manoeuvring = args.turn_rate != 0.0 or args.acceleration != 0.0
     try:
         manoeuvre = Manoeuvre(onset=args.manoeuvre_onset, turn_rate_deg=args.turn_rate,
@@ -210,11 +210,16 @@ def scenario(args: argparse.Namespace, geometry: Any, start: tuple[float, ...], 
 _MANOEUVRE_OPTIONS = {"onset": "--manoeuvre-onset", "turn_rate_deg": "--turn-rate", "acceleration": "--acceleration"}
 
 
+def one_or_each(values: list[float]) -> float | tuple[float, ...]:
+    """An option's values as one number (one given) or a tuple (one each, of whatever it counts)."""
+    return values[0] if len(values) == 1 else tuple(values)
+
+
 def per_pair(values: list[float], n_pairs: int, option: str, where: str = "") -> float | tuple[float, ...]:
     """An option's values as one number or a tuple of one per pair (a CLIError for another count)."""
     if len(values) not in (1, n_pairs):
         raise CLIError(f"{option} takes one value or one per pair ({n_pairs}{where}), got {len(values)}")
-    return values[0] if len(values) == 1 else tuple(values)
+    return one_or_each(values)
 
 
 def east_north_of(geometry: Any, lat: float, lon: float, option: str) -> tuple[float, float]:

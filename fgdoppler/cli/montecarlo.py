@@ -20,6 +20,7 @@ from fgdoppler.cli.common import (
     huber,
     motion,
     offset_sigma_error,
+    one_or_each,
     per_pair,
     scenario,
 )
@@ -184,10 +185,9 @@ def _error_draws(args: argparse.Namespace) -> Any:
         return None
     from fgdoppler.error_draws import ErrorDraws
 
-    def value(v: list[float] | None) -> float | tuple[float, ...]:
-        return 0.0 if v is None else v[0] if len(v) == 1 else tuple(v)
     try:
-        return ErrorDraws(bias_sigma=value(args.draw_bias), site_sigma=value(args.draw_site_error))
+        return ErrorDraws(bias_sigma=0.0 if args.draw_bias is None else one_or_each(args.draw_bias),
+                          site_sigma=0.0 if args.draw_site_error is None else one_or_each(args.draw_site_error))
     except ValueError as exc:
         raise CLIError(_in_option_words(str(exc))) from None
 
@@ -217,10 +217,10 @@ def _with_per_pair_sigma(args: argparse.Namespace, scen: list[Any], settings: di
             from fgdoppler.estimators.site_offsets import site_sigmas
 
             try:
-                site_sigmas(values[0] if len(values) == 1 else tuple(values), sc.geometry)
+                site_sigmas(one_or_each(values), sc.geometry)
             except ValueError as exc:
                 raise CLIError(f"{option} in {sc.name}: {exc}") from None
-            sigma = values[0] if len(values) == 1 else tuple(values)
+            sigma = one_or_each(values)
         else:
             sigma = per_pair(values, sc.geometry.n_pairs, option, f" in {sc.name}")
     # the study's estimators only (lag:S is the fixed-lag smoother): another's refusal must not stop it

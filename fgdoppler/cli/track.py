@@ -23,6 +23,7 @@ from fgdoppler.cli.common import (
     huber,
     motion,
     offset_sigma_error,
+    one_or_each,
     per_pair,
     taking,
 )
@@ -240,7 +241,7 @@ def _check_declared_counts(args: argparse.Namespace, geom: Geometry) -> None:
         from fgdoppler.estimators.site_offsets import site_sigmas
 
         try:
-            site_sigmas(args.site_sigma[0] if len(args.site_sigma) == 1 else tuple(args.site_sigma), geom)
+            site_sigmas(one_or_each(args.site_sigma), geom)
         except ValueError as exc:
             raise CLIError(f"--site-sigma: {exc}") from None
 
@@ -565,7 +566,7 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
         if values is not None and name not in taking(field):
             raise CLIError(f"{option} applies to {', '.join(taking(field))}, not to {name}")
         if values is not None:
-            shared[field] = values[0] if len(values) == 1 else tuple(values)
+            shared[field] = one_or_each(values)
     try:
         ESTIMATORS[name].settings(huber_k=k, **shared)
     except ValueError as exc:
