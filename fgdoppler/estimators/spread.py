@@ -567,9 +567,10 @@ def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
     the first estimate ``x0``); the reported track is the estimate moved by the mean's shift
     from ``x0``.  Importance sampling alone (no moves) decides whether to look further, so a track whose
     posterior is Gaussian costs one evaluation of :data:`SAMPLES` likelihoods; the moved samples' mean must
-    then still lie beyond :data:`MEAN_SHIFT_MIN` of the mode.  ``laplace``: the smoother's Laplace covariances; ``own``: the sampled
-    cost's own Gaussian model of the first state, whose difference from the samples' covariance about their
-    mean is added to them (:func:`_carried`, floored at the samples' narrowing of ``own``).
+    then still lie beyond :data:`MEAN_SHIFT_MIN` of the mode.  ``laplace``: the smoother's Laplace
+    covariances; ``own``: the sampled cost's own Gaussian model of the first state, whose difference from the
+    samples' covariance about their mean is added to them (:func:`_carried`, floored at the samples' narrowing
+    of ``own``).
     """
     x0, P0 = np.asarray(states[0], dtype=float), laplace[0]
     if post.sample_from([(x0, P0)], SAMPLES, 0, rng, tempered=False) is None:
@@ -577,13 +578,16 @@ def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
     # skewness is the mean's distance from the sampled posterior's own mode; the smoother's estimate differs
     # from that mode by what the process noise lets the track do, which is not skewness
     mode = post.mode(x0)
-    skew = post.x.mean(axis=0) - mode
-    if float(skew @ info @ skew) <= MEAN_SHIFT_MIN:
+
+    def skewed(mean: FloatArray) -> bool:
+        skew = mean - mode
+        return float(skew @ info @ skew) > MEAN_SHIFT_MIN
+
+    if not skewed(post.x.mean(axis=0)):
         return None
     rate = post.move(MOVES, rng)
     mean0 = post.x.mean(axis=0)
-    skew = mean0 - mode
-    if float(skew @ info @ skew) <= MEAN_SHIFT_MIN:
+    if not skewed(mean0):
         # the importance weights' scatter made the first mean look shifted and the moved samples' is not: moving
         # the track by its shift from x0 would carry x0's own distance from the mode, the process noise's share,
         # along the whole track (a high-rate recording: 8 m at 120 s, 5 of its own sigma, 'ok')
