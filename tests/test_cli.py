@@ -40,6 +40,33 @@ def test_simulate_writes_three_files(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert len(m) == 122 and t.states.shape == (61, 4)
 
 
+def test_simulate_says_when_the_start_lies_outside_the_trackers_zone(tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """Case a's default zone ends 48 km along the baseline.  A start at 60 km is outside it: simulate says so and
+    gives the zone that holds it; simulated again in that zone, nothing is said, and geometry.toml keeps the zone.
+    The same for a speed above the bound.  Inside the zone (the defaults), nothing is said."""
+    assert main(["simulate", "--case", "a", "--out", str(tmp_path / "in"), "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert "zone_holding_start" not in json.loads(out) and "zone" not in err
+    for start in (["--start-x", "60000"], ["--velocity", "10", "-300"]):
+        assert main(["simulate", "--case", "a", *start, "--out", str(tmp_path / "far"), "--json"]) == 0
+        out, err = capsys.readouterr()
+        advice = json.loads(out)["zone_holding_start"]
+        assert err.startswith("note: the start lies outside the zone") and advice in err
+        words = advice.split()
+        assert main(["simulate", "--case", "a", *start, *words, "--out", str(tmp_path / "wide"), "--json"]) == 0
+        out, err = capsys.readouterr()
+        assert "zone_holding_start" not in json.loads(out) and "zone" not in err
+        geom = fd.Geometry.from_toml(tmp_path / "wide" / "geometry.toml")
+        assert geom.zone.options() == advice
+    # a Monte Carlo study runs where it is asked to, and says the same of each start outside the zone
+    assert main(["montecarlo", "--case", "a", "--start-x", "25000", "60000", "--runs", "1", "--estimators", "ekf",
+                 "--out", str(tmp_path / "mc")]) == 0
+    err = capsys.readouterr().err
+    assert err.count("note:") == 1 and "start 60 km: the start lies outside the zone" in err
+    assert "--zone 2000 74500 -5000 5000" in err
+
+
 def test_simulate_bad_geometry_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["simulate", "--case", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "o")]) == 2
     assert "error" in capsys.readouterr().err
@@ -291,6 +318,24 @@ def test_track_never_assumes_a_geometry(tmp_path: Path, capsys: pytest.CaptureFi
                                                                 for ln in header)
     js = json.loads((tmp_path / "t.json").read_text())
     assert js["geometry"]["source"].endswith("geometry.toml") and js["zone"]["across"] == [-5000.0, 5000.0]
+
+
+def test_a_file_that_cannot_be_read_is_refused_before_the_estimators_load(tmp_path: Path) -> None:
+    """A mistyped name is refused in the reader's words, with or without a geometry, and before the estimators are
+    imported (they take a second or more to load; the user waits for nothing).  A fresh interpreter, so that no
+    earlier test has imported them already."""
+    import subprocess
+    import sys
+
+    missing = tmp_path / "typo.csv"
+    code = ("import sys; from fgdoppler.cli.main import main; "
+            f"status = main(['track', {str(missing)!r}, '--geometry', 'a', '--estimator', 'ekf']); "
+            "print(status, 'fgdoppler.estimators.initiation' in sys.modules, 'gtsam' in sys.modules)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert proc.stdout.split() == ["2", "False", "False"]
+    assert proc.stderr.strip() == f"fgdoppler track: error: {missing}: cannot read: No such file or directory"
+    # a folder given as FILE: the same words, whatever the geometry
+    assert main(["track", str(tmp_path), "--geometry", "b"]) == 2
 
 
 def test_zone_options_and_the_zone_table_are_used(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

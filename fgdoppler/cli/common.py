@@ -100,6 +100,20 @@ def geometry_with_zone(spec: str, args: argparse.Namespace) -> Any:
     return moved
 
 
+def zone_holding_start(geom: Any, start: Any) -> str | None:
+    """The zone options (:meth:`~fgdoppler.zone.Zone.reaching`) that hold the simulated ``start`` state, where the
+    geometry's zone (every tracker's prior) does not; ``None`` where it does.
+
+    The zone is the trackers' only knowledge of where a track begins.  Far from the sensors a start outside it
+    can fit the Doppler as well as one inside (range is weakly observed there), so `track` cannot see the mistake
+    in the data: it is said where the truth is known (simulate, montecarlo).
+    """
+    zone = geom.zone
+    if bool(zone.contains(start)):
+        return None
+    return str(zone.reaching(start).options())
+
+
 #: The ``dest`` of every option :func:`add_scenario_options` adds.
 SCENARIO_OPTIONS = ("velocity", "duration", "dt", "offsets", "sigma", "process_noise", "turn_rate", "acceleration",
                     "manoeuvre_onset", "bias", "clock_error", "site_error")

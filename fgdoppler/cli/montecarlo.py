@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,7 @@ from fgdoppler.cli.common import (
     one_or_each,
     per_pair,
     scenario,
+    zone_holding_start,
 )
 from fgdoppler.estimators.names import DEFAULT_ESTIMATORS
 
@@ -126,6 +128,12 @@ def _run(args: argparse.Namespace) -> int:
         z_note = "" if args.start_z is None else f", altitude {args.start_z / 1e3:g} km"
         scen += [scenario(args, geom, (x, y, *z), f"{label}, start {where}{z_note}")
                  for x, y, where in _starts(args, geom, PAPER_START_X)]
+    for sc in scen:  # the study runs as asked; the user learns that its trackers assume otherwise
+        outside = zone_holding_start(sc.geometry, sc.x0)
+        if outside is not None:
+            print(f"note: {sc.name}: the start lies outside the zone the trackers assume "
+                  f"({sc.geometry.zone.options()}), and a track starting inside it may be called ok; {outside} "
+                  "gives one that holds it", file=sys.stderr)
     from fgdoppler.estimators.registry import ESTIMATORS
 
     k = huber(args)

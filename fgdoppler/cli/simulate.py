@@ -20,6 +20,7 @@ from fgdoppler.cli.common import (
     geometry_with_zone,
     per_pair,
     scenario,
+    zone_holding_start,
 )
 
 __all__ = ["add_simulate"]
@@ -87,6 +88,9 @@ def _run(args: argparse.Namespace) -> int:
     }
     if scen.site_error:
         summary["site_error"] = scen.site_errors.tolist()
+    outside = zone_holding_start(geom, scen.x0)
+    if outside is not None:
+        summary["zone_holding_start"] = outside
     if args.json:
         emit_json(summary)
     else:
@@ -96,6 +100,10 @@ def _run(args: argparse.Namespace) -> int:
                   "declared, as a tracker would be told")
         for f in summary["files"]:
             print(f"  wrote {f}")
+    if outside is not None:
+        print(f"note: the start lies outside the zone the trackers will assume ({geom.zone.options()}): `fgdoppler "
+              f"track` may report a track that starts inside it, with status ok.  Give {outside} to simulate "
+              f"(geometry.toml keeps it) or to track", file=sys.stderr)
     return 0
 
 

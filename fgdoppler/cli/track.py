@@ -123,12 +123,6 @@ def _geometry_spec(args: argparse.Namespace) -> str:
     beside = args.file.parent / "geometry.toml"
     if beside.is_file():
         return str(beside)
-    # a file that cannot be opened (a mistyped name, a folder) is the mistake to report, as the CSV reader words it,
-    # not the missing geometry it implies; its contents wait for the geometry (pairs may be named in it)
-    try:
-        args.file.open("rb").close()
-    except OSError as exc:
-        raise CLIError(f"{args.file}: cannot read: {exc.strerror or exc}") from None
     raise CLIError(f"no geometry for {args.file}: pass --geometry a|b|FILE.toml, or put a geometry.toml "
                    "beside it (fgdoppler simulate writes one)")
 
@@ -246,7 +240,22 @@ def _check_declared_counts(args: argparse.Namespace, geom: Geometry) -> None:
             raise CLIError(f"--site-sigma: {exc}") from None
 
 
+def _check_readable(path: Path) -> None:
+    """Refuse a FILE that cannot be opened, in the CSV reader's words.
+
+    It comes first, before the estimators are imported (a second or more): a mistyped name is the mistake to
+    report, at once, and not the missing geometry it implies.  The contents wait for the geometry (pairs may be
+    named in it).  A pipe is not opened here: opening a named one twice could lose what its writer sent between.
+    """
+    try:
+        if path.is_dir() or path.is_file() or not path.exists():
+            path.open("rb").close()
+    except OSError as exc:
+        raise CLIError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
 def _run(args: argparse.Namespace) -> int:
+    _check_readable(args.file)
     from fgdoppler.csvfile import header_names
     from fgdoppler.estimators.initiation import initiate
     from fgdoppler.estimators.judge import repeat_reasons
