@@ -197,6 +197,13 @@ def test_a_skewed_valley_reports_the_posterior_mean_and_it_is_the_exact_one(s: i
     np.testing.assert_array_equal(a.times, b.times)
 
 
+def _four_pairs() -> fd.Geometry:
+    """Two transmitters and two receivers, each transmitter seen by both: a user's kind of layout."""
+    return fd.Geometry(pairs=tuple(fd.BistaticPair(tx=tx, rx=rx) for tx, rx in (
+        ((0.0, 0.0), (12e3, 3e3)), ((0.0, 0.0), (-8e3, 9e3)), ((20e3, -5e3), (12e3, 3e3)),
+        ((20e3, -5e3), (-8e3, 9e3)))))
+
+
 def test_where_the_process_noise_has_a_share_the_track_is_not_moved_by_it() -> None:
     """Four pairs about a well-observed target, 10 Hz for 60 s: the smoother's start differs from the
     constant-velocity samples' mode by what the process noise lets the track do, and the importance-sampled
@@ -208,9 +215,7 @@ def test_where_the_process_noise_has_a_share_the_track_is_not_moved_by_it() -> N
     nothing is reported as skewed, the track is the most likely one, and the truth lies inside the
     chi-square(4) 99.9 % point at its end.
     """
-    geometry = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=tx, rx=rx) for tx, rx in (
-        ((0.0, 0.0), (12e3, 3e3)), ((0.0, 0.0), (-8e3, 9e3)), ((20e3, -5e3), (12e3, 3e3)),
-        ((20e3, -5e3), (-8e3, 9e3)))))
+    geometry = _four_pairs()
     scenario = fd.Scenario(geometry=geometry, x0=(5e3, 5e3, 150.0, -50.0), duration=60.0, dt=0.1)
     sim = fd.simulate(scenario, np.random.default_rng(7))
     model = fd.TrackingModel.of(geometry)
@@ -232,9 +237,7 @@ def test_a_truth_with_process_noise_keeps_the_most_likely_track() -> None:
     skew is not reported where their mode lies beyond ``MODE_APART_MAX`` of the estimate: the most likely track,
     RMSE 2.7 m, its truth inside the chi-square(4) 99.9 % point at the end (measured 1.6).
     """
-    geometry = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=tx, rx=rx) for tx, rx in (
-        ((0.0, 0.0), (12e3, 3e3)), ((0.0, 0.0), (-8e3, 9e3)), ((20e3, -5e3), (12e3, 3e3)),
-        ((20e3, -5e3), (-8e3, 9e3)))))
+    geometry = _four_pairs()
     scenario = fd.Scenario(geometry=geometry, x0=(5e3, 5e3, 150.0, -50.0), duration=120.0, dt=0.5,
                            process_noise=fd.ConstantVelocity(q=1e-3))
     sim = fd.simulate(scenario, np.random.default_rng([9, 10]))
