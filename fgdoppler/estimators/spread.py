@@ -604,27 +604,24 @@ def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
     # skewness is the mean's distance from the sampled posterior's own mode; the smoother's estimate differs
     # from that mode by what the process noise lets the track do, which is not skewness
     mode = post.mode(x0)
-    apart = mode - x0
-    if float(apart @ info @ apart) > MODE_APART_MAX:
+
+    def squared(v: FloatArray) -> float:  # squared Mahalanobis length in the Laplace covariance
+        return float(v @ info @ v)
+
+    if squared(mode - x0) > MODE_APART_MAX:
         # the data hold the track away from every constant-velocity one: the samples' posterior is not the
         # smoother's, nor is its skew
         return None
-
-    def skewed(mean: FloatArray) -> bool:
-        skew = mean - mode
-        return float(skew @ info @ skew) > MEAN_SHIFT_MIN
-
-    if not skewed(post.x.mean(axis=0)):
+    if squared(post.x.mean(axis=0) - mode) <= MEAN_SHIFT_MIN:
         return None
     rate = post.move(MOVES, rng)
-    mean0 = post.x.mean(axis=0)
-    if not skewed(mean0):
-        # the importance weights' scatter made the first mean look shifted and the moved samples' is not
-        return None
     # the skew alone moves the track: a shift from x0 would also carry x0's own distance from the mode, the
     # process noise's share, along the whole track as a velocity offset
-    d = mean0 - mode
-    w = float(d @ info @ d)
+    d = post.x.mean(axis=0) - mode
+    w = squared(d)
+    if w <= MEAN_SHIFT_MIN:
+        # the importance weights' scatter made the first mean look shifted and the moved samples' is not
+        return None
     spread = _weighted_cov(post.x, np.full(post.x.shape[0], 1.0 / post.x.shape[0]))
     carried = _carried(model, laplace, spread - own, times, min(1.0, float(_whitened_eigenvalues(own, spread)[0])))
     t0 = float(times[0])
