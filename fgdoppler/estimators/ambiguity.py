@@ -164,11 +164,22 @@ def resolve(run: Runner, resolution: Resolution, measurements: Measurements, mod
     r"""Run ``run`` from every hypothesis and report one track (module docstring).
 
     ``weights`` are the hypotheses' prior weights (default: from their
-    window costs, :math:`\propto e^{-c/2}`).  ``progress`` sees each run's
-    tasks prefixed with ``"hypothesis i/n"``.
+    window costs, :math:`\propto e^{-c/2}`); a hypothesis of weight zero is
+    run but takes no share.  ``progress`` sees each run's tasks prefixed
+    with ``"hypothesis i/n"``.
+
+    Raises
+    ------
+    ValueError
+        If ``weights`` are not one non-negative number per hypothesis, or all zero.
     """
     t_begin = time.perf_counter()
     n = len(hyps)
+    if weights is not None:
+        w = np.asarray(weights, dtype=float)
+        if w.shape != (n,) or not (np.all(w >= 0.0) and np.any(w > 0.0)):
+            raise ValueError(f"the {n} hypotheses' weights must be {n} non-negative numbers, not all zero; "
+                             f"got {w.tolist()}")
     note = _ran(n)
     if resolution == "likelihood" and run is not run_ekf:
         return _resolve_ranked(run, measurements, model, hyps, settings, progress, weights, note, t_begin)
@@ -358,9 +369,18 @@ class _Weights:
 
     @classmethod
     def of(cls, hyps: list[Initiation], ekfs: list[TrackResult], weights: NDArray[np.float64] | None) -> _Weights:
-        r"""From the prior ``weights`` (default :math:`\propto e^{-c/2}` of the window costs) and one EKF each."""
-        logw0 = np.log(np.asarray(weights, dtype=float)) if weights is not None else -0.5 * np.array(
-            [h.cost for h in hyps])
+        r"""From the prior ``weights`` (default :math:`\propto e^{-c/2}` of the window costs) and one EKF each.
+
+        A weight of exactly zero is a log weight of :math:`-\infty`: the
+        hypothesis takes no share anywhere (a restart's running estimate whose
+        cost puts it more than ~745 nats below the fit, where its share
+        underflows).
+        """
+        if weights is None:
+            logw0 = -0.5 * np.array([h.cost for h in hyps])
+        else:
+            with np.errstate(divide="ignore"):
+                logw0 = np.log(np.asarray(weights, dtype=float))
         return cls(logw0, np.array([e.log_likelihood for e in ekfs]), ekfs[0].primary.times)
 
     def at(self, times: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -137,3 +137,30 @@ def test_only_the_hypothesis_of_lowest_cost_is_finished(monkeypatch: pytest.Monk
     whole = amb.resolve(ESTIMATORS["smoother"].run, "cost", m, model, hyps, settings, None, weights)
     assert sampled == [True, True]
     _assert_same_report(staged, whole)
+
+
+@pytest.mark.parametrize("name", ["ekf", "isam2"])
+def test_a_hypothesis_of_zero_weight_takes_no_share(name: str) -> None:
+    """Case a 45 km run 1 (a mirror hypothesis): prior weights (1, 0) report the first hypothesis's run alone.
+
+    A restart's running estimate can weigh exactly zero, its share of the
+    window's posterior underflowing (a random layout at 5 Hz); its log
+    weight is then -inf, so every mixture weight is exactly (1, 0) and the
+    mixed means are the first run's to the bit (pytest turns the log's
+    divide-by-zero warning into an error).  Weights that are not one
+    non-negative number per hypothesis, or all zero, are refused before
+    anything runs.
+    """
+    m, model, init = _case(2, 1)
+    hyps = amb.hypotheses(init)
+    assert len(hyps) == 2
+    info = fd.ESTIMATORS[name]
+    settings = info.settings(restarts=False)
+    mixed = amb.resolve(info.run, "likelihood", m, model, hyps, settings, None, np.array([1.0, 0.0]))
+    alone = info.run(m, model, hyps[0], settings)
+    np.testing.assert_array_equal(mixed.primary.times, alone.primary.times)
+    np.testing.assert_array_equal(mixed.primary.states, alone.primary.states)
+    np.testing.assert_allclose(mixed.primary.covariances, alone.primary.covariances, rtol=1e-12, atol=0)
+    for bad in ([0.0, 0.0], [1.0, -0.5], [1.0]):
+        with pytest.raises(ValueError, match="non-negative"):
+            amb.resolve(info.run, "likelihood", m, model, hyps, settings, None, np.array(bad))
