@@ -171,14 +171,14 @@ def resolve(run: Runner, resolution: Resolution, measurements: Measurements, mod
     Raises
     ------
     ValueError
-        If ``weights`` are not one non-negative number per hypothesis, or all zero.
+        If ``weights`` are not one finite, non-negative number per hypothesis, or all zero.
     """
     t_begin = time.perf_counter()
     n = len(hyps)
     if weights is not None:
         w = np.asarray(weights, dtype=float)
-        if w.shape != (n,) or not (np.all(w >= 0.0) and np.any(w > 0.0)):
-            raise ValueError(f"the {n} hypotheses' weights must be {n} non-negative numbers, not all zero; "
+        if w.shape != (n,) or not (np.all(np.isfinite(w)) and np.all(w >= 0.0) and np.any(w > 0.0)):
+            raise ValueError(f"the {n} hypotheses' weights must be {n} finite, non-negative numbers, not all zero; "
                              f"got {w.tolist()}")
     note = _ran(n)
     if resolution == "likelihood" and run is not run_ekf:

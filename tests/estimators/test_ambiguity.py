@@ -147,7 +147,7 @@ def test_a_hypothesis_of_zero_weight_takes_no_share(name: str) -> None:
     window's posterior underflowing (a random layout at 5 Hz); its log
     weight is then -inf, so every mixture weight is exactly (1, 0) and the
     mixed means are the first run's to the bit (pytest turns the log's
-    divide-by-zero warning into an error).  Weights that are not one
+    divide-by-zero warning into an error).  Weights that are not one finite,
     non-negative number per hypothesis, or all zero, are refused before
     anything runs.
     """
@@ -161,6 +161,6 @@ def test_a_hypothesis_of_zero_weight_takes_no_share(name: str) -> None:
     np.testing.assert_array_equal(mixed.primary.times, alone.primary.times)
     np.testing.assert_array_equal(mixed.primary.states, alone.primary.states)
     np.testing.assert_allclose(mixed.primary.covariances, alone.primary.covariances, rtol=1e-12, atol=0)
-    for bad in ([0.0, 0.0], [1.0, -0.5], [1.0]):
+    for bad in ([0.0, 0.0], [1.0, -0.5], [1.0, np.inf], [1.0, np.nan], [1.0]):
         with pytest.raises(ValueError, match="non-negative"):
             amb.resolve(info.run, "likelihood", m, model, hyps, settings, None, np.array(bad))
