@@ -358,9 +358,9 @@ from fgdoppler.models.robust import huber_weights
 from fgdoppler.models.tracking import TrackingModel
 
 __all__ = ["ADAPTED", "ADAPTED_PASSES", "BEND_LIMIT", "BROAD", "ESS_MIN", "FILTER_MOVES", "FILTER_SAMPLES",
-           "GROWTH_LIMIT", "MAX_ADAPTED_PASSES", "MAX_SPAN", "MEAN_SHIFT_MIN", "MODE_APART_MAX", "PASS_GROWTH", "PROBE_MOVES",
-           "PROBE_PASSES", "PROBE_SAMPLES", "SAMPLES", "SAMPLING_LIMIT", "TRUST_LIMIT", "FilteredSpread",
-           "PosteriorSpread", "filtered_spread", "posterior_spread"]
+           "GROWTH_LIMIT", "MAX_ADAPTED_PASSES", "MAX_SPAN", "MEAN_SHIFT_MIN", "MODE_APART_MAX", "PASS_GROWTH",
+           "PROBE_MOVES", "PROBE_PASSES", "PROBE_SAMPLES", "SAMPLES", "SAMPLING_LIMIT", "TRUST_LIMIT",
+           "FilteredSpread", "PosteriorSpread", "filtered_spread", "posterior_spread"]
 
 FloatArray = NDArray[np.float64]
 
