@@ -96,6 +96,14 @@ to the track to its covariances, from reruns with the same random numbers
 (:func:`~fgdoppler.estimators.clock_offsets.clock_shares`), as for the
 filters.
 
+**Restarts.** :func:`~fgdoppler.estimators.registry.run_estimator`
+tests the run at the filters' checkpoints where the data since the last
+one surprise it, and starts it again from the best fit of all the data so
+far where that and the running estimate each lie outside the other's
+99.9 % region (:mod:`fgdoppler.estimators.restart`, "The particle
+estimators"; ``restarts=False`` in the settings turns this off): a start
+sampled in the wrong basin is otherwise never left.
+
 Random numbers come from ``numpy.random.default_rng(settings.seed)``: the
 same input and settings give the same track.
 """

@@ -39,7 +39,7 @@ from fgdoppler.estimators.judge import judge, track_reference
 from fgdoppler.estimators.later_mistakes import later_mistakes
 from fgdoppler.estimators.names import ALIASES, SUMMARIES
 from fgdoppler.estimators.particle import run_map, run_particle
-from fgdoppler.estimators.restart import FreshFits, with_restarts
+from fgdoppler.estimators.restart import FreshFits, surprise_check, with_restarts
 from fgdoppler.estimators.results import TrackResult
 from fgdoppler.estimators.search_memo import SearchMemo
 from fgdoppler.estimators.settings import (
@@ -160,7 +160,10 @@ def run_estimator(
     If the initiation is ambiguous (other solutions pass its χ² test, e.g. a
     mirror image) and ``resolve_ambiguity`` is set, the estimator is run from
     every hypothesis and the later data decide
-    (:mod:`fgdoppler.estimators.ambiguity`).
+    (:mod:`fgdoppler.estimators.ambiguity`); with it and
+    ``settings.restarts`` (the default of every estimator but the offline
+    smoother) the run is started again where all the data so far point
+    elsewhere (:mod:`fgdoppler.estimators.restart`).
 
     The estimator runs in the model's computation frame (the geometry's own,
     :attr:`~fgdoppler.models.tracking.TrackingModel.frame`) and the result is
@@ -215,12 +218,14 @@ def _run_estimator(name: str, measurements: Measurements, model: TrackingModel |
     per_pair, offsets, clocks, site_errors = _declared_offsets(settings, model)
     hyps, weights = _hypotheses(info, measurements, model, init, settings) if resolve_ambiguity else ([init], None)
     result = base = _solve(info, measurements, model, hyps, settings, progress, weights)
-    if resolve_ambiguity and info.resolution == "likelihood" and getattr(settings, "restarts", False) \
+    if resolve_ambiguity and info.resolution in ("likelihood", "native") and getattr(settings, "restarts", False) \
             and model.zone is not None:
         def again(new: Initiation) -> TrackResult:
             h, w = _hypotheses(info, measurements, model, new, settings)
             return _solve(info, measurements, model, h, settings, prefixed(progress, "restart"), w)
-        result = with_restarts(measurements, model, init, settings, result, again, fits=fits)
+        result = with_restarts(measurements, model, init, settings, result, again, fits=fits,
+                               only_if=surprise_check(init.t_start, settings.max_span)
+                               if isinstance(settings, ParticleSettings) else None)
     held = (_reference(measurements, model, init, settings, reference, per_pair, resolve_ambiguity, progress)
             if verify and result.primary.kind != "smoothed" else None)
     judged = judge(result, measurements, model, settings, held, half_plane=init.half_plane is not None)

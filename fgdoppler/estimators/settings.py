@@ -721,6 +721,15 @@ class ParticleSettings(TrackerSettings):
         ``start_move_steps`` moves (faster; its sample stays near the
         proposal's centres, under-dispersed, and can give one of two
         mirror modes all the mass).
+    restarts : bool, default True
+        At the filters' checkpoints where the measurements since the last
+        one surprise the estimator (their NIS sum beyond the χ² 99.9 %
+        quantile) and no later than ``max_span`` after the start, find the
+        best fit of all data so far and, where it and the running estimate
+        each lie outside the other's 99.9 % region, sample the posterior of
+        all the data so far again from the fit's solutions and the running
+        estimate (:mod:`fgdoppler.estimators.restart`, "The particle
+        estimators").
     bias_sigma : float or tuple of float, default 0.0
         Each pair's Doppler calibration uncertainty (m/s, one standard
         deviation; one value for every pair or one per pair).  Where the
@@ -766,6 +775,7 @@ class ParticleSettings(TrackerSettings):
     max_span: float = 300.0
     max_noise_share: float = 0.1
     tempered_start: bool = True
+    restarts: bool = True
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -786,6 +796,7 @@ class ParticleSettings(TrackerSettings):
         if isinstance(self.max_noise_share, bool) or not self.max_noise_share > 0:
             raise ValueError(f"max_noise_share must be a positive number (math.inf: off), got {self.max_noise_share!r}")
         _flag(self.tempered_start, "tempered_start")
+        _flag(self.restarts, "restarts")
 
 
 @dataclass(frozen=True, kw_only=True)
