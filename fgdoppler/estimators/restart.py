@@ -88,8 +88,8 @@ favour a wrong basin every particle can settle there and stay, confident.
 On two pairs in general position recorded with gaps (the layout and
 target of draw 23 of ``studies/random_layouts.py``, 60 s at 2 Hz, 30 % of
 the measurements dropped, one pair silent for 10 s; one of 16 noise
-draws, ``tests/estimators/test_restart.py``) both ended 12.6 km from the truth with a position sigma of 53 m, and the
-verdict said ``failed``.  So they are tested as well, at a checkpoint
+draws, ``tests/estimators/test_restart.py``) both ended 12.6 km from the
+truth with a position sigma of 53 m, and the verdict said ``failed``.  So they are tested as well, at a checkpoint
 where the measurements since the last one *surprise* them — the sum of
 their normalised innovations beyond the χ² quantile at :data:`SURPRISE`
 (:func:`surprised`) — and no later than ``max_span`` after the start: a
