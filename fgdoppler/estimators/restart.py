@@ -89,21 +89,22 @@ On two pairs in general position recorded with gaps (the layout and
 target of draw 23 of ``studies/random_layouts.py``, 60 s at 2 Hz, 30 % of
 the measurements dropped, one pair silent for 10 s; one of 16 noise
 draws, ``tests/estimators/test_restart.py``) both ended 12.6 km from the
-truth with a position sigma of 53 m, and the verdict said ``failed``.  So they are tested as well, at a checkpoint
-where the measurements since the last one *surprise* them — the sum of
-their normalised innovations beyond the χ² quantile at :data:`SURPRISE`
-(:func:`surprised`) — and no later than ``max_span`` after the start: a
-restart samples the posterior of every measurement so far, which past
-``max_span`` costs more than the moves the estimators themselves bound
-to that span.  The test and the restart are the ones above; the
+truth with a position sigma of 53 m, and the verdict said ``failed``.  So
+they are tested as well, at a checkpoint where the measurements since the
+last one *surprise* them — more than half of their normalised
+innovations beyond the χ²₁ quantile at :data:`SURPRISE`
+(:func:`surprised`), which a few outliers do not reach — and no later
+than ``max_span`` after the start: a restart samples the posterior of
+every measurement so far, which past ``max_span`` costs more than the
+moves the estimators themselves bound to that span.  The test and the restart are the ones above; the
 estimator runs again from the fresh initiation, its window every
 measurement up to :math:`t_c`, sampled from the fit's solutions and the
-running estimate.  On that recording the check at 20 s put the running
-estimate 950 sigma from the best fit, and both ended 23–25 m from the
+running estimate.  On that recording the check at 36.5 s put the running
+estimate 930 sigma from the best fit, and both ended 31–34 m from the
 truth (``doubtful``: the rejections before the restart).  In the
-accuracy benchmark's 600 runs of each seed the data surprised them at 2–3
-of 2,400 checkpoints, and none of those checks restarted them
-(docs/concepts.md, "The particle estimators restart too").
+accuracy benchmark's 600 runs of each seed not one of the 2,400
+checkpoints per estimator surprised them (docs/concepts.md, "The particle
+estimators restart too", with the rule tried first).
 
 Step 1 depends on the recording, the model, the loss and the half plane,
 never on the tracker or its estimate: the EKF, iSAM2 and the fixed-lag
@@ -153,7 +154,7 @@ DISAGREEMENT = 0.999
 #: Data-cost margin (Σr², i.e. −2 log-likelihood) by which another mode must beat the running estimate's own basin:
 #: a likelihood ratio of 1/(1 − DISAGREEMENT), 1,000 to 1.
 MODE_MARGIN = float(2.0 * np.log(1.0 / (1.0 - DISAGREEMENT)))
-#: χ² probability beyond which the NIS sum since the last checkpoint surprises a particle estimator (:func:`surprised`).
+#: χ²₁ probability beyond which the median NIS since the last checkpoint surprises a particle estimator (:func:`surprised`).
 SURPRISE = 0.999
 
 #: Runs a tracker from an initiation over the measurements after its window (the registry's solve step).
@@ -385,20 +386,27 @@ def _splice(old: TrackResult, new: TrackResult, tc: float, message: str) -> Trac
 def surprised(result: TrackResult, t_from: float, t_to: float) -> bool:
     r"""Whether the measurements gated in :math:`(t_\mathrm{from}, t_\mathrm{to}]` surprise the tracker.
 
-    Their normalised innovations :math:`\nu_j` (``result.nis``, kept or
-    rejected) have mean 1 each under the tracker's own predictive
-    distribution, so their sum over :math:`n` measurements is :math:`\chi^2_n`
-    where that distribution is Gaussian and right.  Surprised when the sum
-    exceeds the :math:`\chi^2_n` quantile at :data:`SURPRISE`.  Rejections
-    count at their full NIS: a tracker that has lost the target rejects
-    nearly everything, each by a wide margin.
+    Surprised when the median of their normalised innovations :math:`\nu_j`
+    (``result.nis``, kept or rejected) exceeds the :math:`\chi^2_1` quantile
+    at :data:`SURPRISE`: more than half of them lie where a right predictive
+    distribution puts one measurement in a thousand.  Under it the chance of
+    that is :math:`P(\mathrm{Bin}(n, 1 - \mathrm{SURPRISE}) \ge n/2)`, below
+    :math:`10^{-10}` for the ten or more measurements between two
+    checkpoints.  A tracker that has lost the target misses most
+    measurements by a wide margin; a few outliers move the median
+    little.  The sum of the :math:`\nu_j` against :math:`\chi^2_n`, tried
+    first, was set off by 5 % of outliers at ±100 σ under the squared loss,
+    and the restart then went to a fit that the outliers had pulled away:
+    `particle` 58 m → 829 m and 88 m → 1,042 m from the truth at the end
+    (the verdict cases of ``tests/estimators/test_verdict.py``, seeds 0 and
+    2); with the median they do not restart.
     """
     if result.nis.size == 0:
         return False
     t = result.nis[:, 0]
     nu = result.nis[(t > t_from + 1e-9) & (t <= t_to + 1e-9), 2]
     nu = nu[np.isfinite(nu)]
-    return bool(nu.size and float(np.sum(nu)) > chi2.ppf(SURPRISE, nu.size))
+    return bool(nu.size and float(np.median(nu)) > chi2.ppf(SURPRISE, 1))
 
 
 def surprise_check(t_start: float, max_span: float) -> Callable[[TrackResult, float, float], bool]:
