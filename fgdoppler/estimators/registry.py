@@ -218,8 +218,7 @@ def _run_estimator(name: str, measurements: Measurements, model: TrackingModel |
     per_pair, offsets, clocks, site_errors = _declared_offsets(settings, model)
     hyps, weights = _hypotheses(info, measurements, model, init, settings) if resolve_ambiguity else ([init], None)
     result = base = _solve(info, measurements, model, hyps, settings, progress, weights)
-    if resolve_ambiguity and info.resolution in ("likelihood", "native") and getattr(settings, "restarts", False) \
-            and model.zone is not None:
+    if resolve_ambiguity and getattr(settings, "restarts", False) and model.zone is not None:
         def again(new: Initiation) -> TrackResult:
             h, w = _hypotheses(info, measurements, model, new, settings)
             return _solve(info, measurements, model, h, settings, prefixed(progress, "restart"), w)

@@ -96,10 +96,10 @@ innovations beyond the χ²₁ quantile at :data:`SURPRISE`
 (:func:`surprised`), which a few outliers do not reach — and no later
 than ``max_span`` after the start: a restart samples the posterior of
 every measurement so far, which past ``max_span`` costs more than the
-moves the estimators themselves bound to that span.  The test and the restart are the ones above; the
-estimator runs again from the fresh initiation, its window every
-measurement up to :math:`t_c`, sampled from the fit's solutions and the
-running estimate.  On that recording the check at 36.5 s put the running
+moves the estimators themselves bound to that span.  The test and the
+restart are the ones above; the estimator runs again from the fresh
+initiation, its window every measurement up to :math:`t_c`, sampled from
+the fit's solutions and the running estimate.  On that recording the check at 36.5 s put the running
 estimate 930 sigma from the best fit, and both ended 31–34 m from the
 truth (``doubtful``: the rejections before the restart).  In the
 accuracy benchmark's 600 runs of each seed not one of the 2,400
