@@ -164,7 +164,9 @@ class GaussianSumSettings(TrackerSettings):
         from the tracker's own estimate, unless a fresh multi-start
         initiation finds a mode 1,000 times more likely) and restart the
         tracker from it when each lies outside the other's 99.9 % region
-        (:mod:`fgdoppler.estimators.restart`).
+        (decided under the Huber loss where a few measurements pull the
+        squared-loss fit away: outliers do not restart it;
+        :mod:`fgdoppler.estimators.restart`).
     """
 
     components: int = 8
@@ -723,11 +725,11 @@ class ParticleSettings(TrackerSettings):
         mirror modes all the mass).
     restarts : bool, default True
         At the filters' checkpoints where the measurements since the last
-        one surprise the estimator (more than half of their NIS beyond the
-        χ²₁ 99.9 % quantile) and no later than ``max_span`` after the
-        start, find the best fit of all data so far and, where it and the
-        running estimate each lie outside the other's 99.9 % region,
-        sample the posterior of all the data so far again from the fit's
+        one surprise the estimator (their NIS sum beyond the χ² 99.9 %
+        quantile) and no later than ``max_span`` after the start, find the
+        best fit of all data so far and, where it and the running estimate
+        each lie outside the other's 99.9 % region (under the Huber loss
+        where a few measurements pull the fit away), sample the posterior of all the data so far again from the fit's
         solutions and the running estimate
         (:mod:`fgdoppler.estimators.restart`, "The particle estimators").
     bias_sigma : float or tuple of float, default 0.0

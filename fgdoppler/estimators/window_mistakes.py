@@ -31,6 +31,7 @@ from fgdoppler.estimators.judge import REJECT_ROBUST
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.geometry import Geometry, pair_labels
 from fgdoppler.measurements import Measurements
+from fgdoppler.models.robust import EFFICIENT_K
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.repeats import find_repeats
 
@@ -92,7 +93,7 @@ TIME_UNITS: tuple[tuple[str, float], ...] = (("milliseconds", 1e3), ("microsecon
 SHORTEST_INTERVAL = 5e-3
 
 #: The Huber threshold (whitened residuals) :func:`outliers_reason` fits a failing window with: ``--huber``'s default.
-HUBER_TRIED = 1.345
+HUBER_TRIED = EFFICIENT_K
 
 #: What an ``outliers`` finding of :func:`outliers_reason` says (and only it).
 WITH_OUTLIERS = "the data likely hold outliers"

@@ -21,9 +21,11 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["huber_residuals", "huber_rho", "huber_weights"]
+__all__ = ["EFFICIENT_K", "huber_residuals", "huber_rho", "huber_weights"]
 
 FloatArray = NDArray[np.float64]
+#: The threshold (whitened units) at which the Huber estimate of a mean keeps 95 % efficiency on Gaussian data.
+EFFICIENT_K = 1.345
 
 
 def huber_rho(r: ArrayLike, k: float | None, *, out: FloatArray | None = None) -> FloatArray:

@@ -291,18 +291,19 @@ def _with_nis(nis: list[tuple[float, int, float, bool]]) -> fd.TrackResult:
     return replace(res, nis=np.array(nis, dtype=float).reshape(-1, 4))
 
 
-def test_surprise_is_a_median_nis_beyond_the_chi_square_quantile() -> None:
-    # Surprised when more than half of the measurements in (t_from, t_to] lie beyond the chi-square(1)
-    # quantile at SURPRISE, kept or rejected; rows at t_from or after t_to do not count (were they counted,
-    # their zeros would pull the median down), and just under half beyond, however far, is no surprise.
-    q = chi2.ppf(SURPRISE, 1)
-    outside = [(10.0, 0, 0.0, True)] * 3 + [(30.0, 1, 0.0, True)] * 3
+def test_surprise_is_a_nis_sum_beyond_the_chi_square_quantile() -> None:
+    # Surprised when the NIS of the n measurements in (t_from, t_to], kept or rejected, sum beyond the
+    # chi-square(n) quantile at SURPRISE; rows at t_from or after t_to do not count (were they counted, their
+    # 1e6 would surprise it), and neither do rows whose NIS is not finite.
+    n = 11
+    q = chi2.ppf(SURPRISE, n)
+    outside = [(10.0, 0, 1e6, False)] * 3 + [(30.0, 1, 1e6, False)] * 3 + [(12.5, 0, np.nan, False)]
     for scale, expected in ((1.001, True), (0.999, False)):
-        beyond = [(11.0 + k, k % 2, scale * q, False) for k in range(6)]
-        inside = [(17.0 + k, k % 2, 0.0, True) for k in range(5)]
-        assert surprised(_with_nis(beyond + inside + outside), 10.0, 22.0) is expected
-    outliers = [(11.0 + k, 0, 1e6, False) for k in range(5)] + [(16.0 + k, 1, 0.5, True) for k in range(6)]
-    assert not surprised(_with_nis(outliers), 10.0, 22.0)
+        inside = [(11.0 + k, k % 2, scale * q / n, k % 3 > 0) for k in range(n)]
+        assert surprised(_with_nis(inside + outside), 10.0, 22.0) is expected
+    # one measurement far off among many is a surprise: the sum sees it, whatever the others do
+    assert surprised(_with_nis([(11.0, 0, 1e3, False)] + [(12.0 + k, 1, 0.0, True) for k in range(n - 1)]),
+                     10.0, 22.0)
     assert not surprised(_with_nis([]), 0.0, 100.0)
     # a checkpoint beyond the span is never tested, however surprising the data
     loud = _with_nis([(5.0, 0, 1e6, False), (15.0, 0, 1e6, False)])
@@ -329,9 +330,9 @@ def _gapped_recording(seed: int) -> tuple[fd.Simulation, fd.Measurements, fd.Geo
 @pytest.mark.parametrize("estimator", ["particle", "map"])
 def test_a_lost_particle_estimator_restarts_and_recovers(estimator: str) -> None:
     # The window's posterior was sampled in the wrong basin and every particle stayed there, confident:
-    # 12.6 km off, 53 m sigma, "failed".  From 20 s on most measurements miss it by far, the best fit of all
-    # the data up to the next checkpoint (36.5 s) lies hundreds of sigma away, and the restarted estimator
-    # ends within 100 m.
+    # 12.6 km off, 53 m sigma, "failed".  The measurements up to the checkpoint at 20 s surprise it (their NIS
+    # sum beyond its quantile), the best fit of all the data up to then lies 950-960 sigma away, and the restarted
+    # estimator ends within 100 m.
     sim, m, g = _gapped_recording(14)
     init = fd.initiate(m.first_per_pair(10), g)
     settings = fd.ESTIMATORS[estimator].settings
@@ -349,18 +350,44 @@ def test_a_lost_particle_estimator_restarts_and_recovers(estimator: str) -> None
     np.testing.assert_array_equal(cut.primary.states, res.primary.states[sel])
 
 
-def test_a_few_outliers_do_not_restart_the_particle_estimator() -> None:
-    # 5 % of the measurements moved by +-100 sigma, squared loss (a verdict case of test_verdict.py, seed 0):
-    # the particles reject them and stay 58 m from the truth.  The outliers' NIS summed against chi-square(n)
-    # surprised the estimator at every checkpoint and restarted it onto fits they had pulled away (829 m off at
-    # the end); most measurements still fit, so the median does not.
+@pytest.mark.parametrize(("estimator", "seed"), [("ekf", 3), ("isam2", 3), ("fixed-lag", 3), ("particle", 0),
+                                               ("particle", 2)])
+def test_a_few_outliers_do_not_restart_a_tracker(estimator: str, seed: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    # 5 % of the measurements moved by +-100 sigma, squared loss (a verdict case of test_verdict.py): the
+    # estimators reject them by their gate or likelihood and end 3-17 m (seed 3), 58 m and 88 m (particle,
+    # seeds 0 and 2) from the truth.  The outliers pull the check's squared-loss fit 19-182 sigma from the fit
+    # under the Huber loss, so the check is decided under the Huber loss, whose fit agrees with the running
+    # estimate: no restart.  With the squared-loss check alone they restarted onto fits the outliers had pulled
+    # and ended 239-1,102 m (seed 3) and 829 m and 1,042 m off.  The NIS sum that tests the particle estimators is
+    # set off by the outliers, so their check does run.
     from tests.estimators.test_verdict import CASES
 
-    sim, g, m, _ = CASES["5 % outliers, Gaussian loss"](0)
+    sim, g, m, _ = CASES["5 % outliers, Gaussian loss"](seed)
     init = fd.initiate(m.first_per_pair(10), g)
-    plain = fd.run_estimator("particle", m, g, init, fd.ParticleSettings(restarts=False), verify=False)
-    res = fd.run_estimator("particle", m, g, init, verify=False)
+    settings = fd.ESTIMATORS[estimator].settings
+    plain = fd.run_estimator(estimator, m, g, init, settings(restarts=False), verify=False)
+    res = fd.run_estimator(estimator, m, g, init, verify=False)
     assert np.any(res.nis[:, 3] == 0)  # the outliers were there and rejected
+    if estimator == "particle":
+        ends = [init.t_end, *checkpoints(m, init)]
+        assert any(surprised(plain, t_from, t_to) for t_from, t_to in pairwise(ends))
     assert not [e for e in res.events if "online re-initiation" in e.message]
     np.testing.assert_array_equal(res.primary.states, plain.primary.states)
     assert _end_error(sim, res) < 200.0
+    monkeypatch.setattr(restart, "EFFICIENT_K", None)  # the robust fit is the squared-loss one: never pulled
+    pulled = fd.run_estimator(estimator, m, g, init, verify=False)
+    assert [e for e in pulled.events if "online re-initiation" in e.message]
+    assert _end_error(sim, pulled) > 4.0 * _end_error(sim, res) + 100.0
+
+
+def test_on_gaussian_data_the_robust_fit_leaves_a_restart_alone(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Case a 5 km, run 36 of the accuracy benchmark (seed 2026): the EKF restarts at 7 s, 4.5 sigma from the
+    # best fit (the threshold: 4.3).  The fit under the Huber loss lies 0.3 sigma from the squared-loss one, so
+    # the squared-loss check stands.  Deciding every restart under the Huber loss too vetoed this one, and the
+    # run's RMSE went from 1,063 m to 1,288 m.
+    sim, model, init = benchmark_run(0, 36)
+    res = fd.run_estimator("ekf", sim.measurements, model, init, verify=False)
+    assert [e for e in res.events if "online re-initiation" in e.message]
+    monkeypatch.setattr(restart, "EFFICIENT_K", None)
+    squared = fd.run_estimator("ekf", sim.measurements, model, init, verify=False)
+    np.testing.assert_array_equal(res.primary.states, squared.primary.states)
