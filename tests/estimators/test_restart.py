@@ -241,7 +241,8 @@ def _rotated(g: fd.Geometry, angle: float, shift: tuple[float, float]) -> fd.Geo
 
 def test_the_trackers_of_one_call_share_their_fresh_fits(monkeypatch: pytest.MonkeyPatch) -> None:
     # Step 1 of a check (the fit of all data up to the checkpoint) does not depend on the tracker: in
-    # run_estimators the EKF and the fixed-lag smoother (iSAM2 alike) compute each checkpoint's fit once,
+    # run_estimators the EKF and the fixed-lag smoother (iSAM2 alike) compute each checkpoint's fit once (and,
+    # where a check calls for a restart, its fit under the Huber loss once: restart._pulled),
     # and their tracks are those of one run_estimator call each, to the bit.  Run 32 of case a 5 km (the EKF
     # restarts there), with the geometry rotated and moved 830 km, so that every tracker computes in the
     # geometry's own frame and the fits are shared through one local model.
@@ -249,11 +250,11 @@ def test_the_trackers_of_one_call_share_their_fresh_fits(monkeypatch: pytest.Mon
     m = sim.measurements
     g = _rotated(sim.scenario.geometry, 0.37, (3.2e5, -7.7e5))
     init = fd.initiate(m.first_per_pair(10), g)
-    calls: list[float] = []
+    calls: list[tuple[float, float]] = []  # (checkpoint, Huber threshold or 0 for the squared loss) of each fit
     fit = restart._fresh_fit
 
     def counted(*args: object) -> object:
-        calls.append(float(args[-1]))  # type: ignore[arg-type]
+        calls.append((float(args[-1]), float(args[2] or 0.0)))  # type: ignore[arg-type]
         return fit(*args)  # type: ignore[arg-type]
 
     monkeypatch.setattr(restart, "_fresh_fit", counted)
@@ -264,6 +265,7 @@ def test_the_trackers_of_one_call_share_their_fresh_fits(monkeypatch: pytest.Mon
     shared = fd.run_estimators(names, m, g, init, verify=False)
     assert any("online re-initiation" in e.message for e in alone["ekf"].events)
     assert sorted(calls) == sorted(set(alone_calls)) and len(alone_calls) == 2 * len(calls) > 0
+    assert any(k > 0 for _, k in calls)  # the restart's check fitted under the Huber loss too, shared as well
     for n in names:
         a, b = alone[n], shared[n]
         assert [e.kind for e in a.estimates] == [e.kind for e in b.estimates]
