@@ -128,7 +128,11 @@ runs again from the fresh initiation, its window every measurement up to
 :math:`t_c`, sampled from the fit's solutions and the running estimate.
 On the gapped recording the check at 20 s put the running estimate 950-960
 sigma from the best fit, and both ended 23–25 m from the truth
-(``doubtful``: the rejections before the restart).
+(``doubtful``: the rejections before the restart).  On the accuracy
+benchmark (100 runs of each scenario, seeds 2026 and 7) the data surprised
+them at 10 of the 9,600 checkpoints of both estimators and both seeds, and
+none restarted; every track is the one of the median rule before, to the
+bit (docs/concepts.md, "The particle estimators restart too").
 
 Step 1 depends on the recording, the model, the loss and the half plane,
 never on the tracker or its estimate: the EKF, iSAM2 and the fixed-lag
