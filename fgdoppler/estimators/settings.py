@@ -729,9 +729,10 @@ class ParticleSettings(TrackerSettings):
         quantile) and no later than ``max_span`` after the start, find the
         best fit of all data so far and, where it and the running estimate
         each lie outside the other's 99.9 % region (under the Huber loss
-        where a few measurements pull the fit away), sample the posterior of all the data so far again from the fit's
-        solutions and the running estimate
-        (:mod:`fgdoppler.estimators.restart`, "The particle estimators").
+        where a few measurements pull the fit away), sample the posterior
+        of all the data so far again from the fit's solutions and the
+        running estimate (:mod:`fgdoppler.estimators.restart`, "The
+        particle estimators").
     bias_sigma : float or tuple of float, default 0.0
         Each pair's Doppler calibration uncertainty (m/s, one standard
         deviation; one value for every pair or one per pair).  Where the
