@@ -312,6 +312,13 @@ class FreshFits(RecordingMemo):
         return self._once(self._fits, measurements, (id(model), huber_k, side, tc), compute)
 
 
+def _shared_fit(measurements: Measurements, model: TrackingModel, huber_k: float | None,
+                half_plane: HalfPlane | None, tc: float, fits: FreshFits | None) -> _Fit | None:
+    """Step 1 of the check at ``tc`` under the loss ``huber_k``, from ``fits`` where the trackers share them."""
+    return (_fresh_fit(measurements, model, huber_k, half_plane, tc) if fits is None
+            else fits.fit(measurements, model, huber_k, half_plane, tc))
+
+
 @dataclass(frozen=True, kw_only=True)
 class _Disagreement:
     """Steps 1-3 of a check that called for a restart: the fits, the chosen one and how far the tracker lies."""
@@ -329,8 +336,7 @@ def _disagreement(measurements: Measurements, model: TrackingModel, huber_k: flo
                   old: tuple[FloatArray, FloatArray], tc: float, half_plane: HalfPlane | None,
                   fits: FreshFits | None) -> _Disagreement | None:
     """Steps 1-3 of the check at ``tc`` under the loss ``huber_k``; ``None`` where the running estimate stands."""
-    fit = (_fresh_fit(measurements, model, huber_k, half_plane, tc) if fits is None
-           else fits.fit(measurements, model, huber_k, half_plane, tc))
+    fit = _shared_fit(measurements, model, huber_k, half_plane, tc, fits)
     if fit is None:
         return None
     data, isets, grid, new = fit
@@ -363,8 +369,7 @@ def _pulled(fit: Initiation, measurements: Measurements, model: TrackingModel, h
     :math:`(\mathbf x_h - \mathbf x_s)'\mathbf P_s^{-1}(\mathbf x_h - \mathbf x_s)` beyond the χ² quantile at
     :data:`DISAGREEMENT`.
     """
-    robust = (_fresh_fit(measurements, model, EFFICIENT_K, half_plane, tc) if fits is None
-              else fits.fit(measurements, model, EFFICIENT_K, half_plane, tc))
+    robust = _shared_fit(measurements, model, EFFICIENT_K, half_plane, tc, fits)
     if robust is None or fit.P_end is None:
         return False
     d = robust[3].x_end - fit.x_end
