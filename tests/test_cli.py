@@ -28,6 +28,16 @@ def test_help_on_every_subcommand(capsys: pytest.CaptureFixture[str]) -> None:
         assert "usage" in capsys.readouterr().out
 
 
+def test_huber_alone_is_the_efficient_threshold() -> None:
+    from fgdoppler.models.robust import EFFICIENT_K
+
+    parser = build_parser()
+    for command in (["track", "m.csv", "--geometry", "g.toml"], ["montecarlo", "--case", "a"]):
+        assert parser.parse_args([*command, "--huber"]).huber == EFFICIENT_K
+        assert parser.parse_args([*command, "--huber", "2.5"]).huber == 2.5
+        assert parser.parse_args(command).huber is None
+
+
 def test_simulate_writes_three_files(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "sim"
     assert main(["simulate", "--case", "a", "--start-x", "25000", "--seed", "1", "--out", str(out), "--json"]) == 0

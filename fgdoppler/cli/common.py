@@ -297,8 +297,10 @@ def _finite(v: float) -> bool:
 
 def add_huber_option(p: argparse.ArgumentParser) -> None:
     """``--huber [K]``: the robust loss in the initiation and every estimator."""
-    p.add_argument("--huber", type=float, nargs="?", const=1.345, default=None, metavar="K",
-                   help="Huber loss with threshold K (whitened units; K = 1.345 when given alone) on every "
+    from fgdoppler.models.robust import EFFICIENT_K
+
+    p.add_argument("--huber", type=float, nargs="?", const=EFFICIENT_K, default=None, metavar="K",
+                   help=f"Huber loss with threshold K (whitened units; K = {EFFICIENT_K} when given alone) on every "
                    "Doppler residual, in the initiation and every estimator: a few gross outliers cannot drag "
                    "the track (default: Gaussian loss)")
 
