@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -92,18 +93,29 @@ def recording(cell: Cell, i: int) -> tuple[fd.Simulation, fd.Measurements]:
     return sim, m.subset(keep)
 
 
-@one_blas_thread
-def one(task: tuple[str, int]) -> dict[str, Any]:
+def started(task: tuple[str, int]) -> tuple[dict[str, Any], fd.Simulation, fd.Measurements, fd.Initiation | None]:
+    """Draw ``task = (cell, i)``: its record so far, simulation, measurements and default initiation.
+
+    The initiation is ``None`` where it refuses the draw (a target faster
+    than the zone's bound); the record then says why under ``"refused"``.
+    """
     name, i = task
-    cell = CELLS[name]
-    sim, m = recording(cell, i)
+    sim, m = recording(CELLS[name], i)
     g = sim.scenario.geometry
     out: dict[str, Any] = {"cell": name, "draw": i, "pairs": len(g.pairs)}
     try:
-        init = fd.initiate(m.first_per_pair(10), g)
-    except ValueError as exc:  # a target faster than the zone's bound
-        return {**out, "refused": str(exc)}
-    for est, r in fd.run_estimators(list(fd.ESTIMATORS), m, g, init).items():
+        return out, sim, m, fd.initiate(m.first_per_pair(10), g)
+    except ValueError as exc:
+        return {**out, "refused": str(exc)}, sim, m, None
+
+
+@one_blas_thread
+def one(task: tuple[str, int]) -> dict[str, Any]:
+    out, sim, m, init = started(task)
+    if init is None:
+        return out
+    cell = CELLS[task[0]]
+    for est, r in fd.run_estimators(list(fd.ESTIMATORS), m, sim.scenario.geometry, init).items():
         e = r.primary
         late = (e.times >= T_AVERAGE) & e.cov_ok
         truth = sim.truth.at(e.times[late])
@@ -138,21 +150,30 @@ def report(rows: list[dict[str, Any]]) -> None:
     print("\n".join(beyond_rows))
 
 
-def main() -> None:
-    p = argparse.ArgumentParser(prog="noisy_truth_layouts.py", description=__doc__.splitlines()[0])
+def run_draws(name: str, description: str, task: Callable[[tuple[str, int]], dict[str, Any]]) -> list[dict[str, Any]]:
+    """The command line of a study over the cells' draws: ``task`` on each, the records in ``DIR/name.json``.
+
+    Options ``--cells``, ``--workers`` and ``--out``; prints how many draws
+    ran and how many the initiation refused.
+    """
+    p = argparse.ArgumentParser(prog=f"{name}.py", description=description)
     p.add_argument("--cells", nargs="+", choices=list(CELLS), default=list(CELLS))
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--out", type=Path, default=Path("output/studies"))
     args = p.parse_args()
-    tasks = [(name, i) for name in args.cells for i in range(CELLS[name].draws)]
+    tasks = [(cell, i) for cell in args.cells for i in range(CELLS[cell].draws)]
     with ProcessPoolExecutor(args.workers) as pool:
-        rows = list(pool.map(one, tasks))
+        rows = list(pool.map(task, tasks))
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "noisy_truth_layouts.json").write_text(json.dumps(rows, indent=1))
+    (args.out / f"{name}.json").write_text(json.dumps(rows, indent=1))
     refused = sum("refused" in r for r in rows)
     print(f"{len(rows)} draws, {refused} refused (a target faster than the zone's bound); "
           f"averages over t >= {T_AVERAGE:g} s")
-    report(rows)
+    return rows
+
+
+def main() -> None:
+    report(run_draws("noisy_truth_layouts", __doc__.splitlines()[0], one))
 
 
 if __name__ == "__main__":

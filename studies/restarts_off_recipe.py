@@ -21,15 +21,11 @@ on 2 cores, 2026-12-02; every draw's RMSEs go to ``DIR/restarts_off_recipe.json`
 
 from __future__ import annotations
 
-import argparse
-import json
-from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 from typing import Any
 
 import _common  # noqa: F401  (the repository root on the path)
 import numpy as np
-from noisy_truth_layouts import CELLS, T_AVERAGE, recording
+from noisy_truth_layouts import CELLS, T_AVERAGE, run_draws, started
 from scipy.stats import wilcoxon
 
 import fgdoppler as fd
@@ -45,18 +41,14 @@ RESOLVED = 1.1
 @one_blas_thread
 def one(task: tuple[str, int]) -> dict[str, Any]:
     """One draw: each tracker's RMSE over t >= T_AVERAGE with and without restarts, and its restart count."""
-    name, i = task
-    cell = CELLS[name]
-    sim, m = recording(cell, i)
-    g = sim.scenario.geometry
-    out: dict[str, Any] = {"cell": name, "draw": i}
-    try:
-        init = fd.initiate(m.first_per_pair(10), g)
-    except ValueError as exc:  # a target faster than the zone's bound
-        return {**out, "refused": str(exc)}
+    out, sim, m, init = started(task)
+    if init is None:
+        return out
+    cell = CELLS[task[0]]
     for restarts in (True, False):
         settings = {est: cls(restarts=restarts) for est, cls in TRACKERS.items()}
-        for est, r in fd.run_estimators(list(TRACKERS), m, g, init, settings, verify=False).items():
+        for est, r in fd.run_estimators(list(TRACKERS), m, sim.scenario.geometry, init, settings,
+                                        verify=False).items():
             e = r.primary
             late = e.times >= T_AVERAGE
             err = np.linalg.norm(e.states[late, :cell.dim] - sim.truth.at(e.times[late])[:, :cell.dim], axis=1)
@@ -88,20 +80,7 @@ def report(rows: list[dict[str, Any]]) -> None:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(prog="restarts_off_recipe.py", description=__doc__.splitlines()[0])
-    p.add_argument("--cells", nargs="+", choices=list(CELLS), default=list(CELLS))
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--out", type=Path, default=Path("output/studies"))
-    args = p.parse_args()
-    tasks = [(name, i) for name in args.cells for i in range(CELLS[name].draws)]
-    with ProcessPoolExecutor(args.workers) as pool:
-        rows = list(pool.map(one, tasks))
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "restarts_off_recipe.json").write_text(json.dumps(rows, indent=1))
-    refused = sum("refused" in r for r in rows)
-    print(f"{len(rows)} draws, {refused} refused (a target faster than the zone's bound); "
-          f"RMSE over t >= {T_AVERAGE:g} s")
-    report(rows)
+    report(run_draws("restarts_off_recipe", __doc__.splitlines()[0], one))
 
 
 if __name__ == "__main__":
