@@ -35,6 +35,7 @@ import json
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -93,28 +94,28 @@ def recording(cell: Cell, i: int) -> tuple[fd.Simulation, fd.Measurements]:
     return sim, m.subset(keep)
 
 
-def started(task: tuple[str, int]) -> tuple[dict[str, Any], fd.Simulation, fd.Measurements, fd.Initiation | None]:
-    """Draw ``task = (cell, i)``: its record so far, simulation, measurements and default initiation.
-
-    The initiation is ``None`` where it refuses the draw (a target faster
-    than the zone's bound); the record then says why under ``"refused"``.
-    """
-    name, i = task
-    sim, m = recording(CELLS[name], i)
-    g = sim.scenario.geometry
-    out: dict[str, Any] = {"cell": name, "draw": i, "pairs": len(g.pairs)}
-    try:
-        return out, sim, m, fd.initiate(m.first_per_pair(10), g)
-    except ValueError as exc:
-        return {**out, "refused": str(exc)}, sim, m, None
+#: What a study measures on one draw: ``(cell, simulation, measurements, initiation)`` to the draw's record.
+Measure = Callable[[Cell, fd.Simulation, fd.Measurements, fd.Initiation], dict[str, Any]]
 
 
 @one_blas_thread
-def one(task: tuple[str, int]) -> dict[str, Any]:
-    out, sim, m, init = started(task)
-    if init is None:
-        return out
-    cell = CELLS[task[0]]
+def _draw(measure: Measure, task: tuple[str, int]) -> dict[str, Any]:
+    """Draw ``task = (cell, i)`` recorded, initiated and measured; a refusal of the initiation is recorded."""
+    name, i = task
+    cell = CELLS[name]
+    sim, m = recording(cell, i)
+    g = sim.scenario.geometry
+    out: dict[str, Any] = {"cell": name, "draw": i, "pairs": len(g.pairs)}
+    try:
+        init = fd.initiate(m.first_per_pair(10), g)
+    except ValueError as exc:  # a target faster than the zone's bound
+        return {**out, "refused": str(exc)}
+    return {**out, **measure(cell, sim, m, init)}
+
+
+def one(cell: Cell, sim: fd.Simulation, m: fd.Measurements, init: fd.Initiation) -> dict[str, Any]:
+    """Every estimator's verdict, run-averaged NEES over t >= T_AVERAGE and final position error."""
+    out: dict[str, Any] = {}
     for est, r in fd.run_estimators(list(fd.ESTIMATORS), m, sim.scenario.geometry, init).items():
         e = r.primary
         late = (e.times >= T_AVERAGE) & e.cov_ok
@@ -150,11 +151,14 @@ def report(rows: list[dict[str, Any]]) -> None:
     print("\n".join(beyond_rows))
 
 
-def run_draws(name: str, description: str, task: Callable[[tuple[str, int]], dict[str, Any]]) -> list[dict[str, Any]]:
-    """The command line of a study over the cells' draws: ``task`` on each, the records in ``DIR/name.json``.
+def run_draws(name: str, description: str, measure: Measure) -> list[dict[str, Any]]:
+    """The command line of a study over the cells' draws: ``measure`` on each, the records in ``DIR/name.json``.
 
-    Options ``--cells``, ``--workers`` and ``--out``; prints how many draws
-    ran and how many the initiation refused.
+    Options ``--cells``, ``--workers`` and ``--out``; every draw is recorded
+    and initiated by default (:func:`recording`, :func:`fgdoppler.initiate`
+    on its first 10 scans per pair), its record the cell, draw, pair count
+    and what ``measure`` (a module-level function, for the process pool)
+    returns.  Prints how many draws ran and how many the initiation refused.
     """
     p = argparse.ArgumentParser(prog=f"{name}.py", description=description)
     p.add_argument("--cells", nargs="+", choices=list(CELLS), default=list(CELLS))
@@ -163,7 +167,7 @@ def run_draws(name: str, description: str, task: Callable[[tuple[str, int]], dic
     args = p.parse_args()
     tasks = [(cell, i) for cell in args.cells for i in range(CELLS[cell].draws)]
     with ProcessPoolExecutor(args.workers) as pool:
-        rows = list(pool.map(task, tasks))
+        rows = list(pool.map(partial(_draw, measure), tasks))
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / f"{name}.json").write_text(json.dumps(rows, indent=1))
     refused = sum("refused" in r for r in rows)

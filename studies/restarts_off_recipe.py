@@ -25,11 +25,10 @@ from typing import Any
 
 import _common  # noqa: F401  (the repository root on the path)
 import numpy as np
-from noisy_truth_layouts import CELLS, T_AVERAGE, run_draws, started
+from noisy_truth_layouts import CELLS, T_AVERAGE, Cell, run_draws
 from scipy.stats import wilcoxon
 
 import fgdoppler as fd
-from fgdoppler.analysis.workers import one_blas_thread
 from fgdoppler.estimators.settings import EKFSettings, FixedLagSettings, ISAM2Settings
 
 #: The trackers that restart, with their settings classes.
@@ -38,13 +37,9 @@ TRACKERS = {"ekf": EKFSettings, "isam2": ISAM2Settings, "fixed-lag": FixedLagSet
 RESOLVED = 1.1
 
 
-@one_blas_thread
-def one(task: tuple[str, int]) -> dict[str, Any]:
+def one(cell: Cell, sim: fd.Simulation, m: fd.Measurements, init: fd.Initiation) -> dict[str, Any]:
     """One draw: each tracker's RMSE over t >= T_AVERAGE with and without restarts, and its restart count."""
-    out, sim, m, init = started(task)
-    if init is None:
-        return out
-    cell = CELLS[task[0]]
+    out: dict[str, Any] = {}
     for restarts in (True, False):
         settings = {est: cls(restarts=restarts) for est, cls in TRACKERS.items()}
         for est, r in fd.run_estimators(list(TRACKERS), m, sim.scenario.geometry, init, settings,
