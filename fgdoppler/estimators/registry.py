@@ -39,8 +39,8 @@ from fgdoppler.estimators.judge import judge, track_reference
 from fgdoppler.estimators.later_mistakes import later_mistakes
 from fgdoppler.estimators.names import ALIASES, SUMMARIES
 from fgdoppler.estimators.particle import run_map, run_particle
-from fgdoppler.estimators.restart import FreshFits, surprise_check, with_restarts
-from fgdoppler.estimators.results import TrackResult
+from fgdoppler.estimators.restart import FreshFits, splice_estimates, surprise_check, with_restarts
+from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.search_memo import SearchMemo
 from fgdoppler.estimators.settings import (
     EKFSettings,
@@ -217,10 +217,12 @@ def _run_estimator(name: str, measurements: Measurements, model: TrackingModel |
         return local.transformed(frame, to_world=True)
     per_pair, offsets, clocks, site_errors = _declared_offsets(settings, model)
     hyps, weights = _hypotheses(info, measurements, model, init, settings) if resolve_ambiguity else ([init], None)
-    result = base = _solve(info, measurements, model, hyps, settings, progress, weights)
+    result = _solve(info, measurements, model, hyps, settings, progress, weights)
+    segments = [_Segment(t_from=-np.inf, hyps=hyps, weights=weights)]
     if resolve_ambiguity and getattr(settings, "restarts", False) and model.zone is not None:
-        def again(new: Initiation) -> TrackResult:
+        def again(new: Initiation, tc: float) -> TrackResult:
             h, w = _hypotheses(info, measurements, model, new, settings)
+            segments.append(_Segment(t_from=tc, hyps=h, weights=w))
             return _solve(info, measurements, model, h, settings, prefixed(progress, "restart"), w)
         result = with_restarts(measurements, model, init, settings, result, again, fits=fits,
                                only_if=surprise_check(init.t_start, settings.max_span)
@@ -232,7 +234,7 @@ def _run_estimator(name: str, measurements: Measurements, model: TrackingModel |
     if isinstance(settings, SampledCovarianceSettings) and settings.sampled_covariance:
         judged, checked = _with_sampled_covariances(judged, measurements, model, settings, held)
     if any(v is not None and np.any(v > 0) for v in (offsets, clocks, site_errors)):
-        judged, checked = _with_offsets(judged, base, info, measurements, model, hyps, weights, settings, offsets,
+        judged, checked = _with_offsets(judged, result, segments, info, measurements, model, settings, offsets,
                                         clocks, prefixed(progress, "calibration, clock and site offsets"),
                                         checked=checked, sites=site_errors)
     if held is not None:
@@ -429,38 +431,53 @@ def _with_sampled_covariances(result: TrackResult, measurements: Measurements, m
             widened.checked)
 
 
-def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, measurements: Measurements,
-                  model: TrackingModel, hyps: list[Initiation], weights: NDArray[np.float64] | None,
-                  settings: TrackerSettings, offsets: NDArray[np.float64] | None,
-                  clocks: NDArray[np.float64] | None = None, progress: Progress | None = None, *,
-                  checked: NDArray[np.float64] | None = None, sites: NDArray[np.float64] | None = None
-                  ) -> tuple[TrackResult, NDArray[np.float64] | None]:
+@dataclass(frozen=True, kw_only=True)
+class _Segment:
+    """A stretch of the reported track: the tracker's run from ``hyps`` (weighted by ``weights``) from ``t_from`` on
+    (the first run from the start; each restart's from its checkpoint)."""
+
+    t_from: float
+    hyps: list[Initiation]
+    weights: NDArray[np.float64] | None
+
+
+def _with_offsets(result: TrackResult, tracked: TrackResult, segments: list[_Segment], info: EstimatorInfo,
+                  measurements: Measurements, model: TrackingModel, settings: TrackerSettings,
+                  offsets: NDArray[np.float64] | None, clocks: NDArray[np.float64] | None = None,
+                  progress: Progress | None = None, *, checked: NDArray[np.float64] | None = None,
+                  sites: NDArray[np.float64] | None = None) -> tuple[TrackResult, NDArray[np.float64] | None]:
     """Every estimate's covariances with the calibration offsets' share (``offsets``: σ per pair, m/s), the
     clock offsets' (``clocks``: σ per pair, s) and the site errors' (``sites``: σ per site, m) added; and
     ``checked`` (other primary covariances, or ``None``) with the primary's share added too.
 
-    The share is what the offsets do to ``base`` — the tracker's run from
-    ``hyps`` before any restart — run again on the data with one pair
-    shifted at a time, from starts moved as the window's solution moves
-    (:func:`~fgdoppler.estimators.calibration.moved_starts`,
-    :func:`~fgdoppler.estimators.calibration.offset_shares`); a clock offset
-    shifts the data along ``base``'s primary track
+    The share is what the offsets do to ``tracked`` — the tracker's
+    reported track, its run from the first hypotheses spliced with those of
+    its restarts (``segments``) — with each run made again on the data with
+    one pair shifted at a time, from starts moved as its window's solution
+    moves (:func:`~fgdoppler.estimators.calibration.moved_starts`,
+    :func:`~fgdoppler.estimators.calibration.offset_shares`), and spliced at
+    the same checkpoints: the restart decisions held, as a linearisation
+    holds the track's mode.  A clock offset shifts the data along
+    ``tracked``'s primary track
     (:func:`~fgdoppler.estimators.clock_offsets.clock_shares`), and so does
-    a site error (:func:`~fgdoppler.estimators.site_offsets.site_shares`).  It
-    is added at the reported estimates' times, which a restart does not change.
+    a site error (:func:`~fgdoppler.estimators.site_offsets.site_shares`).
     """
-    kinds = [e.kind for e in base.estimates]
-    moved = moved_starts(hyps, measurements, model, huber_k=settings.huber_k)
+    kinds = [e.kind for e in tracked.estimates]
+    moved = [moved_starts(s.hyps, measurements, model, huber_k=settings.huber_k) for s in segments]
 
     def respond(data: Measurements) -> list[NDArray[np.float64]]:
-        again = _solve(info, data, model, moved(data), settings, progress, weights)
-        return [again.estimate(k).states for k in kinds]
+        spliced: dict[str, Estimates] = {}
+        for s, move in zip(segments, moved, strict=True):
+            again = _solve(info, data, model, move(data), settings, progress, s.weights)
+            for e in again.estimates:
+                spliced[e.kind] = e if e.kind not in spliced else splice_estimates(spliced[e.kind], e, s.t_from)
+        return [spliced[k].states for k in kinds]
 
-    baseline = [e.states for e in base.estimates]
+    baseline = [e.states for e in tracked.estimates]
     shares = [np.zeros((*b.shape, b.shape[-1])) for b in baseline]
     if offsets is not None and np.any(offsets > 0):
         shares = [a + b for a, b in zip(shares, offset_shares(measurements, offsets, baseline, respond), strict=True)]
-    along = base.primary
+    along = tracked.primary
     if clocks is not None and np.any(clocks > 0):
         shares = [a + b for a, b in zip(shares, clock_shares(measurements, model, clocks, along.times, along.states,
                                                               baseline, respond), strict=True)]
@@ -471,8 +488,8 @@ def _with_offsets(result: TrackResult, base: TrackResult, info: EstimatorInfo, m
     estimates = []
     for e in result.estimates:
         if e.kind in by_kind:
-            if not np.array_equal(e.times, base.estimate(e.kind).times):  # a restart keeps the scans' times
-                raise RuntimeError(f"{info.name}: the {e.kind} estimates' times changed after the first run")
+            if not np.array_equal(e.times, tracked.estimate(e.kind).times):
+                raise RuntimeError(f"{info.name}: the {e.kind} estimates' times changed after the run")
             e = replace(e, covariances=e.covariances + by_kind[e.kind])
         estimates.append(e)
     share = by_kind.get(result.primary.kind)

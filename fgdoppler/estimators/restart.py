@@ -175,7 +175,8 @@ from fgdoppler.models.robust import EFFICIENT_K, huber_rho
 from fgdoppler.models.tracking import TrackingModel
 
 __all__ = ["DISAGREEMENT", "GROWTH", "MODE_MARGIN", "PER_PAIR", "SURPRISE", "FreshFits", "checkpoint_counts",
-           "checkpoints", "fresh_start", "surprise_check", "surprised", "with_restarts"]
+           "checkpoints", "fresh_start", "splice_estimates", "surprise_check", "surprised",
+           "with_restarts"]
 
 FloatArray = NDArray[np.float64]
 #: A checkpoint each time the number of measurements since the start has grown by this factor.
@@ -191,8 +192,9 @@ MODE_MARGIN = float(2.0 * np.log(1.0 / (1.0 - DISAGREEMENT)))
 #: estimator (:func:`surprised`).
 SURPRISE = 0.999
 
-#: Runs a tracker from an initiation over the measurements after its window (the registry's solve step).
-Solver = Callable[[Initiation], TrackResult]
+#: Runs a tracker from an initiation over the measurements after its window (the registry's solve step); the second
+#: argument is the checkpoint the run takes over from (s).
+Solver = Callable[[Initiation, float], TrackResult]
 
 
 def checkpoint_counts(n0: int) -> Iterator[int]:
@@ -446,7 +448,8 @@ def _running_estimate(model: TrackingModel, best: Initiation, x_back: FloatArray
                      log_evidence=evidence)
 
 
-def _splice_estimates(old: Estimates, new: Estimates, tc: float) -> Estimates:
+def splice_estimates(old: Estimates, new: Estimates, tc: float) -> Estimates:
+    """``old`` before ``tc`` and ``new`` from ``tc`` on (a restart's track: :func:`with_restarts`)."""
     keep = old.times < tc - 1e-9
     take = new.times >= tc - 1e-9
     return Estimates(kind=old.kind, times=np.concatenate([old.times[keep], new.times[take]]),
@@ -458,7 +461,7 @@ def _splice_estimates(old: Estimates, new: Estimates, tc: float) -> Estimates:
 def _splice(old: TrackResult, new: TrackResult, tc: float, message: str) -> TrackResult:
     """``old`` before ``tc`` and ``new`` from ``tc`` on, in every estimate set and record."""
     kinds = {e.kind: e for e in new.estimates}
-    estimates = tuple(_splice_estimates(e, kinds[e.kind], tc) if e.kind in kinds else e for e in old.estimates)
+    estimates = tuple(splice_estimates(e, kinds[e.kind], tc) if e.kind in kinds else e for e in old.estimates)
     keep = old.primary.times < tc - 1e-9
     take = new.primary.times >= tc - 1e-9
     loglik = old.log_likelihood
@@ -519,7 +522,8 @@ def with_restarts(measurements: Measurements, model: TrackingModel, init: Initia
                   only_if: Callable[[TrackResult, float, float], bool] | None = None) -> TrackResult:
     """Test ``first`` (the tracker run from ``init``) at every checkpoint and restart where it fails (module doc).
 
-    ``solve`` runs the tracker from an initiation (with its hypotheses);
+    ``solve(init, tc)`` runs the tracker from an initiation (with its
+    hypotheses) to take the track over from checkpoint ``tc``;
     the returned result's ``wall_time`` covers the checks and the restarts.
     ``fits`` shares the checks' fresh fits with the other trackers of a call.
     ``only_if(result, t_last, t_c)``: test only at the checkpoints ``t_c``
@@ -539,5 +543,5 @@ def with_restarts(measurements: Measurements, model: TrackingModel, init: Initia
         if fresh is None:
             continue
         new_init, message = fresh
-        result = _splice(result, solve(new_init), tc, message)
+        result = _splice(result, solve(new_init, tc), tc, message)
     return replace(result, wall_time=first.wall_time + time.perf_counter() - t_begin)

@@ -291,7 +291,11 @@ class SampledCovarianceSettings(GaussianSumSettings):
         initiation window's solution moves, on the data with one pair
         shifted at a time (:func:`~fgdoppler.estimators.calibration.offset_shares`;
         applied by :func:`~fgdoppler.estimators.registry.run_estimator`
-        last, after the verdict and the sampled covariances).  The track
+        last, after the verdict and the sampled covariances).  Where the
+        tracker restarted, each of its runs (the first and every restart's,
+        from its own moved start) is made again and the runs are spliced
+        at the same checkpoints, so that the share is that of the track
+        reported; each restart adds its run to every one of these.  The track
         does not change; the verdict's reference smoother reads its own
         findings with the offsets in the model
         (:func:`~fgdoppler.estimators.smoother.with_offset_findings`), so
@@ -305,7 +309,8 @@ class SampledCovarianceSettings(GaussianSumSettings):
         offsets would do to the answer — the tracker run again, from its
         start moved as the initiation window's solution moves, on the data
         as they would read with one pair's clock off at a time, made along
-        the tracker's own primary track
+        the tracker's own primary track (its runs spliced as for
+        ``bias_sigma``)
         (:func:`~fgdoppler.estimators.clock_offsets.clock_shares`; four runs
         per pair, added with the calibration offsets' share, last).  The
         track does not change, nor does the verdict but for its whole-track

@@ -232,6 +232,39 @@ def test_a_restart_carries_the_running_estimate_along() -> None:
     assert shares[1] / shares[0] == pytest.approx(np.exp(-0.5 * (carried.cost - new.cost)), rel=1e-9)
 
 
+def test_the_offsets_share_of_a_restarted_track_is_that_of_the_runs_it_is_spliced_from() -> None:
+    # Run 32 of case a 5 km restarts once, at its first checkpoint.  The calibration offsets' share of its
+    # covariances is what the offsets do to the track it reports: before the restart what they do to the first
+    # run, after it what they do to the restarted run, each the share that run has alone (no restarts of its own).
+    # (It was the first run's share throughout, a track the tracker no longer reports after the checkpoint.)
+    sim, model, init = benchmark_run(0, 32)
+    m = sim.measurements
+    declared = fd.EKFSettings(bias_sigma=0.3)
+
+    def share(start: fd.Initiation, settings: fd.EKFSettings) -> fd.Estimates:
+        without = fd.run_estimator("ekf", m, model, start, replace(settings, bias_sigma=0.0), verify=False)
+        res = fd.run_estimator("ekf", m, model, start, settings, verify=False)
+        np.testing.assert_array_equal(res.primary.states, without.primary.states)
+        return replace(res.primary, covariances=res.primary.covariances - without.primary.covariances)
+
+    tc = checkpoints(m, init)[0]
+    reported = share(init, declared)
+    first = share(init, replace(declared, restarts=False))
+    old = restart._state_at(fd.run_estimator("ekf", m, model, init, fd.EKFSettings(restarts=False), verify=False), tc)
+    fresh = fresh_start(m, model, declared, old, tc)
+    assert fresh is not None
+    restarted = share(fresh[0], replace(declared, restarts=False))
+    before = reported.times < tc
+    after = restarted.times >= tc
+    np.testing.assert_array_equal(reported.times, np.concatenate([first.times[first.times < tc],
+                                                                  restarted.times[after]]))
+    np.testing.assert_allclose(reported.covariances[before], first.covariances[first.times < tc],
+                               rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(reported.covariances[~before], restarted.covariances[after], rtol=1e-9, atol=1e-9)
+    # and it is a share, not nothing: the offsets move the restarted track by tens of metres at least
+    assert np.all(np.trace(reported.covariances[~before][:, :2, :2], axis1=1, axis2=2) > 10.0**2)
+
+
 def _rotated(g: fd.Geometry, angle: float, shift: tuple[float, float]) -> fd.Geometry:
     c, s = np.cos(angle), np.sin(angle)
     R = np.array([[c, -s], [s, c]])
