@@ -61,7 +61,7 @@ from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["QUADRATURE", "bias_sigmas", "moved_starts", "offset_shares", "per_pair_sigmas", "shifted_by",
+__all__ = ["QUADRATURE", "SAME_MINIMUM", "bias_sigmas", "moved_starts", "offset_shares", "per_pair_sigmas", "shifted_by",
            "smoother_response", "with_bias_uncertainty"]
 
 FloatArray = NDArray[np.float64]
@@ -220,6 +220,25 @@ def smoother_response(model: TrackingModel, times: ArrayLike, states: ArrayLike,
     return respond
 
 
+#: Two window solutions whose last states lie closer than this (squared distance in the hypothesis's own ``P_end``)
+#: are one minimum, reached from two starts: a hundredth of a standard deviation, the Levenberg–Marquardt stopping
+#: tolerance along a flat valley (:func:`moved_starts` re-solves the window once for both).
+SAME_MINIMUM = 1e-4
+
+
+def _same_minimum(h: Initiation, mine: tuple[FloatArray, FloatArray | None],
+                  other: tuple[FloatArray, FloatArray | None]) -> bool:
+    """Whether hypothesis ``h``'s window solution ``mine`` and ``other`` (``(times, states)``) are one minimum."""
+    (t_a, a), (t_b, b) = mine, other
+    if a is None or b is None or h.P_end is None or not np.array_equal(t_a, t_b):
+        return False
+    d = a[-1] - b[-1]
+    try:
+        return bool(float(d @ np.linalg.solve(h.P_end, d)) < SAME_MINIMUM)
+    except np.linalg.LinAlgError:
+        return False
+
+
 def moved_starts(hyps: Sequence[Initiation], measurements: Measurements, model: TrackingModel, *,
                  huber_k: float | None = None) -> Callable[[Measurements], list[Initiation]]:
     r"""The trackers' starts as they move with the data of the initiation window.
@@ -231,30 +250,41 @@ def moved_starts(hyps: Sequence[Initiation], measurements: Measurements, model: 
     other data from it and moves the hypothesis's ``x_start`` and ``x_end``
     by the solution's change (carried from the window's first and last scan
     to ``t_start`` and ``t_end`` by the motion model; no change where either
-    solve fails or the window is empty).  The covariances stay.
+    solve fails or the window is empty).  The covariances stay.  Hypotheses
+    whose window solutions are one minimum (:data:`SAME_MINIMUM`) share one
+    re-solve: the terms of a Gaussian sum mostly converge there, and a
+    restart's window is all the data so far.
     """
     from fgdoppler.estimators.window import solve_window, split_window, window_start
 
     solved = []
-    for h in hyps:
+    same: list[int] = []  # for each hypothesis, the first one whose window solution is the same minimum
+    for i, h in enumerate(hyps):
         window, _ = split_window(measurements, h.t_end)
         times = window.scans().times
         s0, note = window_start(model, window, h, huber_k=huber_k) if times.size else (None, "empty")
         solved.append((times, None if note else s0))
+        same.append(next((j for j in range(i) if _same_minimum(h, solved[i], solved[j])), i))
 
     def moved(data: Measurements) -> list[Initiation]:
+        changes: dict[int, tuple[FloatArray, FloatArray] | None] = {}
         out = []
-        for h, (times, s0) in zip(hyps, solved, strict=True):
+        for h, (times, s0), j in zip(hyps, solved, same, strict=True):
             if s0 is None:
                 out.append(h)
                 continue
-            window, _ = split_window(data, h.t_end)
-            s1, note = solve_window(model, window, s0, prior=model.prior(), huber_k=huber_k)
-            if note:
+            if j not in changes:  # one solve per minimum: started from the same one, the data move it alike
+                window, _ = split_window(data, hyps[j].t_end)
+                sj = solved[j][1]
+                assert sj is not None
+                s1, note = solve_window(model, window, sj, prior=model.prior(), huber_k=huber_k)
+                changes[j] = None if note else (s1[0] - sj[0], s1[-1] - sj[-1])
+            change = changes[j]
+            if change is None:
                 out.append(h)
                 continue
-            d0 = model.motion.F(h.t_start - times[0]) @ (s1[0] - s0[0])
-            d1 = model.motion.F(h.t_end - times[-1]) @ (s1[-1] - s0[-1])
+            d0 = model.motion.F(h.t_start - times[0]) @ change[0]
+            d1 = model.motion.F(h.t_end - times[-1]) @ change[1]
             out.append(replace(h, x_start=h.x_start + d0, x_end=h.x_end + d1))
         return out
 
