@@ -221,8 +221,9 @@ def smoother_response(model: TrackingModel, times: ArrayLike, states: ArrayLike,
 
 
 #: Two window solutions whose last states lie closer than this (squared distance in the hypothesis's own ``P_end``)
-#: are one minimum, reached from two starts: a hundredth of a standard deviation, the Levenberg–Marquardt stopping
-#: tolerance along a flat valley (:func:`moved_starts` re-solves the window once for both).
+#: are one minimum, reached from two starts (:func:`moved_starts` re-solves the window once for both): a hundredth
+#: of a standard deviation, far below what a share resolves and above where Levenberg–Marquardt stops along a flat
+#: valley (the terms of a restart's Gaussian sum: within a metre of one another where σ is kilometres).
 SAME_MINIMUM = 1e-4
 
 
