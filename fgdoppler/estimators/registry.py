@@ -173,8 +173,11 @@ def run_estimator(
     With ``verify`` (default) a filter's final state is checked against the
     offline smoother's, which costs a smoother run unless ``reference`` — the
     result of ``run_estimator("smoother", ...)`` on the same data and
-    initiation — is given (without ``verify`` a given ``reference`` serves
-    only the later windows' check, whose answer it may already hold).
+    initiation, with ``SmootherSettings.reference_for(settings)`` — is given
+    (one run without the declared calibration offsets has only its findings
+    about the motion model and the mirror image read with them; without
+    ``verify`` a given ``reference`` serves only the later windows' check,
+    whose answer it may already hold).
     With ``settings.bias_sigma`` a filter's covariances include what
     calibration offsets of that size would do to it (:func:`~fgdoppler.estimators.calibration.offset_shares`, added last;
     the smoother adds its own; the particle estimators integrate the
@@ -272,15 +275,18 @@ def _declared_offsets(settings: TrackerSettings, model: TrackingModel
 def _reference(measurements: Measurements, model: TrackingModel, init: Initiation, settings: TrackerSettings,
                given: TrackResult | None, per_pair: NDArray[np.float64], resolve_ambiguity: bool,
                progress: Progress | None) -> TrackResult:
-    """The offline smoother a tracker is held against: ``given``, or run here with the tracker's gate, loss and seed;
-    with calibration offsets declared (``per_pair``), its findings read with them in the model
-    (:func:`~fgdoppler.estimators.smoother.with_offset_findings`)."""
-    reference = given
-    if reference is None:
-        reference = run_estimator("smoother", measurements, model, init, SmootherSettings.reference_for(settings),
-                                  resolve_ambiguity=resolve_ambiguity, progress=prefixed(progress, "reference"))
-    return with_offset_findings(reference, measurements, model, tuple(float(v) for v in per_pair),
-                                half_plane=init.half_plane is not None)
+    """The offline smoother a tracker is held against: ``given``, or run here with the tracker's gate, loss, seed and
+    calibration offsets (``SmootherSettings.reference_for``: its findings read the offsets, its covariances
+    leave out their share).  A ``given`` smoother run without the declared offsets (``per_pair``) has its
+    motion-model and mirror-image findings read with them in the model
+    (:func:`~fgdoppler.estimators.smoother.with_offset_findings`; its zone-wall findings stay those without)."""
+    if given is None:
+        return run_estimator("smoother", measurements, model, init, SmootherSettings.reference_for(settings),
+                             resolve_ambiguity=resolve_ambiguity, progress=prefixed(progress, "reference"))
+    declared = isinstance(given.settings, SmootherSettings) and np.array_equal(
+        bias_sigmas(given.settings.bias_sigma, model.observation.n_channels), per_pair)
+    return given if declared else with_offset_findings(given, measurements, model, tuple(float(v) for v in per_pair),
+                                                       half_plane=init.half_plane is not None)
 
 
 def run_estimators(

@@ -296,10 +296,12 @@ class SampledCovarianceSettings(GaussianSumSettings):
         from its own moved start) is made again and the runs are spliced
         at the same checkpoints, so that the share is that of the track
         reported; each restart adds its run to every one of these.  The track
-        does not change; the verdict's reference smoother reads its own
-        findings with the offsets in the model
-        (:func:`~fgdoppler.estimators.smoother.with_offset_findings`), so
-        that offsets do not pass for a manoeuvre.
+        does not change; the verdict's reference smoother is told of the
+        same offsets (:meth:`SmootherSettings.reference_for`) and reads its
+        findings with them in the model — its covariances without their
+        share, like the tracker's own before its share is added — so that
+        offsets pass neither for a manoeuvre nor for a start outside the
+        zone.
     clock_sigma : float or tuple of float, default 0.0
         Each pair's clock uncertainty (s, one standard deviation; one value
         for every pair or one per pair): all of a pair's measurement times
@@ -605,10 +607,13 @@ class SmootherSettings(TrackerSettings):
         case a 45 km an offset of 1 σ of the noise on one pair moves the
         smoother's answer by 6–8 of its own σ while its residuals stay as
         good.  The verdict tests the model with the offsets in it either
-        way: the split test of the motion model re-fits them, and in 2-D a
+        way: the split test of the motion model re-fits them, in 2-D a
         mirror image of the track that free offsets make about as likely is
         a ``competing`` finding (one more joint solve of track and offsets,
-        :mod:`fgdoppler.estimators.smoother_offsets`).
+        :mod:`fgdoppler.estimators.smoother_offsets`), and the zone wall's
+        ``boundary`` test compares the held and the released track with the
+        offsets free (:func:`~fgdoppler.estimators.smoother_offsets.joint_wall_gain`,
+        three more solves where the wall's test without them fails).
     estimate_offsets : bool, default False
         With ``bias_sigma``: estimate each uncertain pair's offset together
         with the track (one variable per pair, prior N(0, σ²) with σ its
@@ -628,6 +633,15 @@ class SmootherSettings(TrackerSettings):
         mirror image across the sensors' line: free offsets can make that
         mode as likely, and then the verdict has a ``competing`` finding
         (as with the offsets only considered).
+    offset_share : bool, default True
+        With ``bias_sigma``: add the offsets' share to the reported
+        covariances.  ``False`` reports the covariances of the track alone
+        while the verdict still tests the model with the offsets in it (the
+        split test, the mirror image, the zone wall): the reference a
+        tracker told of offsets is held against (:meth:`reference_for`),
+        whose track and covariance it compares like with like, each without
+        its share.  Not with ``estimate_offsets``, whose reported track is
+        the joint mode's.
     clock_sigma : float or tuple of float, default 0.0
         Each pair's clock uncertainty (s, one standard deviation; one value
         for every pair or one per pair): all of a pair's measurement times
@@ -663,13 +677,17 @@ class SmootherSettings(TrackerSettings):
     mode_candidates: int = 20
     motion_check: bool = True
     estimate_offsets: bool = False
+    offset_share: bool = True
 
     def __post_init__(self) -> None:
         super().__post_init__()
         _flag(self.estimate_offsets, "estimate_offsets")
+        _flag(self.offset_share, "offset_share")
         sigmas = self.bias_sigma if isinstance(self.bias_sigma, tuple) else (self.bias_sigma,)
         if self.estimate_offsets and max(sigmas) == 0.0:
             raise ValueError("estimate_offsets needs bias_sigma > 0 for at least one pair (the offsets' prior)")
+        if self.estimate_offsets and not self.offset_share:
+            raise ValueError("estimate_offsets reports the joint mode with its share; it cannot leave out offset_share")
         _count(self.max_iterations, "max_iterations")
         _count(self.mode_candidates, "mode_candidates")
         _flag(self.sampled_covariance, "sampled_covariance")
@@ -685,9 +703,15 @@ class SmootherSettings(TrackerSettings):
 
     @classmethod
     def reference_for(cls, settings: TrackerSettings) -> SmootherSettings:
-        """The offline smoother a tracker's verdict holds it against: the tracker's gate, loss and seed, every other
-        setting the default (one such smoother serves every tracker that shares those three)."""
-        return cls(gate_probability=settings.gate_probability, huber_k=settings.huber_k, seed=settings.seed)
+        """The offline smoother a tracker's verdict holds it against: the tracker's gate, loss, seed and calibration
+        offsets, every other setting the default (one such smoother serves every tracker that shares those four).
+
+        With offsets declared (``bias_sigma``) its findings test the model with them in it, and its covariances
+        leave out their share (``offset_share=False``), as the tracker's own verdict reads its covariances before
+        its share is added."""
+        sigmas = settings.bias_sigma if isinstance(settings.bias_sigma, tuple) else (settings.bias_sigma,)
+        return cls(gate_probability=settings.gate_probability, huber_k=settings.huber_k, seed=settings.seed,
+                   bias_sigma=settings.bias_sigma, offset_share=max(sigmas) == 0.0)
 
 
 @dataclass(frozen=True, kw_only=True)

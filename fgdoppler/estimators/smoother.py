@@ -36,7 +36,7 @@ the solution is the judge's (:mod:`fgdoppler.estimators.judge`).
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -56,7 +56,11 @@ from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.estimators.site_offsets import site_sigmas, with_site_uncertainty
 from fgdoppler.estimators.smoother_modes import _modes_2d, _reinitiate, _restarts_3d, _rival_reason
 from fgdoppler.estimators.smoother_solve import FloatArray, SmootherSolution, solve_smoother
-from fgdoppler.estimators.smoother_zone import _outside_findings, _released_reason
+from fgdoppler.estimators.smoother_zone import (
+    _held_with_offsets,
+    _outside_findings,
+    _released_reason,
+)
 from fgdoppler.estimators.spread import posterior_spread
 from fgdoppler.estimators.verdict import Event, Reason
 from fgdoppler.geometry import pair_labels
@@ -112,14 +116,17 @@ def initial_trajectory(measurements: Measurements, model: TrackingModel, init: I
 
 def _final_findings(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
                     sol: SmootherSolution, init: Initiation, reasons: list[Reason], progress: Progress | None,
-                    memo: SearchMemo | None, joint: JointSolution | str | None = None) -> list[Reason]:
+                    memo: SearchMemo | None, joint: JointSolution | str | None = None,
+                    walls: Callable[[FloatArray, FloatArray], float] | None = None) -> list[Reason]:
     """``reasons`` with what the searches outside the zone (2-D, ``mode_search``:
     :func:`~fgdoppler.estimators.smoother_zone._outside_findings`) and the split test of the motion model
     (``motion_check``: :mod:`fgdoppler.estimators.manoeuvre`) find about the final solution — with the offsets
     in the model where they were estimated with the track (``joint``,
-    :func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`)."""
+    :func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`); the zone wall's tests with them in
+    the model where ``walls`` (:func:`~fgdoppler.estimators.smoother_offsets.joint_wall_gain`) is given."""
     if settings.mode_search:
-        reasons = _outside_findings(measurements, model, settings, sol, init, reasons, progress, memo)
+        reasons = _outside_findings(measurements, model, settings, sol, init, reasons, progress, memo, walls)
+    reasons = _held_with_offsets(measurements, model, settings, sol, reasons, walls)
     return [*reasons, *_model_findings(measurements, model, settings, sol.times, sol.states, joint,
                                        half_plane=init.half_plane is not None)]
 
@@ -172,8 +179,11 @@ def with_offset_findings(reference: TrackResult, measurements: Measurements, mod
     model: the split test of the motion model re-fitting them
     (:func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`) in place of the one without, and in 2-D
     the mirror image that free offsets can make a rival (:func:`_mirror_reason`; not with a ``half_plane``).
+    Not the zone wall's test, which needs the tracks the smoother released from the wall: a smoother run with
+    the offsets declared (``SmootherSettings.reference_for``) reads that one too.
 
-    For a tracker told of offsets and held against the offline smoother (the ``reference`` finding): the
+    For a tracker told of offsets and held against an offline smoother given without them (the ``reference``
+    finding; :func:`~fgdoppler.estimators.registry.run_estimator`'s ``reference``): the
     comparison of track and covariance stays like with like — both without the offsets' share, which the
     tracker adds last — but the smoother's own findings about the model must be those of the model the
     user declared.  Without this, offsets pass for a manoeuvre: the paper's case b 45 km, offsets of σ 1 m/s
@@ -215,7 +225,7 @@ def _reported(measurements: Measurements, model: TrackingModel, settings: Smooth
               reasons: list[Reason], notes: list[str], joint: JointSolution | str | None = None
               ) -> tuple[list[FloatArray], list[FloatArray | None], OffsetEstimate | None]:
     """The states and covariances to report: the sampled spread where the posterior is skewed (its reason joins
-    ``reasons``), with the calibration offsets' share (``settings.bias_sigma``) added — a consider covariance
+    ``reasons``), with the calibration offsets' share (``settings.bias_sigma``; not without ``settings.offset_share``) added — a consider covariance
     (:func:`~fgdoppler.estimators.calibration.with_bias_uncertainty`) or, with ``settings.estimate_offsets``, the
     joint solution's (``joint``, :func:`_joint`) shift and share (:mod:`~fgdoppler.estimators.smoother_offsets`;
     its offsets are returned, what happened joins ``notes``), the clock offsets' share (``settings.clock_sigma``,
@@ -232,7 +242,7 @@ def _reported(measurements: Measurements, model: TrackingModel, settings: Smooth
             states, covs = list(sampled.states), list(sampled.covariances)
             reasons.append(sampled.reason)
     off = None
-    if np.any(np.asarray(settings.bias_sigma) > 0):  # its count was checked when the run began
+    if settings.offset_share and np.any(np.asarray(settings.bias_sigma) > 0):  # its count was checked at the start
         states, covs, off = _with_bias(measurements, model, settings, sol, states, covs, has_covs, notes, joint)
     if has_covs and np.any(np.asarray(settings.clock_sigma) > 0):
         covs = list(with_clock_uncertainty(measurements, model, sol.times, sol.states, np.array(covs),
@@ -436,10 +446,15 @@ def finish_smoother(measurements: Measurements, model: TrackingModel, draft: Smo
     settings, sol = draft.settings, draft.solution
     progress = prefixed(progress, "smoother")
     notes = list(draft.notes)
+    from fgdoppler.estimators.smoother_offsets import joint_wall_gain
+
     joint = _joint(measurements, model, settings, sol)
-    released = _released_reason(measurements, model, settings, sol, draft.released)
+    # With offsets declared the zone wall's tests read them too: a pair's constant error can make a start
+    # outside the zone fit better, which the model the user declared explains inside it.
+    walls = None if joint is None else joint_wall_gain(measurements, model, settings, sol.times)
+    released = _released_reason(measurements, model, settings, sol, draft.released, offsets=walls)
     reasons = _final_findings(measurements, model, settings, sol, draft.init, [*draft.reasons, *released],
-                              progress, memo, joint)
+                              progress, memo, joint, walls)
     states, covs, offsets = _reported(measurements, model, settings, sol, reasons, notes,
                                       joint if settings.estimate_offsets else None)
     return _track(draft, states, covs, reasons, notes, offsets)

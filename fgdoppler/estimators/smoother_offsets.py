@@ -23,7 +23,9 @@ compares one track and the offsets with two tracks that share them
 (:func:`joint_split_statistics`), and in 2-D the joint mode found from the
 track's mirror image across the sensors' line, which free offsets can make
 as likely as the reported one, is a ``competing`` finding where it is a
-rival (:func:`mirror_solution`).  Those two tests of the model run with the
+rival (:func:`mirror_solution`), and the zone wall's likelihood-ratio test
+compares the held and the released track in the joint objective
+(:func:`joint_wall_gain`).  Those three tests of the model run with the
 offsets only considered too (``bias_sigma`` without ``estimate_offsets``):
 the joint solution is then found for the verdict alone.
 
@@ -55,6 +57,7 @@ of each).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import gtsam
@@ -72,7 +75,8 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.zone import Zone
 
-__all__ = ["JointSolution", "joint_split_statistics", "mirror_solution", "mirrored", "solve_with_offsets"]
+__all__ = ["JointSolution", "joint_split_statistics", "joint_wall_gain", "mirror_solution", "mirrored",
+           "solve_with_offsets"]
 
 FloatArray = NDArray[np.float64]
 
@@ -242,6 +246,34 @@ def solve_with_offsets(measurements: Measurements, model: TrackingModel, setting
     return JointSolution(times=prob.times, states=x.copy(), offsets=OffsetEstimate(pairs=prob.pairs, values=b.copy(),
                                                                  covariance=sol.border_covariance),
                          covariances=sol.covariances, conditional=sol.conditional, cost=cost, notes=tuple(notes))
+
+
+def joint_wall_gain(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
+                    times: FloatArray) -> Callable[[FloatArray, FloatArray], float]:
+    r"""The zone wall's likelihood-ratio statistic with the calibration offsets in the model: a function of the
+    held track and a track found without the wall (both at ``times``).
+
+    The ``boundary`` test (:func:`~fgdoppler.estimators.smoother_zone._wall_reason`) compares the held track's
+    cost :math:`c_h` with a free track's :math:`c_f`, both without the offsets.  With offsets declared
+    (``settings.bias_sigma``) the model the user stated has them, and a start outside the zone that fits
+    better only because the pairs disagree by a constant is not preferred by the data.  So both costs are
+    those of the joint objective (module docstring, without the wall): :math:`\tilde c_h` at the joint mode
+    from the held track with the wall, :math:`\tilde c_f` the lower of the joint modes without the wall from
+    the free track (offsets 0) and from :math:`\tilde c_h`'s point; the function returns
+    :math:`\tilde c_h - \tilde c_f`.  Three Levenberg–Marquardt solves.
+    """
+    sigmas = bias_sigmas(settings.bias_sigma, model.observation.n_channels)
+    held_problem = _JointProblem(model, measurements, settings, times, sigmas)
+    free_problem = _JointProblem(model, measurements, replace(settings, region_bound=False), times, sigmas)
+
+    def gain(held: FloatArray, free: FloatArray) -> float:
+        z0 = np.concatenate([np.asarray(held, dtype=float).ravel(), np.zeros(held_problem.p)])
+        z_held, *_ = _levenberg_marquardt(held_problem, z0, settings.max_iterations)
+        c_free = min(free_problem.data_cost(_levenberg_marquardt(free_problem, z, settings.max_iterations)[0])
+                     for z in (z_held, np.concatenate([np.asarray(free, dtype=float).ravel(), np.zeros(held_problem.p)])))
+        return held_problem.data_cost(z_held) - c_free
+
+    return gain
 
 
 def mirror_solution(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,

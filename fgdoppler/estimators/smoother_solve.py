@@ -401,11 +401,14 @@ def _boundary_test(prob: _Problem, x: FloatArray, max_iterations: int
 
 
 def _wall_reason(zone: Zone, x: FloatArray, inside: float, free: FloatArray, free_cost: float,
-                 searched: str = "", advise: Callable[[], tuple[str, Zone]] | None = None) -> Reason:
+                 searched: str = "", advise: Callable[[], tuple[str, Zone]] | None = None,
+                 offsets: Callable[[FloatArray, FloatArray], float] | None = None) -> Reason:
     """The ``boundary`` finding for a track ``x`` held by the wall (data cost ``inside``) and the best track
     found without it (``free``, cost ``free_cost``; ``searched`` says where it was looked for, and whether the
     start found lies at its edge; ``advise`` gives the zone to try, asked only when the finding is
-    ``doubtful`` — by default the one that holds ``free``'s start)."""
+    ``doubtful`` — by default the one that holds ``free``'s start).  With calibration offsets declared,
+    ``offsets`` gives the statistic with them in the model
+    (:func:`~fgdoppler.estimators.smoother_offsets.joint_wall_gain`), which then decides."""
     gain = inside - free_cost
     limit = WALL_GAIN
     d = zone.dim
@@ -413,12 +416,35 @@ def _wall_reason(zone: Zone, x: FloatArray, inside: float, free: FloatArray, fre
             f"bound{searched} the cost is {free_cost:.2f} "
             f"instead of {inside:.2f}, {distance_text(np.linalg.norm(free[0, :d] - x[0, :d]))} away"
             f" (speed {np.linalg.norm(free[0, d:]):.0f} m/s)")
+    joint = _offsets_gain(offsets, x, free, gain, limit)
+    said = _offsets_text(joint, gain)
+    gain = gain if joint is None else joint
     if gain > limit:
         text, advised = advise() if advise else _held_start(zone.reaching(free[0]))
         return Reason(code="boundary", status="doubtful", message=(
-            f"{held}: the data prefer a start outside the zone (lower by {gain:.1f} > {limit:.2f}); widen the "
-            f"zone to hold that start, {text}"), zone=advised.box())
-    return Reason(code="boundary", status="ok", message=f"{held}: the data do not prefer a start outside it")
+            f"{held}: the data prefer a start outside the zone (lower by {gain:.1f}{said} > {limit:.2f}); widen "
+            f"the zone to hold that start, {text}"), zone=advised.box())
+    return Reason(code="boundary", status="ok", message=(
+        f"{held}: the data do not prefer a start outside it" + (f" (lower by {gain:.1f}{said})" if said else "")))
+
+
+def _offsets_gain(offsets: Callable[[FloatArray, FloatArray], float] | None, held: FloatArray, free: FloatArray,
+                  gain: float, limit: float) -> float | None:
+    """The wall test's statistic with the declared calibration offsets in the model, where ``offsets`` is given
+    and the test without them fails (``gain > limit``); ``None`` otherwise, or where the joint solves fail (the
+    test without the offsets then stands)."""
+    if offsets is None or gain <= limit or free.shape != held.shape:
+        return None
+    try:
+        joint = float(offsets(held, free))
+    except (RuntimeError, np.linalg.LinAlgError):
+        return None
+    return joint if np.isfinite(joint) else None
+
+
+def _offsets_text(joint: float | None, gain: float) -> str:
+    """What the wall test with the offsets in the model (statistic ``joint``; none: ``None``) adds to a finding."""
+    return "" if joint is None else f" with the declared calibration offsets free in the model ({gain:.1f} without)"
 
 
 def _data_cost(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,

@@ -37,6 +37,8 @@ from fgdoppler.estimators.smoother_solve import (
     SmootherSolution,
     _data_cost,
     _held_start,
+    _offsets_gain,
+    _offsets_text,
     _wall_reason,
 )
 from fgdoppler.estimators.verdict import Reason
@@ -77,7 +79,8 @@ def _widened(zone: Zone, x0: FloatArray | None) -> Zone:
 
 def _beyond_wall_2d(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
                     sol: SmootherSolution, window: Measurements, progress: Progress | None = None, *,
-                    half_plane: HalfPlane | None = None, memo: SearchMemo | None = None) -> Reason | None:
+                    half_plane: HalfPlane | None = None, memo: SearchMemo | None = None,
+                    offsets: Callable[[FloatArray, FloatArray], float] | None = None) -> Reason | None:
     r"""2-D: the ``boundary`` test of a track held by the zone wall, against the data's modes beyond the wall.
 
     The test in :func:`~fgdoppler.estimators.smoother_solve.solve_smoother` releases the wall from where the
@@ -99,7 +102,8 @@ def _beyond_wall_2d(measurements: Measurements, model: TrackingModel, settings: 
     itself stays: the zone is the user's, and the finding tells them to
     widen it.  ``None`` where the wall does not hold or the search does
     not apply (as :func:`~fgdoppler.estimators.smoother_modes._modes_2d`).  A ``memo`` runs each search once for
-    all of a call's hypotheses.
+    all of a call's hypotheses.  With calibration offsets declared, ``offsets`` tests the lowest-cost track
+    found in the model with them (:func:`~fgdoppler.estimators.smoother_solve._wall_reason`).
     """
     zone = model.zone
     if zone is None or not settings.region_bound or not _searchable_2d(model, sol) \
@@ -110,7 +114,7 @@ def _beyond_wall_2d(measurements: Measurements, model: TrackingModel, settings: 
     if found is None:
         return None
     best, inside, searched, advise = found
-    return _wall_reason(zone, sol.states, inside, best.states, best.cost, searched, advise)
+    return _wall_reason(zone, sol.states, inside, best.states, best.cost, searched, advise, offsets)
 
 
 def _best_outside_2d(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
@@ -286,13 +290,15 @@ def _outside_zone_2d(measurements: Measurements, model: TrackingModel, settings:
 
 def _outside_findings(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
                       sol: SmootherSolution, init: Initiation, reasons: list[Reason], progress: Progress | None,
-                      memo: SearchMemo | None) -> list[Reason]:
+                      memo: SearchMemo | None, offsets: Callable[[FloatArray, FloatArray], float] | None = None
+                      ) -> list[Reason]:
     """``reasons`` after the 2-D searches outside the zone: beyond a wall that holds the track (its
-    ``boundary`` finding replaced, :func:`_beyond_wall_2d`), else where the track fits poorly (a ``zone``
-    finding added, :func:`_outside_zone_2d`)."""
+    ``boundary`` finding replaced, :func:`_beyond_wall_2d`, with the declared calibration offsets in the model
+    where ``offsets`` is given), else where the track fits poorly (a ``zone`` finding added,
+    :func:`_outside_zone_2d`)."""
     window = measurements.between(init.t_start, init.t_end)
     beyond = _beyond_wall_2d(measurements, model, settings, sol, window, progress, half_plane=init.half_plane,
-                             memo=memo)
+                             memo=memo, offsets=offsets)
     if beyond is not None:
         return [beyond if r.code == "boundary" else r for r in reasons]
     if any(r.code == "boundary" for r in reasons):
@@ -302,10 +308,28 @@ def _outside_findings(measurements: Measurements, model: TrackingModel, settings
     return reasons if outside is None else [*reasons, outside]
 
 
+def _held_with_offsets(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
+                       sol: SmootherSolution, reasons: list[Reason],
+                       offsets: Callable[[FloatArray, FloatArray], float] | None) -> list[Reason]:
+    """``reasons`` with the solve's own ``boundary`` finding — the held track released from where it stopped
+    (:func:`~fgdoppler.estimators.smoother_solve.solve_smoother`) — tested again with the declared calibration
+    offsets in the model (``offsets``), where it is ``doubtful`` and no search beyond the wall replaced it (3-D,
+    or nothing found there: :func:`_beyond_wall_2d`)."""
+    own = [r for r in sol.reasons if r.code == "boundary" and r.status == "doubtful"]
+    if offsets is None or sol.released is None or model.zone is None or not own:
+        return reasons
+    free, free_cost = sol.released
+    again = _wall_reason(model.zone, sol.states, _data_cost(measurements, model, settings, sol), free, free_cost,
+                         offsets=offsets)
+    return [again if any(r is o for o in own) else r for r in reasons]
+
+
 def _released_reason(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
-                     sol: SmootherSolution, released: Sequence[tuple[FloatArray, float]]) -> list[Reason]:
+                     sol: SmootherSolution, released: Sequence[tuple[FloatArray, float]], *,
+                     offsets: Callable[[FloatArray, FloatArray], float] | None = None) -> list[Reason]:
     r"""A ``boundary`` finding, ``doubtful``, where a track the zone wall held gave way to ``sol`` and,
-    released from the wall, fits the data better than ``sol`` from a start outside the zone.
+    released from the wall, fits the data better than ``sol`` from a start outside the zone (with calibration
+    offsets declared, in the model with them: ``offsets``, :func:`~fgdoppler.estimators.smoother_solve._wall_reason`).
 
     The ``boundary`` test (:func:`~fgdoppler.estimators.smoother_solve._boundary_test`) is a likelihood-ratio
     test of the wall for the track it holds.  When the re-initiation or the
@@ -341,13 +365,16 @@ def _released_reason(measurements: Measurements, model: TrackingModel, settings:
     free, free_cost = min(outside, key=lambda r: r[1])
     inside = _data_cost(measurements, model, settings, sol)
     gain = inside - free_cost
+    joint = _offsets_gain(offsets, sol.states, free, gain, WALL_GAIN)
+    said = _offsets_text(joint, gain)
+    gain = gain if joint is None else joint
     if gain <= WALL_GAIN:
         return []
     d = zone.dim
     text, advised = _held_start(zone.reaching(free[0]))
     return [Reason(code="boundary", status="doubtful", zone=advised.box(), message=(
         f"a track held at the zone's boundary was replaced by this one (cost {inside:.2f}), but released from the "
-        f"bound it fits the data better: cost {free_cost:.2f}, lower by {gain:.1f} > {WALL_GAIN:.2f}, starting "
+        f"bound it fits the data better: cost {free_cost:.2f}, lower by {gain:.1f}{said} > {WALL_GAIN:.2f}, starting "
         f"{distance_text(np.linalg.norm(free[0, :d] - sol.states[0, :d]))} away at "
         f"{np.linalg.norm(free[0, d:]):.0f} m/s ({zone.excess_text(free[0])}): the data prefer a start outside "
         f"the zone; widen the zone to hold that start, {text}"))]

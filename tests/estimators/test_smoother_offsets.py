@@ -20,14 +20,16 @@ from fgdoppler.estimators.manoeuvre import split_statistics
 from fgdoppler.estimators.marginals import bordered_chain_solve
 from fgdoppler.estimators.offset_posterior import OffsetPrior
 from fgdoppler.estimators.results import OffsetEstimate
-from fgdoppler.estimators.smoother import with_offset_findings
+from fgdoppler.estimators.smoother import draft_smoother, with_offset_findings
 from fgdoppler.estimators.smoother_offsets import (
     _JointProblem,
     joint_split_statistics,
+    joint_wall_gain,
     mirror_solution,
     mirrored,
     solve_with_offsets,
 )
+from fgdoppler.estimators.smoother_solve import WALL_GAIN, _data_cost
 
 
 def _random_bordered_chain(rng: np.random.Generator, n: int = 6, d: int = 4, p: int = 2
@@ -188,6 +190,16 @@ def test_estimating_offsets_needs_their_prior() -> None:
     m = sim.measurements
     with pytest.raises(ValueError, match="no pair"):
         solve_with_offsets(m, model, fd.SmootherSettings(), m.scans().times, sim.truth.at(m.scans().times))
+
+
+def test_the_reference_a_tracker_told_of_offsets_is_held_against_reads_them_in_its_findings_only() -> None:
+    with pytest.raises(ValueError, match="cannot leave out offset_share"):
+        fd.SmootherSettings(bias_sigma=1.0, estimate_offsets=True, offset_share=False)
+    told_nothing = fd.EKFSettings(gate_probability=0.999, huber_k=2.0, seed=4)
+    assert fd.SmootherSettings.reference_for(told_nothing) == fd.SmootherSettings(
+        gate_probability=0.999, huber_k=2.0, seed=4)
+    told = fd.SmootherSettings.reference_for(fd.ISAM2Settings(bias_sigma=(0.5, 0.0)))
+    assert told.bias_sigma == (0.5, 0.0) and not told.offset_share and not told.estimate_offsets
 
 
 def test_the_command_line_estimates_the_offsets(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -430,3 +442,49 @@ def test_offsets_are_described_by_index_or_as_the_geometry_names_the_pairs() -> 
     assert off.describe() == "pair 0 +0.12 +- 0.05 m/s, pair 2 -1.00 +- 0.20 m/s"
     g = fd.Geometry(pairs=(fd.BistaticPair(tx=(0.0, 0.0), rx=(1e3, 0.0)),) * 3, pair_names=("a", "b", "c"))
     assert off.describe(g.pair_label) == "pair 0 (a) +0.12 +- 0.05 m/s, pair 2 (c) -1.00 +- 0.20 m/s"
+
+
+def test_with_the_offsets_declared_the_zone_wall_test_reads_them_and_tends_to_the_test_without_as_they_vanish(
+) -> None:
+    # Case b 45 km, run 23 (offsets +1.13 and -1.06 m/s drawn as studies/doppler_offsets.py draws them): the
+    # smoother's track is held at the zone's boundary, and released from where it stopped it fits the data
+    # better by 5.77 (> chi2_1 95 % = 3.84: "the data prefer a start outside the zone").  The truth starts
+    # inside.  In the model with the offsets free (sigma 1 m/s) the held track explains the data as well as
+    # the released one (measured: 0.0); the statistic is that of the joint objective, which tends to the one
+    # without offsets as their sigma goes to zero (measured 5.7674 at 1e-3 m/s).
+    model, sim, scen = _case_b_45_with_offsets(23)
+    np.testing.assert_allclose(scen.biases, (1.1257, -1.0616), atol=1e-4)
+    m = sim.measurements
+    init = fd.initiate(m.first_per_pair(10), model)
+    assert model.zone is not None and not np.any(model.zone.excess(sim.truth.at(m.scans().times[:1])[0])[0] != 0.0)
+    settings = fd.SmootherSettings()
+    sol = draft_smoother(m, model, init, settings).solution
+    assert [r.status for r in sol.reasons if r.code == "boundary"] == ["doubtful"] and sol.released is not None
+    free, free_cost = sol.released
+    gain = _data_cost(m, model, settings, sol) - free_cost
+    assert gain > WALL_GAIN
+    for sb, near in ((1e-3, gain), (1.0, 0.0)):
+        joint = joint_wall_gain(m, model, dataclasses.replace(settings, bias_sigma=sb), sol.times)(sol.states, free)
+        assert abs(joint - near) < 0.01 * max(gain, 1.0), (sb, joint, near)
+    # The smoother told of the offsets, and the reference an EKF told of them is held against, say so in the
+    # `boundary` finding and keep the track; the reference's covariances are those of the smoother told nothing
+    # (the EKF compares its own, before its share, with them), while the smoother told of them adds the share.
+    plain = fd.run_estimator("smoother", m, model, init, settings)
+    ekf = fd.EKFSettings(bias_sigma=1.0)
+    reference = fd.run_estimator("smoother", m, model, init, fd.SmootherSettings.reference_for(ekf))
+    considered = fd.run_estimator("smoother", m, model, init, fd.SmootherSettings(bias_sigma=1.0))
+    assert "boundary" in {r.code for r in plain.reasons if r.status == "doubtful"}
+    for told in (reference, considered):
+        boundary = [r for r in told.reasons if r.code == "boundary"]
+        assert [r.status for r in boundary] == ["ok"] and "declared calibration offsets" in boundary[0].message
+        np.testing.assert_array_equal(told.primary.states, plain.primary.states)
+    np.testing.assert_array_equal(reference.primary.covariances, plain.primary.covariances)
+    assert np.all(np.linalg.eigvalsh(considered.primary.covariances[-1] - plain.primary.covariances[-1]) > 0.0)
+
+    def wall_findings(given: fd.TrackResult) -> list[str]:
+        r = fd.run_estimator("ekf", m, model, init, ekf, reference=given)
+        return [x.message for x in r.reasons if x.code == "reference" and "zone's boundary" in x.message]
+
+    # A given reference run without the offsets keeps its zone-wall findings (only its motion-model and
+    # mirror-image findings are read again, smoother.with_offset_findings); the one reference_for makes does not.
+    assert wall_findings(plain) and not wall_findings(reference)
