@@ -225,7 +225,8 @@ def _reported(measurements: Measurements, model: TrackingModel, settings: Smooth
               reasons: list[Reason], notes: list[str], joint: JointSolution | str | None = None
               ) -> tuple[list[FloatArray], list[FloatArray | None], OffsetEstimate | None]:
     """The states and covariances to report: the sampled spread where the posterior is skewed (its reason joins
-    ``reasons``), with the calibration offsets' share (``settings.bias_sigma``; not without ``settings.offset_share``) added — a consider covariance
+    ``reasons``), with the calibration offsets' share (``settings.bias_sigma``; not without
+    ``settings.offset_share``) added — a consider covariance
     (:func:`~fgdoppler.estimators.calibration.with_bias_uncertainty`) or, with ``settings.estimate_offsets``, the
     joint solution's (``joint``, :func:`_joint`) shift and share (:mod:`~fgdoppler.estimators.smoother_offsets`;
     its offsets are returned, what happened joins ``notes``), the clock offsets' share (``settings.clock_sigma``,
@@ -443,11 +444,11 @@ def finish_smoother(measurements: Measurements, model: TrackingModel, draft: Smo
 
     ``model`` is the one ``draft`` was made with (:func:`draft_smoother`).
     """
+    from fgdoppler.estimators.smoother_offsets import joint_wall_gain
+
     settings, sol = draft.settings, draft.solution
     progress = prefixed(progress, "smoother")
     notes = list(draft.notes)
-    from fgdoppler.estimators.smoother_offsets import joint_wall_gain
-
     joint = _joint(measurements, model, settings, sol)
     # With offsets declared the zone wall's tests read them too: a pair's constant error can make a start
     # outside the zone fit better, which the model the user declared explains inside it.
