@@ -21,6 +21,7 @@ from fgdoppler.estimators.marginals import bordered_chain_solve
 from fgdoppler.estimators.offset_posterior import OffsetPrior
 from fgdoppler.estimators.results import OffsetEstimate
 from fgdoppler.estimators.smoother import draft_smoother, with_offset_findings
+from fgdoppler.estimators.smoother_modes import _rival_reason
 from fgdoppler.estimators.smoother_offsets import (
     _JointProblem,
     joint_split_statistics,
@@ -488,3 +489,37 @@ def test_with_the_offsets_declared_the_zone_wall_test_reads_them_and_tends_to_th
     # A given reference run without the offsets keeps its zone-wall findings (only its motion-model and
     # mirror-image findings are read again, smoother.with_offset_findings); the one reference_for makes does not.
     assert wall_findings(plain) and not wall_findings(reference)
+
+
+def test_the_mirror_image_is_weighed_against_the_covariance_the_user_receives() -> None:
+    # Case a 5 km, run 53 (offsets drawn with sigma 1 m/s as studies/doppler_offsets.py draws them, declared):
+    # the joint mode from the track's mirror image costs 3.79 more (< chi2_1 95 %) and ends 2.1 km away, 3.6
+    # of the joint mode's Laplace sigma (587 m) in that direction -- a rival by the rule read on that covariance.
+    # The smoother considering the offsets reports a covariance with their five-point share, kilometres wide
+    # (its final NEES against the truth 2.0): the mirror mode lies within three of its sigma, so it is no
+    # rival of the answer the user receives.  The reference an EKF told of the offsets is held against
+    # reports no share, but weighs the mirror image against the same covariance.
+    base = fd.paper_scenarios()[0]
+    rng = np.random.default_rng(np.random.SeedSequence([2026, 0, 53]))
+    scen = dataclasses.replace(base, bias=tuple(rng.normal(0.0, 1.0, base.geometry.n_pairs)))
+    model, sim = fd.TrackingModel.of(scen.geometry), fd.simulate(scen, rng)
+    m = sim.measurements
+    init = fd.initiate(m.first_per_pair(10), model)
+    assert model.zone is not None
+    considered = fd.run_estimator("smoother", m, model, init, fd.SmootherSettings(bias_sigma=1.0))
+    e = considered.primary
+    joint = solve_with_offsets(m, model, fd.SmootherSettings(bias_sigma=1.0, estimate_offsets=True), e.times,
+                               draft_smoother(m, model, init, fd.SmootherSettings()).solution.states)
+    assert not isinstance(joint, str)
+    mirror = mirror_solution(m, model, fd.SmootherSettings(bias_sigma=1.0), joint)
+    assert mirror is not None and mirror.cost - joint.cost < chi2.ppf(0.95, 1)
+    assert _rival_reason([joint, mirror], joint, model.zone) is not None
+    away = mirror.states[-1, :2] - joint.states[-1, :2]
+    u = away / np.linalg.norm(away)
+    assert np.linalg.norm(away) < 3.0 * np.sqrt(u @ e.covariances[-1][:2, :2] @ u)
+    d = e.states[-1] - sim.truth.at(e.times[-1:])[0]
+    assert float(d @ np.linalg.solve(e.covariances[-1], d)) < chi2.ppf(0.999, 4)
+    reference = fd.run_estimator("smoother", m, model, init, fd.SmootherSettings.reference_for(
+        fd.EKFSettings(bias_sigma=1.0)))
+    for told in (considered, reference):
+        assert not any(r.code == "competing" and r.status != "ok" for r in told.reasons), told.reasons
