@@ -609,8 +609,9 @@ class SmootherSettings(TrackerSettings):
         good.  The verdict tests the model with the offsets in it either
         way: the split test of the motion model re-fits them, in 2-D a
         mirror image of the track that free offsets make about as likely is
-        a ``competing`` finding (one more joint solve of track and offsets,
-        :mod:`fgdoppler.estimators.smoother_offsets`), and the zone wall's
+        a ``competing`` finding where the reported covariance (with the
+        offsets' share) does not reach it (one more joint solve of track and
+        offsets, :mod:`fgdoppler.estimators.smoother_offsets`), and the zone wall's
         ``boundary`` test compares the held and the released track with the
         offsets free (:func:`~fgdoppler.estimators.smoother_offsets.joint_wall_gain`,
         three more solves where the wall's test without them fails).
