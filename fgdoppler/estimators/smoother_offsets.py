@@ -260,17 +260,21 @@ def joint_wall_gain(measurements: Measurements, model: TrackingModel, settings: 
     those of the joint objective (module docstring, without the wall): :math:`\tilde c_h` at the joint mode
     from the held track with the wall, :math:`\tilde c_f` the lower of the joint modes without the wall from
     the free track (offsets 0) and from :math:`\tilde c_h`'s point; the function returns
-    :math:`\tilde c_h - \tilde c_f`.  Three Levenberg–Marquardt solves.
+    :math:`\tilde c_h - \tilde c_f`.  Three Levenberg–Marquardt solves, made only when the function is called
+    (most runs with offsets declared never need it: the wall holds nothing).
     """
     sigmas = bias_sigmas(settings.bias_sigma, model.observation.n_channels)
-    held_problem = _JointProblem(model, measurements, settings, times, sigmas)
-    free_problem = _JointProblem(model, measurements, replace(settings, region_bound=False), times, sigmas)
 
     def gain(held: FloatArray, free: FloatArray) -> float:
-        z0 = np.concatenate([np.asarray(held, dtype=float).ravel(), np.zeros(held_problem.p)])
-        z_held, *_ = _levenberg_marquardt(held_problem, z0, settings.max_iterations)
+        held_problem = _JointProblem(model, measurements, settings, times, sigmas)
+        free_problem = _JointProblem(model, measurements, replace(settings, region_bound=False), times, sigmas)
+
+        def packed(states: FloatArray) -> FloatArray:
+            return np.concatenate([np.asarray(states, dtype=float).ravel(), np.zeros(held_problem.p)])
+
+        z_held, *_ = _levenberg_marquardt(held_problem, packed(held), settings.max_iterations)
         c_free = min(free_problem.data_cost(_levenberg_marquardt(free_problem, z, settings.max_iterations)[0])
-                     for z in (z_held, np.concatenate([np.asarray(free, dtype=float).ravel(), np.zeros(held_problem.p)])))
+                     for z in (z_held, packed(free)))
         return held_problem.data_cost(z_held) - c_free
 
     return gain
