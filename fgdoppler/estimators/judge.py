@@ -36,9 +36,13 @@ the status is the worst of them, :mod:`fgdoppler.estimators.verdict`).
     condition on every measurement, so an exact filter and the smoother
     coincide, in mean and in covariance.  ``"doubtful"`` when the difference
     of the means exceeds the χ²₄ :data:`LEVEL` quantile of the filter's own
-    covariance, when the smoother is more than :data:`COVARIANCE_RATIO` times
-    less certain in some direction (variance), or when the smoother's own
-    verdict is not ``ok``.  In poorly observed geometries a filter carried
+    covariance, or when the smoother's own verdict is not ``ok``; and when the
+    smoother is more than :data:`COVARIANCE_RATIO` times less certain in some
+    direction (variance) than the covariance the tracker reports
+    (:func:`covariance_reference`, which
+    :func:`~fgdoppler.estimators.registry.run_estimator` applies after the
+    tracker's checks against posterior samples; informational where only the
+    tracker's own Gaussian covariance was).  In poorly observed geometries a filter carried
     along a curved valley of the likelihood ends several of its standard
     deviations from where the whole recording puts the target, while its
     innovations still look consistent.  Also ``"doubtful"`` when the
@@ -120,8 +124,8 @@ from fgdoppler.repeats import coarse_rounding, find_repeats
 from fgdoppler.zone import ZoneBox
 
 __all__ = ["COVARIANCE_RATIO", "LEVEL", "LOST", "MIN_FIT_DOF", "MIN_MEASUREMENTS", "REJECT_DOUBTFUL", "REJECT_FAILED",
-           "REJECT_ROBUST", "REMOTE_FACTOR", "REPEATS_ADVICE", "ROUNDING_ADVICE", "SPEED_FACTOR", "ZONE_TOLERANCE", "judge",
-           "needed_speed", "repeat_reasons", "track_reference"]
+           "REJECT_ROBUST", "REMOTE_FACTOR", "REPEATS_ADVICE", "ROUNDING_ADVICE", "SPEED_FACTOR", "ZONE_TOLERANCE",
+           "covariance_reference", "judge", "needed_speed", "repeat_reasons", "track_reference"]
 
 #: Level of the verdict's χ² tests: a consistent track fails one in a thousand times.
 LEVEL = 0.999
@@ -314,13 +318,8 @@ def _reference_reasons(est: Estimates, reference: TrackResult) -> list[Reason]:
     d = est.states[-1] - ref.states[-1]
     try:
         m2 = float(d @ np.linalg.solve(est.covariances[-1], d))
-        ratio = float(np.max(np.real(np.linalg.eigvals(np.linalg.solve(est.covariances[-1], ref.covariances[-1])))))
     except np.linalg.LinAlgError:
         return out
-    if ratio > COVARIANCE_RATIO:
-        out.append(Reason(code="reference", status="doubtful", message=(
-            f"the offline smoother, with the same data, is {np.sqrt(ratio):.1f} times less certain in some "
-            f"direction at the last time: the {est.kind} covariance understates the error (poor observability)")))
     n = d.size
     limit = float(chi2.ppf(LEVEL, n))
     if m2 > limit:
@@ -329,6 +328,54 @@ def _reference_reasons(est: Estimates, reference: TrackResult) -> list[Reason]:
             f"from the offline smoother's, which uses the same data (chi-square {m2:.1f} > {limit:.1f}, {n} dof): "
             f"the {est.kind} estimates understate their error here (poor observability)")))
     return out
+
+
+def _last_ratio(P: NDArray[np.float64], ref: NDArray[np.float64]) -> float | None:
+    """The largest generalised eigenvalue of the reference's covariance against ``P``: how many times less certain
+    (variance) the reference is in its most uncertain direction relative to ``P`` (``None`` if ``P`` is singular)."""
+    try:
+        return float(np.max(np.real(np.linalg.eigvals(np.linalg.solve(P, ref)))))
+    except np.linalg.LinAlgError:
+        return None
+
+
+def covariance_reference(est: Estimates, own: Estimates, ref: Estimates) -> list[Reason]:
+    r"""The ``reference`` finding on the covariance at the last time: the offline smoother, with the same data,
+    more than :data:`COVARIANCE_RATIO` times less certain (variance) in some direction than the tracker.
+
+    With :math:`\mathbf P` the tracker's covariance and :math:`\mathbf P^s` the smoother's at the last time
+    (both condition on every measurement: an exact filter and the smoother coincide there), the ratio is the
+    largest eigenvalue of :math:`\mathbf P^{-1}\mathbf P^s`.  ``est`` holds the covariances the tracker
+    reports — after its checks against posterior samples and the enclosure of the posterior linearised about
+    the smoother's track (:func:`~fgdoppler.estimators.spread.filtered_spread`), before the calibration, clock
+    and site offsets' share, which the smoother's covariances leave out too — and decides: ``"doubtful"``
+    above the ratio.  ``own`` holds the tracker's own Gaussian covariances, before those checks; where they
+    alone are beyond the ratio, the finding is informational (``"ok"``) and says the checks widened them.
+
+    Read on ``own`` this test had called a consistent answer ``doubtful`` in 28 of 240 tracker runs of the
+    paper's case a 5 km and case b 45 km (EKF and iSAM2, 60 recordings each, seed 2026; final NEES of the
+    reported covariances 0.2–12.3, run-averaged 1.1–5.9) and caught no inconsistent one that no other
+    finding caught; the reported covariances of those runs were within 0.9–4.2 of the smoother's
+    (docs/concepts.md, "The covariance test reads the reported covariance").
+    """
+    if not (len(est) and len(ref) and abs(est.times[-1] - ref.times[-1]) < 1e-9 and est.cov_ok[-1]
+            and ref.cov_ok[-1]):
+        return []
+    ratio = _last_ratio(est.covariances[-1], ref.covariances[-1])
+    if ratio is None:
+        return []
+    if ratio > COVARIANCE_RATIO:
+        return [Reason(code="reference", status="doubtful", message=(
+            f"the offline smoother, with the same data, is {np.sqrt(ratio):.1f} times less certain in some "
+            f"direction at the last time: the {est.kind} covariance understates the error (poor observability)"))]
+    mine = _last_ratio(own.covariances[-1], ref.covariances[-1]) if len(own) and own.cov_ok[-1] else None
+    if mine is None or not mine > COVARIANCE_RATIO:
+        return []
+    return [Reason(code="reference", status="ok", message=(
+        f"the offline smoother, with the same data, is {np.sqrt(mine):.1f} times less certain in some direction "
+        f"at the last time than the {est.kind} filter's own Gaussian covariance (poor observability); the "
+        f"covariance reported, widened by the checks against posterior samples of the data, is "
+        f"{np.sqrt(max(ratio, 0.0)):.1f} times (at most {np.sqrt(COVARIANCE_RATIO):.0f} allowed)"))]
 
 
 def track_reference(est: Estimates, ref: Estimates) -> list[Reason]:

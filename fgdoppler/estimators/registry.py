@@ -35,7 +35,7 @@ from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.fixed_lag import run_fixed_lag
 from fgdoppler.estimators.initiation import Initiation, InitiationSettings, initiate
 from fgdoppler.estimators.isam2 import run_isam2
-from fgdoppler.estimators.judge import judge, track_reference
+from fgdoppler.estimators.judge import covariance_reference, judge, track_reference
 from fgdoppler.estimators.later_mistakes import later_mistakes
 from fgdoppler.estimators.names import ALIASES, SUMMARIES
 from fgdoppler.estimators.particle import run_map, run_particle
@@ -233,9 +233,12 @@ def _run_estimator(name: str, measurements: Measurements, model: TrackingModel |
     held = (_reference(measurements, model, init, settings, reference, per_pair, resolve_ambiguity, progress)
             if verify and result.primary.kind != "smoothed" else None)
     judged = judge(result, measurements, model, settings, held, half_plane=init.half_plane is not None)
+    own = judged.primary  # the tracker's own Gaussian covariances
     checked = None  # the primary covariances without the enclosure built from the reference's track
     if isinstance(settings, SampledCovarianceSettings) and settings.sampled_covariance:
         judged, checked = _with_sampled_covariances(judged, measurements, model, settings, held)
+    if held is not None:  # on the covariances reported, before the offsets' share (the reference has none)
+        judged = replace(judged, reasons=(*judged.reasons, *covariance_reference(judged.primary, own, held.primary)))
     if any(v is not None and np.any(v > 0) for v in (offsets, clocks, site_errors)):
         judged, checked = _with_offsets(judged, result, segments, info, measurements, model, settings, offsets,
                                         clocks, prefixed(progress, "calibration, clock and site offsets"),

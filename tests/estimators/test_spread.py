@@ -529,10 +529,16 @@ def test_filtered_covariances_widen_where_the_posterior_reaches_further_and_the_
     The widened covariances enclose the filter's own at every time (whitened
     eigenvalues >= 1), the estimates are the filter's, the truth's NEES
     drops by more than half (measured 335 -> 109; 121 by the sampled checks
-    alone, ``linearised_everywhere=False``), the finding says what was
-    done, and the verdict's ``reference`` test still judges the filter's own
-    covariance (doubtful: it understates the smoother's uncertainty).  The
-    track depends on the sampled Gaussian sum it starts from: with sampler
+    alone, ``linearised_everywhere=False``), and the finding says what was
+    done.  The verdict's ``reference`` covariance test reads the covariance
+    reported: on the plain run (its own) it is ``doubtful``, the smoother
+    3.8 times less certain; on the widened one it is informational and names
+    both numbers.  Before 2026-12-03 it read the own covariance in both and
+    this answer was ``doubtful``; that reading called 45 consistent answers
+    ``doubtful`` for this one catch in 640 tracker runs of the benchmark's
+    recordings, and here the exact posterior's own mean and covariance miss
+    the truth too (docs/concepts.md, "The covariance test reads the reported
+    covariance").  The track depends on the sampled Gaussian sum it starts from: with sampler
     seeds 0-7 the plain NEES was 156-370 (widened 62-114) but with seed 3,
     whose track is 58 (widened 51) and not doubtful; seeds are tried until
     the track is the over-confident one this test is about.
@@ -547,7 +553,9 @@ def test_filtered_covariances_widen_where_the_posterior_reaches_further_and_the_
     assert _truth_nees(sim, b) < 0.5 * _truth_nees(sim, a)
     assert [r.code for r in wide.reasons if r.code == "nonlinear" and r.status == "ok"] == ["nonlinear"]
     assert {r.code for r in plain.reasons if r.status == "doubtful"} == {"reference"}
-    assert {r.code for r in wide.reasons if r.status == "doubtful"} == {"reference"}
+    (own,) = [r for r in plain.reasons if "less certain" in r.message]
+    (said,) = [r for r in wide.reasons if "less certain" in r.message]
+    assert own.status == "doubtful" and said.status == "ok" and "own Gaussian covariance" in said.message
     # the smoothed estimates (the tracker's second set) are untouched
     np.testing.assert_array_equal(plain.estimates[1].covariances, wide.estimates[1].covariances)
 
@@ -563,7 +571,10 @@ def test_the_ekfs_covariances_are_checked_as_isam2s_are() -> None:
     whole-track reference finding reads the covariances the sampled checks
     widened (not the linearised enclosure, built from the smoother's
     track): the plain ones stray from the smoother's track (6.9 sigma on
-    average), the checked ones do not; the other findings are the same.
+    average), the checked ones do not.  The covariance test reads the
+    covariance reported: ``doubtful`` on the plain one (the smoother 3.8 times
+    less certain), informational on the widened one (1.1 times); the other
+    findings are the same.
     """
     sim, plain, wide = _plain_and_widened("ekf", 4, 36)
     a, b = plain.primary, wide.primary
@@ -572,7 +583,12 @@ def test_the_ekfs_covariances_are_checked_as_isam2s_are() -> None:
     assert wide.status == plain.status == "doubtful"
     track = [r for r in plain.reasons if "lay on average" in r.message]
     assert len(track) == 1 and not any("lay on average" in r.message for r in wide.reasons)
-    assert [r for r in wide.reasons if r.code != "nonlinear"] == [r for r in plain.reasons if r not in track]
+    covariance = [r for r in plain.reasons if "less certain" in r.message]
+    (said,) = [r for r in wide.reasons if "less certain" in r.message]
+    assert [r.status for r in covariance] == ["doubtful"] and said.status == "ok"
+    assert "is 3.8 times less certain" in said.message and "is 1.1 times" in said.message
+    assert ([r for r in wide.reasons if r.code != "nonlinear" and r is not said]
+            == [r for r in plain.reasons if r not in track and r not in covariance])
 
 
 def test_the_fixed_lag_smoothers_covariances_are_checked_against_the_data_they_have_read() -> None:
