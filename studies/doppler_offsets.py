@@ -59,16 +59,24 @@ def _settings(name: str, bias_sigma: float) -> tuple[str, fd.TrackerSettings]:
     return name, fd.ESTIMATORS[name].settings(bias_sigma=bias_sigma)
 
 
-@one_blas_thread
-def one(task: tuple[int, int, int], *, estimators: list[str], verify: bool) -> dict[str, Any]:
-    s, r, seed = task
+def offset_recording(s: int, r: int, seed: int) -> tuple[fd.Scenario, fd.Simulation, fd.TrackingModel,
+                                                         fd.Initiation]:
+    """Run ``r`` of paper scenario ``s``, every pair offset by its own draw of :data:`BIAS_SIGMA` (drawn first from
+    ``SeedSequence([seed, s, r])``, then the recording): the scenario, the recording, the model and the
+    initiation on the first 10 measurements per pair."""
     base = fd.paper_scenarios()[s]
     rng = np.random.default_rng(np.random.SeedSequence([seed, s, r]))
     scen = replace(base, bias=tuple(rng.normal(0.0, BIAS_SIGMA, base.geometry.n_pairs)))
     sim = fd.simulate(scen, rng)
     model = fd.TrackingModel.of(scen.geometry)
+    return scen, sim, model, fd.initiate(sim.measurements.first_per_pair(10), model)
+
+
+@one_blas_thread
+def one(task: tuple[int, int, int], *, estimators: list[str], verify: bool) -> dict[str, Any]:
+    s, r, seed = task
+    scen, sim, model, init = offset_recording(s, r, seed)
     m = sim.measurements
-    init = fd.initiate(m.first_per_pair(10), model)
     out: dict[str, Any] = {"s": s}
     # One reference smoother per recording and gate, loss and seed, shared as ``run_estimators`` shares it, but
     # made here: that call would time no tracker alone, and cannot run ``smoother`` and ``smoother-joint``

@@ -27,11 +27,10 @@ a minute).  docs/concepts.md ("Calibration offsets") quotes it.
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 
 import _common  # noqa: F401  (the repository root on the path)
 import numpy as np
-from doppler_offsets import BIAS_SIGMA
+from doppler_offsets import BIAS_SIGMA, offset_recording
 from scipy.stats import chi2
 
 import fgdoppler as fd
@@ -44,14 +43,10 @@ RUNS = ((1, 6), (1, 52), (4, 47))
 
 def one_run(s: int, r: int, seed: int) -> str:
     """One run's line of the table."""
-    base = fd.paper_scenarios()[s]
-    rng = np.random.default_rng(np.random.SeedSequence([seed, s, r]))
-    scen = replace(base, bias=tuple(rng.normal(0.0, BIAS_SIGMA, base.geometry.n_pairs)))
-    sim = fd.simulate(scen, rng)
-    model = fd.TrackingModel.of(scen.geometry)
+    scen, sim, model, init = offset_recording(s, r, seed)
     m = sim.measurements
     settings = fd.SmootherSettings(bias_sigma=BIAS_SIGMA)
-    res = fd.run_estimator("smoother", m, model, fd.initiate(m.first_per_pair(10), model), settings)
+    res = fd.run_estimator("smoother", m, model, init, settings)
     e = res.primary
     err = e.states[-1] - sim.truth.at(e.times[-1:])[0]
     nees = float(err @ np.linalg.solve(e.covariances[-1], err))
@@ -64,7 +59,7 @@ def one_run(s: int, r: int, seed: int) -> str:
         z, *_ = _levenberg_marquardt(problem, start, settings.max_iterations)
         modes.append(problem.data_cost(z))
     at_truth = problem.data_cost(truth)
-    return (f"| {base.name} | {r} | {res.status} | {nees:.1f} | "
+    return (f"| {scen.name} | {r} | {res.status} | {nees:.1f} | "
             f"{', '.join(f'{b / BIAS_SIGMA:+.2f}' for b in drawn)} | {at_truth:.2f} | {prior_part:.2f} | "
             f"{modes[0]:.2f} | {modes[1]:.2f} | {at_truth - min(modes):.2f} | "
             f"{chi2.sf(prior_part, drawn.size):.3f} |")
