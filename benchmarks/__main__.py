@@ -20,6 +20,7 @@ from benchmarks import (
     bench_particle,
     bench_scaling,
     bench_shared_reference,
+    bench_small_inverse,
     bench_startup,
     bench_widening,
 )
@@ -28,7 +29,7 @@ BENCHES = {"grid": bench_grid, "ekf": bench_ekf, "scaling": bench_scaling, "mont
            "long": bench_long, "particle": bench_particle, "modes": bench_mode_search,
            "motion": bench_motion_check, "shared": bench_shared_reference, "widening": bench_widening,
            "accuracy": bench_accuracy, "factors": bench_factors, "io": bench_io,
-           "startup": bench_startup}
+           "startup": bench_startup, "inverse": bench_small_inverse}
 
 
 def main() -> None:

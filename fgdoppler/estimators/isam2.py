@@ -56,13 +56,13 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.linalg import solve_triangular
 
 from fgdoppler._text import first_line
 from fgdoppler.estimators.gating import NISGate
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.linearized import MotionBlocks, linearize_rows
 from fgdoppler.estimators.local import LocalFrame, in_computation_frame
+from fgdoppler.estimators.marginals import upper_inverse
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.settings import ISAM2Settings, SmootherSettings
 from fgdoppler.estimators.smoother import solve_smoother
@@ -184,7 +184,7 @@ class ISAM2Tracker:
         """
         c = self.isam.marginalFactor(X(k), gtsam.EliminateQR)
         R = np.asarray(c.R())
-        Ri = solve_triangular(R, np.eye(R.shape[0]))
+        Ri = upper_inverse(R)
         theta = self.scans[k].theta
         assert theta is not None
         return theta + Ri @ np.asarray(c.d()), Ri @ Ri.T
