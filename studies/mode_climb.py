@@ -1,4 +1,4 @@
-r"""Why does ``map``'s climb to the mode take six linearisations where the valley curves?  Two variants timed.
+r"""Why does ``map``'s climb to the mode take six linearisations where the valley curves?  Two variants counted.
 
 ``map`` (:func:`fgdoppler.estimators.particle.run_map`) climbs to the
 posterior mode at every report by Levenberg–Marquardt
@@ -66,7 +66,11 @@ def variant_climb(post: pp._Posterior, x: FloatArray, lambda0: float, sr1: bool)
                 B = A
         gain = 0.0
         for _ in range(pp.MODE_DAMPING_TRIES):
-            trial = x - np.linalg.solve(B + lam * D, g)
+            try:
+                trial = x - np.linalg.solve(B + lam * D, g)
+            except np.linalg.LinAlgError:
+                lam *= 4.0
+                continue
             v, r_t, J_t = post._linearised(trial, quad)
             if v > value:
                 gain, s = v - value, trial - x
