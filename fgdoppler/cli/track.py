@@ -72,7 +72,7 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--q", type=float, default=None, help="process noise PSD in m^2/s^3 (default 1e-3)")
     p.add_argument("--lag", type=float, default=None, help="fixed-lag smoother lag in s (default 5)")
     p.add_argument("--particles", type=int, default=None, metavar="N",
-                   help="particle and map estimators: number of particles (default 4096)")
+                   help="particle and map estimators: number of particles (default 4096 for particle, 2048 for map)")
     p.add_argument("--seed", "--particle-seed", dest="seed", type=int, default=None, metavar="S",
                    help="seed of the estimator's random numbers (default 0): the particle estimators' particles, the "
                         "sampled posteriors behind the filters' Gaussian sums and every sampled covariance, the "

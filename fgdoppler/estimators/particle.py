@@ -343,7 +343,7 @@ class _ModeReadOut:
             self.events.append(Event(time=t, message=(
                 f"the mode moved to another peak of the posterior, "
                 f"{float(np.linalg.norm((there - here)[:post.model.dim])):.0f} m away, "
-                f"its basin more probable by a factor {_factor(gain)} (log mass +{gain:.2f})")))
+                f"its basin more probable by a factor {_factor(gain)} (log mass +{_log_gain(gain)})")))
         self.last_mode = (post.t_anchor, x_mode)
         if self.skewed_mean and mean_is_the_better_point(*post.mean_shift(x_mode, probe_beyond=MEAN_SHIFT_FAR)):
             self.means += 1
@@ -403,7 +403,7 @@ def _summary(settings: ParticleSettings, rates: list[float], n_resample: int, n_
                else "")
             + read_out
             + (f"; the mode moved to another peak {len(jumps)} time(s), the closest call a factor "
-               f"{np.exp(min(jumps)):.3g} in probability" if jumps else ""))
+               f"{_factor(min(jumps))} in probability" if jumps else ""))
 
 
 def _update(post: _Posterior, gate: NISGate, t: float, pair: NDArray[np.intp], z: FloatArray,
@@ -451,8 +451,20 @@ def _update(post: _Posterior, gate: NISGate, t: float, pair: NDArray[np.intp], z
 
 
 def _factor(log_gain: float) -> str:
-    """:math:`e^g` as text, also where it overflows a float (a mode switch across a gain of thousands)."""
+    """:math:`e^g` as text, also where it overflows a float (a mode switch across a gain of thousands).
+
+    Three significant digits, and as many more as it takes to show a small gain's excess over 1 (a gain of
+    4e-4 is ``1.0004``, not ``1``: the mode moved for a probability that is larger, if barely).
+    """
     decimal = log_gain / math.log(10.0)
-    if decimal < 300.0:
-        return f"{math.exp(log_gain):.3g}"
-    return f"10^{decimal:.0f}"
+    if decimal >= 300.0:
+        return f"10^{decimal:.0f}"
+    digits = 3 if log_gain >= 1e-2 or log_gain <= 0.0 else 2 + math.ceil(-math.log10(log_gain))
+    return f"{math.exp(log_gain):.{digits}g}"
+
+
+def _log_gain(log_gain: float) -> str:
+    """A positive log gain as text: two decimals, or to its first significant digit below 0.01 (``0.0004``, not
+    ``0.00``)."""
+    decimals = 2 if log_gain >= 1e-2 or log_gain <= 0.0 else math.ceil(-math.log10(log_gain))
+    return f"{log_gain:.{decimals}f}"
