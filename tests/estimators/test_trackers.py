@@ -8,7 +8,7 @@ from pathlib import Path
 import gtsam
 import numpy as np
 import pytest
-from scipy.stats import chi2
+from scipy.stats import chi2, poisson
 
 import fgdoppler as fd
 from fgdoppler.csvfile import CSVError
@@ -232,9 +232,17 @@ def test_isam2_holds_a_well_observed_track_at_20_hz() -> None:
     # those left the factors of states it had long moved away from linearised where the
     # states were while it converged from the prior, and lost the target (measured without
     # the history check, 1,200 scans: 0.6 % of the measurements accepted, end error 11.7 km
-    # at a stated sd of 55 m).  With it the track holds: nearly every measurement passes the
-    # 0.9999 gate and the end state is consistent with its covariance.  Streamed from the
-    # first scan (the warm-up off), as the check has to hold the track from there.
+    # at a stated sd of 55 m; on 2026-12-04, with the gate and restarts of today, 4 of 2,360
+    # rejected but the end error 5.1 km at a stated sd of 90 m, squared Mahalanobis distance
+    # 35,925: the last assertion's failure).  With it the track holds: once it has converged from the prior,
+    # the 0.9999 gate rejects no more genuine measurements than a consistent filter's would,
+    # and the end state is consistent with its covariance.  Streamed from the first scan (the
+    # warm-up off), as the check has to hold the track from there.  While it converges the gate
+    # does reject some: measured 2026-12-04, 11 of 2,360 with OpenBLAS's Haswell kernels and 26
+    # with those it picks on an AMD EPYC (the same code; iSAM2 amplifies the arithmetic's last
+    # bits there), all before 5.2 s.  So the count is taken from 10 s on, where a consistent
+    # filter rejects each of ~2,000 measurements with probability 1e-4: a Poisson count of mean
+    # 0.2, whose 1 - 1e-6 quantile is the bound.
     sc, sim = _paper_at_20_hz(59.95)
     model = fd.TrackingModel.of(sc.geometry)
     tracker = ISAM2Tracker(model, ISAM2Settings(warmup_seconds=0.0, warmup_per_pair=0), model.prior())
@@ -246,7 +254,10 @@ def test_isam2_holds_a_well_observed_track_at_20_hz() -> None:
         x, P = tracker.add_scan(scans.times[k], m.pair[r], m.doppler[r], m.sigma[r], x0 if k == 0 else None,
                                 gate=k >= 20)
     assert P is not None
-    assert np.mean(tracker.gate.as_array()[:, 3]) >= 0.99
+    gate = tracker.gate.as_array()
+    later = gate[gate[:, 0] >= 10.0]
+    assert later.shape[0] > 1900
+    assert np.sum(later[:, 3] == 0) <= poisson.isf(1e-6, later.shape[0] * (1.0 - 0.9999))
     d = x - sim.truth.states[-1]
     assert float(d @ np.linalg.solve(P, d)) <= chi2.ppf(0.9999, 4)
 
