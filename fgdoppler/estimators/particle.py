@@ -188,9 +188,9 @@ def run_map(
 
     The particle estimator's posterior read at its mode instead of its mean
     (with the same settings, the same particles and random numbers as
-    :func:`run_particle`; its defaults, :class:`MapSettings`, move the
-    particles less after each resampling, since the mode needs less of
-    the posterior's detail than the mean):
+    :func:`run_particle`; its defaults, :class:`MapSettings`, hold half
+    as many particles and move them less after each resampling, since the
+    mode needs less of the posterior's detail than the mean):
     at each report time :math:`t`, Levenberg–Marquardt from the previous
     report's mode, and from the particle of highest posterior density where
     that stands higher
