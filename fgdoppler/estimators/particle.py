@@ -450,6 +450,11 @@ def _update(post: _Posterior, gate: NISGate, t: float, pair: NDArray[np.intp], z
     return float(log_sum_exp(post.logw) - before) - norm
 
 
+def _small_gain_places(log_gain: float) -> int:
+    """Decimal places down to a gain's first significant digit where it is below 0.01 (else 0)."""
+    return math.ceil(-math.log10(log_gain)) if 0.0 < log_gain < 1e-2 else 0
+
+
 def _factor(log_gain: float) -> str:
     """:math:`e^g` as text, also where it overflows a float (a mode switch across a gain of thousands).
 
@@ -459,12 +464,11 @@ def _factor(log_gain: float) -> str:
     decimal = log_gain / math.log(10.0)
     if decimal >= 300.0:
         return f"10^{decimal:.0f}"
-    digits = 3 if log_gain >= 1e-2 or log_gain <= 0.0 else 2 + math.ceil(-math.log10(log_gain))
-    return f"{math.exp(log_gain):.{digits}g}"
+    places = _small_gain_places(log_gain)
+    return f"{math.exp(log_gain):.{2 + places if places else 3}g}"
 
 
 def _log_gain(log_gain: float) -> str:
     """A positive log gain as text: two decimals, or to its first significant digit below 0.01 (``0.0004``, not
     ``0.00``)."""
-    decimals = 2 if log_gain >= 1e-2 or log_gain <= 0.0 else math.ceil(-math.log10(log_gain))
-    return f"{log_gain:.{decimals}f}"
+    return f"{log_gain:.{_small_gain_places(log_gain) or 2}f}"

@@ -245,7 +245,8 @@ def test_isam2_holds_a_well_observed_track_at_20_hz() -> None:
     # 0.2, whose 1 - 1e-6 quantile is the bound.
     sc, sim = _paper_at_20_hz(59.95)
     model = fd.TrackingModel.of(sc.geometry)
-    tracker = ISAM2Tracker(model, ISAM2Settings(warmup_seconds=0.0, warmup_per_pair=0), model.prior())
+    settings = ISAM2Settings(warmup_seconds=0.0, warmup_per_pair=0)
+    tracker = ISAM2Tracker(model, settings, model.prior())
     m = sim.measurements
     scans = m.scans()
     x0 = sim.truth.states[0]
@@ -253,11 +254,11 @@ def test_isam2_holds_a_well_observed_track_at_20_hz() -> None:
         r = scans.rows(k)
         x, P = tracker.add_scan(scans.times[k], m.pair[r], m.doppler[r], m.sigma[r], x0 if k == 0 else None,
                                 gate=k >= 20)
-    assert P is not None
+    assert P is not None and settings.gate_probability == 0.9999
     gate = tracker.gate.as_array()
     later = gate[gate[:, 0] >= 10.0]
     assert later.shape[0] > 1900
-    assert np.sum(later[:, 3] == 0) <= poisson.isf(1e-6, later.shape[0] * (1.0 - 0.9999))
+    assert np.sum(later[:, 3] == 0) <= poisson.isf(1e-6, later.shape[0] * (1.0 - settings.gate_probability))
     d = x - sim.truth.states[-1]
     assert float(d @ np.linalg.solve(P, d)) <= chi2.ppf(0.9999, 4)
 
