@@ -103,3 +103,31 @@ def each_count(one: Callable[..., Any], description: str, name: str, default: in
     task = partial(one, **{option: getattr(args, option) for option in options or {}})
     with ProcessPoolExecutor(max(1, min(2, os.cpu_count() or 1))) as pool:
         return args, list(pool.map(task, range(getattr(args, name))))
+
+
+def paired_cells(rows: list[dict[str, Any]], keys: list[str]) -> tuple[str, str, str]:
+    """One scenario's RMSE, paired-difference and NEES cells of variants run on the same recordings.
+
+    ``rows`` are the scenario's runs, each with the truth times ``row["t"]`` and, for every variant ``k`` of
+    ``keys``, the squared position errors ``row[k]["se"]`` and NEES ``row[k]["nees"]`` on that grid (the
+    accuracy benchmark's ``_on_grid``).  Returns the time-averaged RMSE over t >= 5 s of each variant
+    (" / "-joined), each later variant's paired difference against the first with its 95 % bootstrap
+    interval (" | "-joined) and the NEES averaged over runs, then over t >= 10 s (" / "-joined): the
+    benchmark's measures.
+    """
+    import warnings
+
+    import numpy as np
+
+    from benchmarks.bench_accuracy import T_NEES, T_RMSE, _mean_after
+    from fgdoppler.analysis.metrics import compare_rmse, time_averaged_rmse
+
+    t = np.array(rows[0]["t"])
+    se = {k: np.array([row[k]["se"] for row in rows]) for k in keys}
+    with warnings.catch_warnings():  # all-NaN columns are expected: no state before the window ends
+        warnings.simplefilter("ignore", RuntimeWarning)
+        nees = [_mean_after(np.nanmean(np.array([row[k]["nees"] for row in rows]), axis=0), t, T_NEES)
+                for k in keys]
+    return (" / ".join(f"{time_averaged_rmse(se[k], t, t0=T_RMSE):,.0f}" for k in keys),
+            " | ".join(str(compare_rmse(se[k], se[keys[0]], t, t0=T_RMSE)) for k in keys[1:]),
+            " / ".join(f"{v:.2f}" for v in nees))

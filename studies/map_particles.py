@@ -27,15 +27,13 @@ Run: python studies/map_particles.py [--particles 4096 2048] [--runs 100] [--see
 from __future__ import annotations
 
 import time
-import warnings
 from typing import Any
 
 import numpy as np
-from _common import each_run, paper_run, save_table
+from _common import each_run, paired_cells, paper_run, save_table
 
 import fgdoppler as fd
-from benchmarks.bench_accuracy import T_NEES, T_RMSE, _mean_after, _on_grid
-from fgdoppler.analysis.metrics import compare_rmse, time_averaged_rmse
+from benchmarks.bench_accuracy import _on_grid
 from fgdoppler.analysis.workers import one_blas_thread
 
 
@@ -70,20 +68,14 @@ def summary(rows: list[dict[str, Any]], particles: list[int]) -> str:
         rs = [row for row in rows if row["s"] == s]
         if not rs:
             continue
-        t = np.array(rs[0]["t"])
-        se = {k: np.array([row[k]["se"] for row in rs]) for k in (first, *others)}
-        with warnings.catch_warnings():  # all-NaN columns are expected: no state before the window ends
-            warnings.simplefilter("ignore", RuntimeWarning)
-            nees = {k: _mean_after(np.nanmean(np.array([row[k]["nees"] for row in rs]), axis=0), t, T_NEES)
-                    for k in se}
-        cpu = {k: np.array([row[k]["seconds"] for row in rs]) for k in se}
+        keys = [first, *others]
+        rmse, diffs, nees = paired_cells(rs, keys)
+        cpu = {k: np.array([row[k]["seconds"] for row in rs]) for k in keys}
         lines.append(
-            f"| {scen.name} | " + " / ".join(f"{time_averaged_rmse(se[k], t, t0=T_RMSE):,.0f}" for k in se) + " | "
-            + " | ".join(str(compare_rmse(se[k], se[first], t, t0=T_RMSE)) for k in others) + " | "
-            + " / ".join(f"{nees[k]:.2f}" for k in se) + " | "
-            + " / ".join(f"{np.median(cpu[k]):.3f}" for k in se) + " | "
+            f"| {scen.name} | {rmse} | {diffs} | {nees} | "
+            + " / ".join(f"{np.median(cpu[k]):.3f}" for k in keys) + " | "
             + " / ".join(f"{np.median(cpu[k] / cpu[first]):.2f}" for k in others) + " | "
-            + " / ".join(str(sum(row[k]["status"] != "ok" for row in rs)) for k in se) + " |")
+            + " / ".join(str(sum(row[k]["status"] != "ok" for row in rs)) for k in keys) + " |")
     return "\n".join(lines)
 
 

@@ -36,17 +36,15 @@ Run: python studies/mode_switch_margin.py [--margins 0 0.1 0.3 1] [--runs 100] [
 from __future__ import annotations
 
 import itertools
-import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
-from _common import each_run, paper_run, save_table
+from _common import each_run, paired_cells, paper_run, save_table
 
 import fgdoppler as fd
-from benchmarks.bench_accuracy import T_NEES, T_RMSE, _mean_after, _on_grid
-from fgdoppler.analysis.metrics import compare_rmse, time_averaged_rmse
+from benchmarks.bench_accuracy import _on_grid
 from fgdoppler.analysis.workers import one_blas_thread
 from fgdoppler.estimators.particle_posterior import _Posterior
 
@@ -117,18 +115,10 @@ def tables(rows: list[dict[str, Any]], margins: list[float]) -> str:
              "|---|---|" + "---|" * len(others) + "---|---|"]
     for s in POOR:
         rs = [row for row in rows if row["s"] == s]
-        t = np.array(rs[0]["t"])
-        se = {k: np.array([row[k]["se"] for row in rs]) for k in (base, *others)}
-        with warnings.catch_warnings():  # all-NaN columns are expected: no state before the window ends
-            warnings.simplefilter("ignore", RuntimeWarning)
-            nees = {k: _mean_after(np.nanmean(np.array([row[k]["nees"] for row in rs]), axis=0), t, T_NEES)
-                    for k in se}
-        lines.append(
-            f"| {fd.paper_scenarios()[s].name} | "
-            + " / ".join(f"{time_averaged_rmse(se[k], t, t0=T_RMSE):,.0f}" for k in se) + " | "
-            + " | ".join(str(compare_rmse(se[k], se[base], t, t0=T_RMSE)) for k in others) + " | "
-            + " / ".join(f"{nees[k]:.2f}" for k in se) + " | "
-            + " / ".join(str(sum(row[k]["taken"] for row in rs)) for k in se) + " |")
+        keys = [base, *others]
+        rmse, diffs, nees = paired_cells(rs, keys)
+        lines.append(f"| {fd.paper_scenarios()[s].name} | {rmse} | {diffs} | {nees} | "
+                     + " / ".join(str(sum(row[k]["taken"] for row in rs)) for k in keys) + " |")
     moved = np.array([sw for row in rows for sw in row[base]["switches"]]).reshape(-1, 3)
     lines += ["", "| switch's log-mass gain | switches (margin 0) | moved closer to the truth | summed change of the "
               "distance (m) |", "|---|---|---|---|"]
