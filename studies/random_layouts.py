@@ -92,11 +92,12 @@ def every_estimator(m: fd.Measurements, g: fd.Geometry, init: fd.Initiation, tru
     return rows
 
 
-def recorded(i: int, g: fd.Geometry, x0: tuple[float, ...], rng: np.random.Generator
+def recorded(i: int, g: fd.Geometry, x0: tuple[float, ...], rng: np.random.Generator, *, duration: float = 30.0
              ) -> tuple[dict[str, Any], fd.Simulation, fd.Initiation | None]:
-    """Draw ``i``'s record (its number, pairs and start), its 30 s recording and the default initiation
-    (``None`` when the initiation refuses it — a target faster than the zone's bound —, said in the record)."""
-    sim = fd.simulate(fd.Scenario(geometry=g, x0=x0, duration=30.0, dt=0.5), rng)
+    """Draw ``i``'s record (its number, pairs and start), its recording (``duration`` s) and the default
+    initiation (``None`` when the initiation refuses it — a target faster than the zone's bound —, said in the
+    record)."""
+    sim = fd.simulate(fd.Scenario(geometry=g, x0=x0, duration=duration, dt=0.5), rng)
     out: dict[str, Any] = {"draw": i, "pairs": len(g.pairs), "x0": [round(v, 1) for v in x0]}
     try:
         return out, sim, fd.initiate(sim.measurements.first_per_pair(10), g)
