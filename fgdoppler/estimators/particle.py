@@ -115,6 +115,7 @@ import time
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import chi2
 
 from fgdoppler.estimators.gating import NISGate
 from fgdoppler.estimators.initiation import Initiation
@@ -138,8 +139,8 @@ from fgdoppler.models.robust import huber_rho
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.progress import Progress, advance, start_task
 
-__all__ = ["MEAN_SHIFT_FAR", "MEAN_SHIFT_NOISE", "WindowPosterior", "mean_is_the_better_point", "run_map", "run_particle",
-           "window_posterior"]
+__all__ = ["MEAN_SHIFT_FAR", "MEAN_SHIFT_NOISE", "RESCUE_DRAWS", "RESCUE_LEVEL", "WindowPosterior",
+           "mean_is_the_better_point", "rescue_shortfall", "run_map", "run_particle", "window_posterior"]
 
 FloatArray = NDArray[np.float64]
 
@@ -152,6 +153,13 @@ MEAN_SHIFT_NOISE = 0.1
 #: of case a 5 km and case b 45 km 1.7 at their 5th percentile, the lopsided ones of the 25 km scenarios 0.72 at
 #: their 95th).
 MEAN_SHIFT_FAR = 1.0
+#: ``map`` samples its particles again about the mode when the best of them falls so far short of it that this many
+#: independent draws of a posterior near Gaussian about the mode would all fall as short with probability
+#: :data:`RESCUE_LEVEL` (:func:`rescue_shortfall`); resampling repeats particles, so fewer count as independent than
+#: there are.
+RESCUE_DRAWS = 20
+#: See :data:`RESCUE_DRAWS`.
+RESCUE_LEVEL = 1e-6
 
 
 @in_computation_frame
@@ -265,7 +273,8 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
     # with calibration offsets integrated out the mean is pulled along the offsets' ridge by the prior (module
     # docstring of run_map): the mode throughout
     skewed_mean = isinstance(settings, MapSettings) and settings.posterior_mean and post.offsets is None
-    reader = _ModeReadOut(post, events, skewed_mean=skewed_mean) if mode else None
+    rescue = rng if isinstance(settings, MapSettings) and settings.mode_rescue else None
+    reader = _ModeReadOut(post, events, skewed_mean=skewed_mean, rescue=rescue) if mode else None
 
     def report(t: float) -> tuple[FloatArray, FloatArray]:
         return post.moments(t) if reader is None else reader.report(t)
@@ -323,11 +332,15 @@ class _ModeReadOut:
     jumps to another peak, and how many reports were read at the mean.
     """
 
-    def __init__(self, post: _Posterior, events: list[Event], *, skewed_mean: bool) -> None:
+    def __init__(self, post: _Posterior, events: list[Event], *, skewed_mean: bool,
+                 rescue: np.random.Generator | None = None) -> None:
         self.post, self.events, self.skewed_mean = post, events, skewed_mean
         self.last_mode: tuple[float, FloatArray] | None = None
         self.jumps: list[float] = []  # log-density gains of the mode's moves to another peak
         self.means = 0
+        # the run's generator where the particles are sampled again about a mode they have missed (else None)
+        self.rescue = rescue
+        self.limit = rescue_shortfall(post.model.n)
 
     def report(self, t: float) -> tuple[FloatArray, FloatArray]:
         """The estimate and covariance at ``t`` (:func:`run_map`)."""
@@ -345,6 +358,13 @@ class _ModeReadOut:
                 f"{float(np.linalg.norm((there - here)[:post.model.dim])):.0f} m away, "
                 f"its basin more probable by a factor {_factor(gain)} (log mass +{_log_gain(gain)})")))
         self.last_mode = (post.t_anchor, x_mode)
+        if self.rescue is not None:
+            short = post.shortfall(x_mode)
+            if short > self.limit and post.resample_about(x_mode, self.rescue):
+                self.events.append(Event(time=t, message=(
+                    f"the particles had missed the posterior's peak: the best stood {short:.2f} below the mode in "
+                    f"log density, where a sample of the posterior stays within {self.limit:.2f}; sampled again "
+                    "about the mode")))
         if self.skewed_mean and mean_is_the_better_point(*post.mean_shift(x_mode, probe_beyond=MEAN_SHIFT_FAR)):
             self.means += 1
             return post.moments(t)
@@ -354,6 +374,25 @@ class _ModeReadOut:
         """The closing event's words on the read-out, of ``reports`` reports."""
         return "; estimates at the posterior mode" + (
             f", or at its mean where the posterior is skewed ({self.means} of {reports})" if self.skewed_mean else "")
+
+
+def rescue_shortfall(d: int) -> float:
+    r"""The shortfall of the best particle below the mode beyond which ``map`` samples again about the mode.
+
+    Where the posterior of the :math:`d` state dimensions is near Gaussian
+    about its mode, a draw :math:`\mathbf x` of it falls short by
+    :math:`s = \log\pi(\hat{\mathbf x}) - \log\pi(\mathbf x) \sim \tfrac12\chi^2_d`, and the
+    best of :math:`n` independent draws falls short by more than :math:`c` with
+    probability :math:`(1 - F_{\chi^2_d}(2c))^n`.  Setting that to
+    :data:`RESCUE_LEVEL` with :math:`n` = :data:`RESCUE_DRAWS`,
+
+    .. math::
+
+        c = \tfrac12 F^{-1}_{\chi^2_d}\big(1 - \alpha^{1/n}\big),
+
+    1.68 for the plane's four dimensions and 2.67 for space's six.
+    """
+    return float(0.5 * chi2.ppf(1.0 - RESCUE_LEVEL ** (1.0 / RESCUE_DRAWS), d))
 
 
 def _offsets_at_end(post: _Posterior, x_mode: FloatArray | None) -> OffsetEstimate:

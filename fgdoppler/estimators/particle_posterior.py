@@ -456,6 +456,37 @@ class _Posterior:
                     return y, gain
         return x, None
 
+    def shortfall(self, x_mode: FloatArray) -> float:
+        r"""How far every particle falls short of the mode: :math:`\log\pi_k(\hat{\mathbf x}) - \max_i \log\pi_k(\mathbf x_i)`.
+
+        A sample of a posterior near Gaussian about its mode has
+        :math:`2(\log\pi_k(\hat{\mathbf x}) - \log\pi_k(\mathbf x_i)) \sim \chi^2_d`, so its best
+        particle stands close to the mode; a large shortfall says the particles
+        sit away from the posterior's peak (:meth:`resample_about`).
+        """
+        finite = self.logpost[np.isfinite(self.logpost)]
+        if finite.size == 0:
+            return np.inf
+        return float(self.log_target(np.asarray(x_mode, dtype=float)[None])[0] - np.max(finite))
+
+    def resample_about(self, x_mode: FloatArray, rng: np.random.Generator) -> bool:
+        r"""Sample the target again from the mode's Laplace Gaussian and the particles' own: ``True`` if done.
+
+        The tempered draw of :meth:`sample_from` from the equal-weight mixture
+        of :math:`N(\hat{\mathbf x}, (\mathbf A^{-1})_{xx})` at the mode
+        (:meth:`_state_laplace`) and the particles' weighted mean and
+        covariance, with as many particles and ``move_steps`` moves: it keeps
+        whatever mass the particles held and adds the peak they had missed.
+        ``False`` (the particles unchanged) where the mode's information is
+        singular or no draw has a finite posterior.
+        """
+        laplace = self._state_laplace(np.asarray(x_mode, dtype=float))
+        if laplace is None:
+            return False
+        w = self.weights()
+        comps = [(np.asarray(x_mode, dtype=float), laplace[0]), (w @ self.x, _weighted_cov(self.x, w))]
+        return self.sample_from(comps, self.x.shape[0], self.settings.move_steps, rng) is not None
+
     def _same_peak(self, x: FloatArray, y: FloatArray) -> bool:
         """Whether two climbs ended on one peak: within a standard deviation of its Laplace covariance at ``x``."""
         laplace = self._state_laplace(x)

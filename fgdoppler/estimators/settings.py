@@ -874,12 +874,26 @@ class MapSettings(ParticleSettings):
         reports the mode at every scan, as does ``map`` with calibration
         offsets integrated out (``bias_sigma`` > 0), where the prior pulls the
         mean along the offsets' ridge.
+    mode_rescue : bool, default True
+        Where the best particle falls further below the mode in log density
+        than a sample of a posterior near Gaussian about it would
+        (:func:`~fgdoppler.estimators.particle.rescue_shortfall`: 1.68 in the
+        plane, 2.67 in space), the particles sit away from the posterior's
+        peak — in space a few thousand of them can miss it for tens of
+        seconds — and are sampled again from the mode's Laplace Gaussian and
+        their own (:meth:`~fgdoppler.estimators.particle_posterior._Posterior.resample_about`),
+        with an event.  The covariance reported (their second moment about
+        the mode) and the Gaussian summary of a re-anchoring then describe the
+        posterior again (docs/concepts.md, "Particles that miss the peak").
+        ``False``: never.
     """
 
     move_steps: int = 3
     n_particles: int = 2048
     posterior_mean: bool = True
+    mode_rescue: bool = True
 
     def __post_init__(self) -> None:
         super().__post_init__()
         _flag(self.posterior_mean, "posterior_mean")
+        _flag(self.mode_rescue, "mode_rescue")
