@@ -52,7 +52,10 @@ This is iterated batch importance sampling (Chopin 2002):
    Levenberg–Marquardt from the previous mode (and from the best particle
    where that stands higher), with the particles' second moment about it as
    covariance — or, where the posterior is skewed rather than curved
-   (:func:`mean_is_the_better_point`), the mean and covariance.
+   (:func:`mean_is_the_better_point`), the mean and covariance.  Where
+   the best particle falls further below that mode than a sample of the
+   posterior can (:func:`rescue_shortfall`), ``map`` samples the particles
+   again about it first (``MapSettings.mode_rescue``).
 
 **Re-anchoring.** When the anchor moves to the current scan, the
 particles are propagated with process-noise samples and the older data are
@@ -248,6 +251,19 @@ def run_map(
     since such a jump can be kilometres for a probability ratio of a few.  After a re-anchoring
     (``max_span``) the older data are a Gaussian summary centred on the
     particles' mean, so on long recordings the two read-outs converge.
+
+    The climb also checks the particles: where the best of them falls short
+    of the mode in log density by more than a sample of a posterior near
+    Gaussian about it would (:func:`rescue_shortfall`), they sit away from
+    the posterior's peak, their second moment about the mode no longer
+    describes the mode's error, and a re-anchoring would summarise the
+    wrong place.  ``MapSettings.mode_rescue`` then samples
+    them again from the mode's Laplace Gaussian and their own
+    (:meth:`~fgdoppler.estimators.particle_posterior._Posterior.resample_about`)
+    and the run says so in an event.  In space, where a few thousand
+    particles can miss the peak for tens of seconds, that restores the
+    covariance; on the paper's scenarios it never acts (docs/concepts.md,
+    "Particles that miss the peak").
 
     Raises
     ------
