@@ -400,7 +400,7 @@ def rescue_shortfall(d: int) -> float:
     :math:`s = \log\pi(\hat{\mathbf x}) - \log\pi(\mathbf x) \sim \tfrac12\chi^2_d`, and the
     best of :math:`n` independent draws falls short by more than :math:`c` with
     probability :math:`(1 - F_{\chi^2_d}(2c))^n`.  Setting that to
-    :data:`RESCUE_LEVEL` with :math:`n` = :data:`RESCUE_DRAWS`,
+    :data:`RESCUE_LEVEL` (:math:`\alpha`) with :math:`n` = :data:`RESCUE_DRAWS`,
 
     .. math::
 
