@@ -252,18 +252,11 @@ def run_map(
     (``max_span``) the older data are a Gaussian summary centred on the
     particles' mean, so on long recordings the two read-outs converge.
 
-    The climb also checks the particles: where the best of them falls short
-    of the mode in log density by more than a sample of a posterior near
-    Gaussian about it would (:func:`rescue_shortfall`), they sit away from
-    the posterior's peak, their second moment about the mode no longer
-    describes the mode's error, and a re-anchoring would summarise the
-    wrong place.  ``MapSettings.mode_rescue`` then samples
-    them again from the mode's Laplace Gaussian and their own
-    (:meth:`~fgdoppler.estimators.particle_posterior._Posterior.resample_about`)
-    and the run says so in an event.  In space, where a few thousand
-    particles can miss the peak for tens of seconds, that restores the
-    covariance; on the paper's scenarios it never acts (docs/concepts.md,
-    "Particles that miss the peak").
+    Where the best particle falls further below the mode than a sample of
+    the posterior can (:func:`rescue_shortfall`), the particles have missed
+    the peak (in space, for tens of seconds) and ``MapSettings.mode_rescue``
+    samples them again about it, with an event; on the paper's scenarios it
+    never acts (docs/concepts.md, "Particles that miss the peak").
 
     Raises
     ------
