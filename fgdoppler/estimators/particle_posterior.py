@@ -467,7 +467,12 @@ class _Posterior:
         finite = self.logpost[np.isfinite(self.logpost)]
         if finite.size == 0:
             return np.inf
-        return float(self.log_target(np.asarray(x_mode, dtype=float)[None])[0] - np.max(finite))
+        x = np.asarray(x_mode, dtype=float)
+        # a report's mode is the end of the climb just made, whose value is kept: no second evaluation
+        value = next((peak.value for peak in self._peaks if peak.holds(self, x)), None)
+        if value is None:
+            value = float(self.log_target(x[None])[0])
+        return float(value - np.max(finite))
 
     def resample_about(self, x_mode: FloatArray, rng: np.random.Generator) -> bool:
         r"""Sample the target again from the mode's Laplace Gaussian and the particles' own: ``True`` if done.
@@ -690,13 +695,14 @@ class _Posterior:
                 lam *= 4.0
             if gain < MODE_TOLERANCE:
                 break
-        self._remember(x, self._information_from(x, value, r, Jw, quad))
+        self._remember(x, value, self._information_from(x, value, r, Jw, quad))
         return x, value
 
-    def _remember(self, x: FloatArray, A: FloatArray | None) -> None:
-        """Keep the information ``A`` at a climb's end ``x`` for :meth:`_information` (the last two climbs')."""
-        self._peaks = [*self._peaks[-1:], _PeakInformation(x=x.copy(), A=A, t=self.data.t, gauss=self.gauss,
-                                                           offsets=self.offsets)]
+    def _remember(self, x: FloatArray, value: float, A: FloatArray | None) -> None:
+        """Keep the log posterior ``value`` and information ``A`` at a climb's end ``x`` for :meth:`_information`
+        and :meth:`shortfall` (the last two climbs')."""
+        self._peaks = [*self._peaks[-1:], _PeakInformation(x=x.copy(), value=value, A=A, t=self.data.t,
+                                                           gauss=self.gauss, offsets=self.offsets)]
 
     def reanchor(self, t: float, rng: np.random.Generator) -> None:
         """Move the anchor to ``t``: propagate with process noise, summarise the older data by a Gaussian."""
@@ -721,13 +727,15 @@ class _Posterior:
 
 @dataclass(frozen=True, kw_only=True)
 class _PeakInformation:
-    """The information at a climb's end ``x``, and the data, prior summary and offsets it was computed with.
+    """The log posterior and information at a climb's end ``x``, and the data, prior summary and offsets they were
+    computed with.
 
     Held by reference, so an object :meth:`_Posterior.reanchor` or :meth:`_Data.add` has replaced cannot be
     mistaken for its successor.
     """
 
     x: FloatArray
+    value: float
     A: FloatArray | None
     t: FloatArray
     gauss: tuple[FloatArray, FloatArray] | None
