@@ -493,8 +493,8 @@ def test_track_reports_the_verdict_on_stderr_and_exits_3_when_failed(tmp_path: P
 
 
 def test_track_particle_and_seed_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """--particles reaches the particle estimators and --seed (old name --particle-seed) every tracker; the seed
-    alone changes the random numbers."""
+    """--particles reaches the particle estimators, --no-rescue map and --seed (old name --particle-seed) every
+    tracker; the seed alone changes the random numbers."""
     sim = tmp_path / "sim"
     main(["simulate", "--case", "b", "--start-x", "5000", "--seed", "3", "--out", str(sim)])
     capsys.readouterr()
@@ -508,6 +508,11 @@ def test_track_particle_and_seed_options(tmp_path: Path, capsys: pytest.CaptureF
     x1, events = last_state("--estimator", "map", "--particles", "256", "--seed", "3")
     assert "256 particles" in events
     assert last_state("--estimator", "map", "--particles", "256", "--particle-seed", "3")[0] == x1  # the old name
+    assert main([*base, "--estimator", "map", "--particles", "256", "--seed", "3", "--no-rescue"]) == 0
+    unrescued = json.loads(capsys.readouterr().out)
+    assert unrescued["settings"]["mode_rescue"] is False
+    # on the paper's recordings the rescue never acts (docs "Particles that miss the peak"): the same track
+    assert unrescued["states"][-1] == x1 and "missed the posterior's peak" not in events
     x2, _ = last_state("--estimator", "particle", "--particles", "256", "--seed", "3")
     x3, _ = last_state("--estimator", "particle", "--particles", "256", "--seed", "4")
     assert x2 != x3  # another seed, another Monte Carlo sample of the same posterior
@@ -519,6 +524,8 @@ def test_track_particle_and_seed_options(tmp_path: Path, capsys: pytest.CaptureF
                      (["--estimator", "ekf", "--particles", "512"], "not to ekf"),
                      (["--estimator", "init", "--particles", "512"], "not to init"),
                      (["--estimator", "init", "--seed", "1"], "not to init"),
+                     (["--estimator", "particle", "--no-rescue"], "--no-rescue applies to map, not to particle"),
+                     (["--estimator", "init", "--no-rescue"], "--no-rescue applies to map, not to init"),
                      (["--particles", "512"], "not to smoother")):
         assert main([*base[:-1], *bad]) == 2  # without --json the initiation would print the geometry first
         captured = capsys.readouterr()

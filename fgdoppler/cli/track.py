@@ -81,6 +81,10 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--most-likely", action="store_true",
                    help="smoother, map: always report the most likely track or state (by default, where the "
                         "posterior is skewed about it, the posterior mean, which is closer to the truth on average)")
+    p.add_argument("--no-rescue", action="store_true",
+                   help="map: never sample the particles again about the posterior's mode where the best of them "
+                        "falls further below it than a sample of the posterior would (by default it does, and says so "
+                        "in an event)")
     p.add_argument("--mode-candidates", type=int, default=None, metavar="N",
                    help="smoother: grid candidates its whole-recording mode search refines (default 20; 0 turns "
                         "the search off: faster, but a track in a wrong mode of the likelihood can be reported ok)")
@@ -214,6 +218,8 @@ def _refuse_tracker_options(args: argparse.Namespace) -> None:
         raise CLIError("--lag applies to fixed-lag, not to init")
     if args.most_likely:
         raise CLIError("--most-likely applies to the smoother and map, not to init")
+    if args.no_rescue:
+        raise CLIError("--no-rescue applies to map, not to init")
     if args.mode_candidates is not None or args.estimate_offsets:
         option = "--mode-candidates" if args.mode_candidates is not None else "--estimate-offsets"
         raise CLIError(f"{option} applies to the smoother, not to init")
@@ -558,6 +564,8 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
                        f"not to {name}")
     if args.most_likely and name not in ("smoother", "map"):
         raise CLIError(f"--most-likely applies to the smoother and map, not to {name}")
+    if args.no_rescue and name != "map":
+        raise CLIError(f"--no-rescue applies to map, not to {name}")
     for given, option in ((args.mode_candidates is not None, "--mode-candidates"),
                           (args.estimate_offsets, "--estimate-offsets")):
         if given and name != "smoother":
@@ -593,7 +601,9 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
             raise CLIError(f"--estimate-offsets: {exc}") from None
     try:
         lag = {} if args.lag is None else {"lag": args.lag}
-        read_out = {"posterior_mean": False} if args.most_likely else {}  # map only (checked above)
+        # map only (checked above)
+        read_out = {**({"posterior_mean": False} if args.most_likely else {}),
+                    **({"mode_rescue": False} if args.no_rescue else {})}
         return (FixedLagSettings(huber_k=k, **lag, **shared) if name == "fixed-lag"
                 else ESTIMATORS[name].settings(huber_k=k, **particle, **read_out, **shared))
     except ValueError as exc:

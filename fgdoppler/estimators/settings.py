@@ -885,7 +885,7 @@ class MapSettings(ParticleSettings):
         with an event.  The covariance reported (their second moment about
         the mode) and the Gaussian summary of a re-anchoring then describe the
         posterior again (docs/concepts.md, "Particles that miss the peak").
-        ``False``: never.
+        ``False``: never (``fgdoppler track --estimator map --no-rescue``).
     """
 
     move_steps: int = 3
