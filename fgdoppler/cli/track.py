@@ -70,24 +70,7 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    help="target known to satisfy (NX, NY) . (p - (PX, PY)) >= 0, e.g. 0 0 0 1 for y >= 0 "
                    "(2-D problems; in 3-D the altitude band bounds the height)")
     p.add_argument("--q", type=float, default=None, help="process noise PSD in m^2/s^3 (default 1e-3)")
-    p.add_argument("--lag", type=float, default=None, help="fixed-lag smoother lag in s (default 5)")
-    p.add_argument("--particles", type=int, default=None, metavar="N",
-                   help="particle and map estimators: number of particles (default 4096 for particle, 2048 for map)")
-    p.add_argument("--seed", "--particle-seed", dest="seed", type=int, default=None, metavar="S",
-                   help="seed of the estimator's random numbers (default 0): the particle estimators' particles, the "
-                        "sampled posteriors behind the filters' Gaussian sums and every sampled covariance, the "
-                        "reference smoother's included; the same seed gives the same answer, another shows its Monte "
-                        "Carlo spread (--particle-seed: its old name)")
-    p.add_argument("--most-likely", action="store_true",
-                   help="smoother, map: always report the most likely track or state (by default, where the "
-                        "posterior is skewed about it, the posterior mean, which is closer to the truth on average)")
-    p.add_argument("--no-rescue", action="store_true",
-                   help="map: never sample the particles again about the posterior's mode where the best of them "
-                        "falls further below it than a sample of the posterior would (by default it does, and says so "
-                        "in an event)")
-    p.add_argument("--mode-candidates", type=int, default=None, metavar="N",
-                   help="smoother: grid candidates its whole-recording mode search refines (default 20; 0 turns "
-                        "the search off: faster, but a track in a wrong mode of the likelihood can be reported ok)")
+    _add_estimator_options(p)
     p.add_argument("--bias-sigma", type=float, nargs="+", default=None, metavar="M/S",
                    help="each pair's Doppler calibration uncertainty in m/s (1 sigma; one value or one per pair): "
                         "the smoother's, ekf's, isam2's and fixed-lag's covariances include what constant offsets "
@@ -118,6 +101,28 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    help=f"exit 0 even when the verdict is 'failed' (default: exit status {3})")
     add_zone_options(p)
     p.set_defaults(handler=_run)
+
+
+def _add_estimator_options(p: argparse.ArgumentParser) -> None:
+    """The options that one estimator or a few take (each refused by the others, :func:`_tracker_settings`)."""
+    p.add_argument("--lag", type=float, default=None, help="fixed-lag smoother lag in s (default 5)")
+    p.add_argument("--particles", type=int, default=None, metavar="N",
+                   help="particle and map estimators: number of particles (default 4096 for particle, 2048 for map)")
+    p.add_argument("--seed", "--particle-seed", dest="seed", type=int, default=None, metavar="S",
+                   help="seed of the estimator's random numbers (default 0): the particle estimators' particles, the "
+                        "sampled posteriors behind the filters' Gaussian sums and every sampled covariance, the "
+                        "reference smoother's included; the same seed gives the same answer, another shows its Monte "
+                        "Carlo spread (--particle-seed: its old name)")
+    p.add_argument("--most-likely", action="store_true",
+                   help="smoother, map: always report the most likely track or state (by default, where the "
+                        "posterior is skewed about it, the posterior mean, which is closer to the truth on average)")
+    p.add_argument("--no-rescue", action="store_true",
+                   help="map: never sample the particles again about the posterior's mode where the best of them "
+                        "falls further below it than a sample of the posterior would (by default it does, and says so "
+                        "in an event)")
+    p.add_argument("--mode-candidates", type=int, default=None, metavar="N",
+                   help="smoother: grid candidates its whole-recording mode search refines (default 20; 0 turns "
+                        "the search off: faster, but a track in a wrong mode of the likelihood can be reported ok)")
 
 
 def _geometry_spec(args: argparse.Namespace) -> str:
