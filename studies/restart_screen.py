@@ -187,7 +187,7 @@ def main() -> None:
     p.add_argument("--out", type=Path, default=Path("output") / "studies")
     a = p.parse_args()
     with ProcessPoolExecutor(2) as pool:
-        draws = [r for r in pool.map(one_draw, range(a.draws)) if "smoother" in r]
+        draws = [r for r in pool.map(one_draw, range(a.draws)) if "map default" in r]
         paper = list(pool.map(one_paper_run, [(s, r, a.seed) for s in range(6) for r in range(a.paper_runs)],
                               chunksize=3))
     lines = [f"{len(draws)} random 3-D draws (60 s), default → screened:", "", *draws_table(draws), "",
