@@ -39,6 +39,7 @@ from scipy.stats import chi2
 
 import fgdoppler as fd
 import fgdoppler.estimators.restart as restart
+from fgdoppler.analysis.metrics import errors, nees
 from fgdoppler.analysis.workers import one_blas_thread
 
 #: Times from which a run's NEES and error are averaged (s), as in the accuracy benchmark.
@@ -52,12 +53,12 @@ EVERY = ("particle", "map")
 def measures(res: fd.TrackResult, truth: fd.Trajectory) -> dict[str, Any]:
     """A run's errors (over t >= :data:`T_LATE`, and at the end), NEES, verdict, restarts and wall time."""
     e = res.primary
-    d = e.states - truth.at(e.times)
-    err = np.linalg.norm(d[:, :3], axis=1)
-    nees = np.einsum("ij,ij->i", d, np.linalg.solve(e.covariances, d[..., None])[..., 0])
+    x_true = truth.at(e.times)
+    se = errors(e.states, x_true)[0]
     late = e.times >= T_LATE
-    return {"rmse": float(np.sqrt(np.mean(err[late] ** 2))), "final": float(err[-1]),
-            "nees": float(np.mean(nees[late])), "status": str(res.status), "wall": float(res.wall_time),
+    return {"rmse": float(np.sqrt(np.mean(se[late]))), "final": float(np.sqrt(se[-1])),
+            "nees": float(np.mean(nees(e.states, e.covariances, x_true)[late])), "status": str(res.status),
+            "wall": float(res.wall_time),
             "restarts": sum("online re-initiation" in ev.message for ev in res.events)}
 
 

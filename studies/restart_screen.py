@@ -65,11 +65,21 @@ def refined_cost(model: fd.TrackingModel, x0: np.ndarray, t: np.ndarray, pair: n
                  sigma: np.ndarray) -> float:
     """Least data cost sum(((z - h(F(t) x)) / sigma)^2) in the basin of ``x0`` (LM; inf where the track
     meets a sensor)."""
+    last: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+    def along(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        # SciPy asks for the residual and then the Jacobian at the same point: one model call for both
+        key = x.tobytes()
+        if key not in last:
+            last.clear()
+            last[key] = _along_jacobian(model, x, t, pair)
+        return last[key]
+
     def residual(x: np.ndarray) -> np.ndarray:
-        return (z - _along_jacobian(model, x, t, pair)[0]) / sigma
+        return (z - along(x)[0]) / sigma
 
     def jacobian(x: np.ndarray) -> np.ndarray:
-        return -_along_jacobian(model, x, t, pair)[1] / sigma[:, None]
+        return -along(x)[1] / sigma[:, None]
 
     try:
         return float(2.0 * least_squares(residual, x0, jac=jacobian, method="lm", max_nfev=60, x_scale="jac").cost)
@@ -95,9 +105,10 @@ class Screen:
         starts = [self.init.x_start, *(a.state for a in self.init.alternatives),
                   *(c.state for c in self.init.candidates)]
         best = min(refined_cost(self.model, x, t, pair, z, sigma) for x in starts)
+        fired = best < own - restart.MODE_MARGIN
         self.screens += 1
-        self.fired += best < own - restart.MODE_MARGIN
-        return best < own - restart.MODE_MARGIN
+        self.fired += fired
+        return fired
 
     def check(self, t_start: float, max_span: float) -> Callable[[fd.TrackResult, float, float], bool]:
         def test(result: fd.TrackResult, t_last: float, tc: float) -> bool:
