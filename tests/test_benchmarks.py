@@ -391,3 +391,28 @@ def test_the_stone_soup_particle_filter_reports_every_scan_with_the_truth_inside
     assert x.shape == (t.size, 4) and P.shape == (t.size, 4, 4) and seconds > 0
     truth = sim.truth.states[np.searchsorted(sim.truth.times, t[-1])]
     assert np.linalg.norm(x[-1, :2] - truth[:2]) < 3 * np.sqrt(P[-1, 0, 0] + P[-1, 1, 1])
+
+
+def test_same_as_records_names_the_runs_whose_errors_nees_or_verdict_changed() -> None:
+    from benchmarks.same_as_records import compare
+
+    rng = np.random.default_rng(0)
+    runs, n_t = 3, 5
+    records: dict[str, np.ndarray] = {}
+    rows = [{"s": s, "r": r} for s in range(6) for r in range(runs)]
+    for s in range(6):
+        se, ne = rng.random((runs, n_t)), rng.random((runs, n_t))
+        se[:, 0] = ne[:, 0] = np.nan  # no state before the window: NaN equals NaN here
+        records |= {f"se_{s}_map": se, f"nees_{s}_map": ne, f"status_{s}_map": np.array(["ok"] * runs),
+                    f"seconds_{s}_map": np.full(runs, 0.2)}
+        for row in rows[s * runs:(s + 1) * runs]:
+            r = row["r"]
+            row["map"] = {"se": se[r].copy(), "nees": ne[r].copy(), "status": "ok", "seconds": 0.3}
+    rows[1]["map"]["se"][3] = np.nextafter(rows[1]["map"]["se"][3], 2.0)  # one bit in scenario 0, run 1
+    rows[4]["map"]["status"] = "doubtful"  # scenario 1, run 1
+    rows[8]["map"]["nees"][2] = np.nan  # scenario 2, run 2
+    lines = compare(records, rows, ("map",))
+    assert lines[2].split("|")[3:5] == [" 2 of 3 ", " 1 "]
+    assert lines[3].split("|")[3:5] == [" 2 of 3 ", " 1 "]
+    assert lines[4].split("|")[3:5] == [" 2 of 3 ", " 2 "]
+    assert all(line.split("|")[3:6] == [" 3 of 3 ", " - ", " 0.300 / 0.200 "] for line in lines[5:])

@@ -29,6 +29,7 @@ from fgdoppler.estimators.ambiguity import (
     resolve,
     resolve_staged,
 )
+from fgdoppler.estimators.basin_screen import basin_screen
 from fgdoppler.estimators.calibration import bias_sigmas, moved_starts, offset_shares
 from fgdoppler.estimators.clock_offsets import clock_shares, clock_sigmas
 from fgdoppler.estimators.ekf import run_ekf
@@ -39,7 +40,13 @@ from fgdoppler.estimators.judge import covariance_reference, judge, track_refere
 from fgdoppler.estimators.later_mistakes import later_mistakes
 from fgdoppler.estimators.names import ALIASES, SUMMARIES
 from fgdoppler.estimators.particle import run_map, run_particle
-from fgdoppler.estimators.restart import FreshFits, splice_estimates, surprise_check, with_restarts
+from fgdoppler.estimators.restart import (
+    MODE_MARGIN,
+    FreshFits,
+    splice_estimates,
+    surprise_check,
+    with_restarts,
+)
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.search_memo import SearchMemo
 from fgdoppler.estimators.settings import (
@@ -228,7 +235,8 @@ def _run_estimator(name: str, measurements: Measurements, model: TrackingModel |
             segments.append(_Segment(t_from=tc, hyps=h, weights=w))
             return _solve(info, measurements, model, h, settings, prefixed(progress, "restart"), w)
         result = with_restarts(measurements, model, init, settings, result, again, fits=fits,
-                               only_if=surprise_check(init.t_start, settings.max_span)
+                               only_if=surprise_check(init.t_start, settings.max_span,
+                                                      basin_screen(measurements, model, init, MODE_MARGIN))
                                if isinstance(settings, ParticleSettings) else None)
     held = (_reference(measurements, model, init, settings, reference, per_pair, resolve_ambiguity, progress)
             if verify and result.primary.kind != "smoothed" else None)

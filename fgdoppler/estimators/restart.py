@@ -121,10 +121,14 @@ draws, ``tests/estimators/test_restart.py``) both ended 12.6 km from the
 truth with a position sigma of 53 m, and the verdict said ``failed``.  So
 they are tested as well, at a checkpoint where the measurements since the
 last one *surprise* them — their normalised innovations sum beyond the χ²
-quantile at :data:`SURPRISE` (:func:`surprised`) — and no later than
-``max_span`` after the start: a restart samples the posterior of every
-measurement so far, which past ``max_span`` costs more than the moves the
-estimators themselves bound to that span.  The test and the restart are
+quantile at :data:`SURPRISE` (:func:`surprised`), or where the data do
+not surprise them but one of the initiation's solutions, refined on every
+measurement so far, fits them better than the running estimate's basin by
+:data:`MODE_MARGIN` (:mod:`fgdoppler.estimators.basin_screen`: a wrong basin
+the data leave slowly) — and no later than ``max_span`` after the start:
+a restart samples the posterior of every measurement so far, which past
+``max_span`` costs more than the moves the estimators themselves bound to
+that span.  The test and the restart are
 the ones above: with the outliers above (seeds 0 and 2) the NIS sum fires,
 the Huber check finds the running estimate in agreement and nothing
 restarts, where the squared-loss check alone sent ``particle`` 829 m and
@@ -505,15 +509,24 @@ def surprised(result: TrackResult, t_from: float, t_to: float) -> bool:
     return bool(nu.size and float(np.sum(nu)) > chi2.ppf(SURPRISE, nu.size))
 
 
-def surprise_check(t_start: float, max_span: float) -> Callable[[TrackResult, float, float], bool]:
+def surprise_check(t_start: float, max_span: float, screen: Callable[[FloatArray, float], bool] | None = None
+                   ) -> Callable[[TrackResult, float, float], bool]:
     """The particle estimators' ``only_if`` of :func:`with_restarts` (module docstring, "The particle estimators").
 
     True at a checkpoint no more than ``max_span`` seconds after ``t_start``
     (the recording's start) where the data since the last one surprise the
-    estimator (:func:`surprised`).
+    estimator (:func:`surprised`) or, where they do not, ``screen(state, t_c)``
+    holds of its filtered estimate there
+    (:func:`~fgdoppler.estimators.basin_screen.basin_screen`: a start's basin
+    fits all the data so far better).
     """
     def check(result: TrackResult, t_last: float, tc: float) -> bool:
-        return tc - t_start <= max_span and surprised(result, t_last, tc)
+        if tc - t_start > max_span:
+            return False
+        if surprised(result, t_last, tc):
+            return True
+        state = None if screen is None else _state_at(result, tc)
+        return state is not None and screen is not None and screen(state[0], tc)
     return check
 
 

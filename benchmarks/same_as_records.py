@@ -1,0 +1,88 @@
+"""Whether some estimators still give the accuracy benchmark's recorded answers, to the bit, without the whole run.
+
+For a change meant to leave the paper's recordings alone (a test that never fires there): every run of
+``python -m benchmarks.bench_accuracy --seed S`` is simulated and initiated again as the benchmark does, the
+reference smoother run, then each named estimator with it; their squared position errors, NEES and verdicts on
+the truth's time grid are compared with the per-run records (``accuracy_seedS.npz``) the benchmark saved.
+Printed: per scenario and estimator, the runs that differ, and the median CPU time against the records' (another
+day's timing: only indicative; paired ratios need both in one run).
+
+Run: python -m benchmarks.same_as_records output/acc/accuracy_seed2026.npz --seed 2026 [--estimators particle map]
+[--runs 100] [--workers 2]   (about 15 min a seed on 2 cores)
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import fgdoppler as fd
+from benchmarks.bench_accuracy import _on_grid
+from fgdoppler.analysis.workers import one_blas_thread
+from fgdoppler.estimators.registry import estimator_info
+
+
+@one_blas_thread
+def one_run(args: tuple[int, int, int, tuple[str, ...]]) -> dict[str, Any]:
+    """Run ``r`` of scenario ``s`` as the benchmark records it, for the named estimators only."""
+    s, r, seed, names = args
+    scen = fd.paper_scenarios()[s]
+    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([seed, s, r])))
+    model = fd.TrackingModel.of(scen.geometry)
+    m = sim.measurements
+    init = fd.initiate(m.first_per_pair(10), model)
+    reference = fd.run_estimator("smoother", m, model, init)
+    out: dict[str, Any] = {"s": s, "r": r}
+    for name in names:
+        cpu = time.process_time()
+        res = fd.run_estimator(name, m, model, init, reference=reference)
+        cpu = time.process_time() - cpu
+        e = res.primary
+        se, ne = _on_grid(sim.truth.times, e.times, e.states, e.covariances, sim.truth.states, e.cov_ok)
+        out[name] = {"se": se, "nees": ne, "status": str(res.status), "seconds": cpu}
+    return out
+
+
+def compare(records: Any, rows: list[dict[str, Any]], names: tuple[str, ...]) -> list[str]:
+    """A table of the runs that differ from the records, per scenario and estimator."""
+    lines = ["| scenario | estimator | runs the same | differ (runs) | median CPU now / recorded (s) |",
+             "|---|---|---|---|---|"]
+    for s, scen in enumerate(fd.paper_scenarios()):
+        rs = sorted((x for x in rows if x["s"] == s), key=lambda x: x["r"])
+        for name in names:
+            differ = [x["r"] for x in rs if not (
+                np.array_equal(x[name]["se"], records[f"se_{s}_{name}"][x["r"]], equal_nan=True)
+                and np.array_equal(x[name]["nees"], records[f"nees_{s}_{name}"][x["r"]], equal_nan=True)
+                and x[name]["status"] == str(records[f"status_{s}_{name}"][x["r"]]))]
+            now = np.median([x[name]["seconds"] for x in rs])
+            then = np.median(records[f"seconds_{s}_{name}"][[x["r"] for x in rs]])
+            lines.append(f"| {scen.name} | {name} | {len(rs) - len(differ)} of {len(rs)} | "
+                         f"{', '.join(map(str, differ)) or '-'} | {now:.3f} / {then:.3f} |")
+    return lines
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("records", type=Path, help="the benchmark's per-run records (accuracy_seedS.npz)")
+    p.add_argument("--seed", type=int, required=True, help="the seed the records were made with")
+    p.add_argument("--estimators", nargs="+", default=["particle", "map"])
+    p.add_argument("--runs", type=int, default=100)
+    p.add_argument("--workers", type=int, default=2)
+    a = p.parse_args()
+    names = tuple(estimator_info(n).name for n in a.estimators)
+    records = np.load(a.records, allow_pickle=False)
+    if records[f"se_0_{names[0]}"].shape[0] < a.runs:
+        p.error(f"the records hold {records[f'se_0_{names[0]}'].shape[0]} runs per scenario, fewer than --runs")
+    tasks = [(s, r, a.seed, names) for s in range(len(fd.paper_scenarios())) for r in range(a.runs)]
+    with ProcessPoolExecutor(a.workers) as pool:
+        rows = list(pool.map(one_run, tasks, chunksize=4))
+    print("\n".join(compare(records, rows, names)))
+
+
+if __name__ == "__main__":
+    main()
