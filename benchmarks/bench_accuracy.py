@@ -126,6 +126,14 @@ def _on_grid(truth_t: FloatArray, t: FloatArray, x: FloatArray, P: FloatArray, t
     return se, ne
 
 
+def recording(s: int, r: int, seed: int) -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation]:
+    """Run ``r`` of paper scenario ``s`` as the benchmark simulates it with ``seed``, its model and its start (the
+    initiation on each pair's first 10 measurements)."""
+    sim = fd.simulate(fd.paper_scenarios()[s], np.random.default_rng(np.random.SeedSequence([seed, s, r])))
+    model = fd.TrackingModel.of(sim.scenario.geometry)
+    return sim, model, fd.initiate(sim.measurements.first_per_pair(10), model)
+
+
 @one_blas_thread
 def one_run(args: tuple[int, int, int, bool, bool]) -> dict[str, Any]:
     """Simulate, initiate and run every estimator and peer on run ``r`` of scenario ``s`` (one BLAS thread),
@@ -133,12 +141,8 @@ def one_run(args: tuple[int, int, int, bool, bool]) -> dict[str, Any]:
     from benchmarks._peers import run_peers, run_stonesoup_pf, stonesoup_available
 
     s, r, seed, exact, time_pf = args
-    scen = fd.paper_scenarios()[s]
-    rng = np.random.default_rng(np.random.SeedSequence([seed, s, r]))
-    sim = fd.simulate(scen, rng)
-    model = fd.TrackingModel.of(scen.geometry)
+    sim, model, init = recording(s, r, seed)
     m = sim.measurements
-    init = fd.initiate(m.first_per_pair(10), model)
     tt, truth = sim.truth.times, sim.truth.states
     out: dict[str, Any] = {}
     cpu = time.process_time()

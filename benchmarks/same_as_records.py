@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 import fgdoppler as fd
-from benchmarks.bench_accuracy import _on_grid
+from benchmarks.bench_accuracy import _on_grid, recording
 from fgdoppler.analysis.workers import one_blas_thread
 from fgdoppler.estimators.registry import estimator_info
 
@@ -31,11 +31,8 @@ from fgdoppler.estimators.registry import estimator_info
 def one_run(args: tuple[int, int, int, tuple[str, ...]]) -> dict[str, Any]:
     """Run ``r`` of scenario ``s`` as the benchmark records it, for the named estimators only."""
     s, r, seed, names = args
-    scen = fd.paper_scenarios()[s]
-    sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([seed, s, r])))
-    model = fd.TrackingModel.of(scen.geometry)
+    sim, model, init = recording(s, r, seed)
     m = sim.measurements
-    init = fd.initiate(m.first_per_pair(10), model)
     reference = fd.run_estimator("smoother", m, model, init)
     out: dict[str, Any] = {"s": s, "r": r}
     for name in names:
