@@ -101,7 +101,9 @@ filters.
 
 **Restarts.** :func:`~fgdoppler.estimators.registry.run_estimator`
 tests the run at the filters' checkpoints where the data since the last
-one surprise it, and starts it again from the best fit of all the data so
+one surprise it or a solution of its initiation, refined on all the data
+so far, fits them better than its own basin
+(:mod:`fgdoppler.estimators.basin_screen`), and starts it again from the best fit of all the data so
 far where that and the running estimate each lie outside the other's
 99.9 % region (:mod:`fgdoppler.estimators.restart`, "The particle
 estimators"; ``restarts=False`` in the settings turns this off): a start

@@ -756,7 +756,10 @@ class ParticleSettings(TrackerSettings):
     restarts : bool, default True
         At the filters' checkpoints where the measurements since the last
         one surprise the estimator (their NIS sum beyond the χ² 99.9 %
-        quantile) and no later than ``max_span`` after the start, find the
+        quantile) or one of the initiation's solutions, refined on all the
+        data so far, fits them better than the running estimate's basin
+        (:mod:`fgdoppler.estimators.basin_screen`), and no later than
+        ``max_span`` after the start, find the
         best fit of all data so far and, where it and the running estimate
         each lie outside the other's 99.9 % region (under the Huber loss
         where a few measurements pull the fit away), sample the posterior
