@@ -525,8 +525,10 @@ def surprise_check(t_start: float, max_span: float, screen: Callable[[FloatArray
             return False
         if surprised(result, t_last, tc):
             return True
-        state = None if screen is None else _state_at(result, tc)
-        return state is not None and screen is not None and screen(state[0], tc)
+        if screen is None:
+            return False
+        state = _state_at(result, tc)
+        return state is not None and screen(state[0], tc)
     return check
 
 
