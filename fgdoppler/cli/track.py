@@ -107,7 +107,8 @@ def _add_estimator_options(p: argparse.ArgumentParser) -> None:
     """The options that one estimator or a few take (each refused by the others, :func:`_tracker_settings`)."""
     p.add_argument("--lag", type=float, default=None, help="fixed-lag smoother lag in s (default 5)")
     p.add_argument("--particles", type=int, default=None, metavar="N",
-                   help="particle and map estimators: number of particles (default 4096 for particle, 2048 for map)")
+                   help="particle and map estimators: number of particles (default 4096 for particle; for map 2048 in the "
+                        "plane, 8192 in space)")
     p.add_argument("--seed", "--particle-seed", dest="seed", type=int, default=None, metavar="S",
                    help="seed of the estimator's random numbers (default 0): the particle estimators' particles, the "
                         "sampled posteriors behind the filters' Gaussian sums and every sampled covariance, the "

@@ -300,7 +300,7 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         sl = scans.rows(k)
         t = float(scans.times[k])
         total += _update(post, gate, t, stream.pair[sl].astype(np.intp), stream.doppler[sl], stream.sigma[sl])
-        if post.ess() < settings.ess_threshold * settings.n_particles:
+        if post.ess() < settings.ess_threshold * settings.particles(model.dim):
             if post.should_reanchor(t):
                 post.reanchor(t, rng)
                 n_reanchor += 1
@@ -317,7 +317,8 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         loglik.append(total)
         advance(progress)
     read_out, jumps = ("", []) if reader is None else (reader.phrase(len(times)), reader.jumps)
-    events.append(Event(time=times[-1], message=_summary(settings, rates, n_resample, n_reanchor, read_out, jumps)))
+    summary = _summary(settings.particles(model.dim), rates, n_resample, n_reanchor, read_out, jumps)
+    events.append(Event(time=times[-1], message=summary))
     offsets = None
     if post.offsets is not None:
         offsets = _offsets_at_end(post, None if reader is None or reader.last_mode is None else reader.last_mode[1])
@@ -443,11 +444,11 @@ def mean_is_the_better_point(w: float, ratio: float) -> bool:
     return w > MEAN_SHIFT_NOISE and (w <= MEAN_SHIFT_FAR or ratio <= SAMPLING_LIMIT)
 
 
-def _summary(settings: ParticleSettings, rates: list[float], n_resample: int, n_reanchor: int, read_out: str,
+def _summary(n_particles: int, rates: list[float], n_resample: int, n_reanchor: int, read_out: str,
              jumps: list[float]) -> str:
     """The run's closing event: particles, moves, acceptance, re-anchorings, ``read_out`` and the mode's jumps."""
     finite = [r for r in rates if np.isfinite(r)]
-    return (f"{settings.n_particles} particles, {n_resample} resample-move steps, mean Metropolis acceptance "
+    return (f"{n_particles} particles, {n_resample} resample-move steps, mean Metropolis acceptance "
             f"{np.mean(finite) if finite else float('nan'):.2f}"
             + (f"; {n_reanchor} re-anchoring(s), the older data summarised by a Gaussian each time" if n_reanchor
                else "")

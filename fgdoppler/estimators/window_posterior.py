@@ -97,7 +97,7 @@ def _start(post: _Posterior, init: Initiation, rng: np.random.Generator) -> floa
     """Sample the window's posterior (module docstring, step 1); returns the moves' acceptance rate."""
     st = post.settings
     tempered = st.tempered_start
-    rate = post.sample_from(_components(post, init, post.data, alike=tempered), st.n_particles,
+    rate = post.sample_from(_components(post, init, post.data, alike=tempered), st.particles(post.model.dim),
                             st.start_move_steps, rng, tempered=tempered)
     if rate is None:
         raise ValueError("no start sample has a finite posterior: the window cannot be explained inside the zone")

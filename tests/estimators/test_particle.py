@@ -557,7 +557,12 @@ def test_map_settings_differ_from_the_particle_estimators_only_in_moves_and_part
     assert isinstance(own, fd.ParticleSettings)
     differ = {f.name for f in dataclasses.fields(base) if getattr(base, f.name) != getattr(own, f.name)}
     assert differ == {"move_steps", "n_particles"}
-    assert own.move_steps < base.move_steps and own.n_particles < base.n_particles
+    # fewer particles in the plane, more in space (six unknowns), unless a number is given
+    assert own.move_steps < base.move_steps and own.particles(2) < base.particles(2) < own.particles(3)
+    assert fd.MapSettings(n_particles=1000).particles(3) == fd.ParticleSettings(n_particles=1000).particles(2) == 1000
+    assert fd.ParticleSettings(n_particles=None).particles(3) == base.particles(3) == base.n_particles
+    with pytest.raises(ValueError, match="2 or 3 spatial dimensions"):
+        own.particles(1)
     with pytest.raises(ValueError, match="move_steps"):
         fd.MapSettings(move_steps=-1)
     with pytest.raises(ValueError, match="n_particles must be >= 64"):
@@ -893,6 +898,23 @@ def test_the_rescue_limit_is_the_shortfall_every_draw_exceeds_with_the_level(d: 
         assert c == pytest.approx(math.log(1.0 / RESCUE_LEVEL) / RESCUE_DRAWS, rel=1e-12)
 
 
+def test_map_holds_its_plane_or_space_number_of_particles_unless_given_one() -> None:
+    """``MapSettings().n_particles`` is ``None``: the window's sample and the run hold 2,048 particles in the plane
+    and 8,192 in space (``DEFAULT_PARTICLES``), a number given is held in both."""
+    sim2, model2, init2 = _case("a", 45e3, 0)
+    pairs = ((0.0, 0.0, 0.0), (30e3, 0.0, 0.0)), ((0.0, 0.0, 0.0), (0.0, 30e3, 0.0)), ((30e3, 30e3, 0.0), (0.0, 0.0, 0.0))
+    g3 = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=tx, rx=rx) for tx, rx in pairs))
+    sim3 = fd.simulate(fd.Scenario(geometry=g3, x0=(5e3, 8e3, 3e3, 100.0, 40.0, 0.0), duration=8.0, dt=0.5),
+                       np.random.default_rng(3))
+    model3 = fd.TrackingModel.of(g3)
+    init3 = fd.initiate(sim3.measurements.first_per_pair(10), model3)
+    for (sim, model, init), expected in (((sim2, model2, init2), 2048), ((sim3, model3, init3), 8192)):
+        assert window_posterior(sim.measurements, model, init, fd.MapSettings()).states.shape[0] == expected
+        assert window_posterior(sim.measurements, model, init, fd.MapSettings(n_particles=512)).states.shape[0] == 512
+    said = [e.message for e in run_map(sim3.measurements, model3, init3).events if " particles, " in e.message]
+    assert said and said[-1].startswith("8192 particles, ")
+
+
 def test_where_the_particles_sample_the_posterior_the_rescue_never_acts() -> None:
     """In a poorly observed paper scenario the best particle stays near the mode: the track is the one without the
     rescue, to the bit (so are all 1,200 of the accuracy benchmark's, docs "Particles that miss the peak")."""
@@ -906,7 +928,7 @@ def test_where_the_particles_sample_the_posterior_the_rescue_never_acts() -> Non
 
 def test_particles_that_miss_the_peak_are_sampled_again_about_the_mode() -> None:
     """An aircraft over four ground pairs (draw 6 of ``studies/random_layouts_3d.py``, rounded; 40 s, simulation
-    seed 5): ``map``'s 2,048 particles sit kilometres from the posterior's peak that its climb finds, and the final
+    seed 5): 2,048 particles of ``map`` (its default in the plane; in space it holds 8,192) sit kilometres from the posterior's peak that its climb finds, and the final
     state lies far outside its covariance (chi-square 126 against the 6-D 99.9 % quantile 22.5).  With the rescue
     the particles are sampled again about the mode when the best of them falls short of it by more than a sample of
     the posterior allows, the run says so, and the final state is inside that quantile."""
@@ -924,9 +946,9 @@ def test_particles_that_miss_the_peak_are_sampled_again_about_the_mode() -> None
         d = e.states[-1] - sim.truth.at(e.times[-1:])[0]
         return float(d @ np.linalg.solve(e.covariances[-1], d))
 
-    off = run_map(sim.measurements, model, init, fd.MapSettings(mode_rescue=False))
+    off = run_map(sim.measurements, model, init, fd.MapSettings(mode_rescue=False, n_particles=2048))
     assert final_m2(off) > limit
-    on = run_map(sim.measurements, model, init)
+    on = run_map(sim.measurements, model, init, fd.MapSettings(n_particles=2048))
     said = [e.message for e in on.events if "missed the posterior's peak" in e.message]
     assert said
     short, allowed = (float(v) for v in re.findall(r"(\d+\.\d+) below the mode.*within (\d+\.\d+)", said[0])[0])
