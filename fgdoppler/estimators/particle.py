@@ -274,6 +274,7 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
     check_channels(model.observation, measurements)
     t_begin = time.perf_counter()
     rng = np.random.default_rng(settings.seed)
+    n_particles = settings.particles(model.dim)
     post, rate = _window_posterior(measurements, model, init, settings, rng)
     _, stream = split_window(measurements, init.t_end)
     events: list[Event] = []
@@ -300,7 +301,7 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         sl = scans.rows(k)
         t = float(scans.times[k])
         total += _update(post, gate, t, stream.pair[sl].astype(np.intp), stream.doppler[sl], stream.sigma[sl])
-        if post.ess() < settings.ess_threshold * settings.particles(model.dim):
+        if post.ess() < settings.ess_threshold * n_particles:
             if post.should_reanchor(t):
                 post.reanchor(t, rng)
                 n_reanchor += 1
@@ -317,8 +318,8 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         loglik.append(total)
         advance(progress)
     read_out, jumps = ("", []) if reader is None else (reader.phrase(len(times)), reader.jumps)
-    summary = _summary(settings.particles(model.dim), rates, n_resample, n_reanchor, read_out, jumps)
-    events.append(Event(time=times[-1], message=summary))
+    events.append(Event(time=times[-1], message=_summary(n_particles, rates, n_resample, n_reanchor, read_out,
+                                                         jumps)))
     offsets = None
     if post.offsets is not None:
         offsets = _offsets_at_end(post, None if reader is None or reader.last_mode is None else reader.last_mode[1])

@@ -928,8 +928,8 @@ def test_where_the_particles_sample_the_posterior_the_rescue_never_acts() -> Non
 
 def test_particles_that_miss_the_peak_are_sampled_again_about_the_mode() -> None:
     """An aircraft over four ground pairs (draw 6 of ``studies/random_layouts_3d.py``, rounded; 40 s, simulation
-    seed 5): 2,048 particles of ``map`` (its default in the plane; in space it holds 8,192) sit kilometres from the posterior's peak that its climb finds, and the final
-    state lies far outside its covariance (chi-square 126 against the 6-D 99.9 % quantile 22.5).  With the rescue
+    seed 5): 2,048 particles of ``map`` (its default in the plane; in space it holds 8,192) sit kilometres from
+    the posterior's peak that its climb finds, and the final state lies far outside its covariance (chi-square 126 against the 6-D 99.9 % quantile 22.5).  With the rescue
     the particles are sampled again about the mode when the best of them falls short of it by more than a sample of
     the posterior allows, the run says so, and the final state is inside that quantile."""
     pairs = [((-5190.0, -24961.0, 0.0), (34862.0, 31085.0, 0.0)), ((25737.0, 10669.0, 0.0), (-39028.0, 15016.0, 0.0)),
