@@ -493,7 +493,7 @@ def test_track_reports_the_verdict_on_stderr_and_exits_3_when_failed(tmp_path: P
 
 
 def test_track_particle_and_seed_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """--particles reaches the particle estimators, --no-rescue map and --seed (old name --particle-seed) every
+    """--particles and --no-rescue reach the particle estimators and --seed (old name --particle-seed) every
     tracker; the seed alone changes the random numbers."""
     sim = tmp_path / "sim"
     main(["simulate", "--case", "b", "--start-x", "5000", "--seed", "3", "--out", str(sim)])
@@ -516,6 +516,10 @@ def test_track_particle_and_seed_options(tmp_path: Path, capsys: pytest.CaptureF
     x2, _ = last_state("--estimator", "particle", "--particles", "256", "--seed", "3")
     x3, _ = last_state("--estimator", "particle", "--particles", "256", "--seed", "4")
     assert x2 != x3  # another seed, another Monte Carlo sample of the same posterior
+    assert main([*base, "--estimator", "particle", "--particles", "256", "--seed", "3", "--no-rescue"]) == 0
+    unrescued = json.loads(capsys.readouterr().out)
+    # the particle estimator rescues in space only by default: in the plane --no-rescue leaves the track alone
+    assert unrescued["settings"]["mode_rescue"] is False and unrescued["states"][-1] == x2
     assert main([*base, "--estimator", "ekf", "--seed", "9"]) == 0
     assert json.loads(capsys.readouterr().out)["settings"]["seed"] == 9  # every tracker takes it
     for bad, msg in ((["--estimator", "particle", "--particles", "10"], "n_particles must be >= 64"),
@@ -524,8 +528,9 @@ def test_track_particle_and_seed_options(tmp_path: Path, capsys: pytest.CaptureF
                      (["--estimator", "ekf", "--particles", "512"], "not to ekf"),
                      (["--estimator", "init", "--particles", "512"], "not to init"),
                      (["--estimator", "init", "--seed", "1"], "not to init"),
-                     (["--estimator", "particle", "--no-rescue"], "--no-rescue applies to map, not to particle"),
-                     (["--estimator", "init", "--no-rescue"], "--no-rescue applies to map, not to init"),
+                     (["--estimator", "ekf", "--no-rescue"],
+                      "--no-rescue applies to the particle estimators (particle, map), not to ekf"),
+                     (["--estimator", "init", "--no-rescue"], "--no-rescue applies to --estimator particle or map, not to init"),
                      (["--particles", "512"], "not to smoother")):
         assert main([*base[:-1], *bad]) == 2  # without --json the initiation would print the geometry first
         captured = capsys.readouterr()

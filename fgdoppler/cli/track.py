@@ -118,9 +118,9 @@ def _add_estimator_options(p: argparse.ArgumentParser) -> None:
                    help="smoother, map: always report the most likely track or state (by default, where the "
                         "posterior is skewed about it, the posterior mean, which is closer to the truth on average)")
     p.add_argument("--no-rescue", action="store_true",
-                   help="map: never sample the particles again about the posterior's mode where the best of them "
-                        "falls further below it than a sample of the posterior would (by default it does, and says so "
-                        "in an event)")
+                   help="map, particle: never sample the particles again about the posterior's mode where the best "
+                        "of them falls further below it than a sample of the posterior would (by default map does, "
+                        "and particle in 3-D, and each says so in an event)")
     p.add_argument("--mode-candidates", type=int, default=None, metavar="N",
                    help="smoother: grid candidates its whole-recording mode search refines (default 20; 0 turns "
                         "the search off: faster, but a track in a wrong mode of the likelihood can be reported ok)")
@@ -225,7 +225,7 @@ def _refuse_tracker_options(args: argparse.Namespace) -> None:
     if args.most_likely:
         raise CLIError("--most-likely applies to the smoother and map, not to init")
     if args.no_rescue:
-        raise CLIError("--no-rescue applies to map, not to init")
+        raise CLIError("--no-rescue applies to --estimator particle or map, not to init")
     if args.mode_candidates is not None or args.estimate_offsets:
         option = "--mode-candidates" if args.mode_candidates is not None else "--estimate-offsets"
         raise CLIError(f"{option} applies to the smoother, not to init")
@@ -564,14 +564,12 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
 
     k = huber(args)
     particle = {} if args.particles is None else {"n_particles": args.particles}
-    if particle and not issubclass(ESTIMATORS[name].settings, ParticleSettings):
-        raise CLIError(f"--particles applies to the particle estimators "
-                       f"({', '.join(n for n, i in ESTIMATORS.items() if issubclass(i.settings, ParticleSettings))}), "
-                       f"not to {name}")
+    sampled = ", ".join(n for n, i in ESTIMATORS.items() if issubclass(i.settings, ParticleSettings))
+    for given, option in ((bool(particle), "--particles"), (args.no_rescue, "--no-rescue")):
+        if given and not issubclass(ESTIMATORS[name].settings, ParticleSettings):
+            raise CLIError(f"{option} applies to the particle estimators ({sampled}), not to {name}")
     if args.most_likely and name not in ("smoother", "map"):
         raise CLIError(f"--most-likely applies to the smoother and map, not to {name}")
-    if args.no_rescue and name != "map":
-        raise CLIError(f"--no-rescue applies to map, not to {name}")
     for given, option in ((args.mode_candidates is not None, "--mode-candidates"),
                           (args.estimate_offsets, "--estimate-offsets")):
         if given and name != "smoother":
@@ -607,7 +605,7 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
             raise CLIError(f"--estimate-offsets: {exc}") from None
     try:
         lag = {} if args.lag is None else {"lag": args.lag}
-        # map only (checked above)
+        # --most-likely: map only; --no-rescue: the particle estimators (checked above)
         read_out = {**({"posterior_mean": False} if args.most_likely else {}),
                     **({"mode_rescue": False} if args.no_rescue else {})}
         return (FixedLagSettings(huber_k=k, **lag, **shared) if name == "fixed-lag"

@@ -55,7 +55,9 @@ This is iterated batch importance sampling (Chopin 2002):
    (:func:`mean_is_the_better_point`), the mean and covariance.  Where
    the best particle falls further below that mode than a sample of the
    posterior can (:func:`rescue_shortfall`), ``map`` samples the particles
-   again about it first (``MapSettings.mode_rescue``).
+   again about it first (``MapSettings.mode_rescue``); so does the mean's
+   estimator in space, where it climbs to the mode for that alone
+   (``ParticleSettings.mode_rescue``).
 
 **Re-anchoring.** When the anchor moves to the current scan, the
 particles are propagated with process-noise samples and the older data are
@@ -158,7 +160,7 @@ MEAN_SHIFT_NOISE = 0.1
 #: of case a 5 km and case b 45 km 1.7 at their 5th percentile, the lopsided ones of the 25 km scenarios 0.72 at
 #: their 95th).
 MEAN_SHIFT_FAR = 1.0
-#: ``map`` samples its particles again about the mode when the best of them falls so far short of it that this many
+#: ``map`` (and the particle estimator in space) samples its particles again about the mode when the best of them falls so far short of it that this many
 #: independent draws of a posterior near Gaussian about the mode would all fall as short with probability
 #: :data:`RESCUE_LEVEL` (:func:`rescue_shortfall`); resampling repeats particles, so fewer count as independent than
 #: there are.
@@ -178,7 +180,13 @@ def run_particle(
 ) -> TrackResult:
     """The particle estimator over a recording (module docstring); filtered estimates from the window's end on.
 
-    Each estimate is the posterior mean with the posterior covariance.
+    Each estimate is the posterior mean with the posterior covariance.  In
+    space (``ParticleSettings.mode_rescue``; by default not in the plane) it
+    also climbs to the posterior's mode at every report, as :func:`run_map`
+    does, and where its best particle falls further below that mode than a
+    sample of the posterior can (:func:`rescue_shortfall`) samples the
+    particles again about it, with an event (docs/concepts.md, "Particles
+    that miss the peak").
 
     Raises
     ------
@@ -285,8 +293,10 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
     # with calibration offsets integrated out the mean is pulled along the offsets' ridge by the prior (module
     # docstring of run_map): the mode throughout
     skewed_mean = isinstance(settings, MapSettings) and settings.posterior_mean and post.offsets is None
-    rescue = rng if isinstance(settings, MapSettings) and settings.mode_rescue else None
-    reader = _ModeReadOut(post, events, skewed_mean=skewed_mean, rescue=rescue) if mode else None
+    rescue = rng if settings.rescues(model.dim) else None
+    # the particle estimator climbs to the mode only to see whether its particles have missed it, and reports the mean
+    reader = (_ModeReadOut(post, events, skewed_mean=skewed_mean, rescue=rescue, read_mode=mode)
+              if mode or rescue is not None else None)
 
     def report(t: float) -> tuple[FloatArray, FloatArray]:
         return post.moments(t) if reader is None else reader.report(t)
@@ -317,12 +327,13 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         covs.append(cov)
         loglik.append(total)
         advance(progress)
-    read_out, jumps = ("", []) if reader is None else (reader.phrase(len(times)), reader.jumps)
+    read_out, jumps = ("", []) if reader is None or not mode else (reader.phrase(len(times)), reader.jumps)
     events.append(Event(time=times[-1], message=_summary(n_particles, rates, n_resample, n_reanchor, read_out,
                                                          jumps)))
     offsets = None
     if post.offsets is not None:
-        offsets = _offsets_at_end(post, None if reader is None or reader.last_mode is None else reader.last_mode[1])
+        offsets = _offsets_at_end(post, None if reader is None or not mode or reader.last_mode is None
+                                  else reader.last_mode[1])
         events.append(Event(time=times[-1], message="calibration offsets at the end: " + offsets.describe(pair_labels(model.observation))))
     return TrackResult(
         estimator=name,
@@ -342,12 +353,13 @@ class _ModeReadOut:
     """``map``'s read-out at each report: the mode (and its jumps between peaks), or the mean where skewed.
 
     Holds what one report leaves to the next: the previous mode (anchor time and state), the gains of the mode's
-    jumps to another peak, and how many reports were read at the mean.
+    jumps to another peak, and how many reports were read at the mean.  With ``read_mode=False`` (the particle
+    estimator's rescue) it follows the mode the same way, says nothing of its jumps and reports the mean.
     """
 
     def __init__(self, post: _Posterior, events: list[Event], *, skewed_mean: bool,
-                 rescue: np.random.Generator | None = None) -> None:
-        self.post, self.events, self.skewed_mean = post, events, skewed_mean
+                 rescue: np.random.Generator | None = None, read_mode: bool = True) -> None:
+        self.post, self.events, self.skewed_mean, self.read_mode = post, events, skewed_mean, read_mode
         self.last_mode: tuple[float, FloatArray] | None = None
         self.jumps: list[float] = []  # log-density gains of the mode's moves to another peak
         self.means = 0
@@ -363,7 +375,7 @@ class _ModeReadOut:
             ta, xa = self.last_mode
             previous = post.model.motion.propagate(xa, post.t_anchor - ta) if ta != post.t_anchor else xa
         x_mode, gain = post.mode_and_switch(previous)
-        if gain is not None and previous is not None:
+        if gain is not None and previous is not None and self.read_mode:
             self.jumps.append(gain)
             here, there = (post.model.motion.propagate(v, t - post.t_anchor) for v in (previous, x_mode))
             self.events.append(Event(time=t, message=(
@@ -378,6 +390,8 @@ class _ModeReadOut:
                     f"the particles had missed the posterior's peak: the best stood {short:.2f} below the mode in "
                     f"log density, where a sample of the posterior stays within {self.limit:.2f}; sampled again "
                     "about the mode")))
+        if not self.read_mode:
+            return post.moments(t)
         if self.skewed_mean and mean_is_the_better_point(*post.mean_shift(x_mode, probe_beyond=MEAN_SHIFT_FAR)):
             self.means += 1
             return post.moments(t)
