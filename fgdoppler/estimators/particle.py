@@ -160,10 +160,10 @@ MEAN_SHIFT_NOISE = 0.1
 #: of case a 5 km and case b 45 km 1.7 at their 5th percentile, the lopsided ones of the 25 km scenarios 0.72 at
 #: their 95th).
 MEAN_SHIFT_FAR = 1.0
-#: ``map`` (and the particle estimator in space) samples its particles again about the mode when the best of them falls so far short of it that this many
-#: independent draws of a posterior near Gaussian about the mode would all fall as short with probability
-#: :data:`RESCUE_LEVEL` (:func:`rescue_shortfall`); resampling repeats particles, so fewer count as independent than
-#: there are.
+#: ``map`` (and the particle estimator in space) samples its particles again about the mode when the best of them
+#: falls so far short of it that this many independent draws of a posterior near Gaussian about the mode would all
+#: fall as short with probability :data:`RESCUE_LEVEL` (:func:`rescue_shortfall`); resampling repeats particles, so
+#: fewer count as independent than there are.
 RESCUE_DRAWS = 20
 #: See :data:`RESCUE_DRAWS`.
 RESCUE_LEVEL = 1e-6

@@ -941,7 +941,8 @@ class MapSettings(ParticleSettings):
         mean along the offsets' ridge.
     mode_rescue : bool or None, default True
         On in the plane too, where ``map`` climbs to the mode at every
-        report anyway (``None``: in space only).  Where the best particle falls further below the mode in log density
+        report anyway (``None``: in space only).  Where the best particle
+        falls further below the mode in log density
         than a sample of a posterior near Gaussian about it would
         (:func:`~fgdoppler.estimators.particle.rescue_shortfall`: 1.68 in the
         plane, 2.67 in space), the particles sit away from the posterior's
