@@ -327,13 +327,14 @@ def _run(measurements: Measurements, model: TrackingModel, init: Initiation, set
         covs.append(cov)
         loglik.append(total)
         advance(progress)
-    read_out, jumps = ("", []) if reader is None or not mode else (reader.phrase(len(times)), reader.jumps)
+    mode_reader = reader if mode else None  # the particle estimator's reader (its rescue) reports the mean
+    read_out, jumps = ("", []) if mode_reader is None else (mode_reader.phrase(len(times)), mode_reader.jumps)
     events.append(Event(time=times[-1], message=_summary(n_particles, rates, n_resample, n_reanchor, read_out,
                                                          jumps)))
     offsets = None
     if post.offsets is not None:
-        offsets = _offsets_at_end(post, None if reader is None or not mode or reader.last_mode is None
-                                  else reader.last_mode[1])
+        last = None if mode_reader is None else mode_reader.last_mode
+        offsets = _offsets_at_end(post, None if last is None else last[1])
         events.append(Event(time=times[-1], message="calibration offsets at the end: " + offsets.describe(pair_labels(model.observation))))
     return TrackResult(
         estimator=name,
