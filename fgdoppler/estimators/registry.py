@@ -39,7 +39,7 @@ from fgdoppler.estimators.isam2 import run_isam2
 from fgdoppler.estimators.judge import covariance_reference, judge, track_reference
 from fgdoppler.estimators.later_mistakes import later_mistakes
 from fgdoppler.estimators.names import ALIASES, SUMMARIES
-from fgdoppler.estimators.particle import run_map, run_particle
+from fgdoppler.estimators.particle import rescued, run_map, run_particle
 from fgdoppler.estimators.restart import (
     MODE_MARGIN,
     FreshFits,
@@ -236,7 +236,8 @@ def _run_estimator(name: str, measurements: Measurements, model: TrackingModel |
             return _solve(info, measurements, model, h, settings, prefixed(progress, "restart"), w)
         result = with_restarts(measurements, model, init, settings, result, again, fits=fits,
                                only_if=surprise_check(init.t_start, settings.max_span,
-                                                      basin_screen(measurements, model, init, MODE_MARGIN))
+                                                      basin_screen(measurements, model, init, MODE_MARGIN),
+                                                      armed=rescued)
                                if isinstance(settings, ParticleSettings) else None)
     held = (_reference(measurements, model, init, settings, reference, per_pair, resolve_ambiguity, progress)
             if verify and result.primary.kind != "smoothed" else None)

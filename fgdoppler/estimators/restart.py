@@ -121,7 +121,10 @@ draws, ``tests/estimators/test_restart.py``) both ended 12.6 km from the
 truth with a position sigma of 53 m, and the verdict said ``failed``.  So
 they are tested as well, at a checkpoint where the measurements since the
 last one *surprise* them — their normalised innovations sum beyond the χ²
-quantile at :data:`SURPRISE` (:func:`surprised`), or where the data do
+quantile at :data:`SURPRISE` (:func:`surprised`), or where their
+particles were sampled again about a posterior peak they had missed since
+the last one (:func:`~fgdoppler.estimators.particle.rescued`: that peak,
+the best fit of the data so far, can lie in a wrong basin), or where the data do
 not surprise them but one of the initiation's solutions, refined on every
 measurement so far, fits them better than the running estimate's basin by
 :data:`MODE_MARGIN` (:mod:`fgdoppler.estimators.basin_screen`: a wrong basin
@@ -509,21 +512,24 @@ def surprised(result: TrackResult, t_from: float, t_to: float) -> bool:
     return bool(nu.size and float(np.sum(nu)) > chi2.ppf(SURPRISE, nu.size))
 
 
-def surprise_check(t_start: float, max_span: float, screen: Callable[[FloatArray, float], bool] | None = None
+def surprise_check(t_start: float, max_span: float, screen: Callable[[FloatArray, float], bool] | None = None,
+                   *, armed: Callable[[TrackResult, float, float], bool] | None = None
                    ) -> Callable[[TrackResult, float, float], bool]:
     """The particle estimators' ``only_if`` of :func:`with_restarts` (module docstring, "The particle estimators").
 
     True at a checkpoint no more than ``max_span`` seconds after ``t_start``
     (the recording's start) where the data since the last one surprise the
-    estimator (:func:`surprised`) or, where they do not, ``screen(state, t_c)``
-    holds of its filtered estimate there
+    estimator (:func:`surprised`), where ``armed(result, t_last, t_c)`` holds
+    (the particles were sampled again about a mode they had missed since the
+    last checkpoint, :func:`~fgdoppler.estimators.particle.rescued`) or, where
+    neither, ``screen(state, t_c)`` holds of its filtered estimate there
     (:func:`~fgdoppler.estimators.basin_screen.basin_screen`: a start's basin
     fits all the data so far better).
     """
     def check(result: TrackResult, t_last: float, tc: float) -> bool:
         if tc - t_start > max_span:
             return False
-        if surprised(result, t_last, tc):
+        if surprised(result, t_last, tc) or (armed is not None and armed(result, t_last, tc)):
             return True
         if screen is None:
             return False

@@ -762,7 +762,10 @@ class ParticleSettings(TrackerSettings):
     restarts : bool, default True
         At the filters' checkpoints where the measurements since the last
         one surprise the estimator (their NIS sum beyond the χ² 99.9 %
-        quantile) or one of the initiation's solutions, refined on all the
+        quantile), where the particles were sampled again about a mode
+        they had missed since the last one (``mode_rescue``;
+        :func:`~fgdoppler.estimators.particle.rescued`), or where one of the
+        initiation's solutions, refined on all the
         data so far, fits them better than the running estimate's basin
         (:mod:`fgdoppler.estimators.basin_screen`), and no later than
         ``max_span`` after the start, find the

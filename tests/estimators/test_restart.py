@@ -14,6 +14,8 @@ from benchmarks.bench_long import THREE_PAIRS
 from fgdoppler.analysis.metrics import errors
 from fgdoppler.estimators import restart
 from fgdoppler.estimators.ambiguity import hypotheses
+from fgdoppler.estimators.basin_screen import basin_screen
+from fgdoppler.estimators.particle import RESCUE_EVENT, rescued
 from fgdoppler.estimators.registry import hypotheses_of
 from fgdoppler.estimators.restart import (
     DISAGREEMENT,
@@ -383,6 +385,60 @@ def test_a_lost_particle_estimator_restarts_and_recovers(estimator: str) -> None
     cut = fd.run_estimator(estimator, m.subset(m.time <= 45.0), g, init, verify=False)
     sel = res.primary.times <= 45.0
     np.testing.assert_array_equal(cut.primary.states, res.primary.states[sel])
+
+
+def _rescued_into_a_wrong_basin() -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation]:
+    """Draw 13 of ``studies/random_layouts_3d.py`` (three ground pairs, an aircraft at 2.2 km), its first 20 s: the
+    draw's own values and the state of its generator after the draw, which then simulates the recording."""
+    pairs = [((19766.745318357025, 6051.519996135663, 0.0), (25604.22099336596, 12427.324875802922, 0.0)),
+             ((32153.77258491247, -28046.777630875964, 0.0), (-12819.153831500465, 2699.666506220259, 0.0)),
+             ((-1337.33219951942, -32175.520055453577, 0.0), (-30326.32136317454, 14555.26886384809, 0.0))]
+    x0 = (19729.119058101474, -6019.396741805518, 2153.041765623383, 4.486660161304062, -65.4157403431881,
+          3.3219061713037044)
+    rng = np.random.Generator(np.random.PCG64())
+    rng.bit_generator.state = {"bit_generator": "PCG64", "has_uint32": 1, "uinteger": 1192146049,
+                               "state": {"state": 207639287032345122370115077018470011005,
+                                         "inc": 233476570586696911600097664360034763769}}
+    g = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=tx, rx=rx) for tx, rx in pairs))
+    sim = fd.simulate(fd.Scenario(geometry=g, x0=x0, duration=20.0, dt=0.5), rng)
+    model = fd.TrackingModel.of(g)
+    return sim, model, fd.initiate(sim.measurements.first_per_pair(10), model)
+
+
+def test_a_rescue_arms_the_next_checkpoints_test() -> None:
+    # At the window's end (4.5 s) the particle estimator's particles miss a peak of the posterior far higher than
+    # the best of them, 9 km from the truth, and are sampled again about it.  There the data that follow do not
+    # surprise them, nor does any start's basin fit the data better (the screen): left alone the run stays 8.6 km
+    # off at the end, its final state 145,000 in squared Mahalanobis distance from the truth.  The rescue arms the
+    # test at the next checkpoint (7 s), which restarts it from the best fit of the data so far.
+    sim, model, init = _rescued_into_a_wrong_basin()
+    tc = checkpoints(sim.measurements, init)[0]
+    plain = fd.run_estimator("particle", sim.measurements, model, init, fd.ParticleSettings(restarts=False),
+                             verify=False)
+    # rescued at the window's end (4.5 s) and at 5 s: both before the first checkpoint, none after it
+    said = [ev.time for ev in plain.events if ev.message.startswith(RESCUE_EVENT)]
+    assert said == [init.t_end, init.t_end + 0.5]
+    assert rescued(plain, init.t_end, tc) and not rescued(plain, tc, sim.measurements.time[-1])
+    at_end = tuple(ev for ev in plain.events if ev.time <= init.t_end)
+    assert rescued(replace(plain, events=at_end), init.t_end, tc)  # the window's end alone counts
+    assert not surprised(plain, init.t_end, tc)
+    e = plain.primary
+    i = int(np.searchsorted(e.times, tc))
+    assert e.times[i] == tc and not basin_screen(sim.measurements, model, init, MODE_MARGIN)(e.states[i], tc)
+    assert surprise_check(init.t_start, 300.0, armed=rescued)(plain, init.t_end, tc)
+    assert not surprise_check(init.t_start, 300.0)(plain, init.t_end, tc)
+    res = fd.run_estimator("particle", sim.measurements, model, init, verify=False)
+    restarts = [ev.time for ev in res.events if "online re-initiation" in ev.message]
+    assert restarts == [tc]
+    before, after = (_final_m2(r, sim) for r in (plain, res))
+    assert before > 1e4 and after < before / 100
+    assert _end_error(sim, res) < _end_error(sim, plain) - 1000.0
+
+
+def _final_m2(res: fd.TrackResult, sim: fd.Simulation) -> float:
+    e = res.primary
+    d = e.states[-1] - sim.truth.at(e.times[-1:])[0]
+    return float(d @ np.linalg.solve(e.covariances[-1], d))
 
 
 @pytest.mark.parametrize(("estimator", "seed"), [("ekf", 3), ("isam2", 3), ("fixed-lag", 3), ("particle", 0),
