@@ -429,11 +429,13 @@ def rescue_shortfall(d: int) -> float:
 
 
 def rescued(result: TrackResult, t_from: float, t_to: float) -> bool:
-    r"""Whether the particles of ``result`` were sampled again about a mode they had missed in :math:`(t_\mathrm{from}, t_\mathrm{to}]`.
+    r"""Whether the particles of ``result`` were sampled again about a mode they had missed in :math:`[t_\mathrm{from}, t_\mathrm{to}]`.
 
-    A rescue at the run's first report (the initiation window's end) counts
-    where :math:`t_\mathrm{from}` is that report's time: it precedes every
-    checkpoint, and the first one tests it.
+    The interval is closed at :math:`t_\mathrm{from}`, the previous
+    checkpoint or the window's end: a rescue at the run's first report, or
+    at a restart's, follows the test there (or precedes every test), so the
+    next one makes it.  A rescue before the test at a checkpoint is then
+    counted by the next one as well, which only tests once more.
 
     The registry then tests the run at the checkpoint :math:`t_\mathrm{to}`
     whether or not the data since surprise it
@@ -450,9 +452,8 @@ def rescued(result: TrackResult, t_from: float, t_to: float) -> bool:
     at 5,983 m.  No other of 40 draws, at 60 s or 30 s, moved, for ``map``
     none (``python studies/particle_anchor_3d.py --draws 40``).
     """
-    # a rescue at the first report (the window's end) precedes every checkpoint: the first one counts it
-    lo = t_from + 1e-9 if t_from > float(result.primary.times[0]) + 1e-9 else -math.inf
-    return any(lo < ev.time <= t_to + 1e-9 and ev.message.startswith(RESCUE_EVENT) for ev in result.events)
+    return any(t_from - 1e-9 <= ev.time <= t_to + 1e-9 and ev.message.startswith(RESCUE_EVENT)
+               for ev in result.events)
 
 
 def _offsets_at_end(post: _Posterior, x_mode: FloatArray | None) -> OffsetEstimate:

@@ -421,6 +421,7 @@ def test_a_rescue_arms_the_next_checkpoints_test() -> None:
     assert rescued(plain, init.t_end, tc) and not rescued(plain, tc, sim.measurements.time[-1])
     at_end = tuple(ev for ev in plain.events if ev.time <= init.t_end)
     assert rescued(replace(plain, events=at_end), init.t_end, tc)  # the window's end alone counts
+    assert rescued(plain, init.t_end + 0.5, init.t_end + 0.5)  # closed at both ends
     assert not surprised(plain, init.t_end, tc)
     e = plain.primary
     i = int(np.searchsorted(e.times, tc))
