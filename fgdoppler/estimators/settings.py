@@ -787,8 +787,10 @@ class ParticleSettings(TrackerSettings):
         the rescue acted in 8 runs and brought the mean closer to the truth in
         7 of them (median NEES over t >= 10 s of those runs 1,768 -> 369)
         and farther in 1, for 1.2 times the CPU time (docs/concepts.md,
-        "The mean's particles too").  In the plane it costs the climb at
-        every report and never acted on the paper's scenarios, so it is off
+        "The mean's particles too").  A rescue also makes the ``restarts``
+        test at the next checkpoint: the peak can lie in a wrong basin
+        (docs/concepts.md, "A rescue arms the next check").  In the plane
+        it costs the climb at every report and never acted on the paper's scenarios, so it is off
         there; ``True`` and ``False`` hold in both.
     bias_sigma : float or tuple of float, default 0.0
         Each pair's Doppler calibration uncertainty (m/s, one standard
