@@ -74,7 +74,7 @@ from scipy.stats import chi2
 
 import fgdoppler as fd
 from benchmarks._common import Row
-from benchmarks._exact import exact_track
+from benchmarks._exact import MIN_ESS, ExactPosterior, exact_track
 from fgdoppler.analysis.bounds import crlb_deterministic
 from fgdoppler.analysis.metrics import compare_rmse, errors, nees, nees_band, time_averaged_rmse
 from fgdoppler.analysis.workers import one_blas_thread
@@ -174,20 +174,33 @@ def one_run(args: tuple[int, int, int, bool, bool]) -> dict[str, Any]:
     return {"s": s, "r": r, "results": out}
 
 
-def exact_rows(m: fd.Measurements, model: fd.TrackingModel, init: fd.Initiation, reference: fd.TrackResult,
-               tt: FloatArray, truth: FloatArray, *, seed: int) -> dict[str, dict[str, Any]]:
-    """Rows ``exact-filtered``, ``exact-lagged`` and ``exact-smoothed`` of one run (module docstring).
+def exact_posteriors(m: fd.Measurements, model: fd.TrackingModel, init: fd.Initiation, reference: fd.TrackResult,
+                     *, seed: int, min_ess: float = MIN_ESS) -> tuple[FloatArray, dict[float, ExactPosterior]]:
+    """The times at which the benchmark samples the exact posterior, and the posteriors given the data up to each.
 
-    The exact posterior is sampled given the data up to every :data:`EXACT_STEP` from ``T_NEES`` after
-    the first measurement to the last one, started from the offline smoother's first state, the
-    initiation's and the previous time's mean; a time where the data do not fix the state is left out.
+    The times are every :data:`EXACT_STEP` from ``T_NEES`` after the first
+    measurement, and the last measurement's; each posterior is started from
+    the offline smoother's first state, the initiation's and the previous
+    time's mean (:func:`benchmarks._exact.exact_track`), keyed by its time
+    rounded to the microsecond.  A time where the data do not fix the state,
+    or where the sampler has fewer than ``min_ess`` effective samples, is
+    left out.
     """
     t0, last = float(np.min(m.time)), float(np.max(m.time))
     starts = [model.motion.F(t0 - float(reference.primary.times[0])) @ reference.primary.states[0],
               model.motion.F(t0 - init.t_start) @ init.x_start]
     ends = np.union1d(t0 + np.arange(T_NEES, last - t0 - 1e-6, EXACT_STEP), [last])
+    posts = exact_track(m, model, ends, starts, seed, min_ess=min_ess)
+    return ends, {round(t_end, 6): post for t_end, post in posts.items()}
+
+
+def exact_rows(m: fd.Measurements, model: fd.TrackingModel, init: fd.Initiation, reference: fd.TrackResult,
+               tt: FloatArray, truth: FloatArray, *, seed: int) -> dict[str, dict[str, Any]]:
+    """Rows ``exact-filtered``, ``exact-lagged`` and ``exact-smoothed`` of one run (module docstring), read from
+    :func:`exact_posteriors`; a time it leaves out is NaN."""
+    last = float(np.max(m.time))
     cpu = time.process_time()
-    posts = {round(t_end, 6): post for t_end, post in exact_track(m, model, ends, starts, seed).items()}
+    ends, posts = exact_posteriors(m, model, init, reference, seed=seed)
     cpu = time.process_time() - cpu
     lag = fd.FixedLagSettings().lag
     given = {"exact-filtered": lambda t: t, "exact-lagged": lambda t: min(t + lag, last),
