@@ -23,7 +23,7 @@ posterior (6 when the truth is a draw from the posterior: here the truths'
 heights, 0.5-4.5 km, are not drawn from the zone's prior, which spans the
 whole altitude band).
 
-Run: python studies/exact_3d.py [--draws 20] [--out DIR]  (about 10 min on 2 cores)
+Run: python studies/exact_3d.py [--draws 20] [--out DIR]  (22 min on 2 cores)
 """
 
 from __future__ import annotations
