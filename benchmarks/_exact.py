@@ -67,7 +67,7 @@ import fgdoppler as fd
 from fgdoppler.models.observation import predict_along
 
 __all__ = ["DOF", "ESS_TARGET", "MIN_ESS", "TAIL_LEVEL", "ExactPosterior", "doppler_residual", "exact_posterior",
-           "exact_track"]
+           "exact_track", "posterior_costs"]
 
 FloatArray = NDArray[np.float64]
 
@@ -157,6 +157,30 @@ def doppler_residual(measurements: fd.Measurements, model: fd.TrackingModel, t_e
     return residual
 
 
+def posterior_costs(measurements: fd.Measurements, model: fd.TrackingModel, t_end: float
+                    ) -> tuple[Callable[[FloatArray], FloatArray], Callable[[FloatArray], FloatArray]]:
+    r"""The two parts of :math:`-2\log` of the posterior density of the first state (up to a constant), as
+    functions of states ``(n, 2d)`` → ``(n,)``: the Doppler's :math:`c(\mathbf x_0)`, the sum of the squared
+    residuals of :func:`doppler_residual` (inf where a track passes through a sensor), and the weak prior's
+    :math:`(\mathbf x_0 - \mathbf m)^\top\mathbf P^{-1}(\mathbf x_0 - \mathbf m)` with the zone as support
+    (inf outside; either part dropped for a model without it)."""
+    doppler = doppler_residual(measurements, model, t_end)
+    prior = model.prior()
+    whiten = None if prior is None else np.linalg.inv(np.linalg.cholesky(prior[1]))
+    zone = model.zone
+
+    def data_cost(xs: FloatArray) -> FloatArray:
+        c = np.sum(doppler(xs) ** 2, axis=1)
+        return np.where(np.isfinite(c), c, np.inf)
+
+    def prior_cost(xs: FloatArray) -> FloatArray:
+        c = np.zeros(len(xs)) if prior is None or whiten is None else np.sum(((xs - prior[0]) @ whiten.T) ** 2,
+                                                                                axis=1)
+        return c if zone is None else np.where(zone.contains(xs), c, np.inf)
+
+    return data_cost, prior_cost
+
+
 def exact_posterior(measurements: fd.Measurements, model: fd.TrackingModel, t_end: float,
                     starts: Sequence[FloatArray], rng: np.random.Generator, *, samples: int = SAMPLES,
                     min_ess: float = MIN_ESS) -> ExactPosterior:
@@ -181,7 +205,6 @@ def exact_posterior(measurements: fd.Measurements, model: fd.TrackingModel, t_en
 
     prior = model.prior()
     whiten = None if prior is None else np.linalg.inv(np.linalg.cholesky(prior[1]))
-    support = None if model.zone is None else model.zone.contains
 
     def residual(x0: FloatArray) -> FloatArray:
         r = doppler(x0)[0]
@@ -189,13 +212,10 @@ def exact_posterior(measurements: fd.Measurements, model: fd.TrackingModel, t_en
             r = np.concatenate([r, whiten @ (x0 - prior[0])])
         return np.nan_to_num(r, nan=1e6)
 
+    data_cost, prior_cost = posterior_costs(measurements, model, t_end)
+
     def cost(xs: FloatArray) -> FloatArray:
-        c = np.sum(doppler(xs) ** 2, axis=1)
-        if prior is not None and whiten is not None:
-            c = c + np.sum(((xs - prior[0]) @ whiten.T) ** 2, axis=1)
-        if support is not None:
-            c = np.where(support(xs), c, np.inf)
-        return c
+        return data_cost(xs) + prior_cost(xs)
 
     fits = [least_squares(residual, np.asarray(s, dtype=float), method="lm") for s in starts]
     best = min(fits, key=lambda f: f.cost)

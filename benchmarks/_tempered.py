@@ -60,7 +60,7 @@ from scipy.special import logsumexp
 from scipy.stats import chi2
 
 import fgdoppler as fd
-from benchmarks._exact import TAIL_LEVEL, ExactPosterior, doppler_residual
+from benchmarks._exact import TAIL_LEVEL, ExactPosterior, posterior_costs
 
 __all__ = ["AGREE_COVARIANCE", "AGREE_MEAN", "BRIDGES", "PARTICLES", "tempered_posterior"]
 
@@ -113,17 +113,8 @@ def tempered_posterior(measurements: fd.Measurements, model: fd.TrackingModel, t
         raise ValueError(f"need at least 10 particles and one bridge, not {particles} and {bridges}")
     mean0, cov0 = prior
     chol0 = np.asarray(np.linalg.cholesky(cov0), dtype=np.float64)
-    whiten = np.linalg.inv(chol0)
-    doppler = doppler_residual(measurements, model, t_end)
+    data_cost, prior_cost = posterior_costs(measurements, model, t_end)
     t0 = float(np.min(measurements.time))
-
-    def data_cost(xs: FloatArray) -> FloatArray:
-        c = np.sum(doppler(xs) ** 2, axis=1)
-        return np.where(np.isfinite(c), c, np.inf)
-
-    def prior_cost(xs: FloatArray) -> FloatArray:
-        c = np.sum(((xs - mean0) @ whiten.T) ** 2, axis=1)
-        return np.where(zone.contains(xs), c, np.inf)
 
     runs = [_bridge(mean0, chol0, zone, particles, rng, data_cost, prior_cost, t_end) for _ in range(bridges)]
     _agree([x for x, _ in runs], t_end)
