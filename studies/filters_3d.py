@@ -1,4 +1,4 @@
-"""Every online estimator on random 3-D layouts, and the particle estimators with a restart check at every checkpoint.
+"""Every online estimator on random 3-D layouts, and the particle estimators with their restart test made the other way.
 
 On the random 3-D layouts of ``random_layouts_3d.py`` (its draws, recorded
 for ``--duration`` seconds) the particle estimators end kilometres from the
@@ -6,10 +6,11 @@ truth where the offline smoother is close (``particle_anchor_3d.py``).  Is
 that the particles, or is every filter there as far off?  Each draw is
 tracked by every estimator with its defaults, against one shared reference
 smoother; and ``particle`` and ``map`` once more with the online
-re-initiation's test made at *every* checkpoint of the first ``max_span``
-seconds instead of only where the data since the last one surprise them
-(:func:`fgdoppler.estimators.restart.surprised`, replaced for that run by a
-test that always holds: a measurement, not an option of the library).
+re-initiation's test made the other way (``check_every``,
+:class:`fgdoppler.MapSettings`): ``particle`` at *every* checkpoint of the
+first ``max_span`` seconds, ``map`` only where the data since the last
+checkpoint surprise it, a rescue armed it or the basin screen fires (each
+one's default in space is the other).
 
 Printed per estimator and variant, over the draws: the RMS and the median of
 each run's position RMS error over t >= 10 s, the median of its horizontal
@@ -19,9 +20,9 @@ smoother), the median final error, the
 median NEES averaged over t >= 10 s, the runs whose NEES exceeds the
 chi-square 99.9 % quantile of the averaged statistic (6 dimensions), the
 ``ok`` runs and of them those beyond that quantile, the restarts, the
-median wall time; for the every-checkpoint variants also the draws whose
-error over t >= 10 s and whose final error fell or rose by more than a
-metre, paired against the default.
+median wall time; for those variants also the draws whose error over
+t >= 10 s and whose final error fell or rose by more than a metre, paired
+against the default.
 
 Run: python studies/filters_3d.py [--draws 40] [--duration 60] [--out DIR]
 (about 20 min on 2 cores)
@@ -30,8 +31,6 @@ Run: python studies/filters_3d.py [--draws 40] [--duration 60] [--out DIR]
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import Any
 
 import _common  # the repository root on the path, and the runner
@@ -41,7 +40,6 @@ from random_layouts_3d import draw
 from scipy.stats import chi2
 
 import fgdoppler as fd
-import fgdoppler.estimators.restart as restart
 from fgdoppler.analysis.bounds import crlb_deterministic
 from fgdoppler.analysis.metrics import errors, nees
 from fgdoppler.analysis.workers import one_blas_thread
@@ -50,8 +48,8 @@ from fgdoppler.analysis.workers import one_blas_thread
 T_LATE = 10.0
 #: The estimators, in the table's order (the smoother last: it is the reference).
 NAMES = ("ekf", "isam2", "fixed-lag", "particle", "map", "smoother")
-#: The particle estimators run again with a check at every checkpoint.
-EVERY = ("particle", "map")
+#: The particle estimators run again with their restart test made the other way: ``check_every``, and the label.
+VARIANTS = {"particle": (True, "every checkpoint"), "map": (False, "surprise only")}
 
 
 def measures(res: fd.TrackResult, truth: fd.Trajectory) -> dict[str, Any]:
@@ -67,6 +65,15 @@ def measures(res: fd.TrackResult, truth: fd.Trajectory) -> dict[str, Any]:
             "nees": float(np.mean(nees(e.states, e.covariances, x_true)[late])), "status": str(res.status),
             "wall": float(res.wall_time),
             "restarts": sum("online re-initiation" in ev.message for ev in res.events)}
+
+
+def changes(runs: list[dict[str, Any]], base: list[dict[str, Any]]) -> str:
+    """The draws whose error over t >= :data:`T_LATE` fell / rose by more than a metre against ``base`` (the same
+    draws' :func:`measures`), and those whose final error did: ``"fell / rose, final fell / rose"``."""
+    a, b = (np.array([x["rmse"] for x in r]) for r in (runs, base))
+    fa, fb = (np.array([x["final"] for x in r]) for r in (runs, base))
+    return (f"{int(np.sum(a < b - 1))} / {int(np.sum(a > b + 1))}, "
+            f"{int(np.sum(fa < fb - 1))} / {int(np.sum(fa > fb + 1))}")
 
 
 def horizontal_bounds(sim: fd.Simulation) -> dict[str, float]:
@@ -98,17 +105,6 @@ def horizontal_bounds(sim: fd.Simulation) -> dict[str, float]:
     return out
 
 
-@contextmanager
-def checked_everywhere() -> Iterator[None]:
-    """The restart test made at every checkpoint of the particle estimators (within ``max_span``)."""
-    surprised = restart.surprised
-    restart.surprised = lambda *args, **kwargs: True  # type: ignore[assignment]
-    try:
-        yield
-    finally:
-        restart.surprised = surprised
-
-
 @one_blas_thread
 def one(k: int, duration: float = 60.0) -> dict[str, Any]:
     out, sim, init = recorded(k, *draw(k), duration=duration)
@@ -121,10 +117,10 @@ def one(k: int, duration: float = 60.0) -> dict[str, Any]:
         res = reference if name == "smoother" else fd.run_estimator(name, sim.measurements, g, init,
                                                                      reference=reference)
         out[name] = measures(res, sim.truth)
-    with checked_everywhere():
-        for name in EVERY:
-            res = fd.run_estimator(name, sim.measurements, g, init, reference=reference)
-            out[f"{name}, every checkpoint"] = measures(res, sim.truth)
+    for name, (every, label) in VARIANTS.items():
+        settings = fd.ESTIMATORS[name].settings(check_every=every)
+        res = fd.run_estimator(name, sim.measurements, g, init, settings, reference=reference)
+        out[f"{name}, {label}"] = measures(res, sim.truth)
     return out
 
 
@@ -138,18 +134,14 @@ def main() -> None:
              "| median final (m) | NEES median | NEES > 99.9 % | ok "
              "| ok and > 99.9 % | restarts | median wall (s) | paired: fell / rose, final fell / rose |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for key in [*NAMES, *(f"{name}, every checkpoint" for name in EVERY)]:
+    variants = [f"{name}, {label}" for name, (_, label) in VARIANTS.items()]
+    for key in [*NAMES, *variants]:
         v = [r[key] for r in rows]
         rmse = np.array([x["rmse"] for x in v])
         horizontal = np.array([x["horizontal"] for x in v])
         bound = np.array([r["bound"]["smoothing" if key == "smoother" else "filtering"] for r in rows])
         final = np.array([x["final"] for x in v])
-        paired = ""
-        if key.endswith("every checkpoint"):
-            base = [r[key.split(",")[0]] for r in rows]
-            b, fb = np.array([x["rmse"] for x in base]), np.array([x["final"] for x in base])
-            paired = (f"{int(np.sum(rmse < b - 1))} / {int(np.sum(rmse > b + 1))}, "
-                      f"{int(np.sum(final < fb - 1))} / {int(np.sum(final > fb + 1))}")
+        paired = changes(v, [r[key.split(",")[0]] for r in rows]) if key in variants else ""
         lines.append(f"| {key} | {math.sqrt(np.mean(rmse ** 2)):,.0f} | {np.median(rmse):,.0f} | "
                      f"{np.median(horizontal):,.0f} | {np.median(horizontal / bound):.2f} | "
                      f"{np.median(final):,.0f} | {np.median([x['nees'] for x in v]):.1f} | "

@@ -493,7 +493,7 @@ def test_track_reports_the_verdict_on_stderr_and_exits_3_when_failed(tmp_path: P
 
 
 def test_track_particle_and_seed_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """--particles and --no-rescue reach the particle estimators and --seed (old name --particle-seed) every
+    """--particles, --no-rescue and --check-every reach the particle estimators and --seed (old name --particle-seed) every
     tracker; the seed alone changes the random numbers."""
     sim = tmp_path / "sim"
     main(["simulate", "--case", "b", "--start-x", "5000", "--seed", "3", "--out", str(sim)])
@@ -520,6 +520,13 @@ def test_track_particle_and_seed_options(tmp_path: Path, capsys: pytest.CaptureF
     unrescued = json.loads(capsys.readouterr().out)
     # the particle estimator rescues in space only by default: in the plane --no-rescue leaves the track alone
     assert unrescued["settings"]["mode_rescue"] is False and unrescued["states"][-1] == x2
+    # the restart test at every checkpoint (by default in space only): here the data so far never point to
+    # another basin, so it restarts nothing and the track is the one of the test made only where surprised
+    for flag, value in (("--check-every", True), ("--no-check-every", False)):
+        assert main([*base, "--estimator", "map", "--particles", "256", "--seed", "3", flag]) == 0
+        checked = json.loads(capsys.readouterr().out)
+        assert checked["settings"]["check_every"] is value and checked["states"][-1] == x1
+        assert not any("online re-initiation" in e["message"] for e in checked["events"])
     assert main([*base, "--estimator", "ekf", "--seed", "9"]) == 0
     assert json.loads(capsys.readouterr().out)["settings"]["seed"] == 9  # every tracker takes it
     for bad, msg in ((["--estimator", "particle", "--particles", "10"], "n_particles must be >= 64"),
@@ -531,6 +538,10 @@ def test_track_particle_and_seed_options(tmp_path: Path, capsys: pytest.CaptureF
                      (["--estimator", "ekf", "--no-rescue"],
                       "--no-rescue applies to the particle estimators (particle, map), not to ekf"),
                      (["--estimator", "init", "--no-rescue"], "--no-rescue applies to --estimator particle or map, not to init"),
+                     (["--estimator", "ekf", "--check-every"],
+                      "--check-every applies to the particle estimators (particle, map), not to ekf"),
+                     (["--estimator", "init", "--no-check-every"],
+                      "--check-every applies to --estimator particle or map, not to init"),
                      (["--particles", "512"], "not to smoother")):
         assert main([*base[:-1], *bad]) == 2  # without --json the initiation would print the geometry first
         captured = capsys.readouterr()

@@ -121,6 +121,11 @@ def _add_estimator_options(p: argparse.ArgumentParser) -> None:
                    help="map, particle: never sample the particles again about the posterior's mode where the best "
                         "of them falls further below it than a sample of the posterior would (by default map does, "
                         "and particle in 3-D, and each says so in an event)")
+    p.add_argument("--check-every", action=argparse.BooleanOptionalAction, default=None,
+                   help="map, particle: make the restart test (a fresh fit of all the data so far) at every "
+                        "checkpoint, not only where the data surprise them; by default map does in 3-D, where it "
+                        "finds wrong basins the data leave slowly at about 3 times the CPU time, and particle "
+                        "never (--no-check-every: only where surprised)")
     p.add_argument("--mode-candidates", type=int, default=None, metavar="N",
                    help="smoother: grid candidates its whole-recording mode search refines (default 20; 0 turns "
                         "the search off: faster, but a track in a wrong mode of the likelihood can be reported ok)")
@@ -226,6 +231,8 @@ def _refuse_tracker_options(args: argparse.Namespace) -> None:
         raise CLIError("--most-likely applies to the smoother and map, not to init")
     if args.no_rescue:
         raise CLIError("--no-rescue applies to --estimator particle or map, not to init")
+    if args.check_every is not None:
+        raise CLIError("--check-every applies to --estimator particle or map, not to init")
     if args.mode_candidates is not None or args.estimate_offsets:
         option = "--mode-candidates" if args.mode_candidates is not None else "--estimate-offsets"
         raise CLIError(f"{option} applies to the smoother, not to init")
@@ -565,7 +572,8 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
     k = huber(args)
     particle = {} if args.particles is None else {"n_particles": args.particles}
     sampled = ", ".join(n for n, i in ESTIMATORS.items() if issubclass(i.settings, ParticleSettings))
-    for given, option in ((bool(particle), "--particles"), (args.no_rescue, "--no-rescue")):
+    for given, option in ((bool(particle), "--particles"), (args.no_rescue, "--no-rescue"),
+                          (args.check_every is not None, "--check-every")):
         if given and not issubclass(ESTIMATORS[name].settings, ParticleSettings):
             raise CLIError(f"{option} applies to the particle estimators ({sampled}), not to {name}")
     if args.most_likely and name not in ("smoother", "map"):
@@ -607,7 +615,8 @@ def _tracker_settings(args: argparse.Namespace, name: str) -> Any:
         lag = {} if args.lag is None else {"lag": args.lag}
         # --most-likely: map only; --no-rescue: the particle estimators (checked above)
         read_out = {**({"posterior_mean": False} if args.most_likely else {}),
-                    **({"mode_rescue": False} if args.no_rescue else {})}
+                    **({"mode_rescue": False} if args.no_rescue else {}),
+                    **({} if args.check_every is None else {"check_every": args.check_every})}
         return (FixedLagSettings(huber_k=k, **lag, **shared) if name == "fixed-lag"
                 else ESTIMATORS[name].settings(huber_k=k, **particle, **read_out, **shared))
     except ValueError as exc:

@@ -237,7 +237,7 @@ def _run_estimator(name: str, measurements: Measurements, model: TrackingModel |
         result = with_restarts(measurements, model, init, settings, result, again, fits=fits,
                                only_if=surprise_check(init.t_start, settings.max_span,
                                                       basin_screen(measurements, model, init, MODE_MARGIN),
-                                                      armed=rescued)
+                                                      armed=rescued, every=settings.checks_every(model.dim))
                                if isinstance(settings, ParticleSettings) else None)
     held = (_reference(measurements, model, init, settings, reference, per_pair, resolve_ambiguity, progress)
             if verify and result.primary.kind != "smoothed" else None)

@@ -513,7 +513,7 @@ def surprised(result: TrackResult, t_from: float, t_to: float) -> bool:
 
 
 def surprise_check(t_start: float, max_span: float, screen: Callable[[FloatArray, float], bool] | None = None,
-                   *, armed: Callable[[TrackResult, float, float], bool] | None = None
+                   *, armed: Callable[[TrackResult, float, float], bool] | None = None, every: bool = False
                    ) -> Callable[[TrackResult, float, float], bool]:
     """The particle estimators' ``only_if`` of :func:`with_restarts` (module docstring, "The particle estimators").
 
@@ -524,11 +524,14 @@ def surprise_check(t_start: float, max_span: float, screen: Callable[[FloatArray
     last checkpoint, :func:`~fgdoppler.estimators.particle.rescued`) or, where
     neither, ``screen(state, t_c)`` holds of its filtered estimate there
     (:func:`~fgdoppler.estimators.basin_screen.basin_screen`: a start's basin
-    fits all the data so far better).
+    fits all the data so far better).  ``every``: true at every checkpoint
+    within ``max_span`` (``ParticleSettings.check_every``).
     """
     def check(result: TrackResult, t_last: float, tc: float) -> bool:
         if tc - t_start > max_span:
             return False
+        if every:
+            return True
         if surprised(result, t_last, tc) or (armed is not None and armed(result, t_last, tc)):
             return True
         if screen is None:

@@ -549,15 +549,15 @@ def test_the_information_at_a_climbs_end_is_that_of_the_posterior_as_it_stands()
     np.testing.assert_array_equal(moved, fresh(mode))
 
 
-def test_map_settings_differ_from_the_particle_estimators_only_in_moves_particles_and_the_plane_s_rescue() -> None:
-    """Every default but ``move_steps``, ``n_particles`` and ``mode_rescue`` is the particle estimator's; the checks
-    are the same."""
+def test_map_settings_differ_from_the_particle_estimators_only_in_moves_particles_rescue_and_checks() -> None:
+    """Every default but ``move_steps``, ``n_particles``, ``mode_rescue`` and ``check_every`` is the particle
+    estimator's; the checks are the same."""
     import dataclasses
 
     base, own = fd.ParticleSettings(), fd.MapSettings()
     assert isinstance(own, fd.ParticleSettings)
     differ = {f.name for f in dataclasses.fields(base) if getattr(base, f.name) != getattr(own, f.name)}
-    assert differ == {"move_steps", "n_particles", "mode_rescue"}
+    assert differ == {"move_steps", "n_particles", "mode_rescue", "check_every"}
     # fewer particles in the plane, more in space (six unknowns), unless a number is given
     assert own.move_steps < base.move_steps and own.particles(2) < base.particles(2) < own.particles(3)
     assert fd.MapSettings(n_particles=1000).particles(3) == fd.ParticleSettings(n_particles=1000).particles(2) == 1000
@@ -582,6 +582,14 @@ def test_map_settings_differ_from_the_particle_estimators_only_in_moves_particle
     for settings in (fd.MapSettings, fd.ParticleSettings):
         with pytest.raises(ValueError, match="mode_rescue must be True, False or None"):
             settings(mode_rescue="yes")  # type: ignore[arg-type]
+        # the restart test at every checkpoint: in space only for map, never for the mean, unless told
+        assert settings().checks_every(3) is (settings is fd.MapSettings) and not settings().checks_every(2)
+        assert settings(check_every=None).checks_every(3) and not settings(check_every=None).checks_every(2)
+        assert settings(check_every=True).checks_every(2) and not settings(check_every=False).checks_every(3)
+        with pytest.raises(ValueError, match="check_every must be True, False or None"):
+            settings(check_every=1)  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match="2 or 3 spatial dimensions"):
+            settings().checks_every(4)
 
 
 def test_map_is_registered_online_with_its_settings() -> None:
