@@ -801,7 +801,7 @@ class ParticleSettings(TrackerSettings):
         so far finds the others.  ``None``: in space only
         (:meth:`checks_every`), :class:`MapSettings`' default.  For the
         posterior mean it does not pay: on 40 random 3-D layouts (60 s) its
-        error over the track fell in 13 draws and rose in 15, for 4.2 times
+        error over the track fell in 13 draws and rose in 15, for 4.5 times
         its CPU time; its mean, off the valley's floor where the posterior
         is curved, lies outside the fit's region more often, and it
         restarted 53 times against ``map``'s 18 (docs/concepts.md, "Every
@@ -993,8 +993,8 @@ class MapSettings(ParticleSettings):
         something calls for it in the plane (:meth:`checks_every`).  On 40
         random 3-D layouts (60 s) it brought ``map`` closer to the truth in
         11 draws and farther in 2 (RMS over draws 16,808 -> 16,342 m,
-        median final error 2,384 -> 1,338 m) for 2.9 times its CPU time
-        (1.9 -> 5.6 s, median), where a wrong basin the data leave slowly
+        median final error 2,384 -> 1,338 m) for 2.8 times its CPU time
+        (1.76 -> 4.85 s, median), where a wrong basin the data leave slowly
         had kept it kilometres off, unsurprised.  In the plane it moved 2
         of 40 random 2-D layouts' tracks and none of the paper's, and would
         take ``map`` past a tenth of the particle filter's time there
