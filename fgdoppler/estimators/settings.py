@@ -61,6 +61,12 @@ def _dimension(dim: int) -> None:
         raise ValueError(f"a model has 2 or 3 spatial dimensions, got {dim!r}")
 
 
+def _in_space_unless_given(given: bool | None, dim: int) -> bool:
+    """A switch whose ``None`` means on in space (``dim`` 3) and off in the plane (``dim`` 2)."""
+    _dimension(dim)
+    return dim == 3 if given is None else given
+
+
 def _count(value: int, name: str) -> None:
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
         raise ValueError(f"{name} must be a whole number >= 1, got {value!r}")
@@ -894,8 +900,7 @@ class ParticleSettings(TrackerSettings):
         ValueError
             If ``dim`` is neither 2 nor 3.
         """
-        _dimension(dim)
-        return dim == 3 if self.mode_rescue is None else self.mode_rescue
+        return _in_space_unless_given(self.mode_rescue, dim)
 
     def checks_every(self, dim: int) -> bool:
         """Whether the ``restarts`` test is made at every checkpoint, for ``dim`` (2 or 3) dimensions.
@@ -907,8 +912,7 @@ class ParticleSettings(TrackerSettings):
         ValueError
             If ``dim`` is neither 2 nor 3.
         """
-        _dimension(dim)
-        return dim == 3 if self.check_every is None else self.check_every
+        return _in_space_unless_given(self.check_every, dim)
 
     def particles(self, dim: int) -> int:
         """The number of particles for a model of ``dim`` (2 or 3) spatial dimensions.

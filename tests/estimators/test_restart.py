@@ -400,14 +400,22 @@ def _rescued_into_a_wrong_basin() -> tuple[fd.Simulation, fd.TrackingModel, fd.I
              ((-1337.33219951942, -32175.520055453577, 0.0), (-30326.32136317454, 14555.26886384809, 0.0))]
     x0 = (19729.119058101474, -6019.396741805518, 2153.041765623383, 4.486660161304062, -65.4157403431881,
           3.3219061713037044)
+    sim, g, init = _layout_3d_recording(pairs, x0, (1192146049, 207639287032345122370115077018470011005,
+                                                     233476570586696911600097664360034763769), 20.0)
+    return sim, fd.TrackingModel.of(g), init
+
+
+def _layout_3d_recording(pairs: list[tuple[tuple[float, ...], tuple[float, ...]]], x0: tuple[float, ...],
+                         state: tuple[int, int, int], duration: float
+                         ) -> tuple[fd.Simulation, fd.Geometry, fd.Initiation]:
+    """A draw of ``studies/random_layouts_3d.py`` rebuilt from its pairs, start and its generator's PCG64 state
+    after the draw (``uinteger``, ``state``, ``inc``): the recording of ``duration`` s and its initiation."""
     rng = np.random.Generator(np.random.PCG64())
-    rng.bit_generator.state = {"bit_generator": "PCG64", "has_uint32": 1, "uinteger": 1192146049,
-                               "state": {"state": 207639287032345122370115077018470011005,
-                                         "inc": 233476570586696911600097664360034763769}}
+    rng.bit_generator.state = {"bit_generator": "PCG64", "has_uint32": 1, "uinteger": state[0],
+                               "state": {"state": state[1], "inc": state[2]}}
     g = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=tx, rx=rx) for tx, rx in pairs))
-    sim = fd.simulate(fd.Scenario(geometry=g, x0=x0, duration=20.0, dt=0.5), rng)
-    model = fd.TrackingModel.of(g)
-    return sim, model, fd.initiate(sim.measurements.first_per_pair(10), model)
+    sim = fd.simulate(fd.Scenario(geometry=g, x0=x0, duration=duration, dt=0.5), rng)
+    return sim, g, fd.initiate(sim.measurements.first_per_pair(10), fd.TrackingModel.of(g))
 
 
 def test_a_rescue_arms_the_next_checkpoints_test() -> None:
@@ -502,13 +510,8 @@ def test_in_space_map_tests_every_checkpoint_and_leaves_a_basin_nothing_else_fla
              ((21601.224184187762, 1812.0407716772315, 0.0), (-24946.672843768225, -30475.664805331267, 0.0))]
     x0 = (-6167.808612590219, -21188.088177166457, 1354.77059973945, -78.72772163119116, 7.288210963512285,
           -3.7844359648105494)
-    rng = np.random.Generator(np.random.PCG64())
-    rng.bit_generator.state = {"bit_generator": "PCG64", "has_uint32": 1, "uinteger": 1369611075,
-                               "state": {"state": 74454217517471840705027492217964001978,
-                                         "inc": 292360484278955852132246029368796412709}}
-    g = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=tx, rx=rx) for tx, rx in pairs))
-    sim = fd.simulate(fd.Scenario(geometry=g, x0=x0, duration=60.0, dt=0.5), rng)
-    init = fd.initiate(sim.measurements.first_per_pair(10), g)
+    sim, g, init = _layout_3d_recording(pairs, x0, (1369611075, 74454217517471840705027492217964001978,
+                                                     292360484278955852132246029368796412709), 60.0)
     assert fd.MapSettings().checks_every(3)
     quiet = fd.run_estimator("map", sim.measurements, g, init, fd.MapSettings(check_every=False), verify=False)
     res = fd.run_estimator("map", sim.measurements, g, init, verify=False)
