@@ -131,7 +131,10 @@ measurement so far, fits them better than the running estimate's basin by
 the data leave slowly) — and no later than ``max_span`` after the start:
 a restart samples the posterior of every measurement so far, which past
 ``max_span`` costs more than the moves the estimators themselves bound to
-that span.  The test and the restart are
+that span.  A wrong basin that neither the data nor the screen flag, one the
+initiation never proposed, is found only by the test itself; so in space
+``map`` makes it at every checkpoint (``ParticleSettings.check_every``,
+docs/concepts.md, "Every checkpoint in space").  The test and the restart are
 the ones above: with the outliers above (seeds 0 and 2) the NIS sum fires,
 the Huber check finds the running estimate in agreement and nothing
 restarts, where the squared-loss check alone sent ``particle`` 829 m and
