@@ -889,6 +889,9 @@ class ParticleSettings(TrackerSettings):
             v = getattr(self, name)
             if v is not None and not isinstance(v, bool):
                 raise ValueError(f"{name} must be True, False or None, got {v!r}")
+        if self.check_every and not self.restarts:
+            raise ValueError("check_every=True asks for the restart test at every checkpoint, but restarts=False "
+                             "turns the test off")
 
     def rescues(self, dim: int) -> bool:
         """Whether the particles are sampled again about a mode they have missed, for ``dim`` (2 or 3) dimensions.

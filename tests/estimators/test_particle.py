@@ -588,6 +588,9 @@ def test_map_settings_differ_from_the_particle_estimators_only_in_moves_particle
         assert settings(check_every=True).checks_every(2) and not settings(check_every=False).checks_every(3)
         with pytest.raises(ValueError, match="check_every must be True, False or None"):
             settings(check_every=1)  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match="restarts=False turns the test off"):
+            settings(check_every=True, restarts=False)
+        assert not settings(restarts=False).check_every  # the defaults ask for nothing a test-free run refuses
         with pytest.raises(ValueError, match="2 or 3 spatial dimensions"):
             settings().checks_every(4)
 
