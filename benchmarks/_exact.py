@@ -67,7 +67,7 @@ import fgdoppler as fd
 from fgdoppler.models.observation import predict_along
 
 __all__ = ["DOF", "ESS_TARGET", "MIN_ESS", "TAIL_LEVEL", "ExactPosterior", "doppler_residual", "exact_posterior",
-           "exact_track", "posterior_costs"]
+           "exact_track", "posterior_costs", "prior_residual"]
 
 FloatArray = NDArray[np.float64]
 
@@ -165,8 +165,7 @@ def posterior_costs(measurements: fd.Measurements, model: fd.TrackingModel, t_en
     :math:`(\mathbf x_0 - \mathbf m)^\top\mathbf P^{-1}(\mathbf x_0 - \mathbf m)` with the zone as support
     (inf outside; either part dropped for a model without it)."""
     doppler = doppler_residual(measurements, model, t_end)
-    prior = model.prior()
-    whiten = None if prior is None else np.linalg.inv(np.linalg.cholesky(prior[1]))
+    prior = prior_residual(model)
     zone = model.zone
 
     def data_cost(xs: FloatArray) -> FloatArray:
@@ -174,11 +173,21 @@ def posterior_costs(measurements: fd.Measurements, model: fd.TrackingModel, t_en
         return np.where(np.isfinite(c), c, np.inf)
 
     def prior_cost(xs: FloatArray) -> FloatArray:
-        c = np.zeros(len(xs)) if prior is None or whiten is None else np.sum(((xs - prior[0]) @ whiten.T) ** 2,
-                                                                                axis=1)
+        c = np.sum(prior(xs) ** 2, axis=1)
         return c if zone is None else np.where(zone.contains(xs), c, np.inf)
 
     return data_cost, prior_cost
+
+
+def prior_residual(model: fd.TrackingModel) -> Callable[[FloatArray], FloatArray]:
+    r"""The model's weak prior as whitened residuals :math:`\mathbf L^{-1}(\mathbf x_0 - \mathbf m)`
+    (:math:`\mathbf P = \mathbf L\mathbf L^	op`) of states ``(n, 2d)`` → ``(n, 2d)``; ``(n, 0)`` for a model
+    without one."""
+    prior = model.prior()
+    if prior is None:
+        return lambda xs: np.zeros((len(xs), 0))
+    mean, whiten = prior[0], np.linalg.inv(np.linalg.cholesky(prior[1]))
+    return lambda xs: (xs - mean) @ whiten.T
 
 
 def exact_posterior(measurements: fd.Measurements, model: fd.TrackingModel, t_end: float,
@@ -202,15 +211,11 @@ def exact_posterior(measurements: fd.Measurements, model: fd.TrackingModel, t_en
         raise ValueError(f"the data up to {t_end:g} s do not determine the first state ({n_data} measurements "
                          f"for {dim} unknowns)")
     doppler = doppler_residual(measurements, model, t_end)
-
-    prior = model.prior()
-    whiten = None if prior is None else np.linalg.inv(np.linalg.cholesky(prior[1]))
+    prior = prior_residual(model)
 
     def residual(x0: FloatArray) -> FloatArray:
-        r = doppler(x0)[0]
-        if prior is not None and whiten is not None:
-            r = np.concatenate([r, whiten @ (x0 - prior[0])])
-        return np.nan_to_num(r, nan=1e6)
+        x = np.atleast_2d(x0)
+        return np.nan_to_num(np.concatenate([doppler(x)[0], prior(x)[0]]), nan=1e6)
 
     data_cost, prior_cost = posterior_costs(measurements, model, t_end)
 

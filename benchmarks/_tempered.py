@@ -140,9 +140,7 @@ def _bridge(mean0: FloatArray, chol0: FloatArray, zone: fd.Zone, particles: int,
         if beta >= 1.0:
             return x, ess
         new = _next_beta(c, beta, ESS_FRACTION * particles)
-        log_w = -0.5 * (new - beta) * c
-        log_w = np.where(np.isfinite(log_w), log_w, -np.inf)
-        w = np.exp(log_w - logsumexp(log_w))
+        w = _weights(c, new - beta)
         ess = float(1.0 / np.sum(w * w))
         beta = new
         keep = _systematic(w, rng)
@@ -187,9 +185,7 @@ def _next_beta(cost: FloatArray, beta: float, target: float) -> float:
     r"""The largest :math:`\beta' \le 1` whose incremental weights keep ``target`` effective samples."""
 
     def ess(b: float) -> float:
-        lw = -0.5 * (b - beta) * cost
-        lw = np.where(np.isfinite(lw), lw, -np.inf)
-        w = np.exp(lw - logsumexp(lw))
+        w = _weights(cost, b - beta)
         return float(1.0 / np.sum(w * w))
 
     if ess(1.0) >= target:
@@ -202,6 +198,14 @@ def _next_beta(cost: FloatArray, beta: float, target: float) -> float:
             break
     # a step that keeps nothing would stall the bridge: move at least by a minimal amount
     return max(lo, beta + 1e-15)
+
+
+def _weights(cost: FloatArray, step: float) -> FloatArray:
+    r"""The normalised incremental weights :math:`w_i \propto e^{-\Delta\beta\,c_i/2}` of a tempering step
+    ``step`` = :math:`\Delta\beta` (zero where the cost is infinite: outside the support)."""
+    lw = -0.5 * step * cost
+    lw = np.where(np.isfinite(lw), lw, -np.inf)
+    return np.exp(lw - logsumexp(lw))
 
 
 def _systematic(w: FloatArray, rng: np.random.Generator) -> NDArray[np.intp]:
