@@ -52,10 +52,12 @@ used to judge.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.cluster.vq import kmeans2, vq
 from scipy.special import logsumexp
 from scipy.stats import chi2
 
@@ -256,7 +258,8 @@ def _move(x: FloatArray, c: FloatArray, pc: FloatArray, beta: float, scale: floa
 
 
 def _clusters(x: FloatArray) -> tuple[Callable[[FloatArray], NDArray[np.intp]], FloatArray]:
-    """:data:`CLUSTERS` centres of the particles by k-means in the coordinates their covariance whitens, the map
+    """:data:`CLUSTERS` centres of the particles by k-means (scipy's ``kmeans2`` from evenly spaced particles, so no
+    random numbers) in the coordinates their covariance whitens, the map
     from a state to its nearest centre, and each cluster's covariance's Cholesky factor ``(CLUSTERS, k, k)`` (the
     covariance of all the particles for a cluster with too few to estimate its own)."""
     n, k = x.shape
@@ -266,15 +269,14 @@ def _clusters(x: FloatArray) -> tuple[Callable[[FloatArray], NDArray[np.intp]], 
     except np.linalg.LinAlgError:
         raise ValueError("the tempered particles collapsed onto too few distinct states to span the state") from None
     inv = np.linalg.inv(whole)
-    u = x @ inv.T
-    centres = u[np.linspace(0, n - 1, CLUSTERS).astype(int)]
-    for _ in range(KMEANS_ITERATIONS):
-        near = np.argmin(((u[:, None, :] - centres[None]) ** 2).sum(-1), axis=1)
-        centres = np.array([u[near == j].mean(axis=0) if np.any(near == j) else centres[j] for j in range(CLUSTERS)])
+    start = x[np.linspace(0, n - 1, CLUSTERS).astype(int)] @ inv.T
+    with warnings.catch_warnings():
+        # an empty cluster keeps its centre, which is what the walk needs; scipy warns of it all the same
+        warnings.simplefilter("ignore", UserWarning)
+        centres, _ = kmeans2(x @ inv.T, start, iter=KMEANS_ITERATIONS, minit="matrix", missing="warn")
 
     def assign(states: FloatArray) -> NDArray[np.intp]:
-        v = states @ inv.T
-        return np.argmin(((v[:, None, :] - centres[None]) ** 2).sum(-1), axis=1)
+        return vq(states @ inv.T, centres, check_finite=False)[0].astype(np.intp)
 
     near = assign(x)
     chols = np.repeat(whole[None], CLUSTERS, axis=0)
