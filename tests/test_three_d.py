@@ -296,7 +296,7 @@ def test_3d_truth_against_a_2d_problem_is_refused(tmp_path: Path) -> None:
         fd.Trajectory.from_csv(tmp_path / "bad.csv")
 
 
-def test_a_3d_recording_goes_through_the_command_line(tmp_path: Path) -> None:
+def test_a_3d_recording_goes_through_the_command_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """simulate → track (every estimator) → montecarlo, 3-D from the command line."""
     import json
 
@@ -306,6 +306,7 @@ def test_a_3d_recording_goes_through_the_command_line(tmp_path: Path) -> None:
     assert main(["simulate", "--case", "b", "--altitude", "0", "12000", "--start-x", "5000", "--start-z", "2000",
                  "--velocity", "10", "-100", "2", "--duration", "12", "--out", str(sim)]) == 0
     assert (sim / "truth.csv").read_text().splitlines()[0] == "time,x,y,z,vx,vy,vz"
+    assert capsys.readouterr().out.startswith("b, start (5, 2) km, height 2000 m: ")  # the start's height named
     for est in ("ekf", "isam2", "fixed-lag", "smoother", "particle", "map"):
         out = tmp_path / f"{est}.csv"
         code = main(["track", str(sim / "measurements.csv"), "--geometry", str(sim / "geometry.toml"), "--estimator",

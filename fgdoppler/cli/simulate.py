@@ -73,7 +73,9 @@ def _run(args: argparse.Namespace) -> int:
                   f"with {', '.join(f'{v:g}' for v in geom.wavelengths)} m in the files written", file=sys.stderr)
     x, y = _start_xy(args, geom)
     start = (x, y) if args.start_z is None else (x, y, args.start_z)
-    scen = scenario(args, geom, start, f"{geom.name or 'custom geometry'}, start ({x / 1e3:g}, {y / 1e3:g}) km")
+    height = "" if args.start_z is None else f", height {args.start_z:g} m"
+    scen = scenario(args, geom, start,
+                    f"{geom.name or 'custom geometry'}, start ({x / 1e3:g}, {y / 1e3:g}) km{height}")
     sim = simulate(scen, np.random.default_rng(args.seed))
     out: Path = args.out
     hz = geom.wavelengths or None  # a receiver's own unit where the geometry gives it
