@@ -26,7 +26,7 @@ def out_dir(default: str) -> Path:
     return p.parse_args().out
 
 
-def report(artefact) -> None:  # type: ignore[no-untyped-def]
+def report(artefact: Any) -> None:
     """Print what an artefact produced and its claims."""
     print(artefact.summary)
     for claim, ok in artefact.claims.items():
