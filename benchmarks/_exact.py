@@ -181,7 +181,7 @@ def posterior_costs(measurements: fd.Measurements, model: fd.TrackingModel, t_en
 
 def prior_residual(model: fd.TrackingModel) -> Callable[[FloatArray], FloatArray]:
     r"""The model's weak prior as whitened residuals :math:`\mathbf L^{-1}(\mathbf x_0 - \mathbf m)`
-    (:math:`\mathbf P = \mathbf L\mathbf L^	op`) of states ``(n, 2d)`` → ``(n, 2d)``; ``(n, 0)`` for a model
+    (:math:`\mathbf P = \mathbf L\mathbf L^\top`) of states ``(n, 2d)`` → ``(n, 2d)``; ``(n, 0)`` for a model
     without one."""
     prior = model.prior()
     if prior is None:
