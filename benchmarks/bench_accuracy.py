@@ -227,7 +227,9 @@ def _bounds(scen: fd.Scenario) -> tuple[FloatArray, FloatArray, FloatArray]:
     return t, np.sqrt(f[:, 0, 0] + f[:, 1, 1]), np.sqrt(sm[:, 0, 0] + sm[:, 1, 1])
 
 
-def _mean_after(x: FloatArray, t: FloatArray, t0: float) -> float:
+def mean_after(x: FloatArray, t: FloatArray, t0: float) -> float:
+    """Mean of the finite values of ``x`` at the times ``t >= t0`` (NaN where none): the time average of the
+    tables (position error from ``T_RMSE``, NEES from ``T_NEES``)."""
     sel = (t >= t0 - 1e-9) & np.isfinite(x)
     return float(np.mean(x[sel])) if np.any(sel) else float("nan")
 
@@ -280,8 +282,8 @@ def _summarise(records: list[dict[str, Any]], runs: int) -> dict[str, Any]:
     for s, scen in enumerate(scens):
         recs = [rec for rec in records if rec["s"] == s]
         t, crlb_f, crlb_s = _bounds(scen)
-        row: dict[str, Any] = {"crlb_filter": _mean_after(crlb_f, t, T_RMSE),
-                               "crlb_smoother": _mean_after(crlb_s, t, T_RMSE), "estimators": {}}
+        row: dict[str, Any] = {"crlb_filter": mean_after(crlb_f, t, T_RMSE),
+                               "crlb_smoother": mean_after(crlb_s, t, T_RMSE), "estimators": {}}
         names = list(dict.fromkeys(n for rec in recs for n in rec["results"]))
         for name in names:
             rs = [rec["results"][name] for rec in recs if name in rec["results"]]
@@ -293,8 +295,8 @@ def _summarise(records: list[dict[str, Any]], runs: int) -> dict[str, Any]:
             inconsistent, unflagged = inconsistent_runs(ne, t, statuses)
             row["estimators"][name] = {
                 "rmse": float(time_averaged_rmse(se, t, t0=T_RMSE)),
-                "median_error": _mean_after(np.nanmedian(np.sqrt(se), axis=0), t, T_RMSE),
-                "nees": _mean_after(nees_t, t, T_NEES),
+                "median_error": mean_after(np.nanmedian(np.sqrt(se), axis=0), t, T_RMSE),
+                "nees": mean_after(nees_t, t, T_NEES),
                 "seconds": float(np.median([x["seconds"] for x in rs])),
                 "runs": len(rs),
                 "verdicts": {k: statuses.count(k) for k in sorted(set(statuses))},

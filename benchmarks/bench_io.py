@@ -26,7 +26,8 @@ LIMIT = 6.0
 
 def _alternate(ours: Callable[[], object], numpy_read: Callable[[], object], repeat: int = 5) -> tuple[float, float]:
     """Median times of the two readers, called alternately."""
-    a, b = [], []
+    a: list[float] = []
+    b: list[float] = []
     for _ in range(repeat):
         for fn, out in ((ours, a), (numpy_read, b)):
             t = time.perf_counter()
@@ -54,7 +55,7 @@ def run() -> list[Row]:
                      *_alternate(lambda: fd.Measurements.from_csv(path, geometry=geometry),
                                  lambda: np.loadtxt(path, delimiter=",", skiprows=1)))]
         track = Path(tmp) / "t.csv"
-        t = np.arange(TRACK_ROWS) * 0.05
+        t = np.asarray(np.arange(TRACK_ROWS) * 0.05, dtype=np.float64)
         states = np.column_stack([25e3 + 10 * t, 2e3 - 100 * t, np.full_like(t, 10.0), np.full_like(t, -100.0)])
         cov = np.tile(np.diag([1e4, 4e4, 1.0, 4.0]), (TRACK_ROWS, 1, 1))
         track.write_text(states_csv(t, states, cov, np.ones(TRACK_ROWS, dtype=bool), ["fgdoppler smoother"]))

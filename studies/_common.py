@@ -119,14 +119,14 @@ def paired_cells(rows: list[dict[str, Any]], keys: list[str]) -> tuple[str, str,
 
     import numpy as np
 
-    from benchmarks.bench_accuracy import T_NEES, T_RMSE, _mean_after
+    from benchmarks.bench_accuracy import T_NEES, T_RMSE, mean_after
     from fgdoppler.analysis.metrics import compare_rmse, time_averaged_rmse
 
     t = np.array(rows[0]["t"])
     se = {k: np.array([row[k]["se"] for row in rows]) for k in keys}
     with warnings.catch_warnings():  # all-NaN columns are expected: no state before the window ends
         warnings.simplefilter("ignore", RuntimeWarning)
-        nees = [_mean_after(np.nanmean(np.array([row[k]["nees"] for row in rows]), axis=0), t, T_NEES)
+        nees = [mean_after(np.nanmean(np.array([row[k]["nees"] for row in rows]), axis=0), t, T_NEES)
                 for k in keys]
     return (" / ".join(f"{time_averaged_rmse(se[k], t, t0=T_RMSE):,.0f}" for k in keys),
             " | ".join(str(compare_rmse(se[k], se[keys[0]], t, t0=T_RMSE)) for k in keys[1:]),

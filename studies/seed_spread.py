@@ -31,7 +31,7 @@ import _common  # noqa: F401  (the repository root on the path, for the benchmar
 import numpy as np
 
 import fgdoppler as fd
-from benchmarks.bench_accuracy import T_NEES, T_RMSE, _mean_after, _on_grid
+from benchmarks.bench_accuracy import T_NEES, T_RMSE, _on_grid, mean_after
 from fgdoppler.analysis.metrics import time_averaged_rmse
 from fgdoppler.analysis.workers import one_blas_thread
 
@@ -70,7 +70,7 @@ def summarise(se: np.ndarray, ne: np.ndarray, times: np.ndarray) -> dict[str, ob
         "median run error": round(float(np.median(per_run)), 1),
         "median run sd over seeds": round(float(np.median(np.std(per_run, axis=0, ddof=1))), 2),
         "largest run sd over seeds": round(float(np.max(np.std(per_run, axis=0, ddof=1))), 1),
-        "nees per seed": [round(_mean_after(np.nanmean(ne[i], axis=0), times, T_NEES), 2) for i in range(k)],
+        "nees per seed": [round(mean_after(np.nanmean(ne[i], axis=0), times, T_NEES), 2) for i in range(k)],
     }
 
 

@@ -30,7 +30,7 @@ import _common  # the repository root on the path, and the runner
 import numpy as np
 
 import fgdoppler as fd
-from benchmarks.bench_accuracy import T_NEES, _mean_after, run_inconsistent
+from benchmarks.bench_accuracy import T_NEES, mean_after, run_inconsistent
 from benchmarks.bench_long import recording
 from fgdoppler.analysis.metrics import errors, nees
 from fgdoppler.analysis.workers import one_blas_thread
@@ -56,7 +56,7 @@ def one(seed: int, samplers: float = 1.0) -> list[dict[str, float]]:
         e = r.primary
         ok = e.cov_ok
         ne, t = nees(e.states[ok], e.covariances[ok], sim.truth.at(e.times[ok])), e.times[ok]
-        return _mean_after(ne, t, T_NEES), bool(run_inconsistent(ne[None], t)[0])
+        return mean_after(ne, t, T_NEES), bool(run_inconsistent(ne[None], t)[0])
 
     rows = []
     for k in range(int(samplers)):

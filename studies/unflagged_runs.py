@@ -36,18 +36,13 @@ from benchmarks.bench_accuracy import (
     T_NEES,
     exact_rows,
     load_records,
+    mean_after,
     recording,
 )
 from fgdoppler.analysis.workers import one_blas_thread
 
 #: The exact posterior's row that conditions on the data each estimator has read.
 MATCHING = {"fixed-lag": "exact-lagged", "smoother": "exact-smoothed"}
-
-
-def run_nees(nees: np.ndarray, t: np.ndarray) -> float:
-    """NEES averaged over t >= ``T_NEES`` (NaN where none)."""
-    late = nees[t >= T_NEES]
-    return float(np.nanmean(late)) if np.any(np.isfinite(late)) else float("nan")
 
 
 def unflagged(records: list[dict[str, Any]], grids: list[np.ndarray]
@@ -61,7 +56,7 @@ def unflagged(records: list[dict[str, Any]], grids: list[np.ndarray]
             res = rec["results"].get(name)
             if res is None or res["status"] != "ok":
                 continue
-            value = run_nees(np.asarray(res["nees"]), grids[rec["s"]])
+            value = mean_after(np.asarray(res["nees"]), grids[rec["s"]], T_NEES)
             if value > limit:
                 found.setdefault((rec["s"], rec["r"]), []).append((name, value))
     return found
@@ -74,7 +69,7 @@ def exact_nees(task: tuple[int, int, int]) -> dict[str, float]:
     sim, model, init = recording(s, r, seed)
     reference = fd.run_estimator("smoother", sim.measurements, model, init)
     rows = exact_rows(sim.measurements, model, init, reference, sim.truth.times, sim.truth.states, seed=seed)
-    return {name: run_nees(row["nees"], sim.truth.times) for name, row in rows.items()}
+    return {name: mean_after(row["nees"], sim.truth.times, T_NEES) for name, row in rows.items()}
 
 
 def main() -> None:
