@@ -21,6 +21,7 @@ Run: python studies/check_every_plane.py [--draws 40] [--out DIR]  (2 min on 2 c
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import _common  # the repository root on the path, and the runner
@@ -45,7 +46,8 @@ def one(k: int) -> dict[str, Any]:
     reference = fd.run_estimator("smoother", sim.measurements, g, init)
     for name in NAMES:
         for every in (False, True):
-            settings = fd.ESTIMATORS[name].settings(check_every=every)
+            settings_of: Callable[..., fd.TrackerSettings] = fd.ESTIMATORS[name].settings
+            settings = settings_of(check_every=every)
             res = fd.run_estimator(name, sim.measurements, g, init, settings, reference=reference)
             out[f"{name} {every}"] = measures(res, sim.truth)
     return out

@@ -44,7 +44,7 @@ def one_run(args: tuple[int, int, int], clock_sigma: float) -> dict[str, Any]:
                                       estimator_info(name).settings(clock_sigma=declared))
             row[f"{name}_{declared > 0}"] = time.process_time() - t0
             states.append(result.primary.states)
-        if not np.array_equal(*states):
+        if not np.array_equal(states[0], states[1]):
             raise RuntimeError(f"{name}: the track changed with clock_sigma in scenario {s}, run {r}")
     return row
 

@@ -352,7 +352,8 @@ def _judged(sim: fd.Simulation, model: fd.TrackingModel, track: int, late: float
     out: dict[str, Any] = {}
     g = sim.scenario.geometry
     for name in versions:
-        truth, used, corrupted = sim.truth, model, []
+        corrupted: list[tuple[int, float]] = []
+        truth, used = sim.truth, model
         if name in (MANOEUVRE, SMALL, SLOW):
             moved = manoeuvring(sim, key)
             m, truth, want = moved.measurements, moved.truth, (lambda g: "")

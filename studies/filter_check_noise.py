@@ -36,10 +36,11 @@ def one_run(task: tuple[int, int, int], estimator: str) -> tuple[int, list[tuple
     noise: list[np.ndarray] = []
     widening, whitened = spread._widening, spread._whitened_widening
 
-    def with_noise(measurements: Any, model: Any, t0: float, t: float, *rest: Any) -> Any:
+    def with_noise(measurements: fd.Measurements, model: fd.TrackingModel, t0: float, t: float, x: np.ndarray,
+                   P: np.ndarray, huber_k: float | None, rng: np.random.Generator) -> np.ndarray | None:
         noise.append(model.motion.Q(t - t0))
         try:
-            return widening(measurements, model, t0, t, *rest)
+            return widening(measurements, model, t0, t, x, P, huber_k, rng)
         finally:
             noise.clear()
 

@@ -31,6 +31,7 @@ Run: python studies/filters_3d.py [--draws 40] [--duration 60] [--out DIR]
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import _common  # the repository root on the path, and the runner
@@ -118,7 +119,8 @@ def one(k: int, duration: float = 60.0) -> dict[str, Any]:
                                                                      reference=reference)
         out[name] = measures(res, sim.truth)
     for name, (every, label) in VARIANTS.items():
-        settings = fd.ESTIMATORS[name].settings(check_every=every)
+        settings_of: Callable[..., fd.TrackerSettings] = fd.ESTIMATORS[name].settings
+        settings = settings_of(check_every=every)
         res = fd.run_estimator(name, sim.measurements, g, init, settings, reference=reference)
         out[f"{name}, {label}"] = measures(res, sim.truth)
     return out

@@ -34,6 +34,7 @@ from typing import Any
 
 import _common  # noqa: F401  (the benchmarks importable)
 import numpy as np
+from numpy.typing import NDArray
 
 import fgdoppler as fd
 from benchmarks.bench_long import recording
@@ -41,12 +42,12 @@ from fgdoppler.estimators.isam2 import ISAM2Tracker
 from fgdoppler.factors import X
 
 
-def _run(sim: fd.Simulation, means: Callable[[ISAM2Tracker, list[int]], np.ndarray]) -> dict[str, Any]:
+def _run(sim: fd.Simulation, means: Callable[[ISAM2Tracker, list[int]], NDArray[np.float64]]) -> dict[str, Any]:
     """iSAM2 on ``sim`` with ``means`` as the checks' values: relinearised factors and filtered position RMSE."""
     g = sim.scenario.geometry
     init = fd.initiate(sim.measurements.first_per_pair(10), g)
     original = ISAM2Tracker._means
-    ISAM2Tracker._means = means  # type: ignore[method-assign]
+    ISAM2Tracker._means = means  # type: ignore[method-assign,assignment]
     try:
         result = fd.run_estimator("isam2", sim.measurements, g, init, verify=False)
     finally:

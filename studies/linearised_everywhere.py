@@ -21,6 +21,7 @@ Run: python studies/linearised_everywhere.py [--runs 100] [--seed 2026]   (about
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -44,7 +45,8 @@ def one_run(task: tuple[int, int, int]) -> tuple[int, Any, dict[str, tuple[Any, 
     tt, truth = sim.truth.times, sim.truth.states
     out: dict[str, tuple[Any, Any, str, str]] = {}
     for name in ESTIMATORS:
-        both = [fd.run_estimator(name, m, model, init, estimator_info(name).settings(linearised_everywhere=flag),
+        settings_of: Callable[..., fd.TrackerSettings] = estimator_info(name).settings
+        both = [fd.run_estimator(name, m, model, init, settings_of(linearised_everywhere=flag),
                                  reference=reference) for flag in (False, True)]
         nees = [_on_grid(tt, x.primary.times, x.primary.states, x.primary.covariances, truth, x.primary.cov_ok)[1]
                 for x in both]

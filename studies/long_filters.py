@@ -28,6 +28,8 @@ Run: ``python studies/long_filters.py [--recordings 12] [--truth-q 0]``
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from long_particles import CASES, by_variant, recording, run_recordings, save
 from scipy.stats import chi2
@@ -61,7 +63,7 @@ def one(seed: int, truth_q: float) -> dict[str, dict[str, list[float | str]]]:
 
 def main() -> None:
     args, rows = run_recordings(one, __doc__)
-    summary = {}
+    summary: dict[str, dict[str, Any]] = {}
     for case, name, runs in by_variant(rows, FILTERS):
         squared, before, after = (np.array([float(v[i]) for v in runs]) for i in range(3))
         ok = np.array([v[3] == "ok" for v in runs])

@@ -64,7 +64,7 @@ def one(k: int, first: float = 0.0, turn_max: float = 0.6, accel_max: float = 1.
                            "acceleration": round(manoeuvre.acceleration, 3), "onset": round(manoeuvre.onset, 1)}
     # offsets from a stream of their own too: with --bias-sigma 0 the recordings are the same as without
     bias = np.random.default_rng([92, i]).normal(0.0, bias_sigma, g.n_pairs) if bias_sigma > 0 else np.zeros(0)
-    told = {"bias_sigma": bias_sigma, "estimate_offsets": True} if bias_sigma > 0 else {}
+    told: dict[str, Any] = {"bias_sigma": bias_sigma, "estimate_offsets": True} if bias_sigma > 0 else {}
     if bias.size:
         out["bias"] = bias.round(3).tolist()
     try:

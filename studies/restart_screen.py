@@ -76,7 +76,7 @@ def run(name: str, measurements: fd.Measurements, model: Any, init: fd.Initiatio
         variant: str) -> tuple[fd.TrackResult, dict[str, float]]:
     """Run ``name`` with or without the screen; its CPU time, screens and screens fired."""
     counted = Counted(variant)
-    registry.basin_screen = counted  # type: ignore[assignment]
+    registry.basin_screen = counted
     try:
         cpu = time.process_time()
         res = fd.run_estimator(name, measurements, model, init, reference=reference)

@@ -107,7 +107,10 @@ def checked(family: str, i: int) -> dict[str, Any]:
     out["sampled"] = "curved" if "posterior samples" in said else "skewed" if "posterior mean of" in said else ""
     out["broad"] = "tempered from a proposal" in said
     if out["sampled"]:  # the probe's ratio, as the finding states it
-        out["ratio"] = float(re.search(r"(\d[\d.e+-]*) times its quadratic model", said).group(1))
+        ratio = re.search(r"(\d[\d.e+-]*) times its quadratic model", said)
+        if ratio is None:
+            raise RuntimeError(f"the nonlinear finding no longer states the probe's ratio: {said!r}")
+        out["ratio"] = float(ratio.group(1))
     if not out["sampled"] or not e.cov_ok[0]:
         return out
     x0, P = e.states[0], e.covariances[0]

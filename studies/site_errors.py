@@ -56,7 +56,7 @@ def one_run(args: tuple[int, int, int], site_error_sigma: float, estimators: lis
             row[key] = {"cpu": time.process_time() - t0, "status": result.status,
                         "nees": float(err @ np.linalg.solve(e.covariances[j][:2, :2], err))}
             states.append(e.states)
-        if not np.array_equal(*states):
+        if not np.array_equal(states[0], states[1]):
             raise RuntimeError(f"{name}: the track changed with site_sigma in scenario {s}, run {r}")
     return row
 

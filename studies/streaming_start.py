@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import time
+from typing import Any
 
 import numpy as np
 from _common import out_dir
@@ -42,7 +43,7 @@ VARIANTS = {"from the first scan": (COLD, True, False), "warm-up, true guess": (
             "warm-up, no guess": (WARM, False, False), "Gaussian sum, no guess": (WARM, False, True)}
 
 
-def one_run(name: str, dt: float, duration: float, seed: int, warmup: dict[str, float], guess: bool,
+def one_run(name: str, dt: float, duration: float, seed: int, warmup: dict[str, Any], guess: bool,
             gaussian_sum: bool = False) -> tuple[float, float, float]:
     """End position error (m), share of gated measurements accepted, filtered NEES averaged over t >= 10 s.
 
@@ -112,7 +113,7 @@ def paper_run(s: int, r: int, gaussian_sum: bool) -> tuple[float, float, float, 
 
 def paper_table() -> list[dict[str, object]]:
     """One warmed-up Gaussian against the Gaussian sum on the paper's scenarios (printed as a Markdown table)."""
-    rows: list[dict[str, object]] = []
+    rows: list[dict[str, Any]] = []
     print(f"\n{PAPER_RUNS} runs per scenario, seed {PAPER_SEED}, iSAM2 fed scan by scan with no guess; position RMSE and "
           f"NEES averaged over runs and t >= 10 s; runs whose own NEES average exceeds {RUN_LIMIT:.1f}; seconds per run; "
           "median time of one scan's update after the warm-up\n")
@@ -150,7 +151,7 @@ def long_feed(duration: float = 3600.0) -> dict[str, object]:
         x, _ = tracker.add_scan(scans.times[k], m.pair[rows], m.doppler[rows], m.sigma[rows])
         latency[k] = time.perf_counter() - t0
     slow = np.argsort(latency)[::-1][:5]
-    out = {"scans": len(scans), "hypotheses": len(tracker.weights), "median_ms": float(1e3 * np.median(latency)),
+    out: dict[str, Any] = {"scans": len(scans), "hypotheses": len(tracker.weights), "median_ms": float(1e3 * np.median(latency)),
            "slowest": [(float(scans.times[i]), float(1e3 * latency[i])) for i in slow],
            "end_error_m": float(np.hypot(*(x - sim.truth.states[-1])[:2]))}
     print(f"\n{duration:g} s at 2 scans/s into a GaussianSumTracker (isam2): {out['scans']} scans, "

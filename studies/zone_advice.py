@@ -56,7 +56,7 @@ def one(seed: int, no_twin: float = 0.0) -> dict[str, Any]:
 
         # the twin search starts from the mirror image; from the start itself it finds the start's own mode,
         # never a twin, so only the start found is advised
-        offsets.mirrored = lambda states, geometry: states  # type: ignore[assignment]
+        offsets.mirrored = lambda states, geometry: np.asarray(states, dtype=float)
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         _quiet(["simulate", "--geometry", str(GEOMETRY), "--start-x", START[0], "--start-y", START[1],
