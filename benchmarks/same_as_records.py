@@ -7,8 +7,13 @@ the truth's time grid are compared with the per-run records (``accuracy_seedS.np
 Printed: per scenario and estimator, the runs that differ, and the median CPU time against the records' (another
 day's timing: only indicative; paired ratios need both in one run).
 
+For a change meant to move some estimators, ``--write MERGED.npz`` saves the records with those estimators' runs
+replaced by the new ones (every other estimator's, and the peers', as recorded), and ``python -m
+benchmarks.bench_accuracy --records MERGED.npz --seed S`` summarises them as a whole benchmark run would: the new
+rows beside the old ones on the same 600 recordings, for a fraction of the run time.
+
 Run: python -m benchmarks.same_as_records output/acc/accuracy_seed2026.npz --seed 2026 [--estimators particle map]
-[--runs 100] [--workers 2]   (about 15 min a seed on 2 cores)
+[--runs 100] [--workers 2] [--write MERGED.npz]   (about 15 min a seed on 2 cores)
 """
 
 from __future__ import annotations
@@ -36,12 +41,12 @@ def one_run(args: tuple[int, int, int, tuple[str, ...]]) -> dict[str, Any]:
     reference = fd.run_estimator("smoother", m, model, init)
     out: dict[str, Any] = {"s": s, "r": r}
     for name in names:
-        cpu = time.process_time()
+        cpu, wall = time.process_time(), time.perf_counter()
         res = fd.run_estimator(name, m, model, init, reference=reference)
-        cpu = time.process_time() - cpu
+        cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
         e = res.primary
         se, ne = _on_grid(sim.truth.times, e.times, e.states, e.covariances, sim.truth.states, e.cov_ok)
-        out[name] = {"se": se, "nees": ne, "status": str(res.status), "seconds": cpu}
+        out[name] = {"se": se, "nees": ne, "status": str(res.status), "seconds": cpu, "wall": wall}
     return out
 
 
@@ -63,6 +68,20 @@ def compare(records: Any, rows: list[dict[str, Any]], names: tuple[str, ...]) ->
     return lines
 
 
+def merged(records: Any, rows: list[dict[str, Any]], names: tuple[str, ...]) -> dict[str, Any]:
+    """The records' arrays with the runs of ``names`` replaced by ``rows`` (the benchmark's ``field_s_name`` keys)."""
+    # verdicts as text wide enough for any of them: a column that held only "ok" would cut "doubtful" short
+    out: dict[str, Any] = {k: np.array(records[k], dtype="<U16" if k.startswith("status_") else None)
+                           for k in records.files}
+    for x in rows:
+        for name in names:
+            for field in ("se", "nees", "status", "seconds", "wall"):
+                key = f"{field}_{x['s']}_{name}"
+                if key in out:
+                    out[key][x["r"]] = x[name][field]
+    return out
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("records", type=Path, help="the benchmark's per-run records (accuracy_seedS.npz)")
@@ -70,6 +89,8 @@ def main() -> None:
     p.add_argument("--estimators", nargs="+", default=["particle", "map"])
     p.add_argument("--runs", type=int, default=100)
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--write", type=Path, default=None,
+                   help="save the records with the named estimators' runs replaced by the new ones here")
     a = p.parse_args()
     names = tuple(estimator_info(n).name for n in a.estimators)
     records = np.load(a.records, allow_pickle=False)
@@ -79,6 +100,10 @@ def main() -> None:
     with ProcessPoolExecutor(a.workers) as pool:
         rows = list(pool.map(one_run, tasks, chunksize=4))
     print("\n".join(compare(records, rows, names)))
+    if a.write is not None:
+        a.write.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(a.write, **merged(records, rows, names))
+        print(f"wrote {a.write}")
 
 
 if __name__ == "__main__":

@@ -444,6 +444,33 @@ def test_same_as_records_names_the_runs_whose_errors_nees_or_verdict_changed() -
     assert all(line.split("|")[3:6] == [" 3 of 3 ", " - ", " 0.300 / 0.200 "] for line in lines[5:])
 
 
+def test_same_as_records_merges_the_new_runs_into_records_the_benchmark_summarises_again(tmp_path: Path) -> None:
+    """``--write``: the named estimator's runs replaced (a verdict longer than any recorded one kept whole), every
+    other estimator's as recorded, and the file read back by the benchmark's own loader."""
+    from benchmarks.bench_accuracy import load_records
+    from benchmarks.same_as_records import merged
+
+    runs, n_t = 2, 4
+    arrays: dict[str, np.ndarray] = {}
+    for s in range(6):
+        for name in ("isam2", "ekf"):
+            arrays |= {f"se_{s}_{name}": np.full((runs, n_t), 1.0), f"nees_{s}_{name}": np.full((runs, n_t), 4.0),
+                       f"status_{s}_{name}": np.array(["ok"] * runs), f"seconds_{s}_{name}": np.full(runs, 0.1),
+                       f"wall_{s}_{name}": np.full(runs, 0.1)}
+    np.savez_compressed(tmp_path / "old.npz", **arrays)
+    rows = [{"s": s, "r": r, "isam2": {"se": np.full(n_t, 9.0), "nees": np.full(n_t, 2.0),
+                                       "status": "doubtful" if (s, r) == (3, 1) else "ok", "seconds": 0.2,
+                                       "wall": 0.3}} for s in range(6) for r in range(runs)]
+    with np.load(tmp_path / "old.npz") as old:
+        out = merged(old, rows, ("isam2",))
+    np.savez_compressed(tmp_path / "new.npz", **out)
+    back = {(x["s"], x["r"]): x["results"] for x in load_records(tmp_path / "new.npz")}
+    assert len(back) == 6 * runs
+    assert back[(3, 1)]["isam2"]["status"] == "doubtful" and back[(3, 0)]["isam2"]["status"] == "ok"
+    assert all(np.all(x["isam2"]["se"] == 9.0) and x["isam2"]["wall"] == 0.3 for x in back.values())
+    assert all(np.all(x["ekf"]["se"] == 1.0) and x["ekf"]["status"] == "ok" for x in back.values())
+
+
 def test_the_tempered_posterior_agrees_with_the_importance_sampler_where_that_one_is_validated() -> None:
     """Case a 5 km, run 1 (seed 2026), the data of the first 10 s: the hardest posterior of the paper's scenarios,
     where the importance sampler has 8,900 effective samples and agrees with Metropolis chains (above).  The
