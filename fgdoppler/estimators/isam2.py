@@ -26,13 +26,12 @@ scan) are checked and those whose state moved more than
 point are replaced (removed and re-added in the same update).  The states'
 values for the check come from their marginals (:meth:`ISAM2Tracker._means`),
 which do not stop where iSAM2's own estimate stops back-substituting (the
-wildfire threshold); in floating point they agree with iSAM2's full
-back-substitution to 0.5 % of a standard deviation (up to 13 m and 4 mm/s
-on the first 300 s of the long benchmark's slow recording:
-``python studies/isam2_check_values.py``), as close as a linearisation point
-needs: with the full back-substitution's values in their place, 10,974
-instead of 10,976 factors were relinearised there and the filtered RMSE
-moved by 0.5 m.  iSAM2's own relinearisation is
+wildfire threshold); eliminated by QR they agree with iSAM2's full
+back-substitution to 1.2e-9 standard deviations (1.3 µm on the first 300 s
+of the long benchmark's slow recording: ``python
+studies/isam2_check_values.py``; by Cholesky they were up to 13 m, 0.5 % of
+a standard deviation, off there, and kilometres off where pairs report
+milliseconds apart, :meth:`ISAM2Tracker._means`).  iSAM2's own relinearisation is
 switched off (all factors are linear), and the factorisation is QR, which
 survives the ill-conditioning of Doppler-only graphs.
 
@@ -205,12 +204,11 @@ class ISAM2Tracker:
         and 146 km, NEES 9e8 and 2e5, against 138 and 111 m, NEES 1.2, by QR,
         whose means agree with iSAM2's full back-substitution to 2e-8
         standard deviations; ``tests/estimators/test_trackers.py``,
-        ``python studies/async_pairs.py``).  An old state's
-        marginal is assembled from the Bayes tree's shortcuts and can still
-        lose digits in the ill-conditioned chain of a poorly observed track:
-        up to 0.5 % of a standard deviation from the full back-substitution
-        (the module docstring), which does not matter in a linearisation
-        point.  Where QR calls the system indeterminate, iSAM2's own
+        ``python studies/async_pairs.py``).  An old state's marginal is
+        assembled from the Bayes tree's shortcuts; by QR it still agrees with
+        the full back-substitution to 1.2e-9 standard deviations on the long
+        benchmark's slow recording (the module docstring), where Cholesky's
+        were up to 0.5 % off.  Where QR calls the system indeterminate, iSAM2's own
         back-substitution is used.
         """
         try:
