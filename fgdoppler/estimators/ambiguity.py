@@ -24,8 +24,10 @@ trackers (EKF, iSAM2, fixed-lag) therefore start from several hypotheses
   per hypothesis); every estimate is the weighted *mixture*,
   :math:`\bar{\mathbf x} = \sum_h w_h\mathbf x_h`,
   :math:`\mathbf P = \sum_h w_h(\mathbf P_h + (\mathbf x_h - \bar{\mathbf x})(\mathbf x_h - \bar{\mathbf x})^\top)`,
-  with the weights of the data up to that time for filtered estimates and
-  of all the data for smoothed and lagged ones; a ``competing`` finding
+  with the weights of the data each estimate has read: those up to its
+  time for filtered estimates, up to ``lag`` seconds after it for the
+  fixed-lag smoother's lagged ones (the scans it was smoothed with before
+  it left the window), all the data for smoothed ones; a ``competing`` finding
   is doubtful when the mixture holds separate modes;
 * smoother ("cost"): the hypothesis with the lowest final cost, with a
   ``competing`` finding when another explains the data about as well;
@@ -62,7 +64,7 @@ from fgdoppler.estimators.ekf import run_ekf
 from fgdoppler.estimators.initiation import Initiation
 from fgdoppler.estimators.results import Estimates, TrackResult
 from fgdoppler.estimators.search_memo import SearchMemo
-from fgdoppler.estimators.settings import EKFSettings, TrackerSettings
+from fgdoppler.estimators.settings import EKFSettings, FixedLagSettings, TrackerSettings
 from fgdoppler.estimators.verdict import Event, Reason
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.motion import ConstantVelocity
@@ -189,7 +191,12 @@ def resolve(run: Runner, resolution: Resolution, measurements: Measurements, mod
         costs = _costs([r.cost for r in results])
         return _lowest_cost(results, costs, int(np.argmin(costs)), t_begin)
     # the EKF reports its own predictive likelihood: it is ranked by it
-    return _mixed(results, _Weights.of(hyps, results, weights), note, t_begin)
+    return _mixed(results, _Weights.of(hyps, results, weights), note, t_begin, lag=_lag(settings))
+
+
+def _lag(settings: TrackerSettings) -> float | None:
+    """How far past its time a lagged estimate has read the data (the fixed-lag smoother's lag), else ``None``."""
+    return settings.lag if isinstance(settings, FixedLagSettings) else None
 
 
 class Draft(Protocol):
@@ -288,7 +295,7 @@ def _resolve_ranked(run: Runner, measurements: Measurements, model: TrackingMode
     A hypothesis whose filtered weight stays below :data:`NEGLIGIBLE` from
     some scan on is run on the data up to that scan only: its filtered
     estimates up to there are what the full run gives (online), and after
-    it, and in every estimate weighted by all the data, its weight is below
+    it, and in every estimate weighted by data beyond it, its weight is below
     :data:`NEGLIGIBLE`; its estimates there are its last state carried
     forward by the motion model (covariance marked indeterminate).
     """
@@ -315,7 +322,7 @@ def _resolve_ranked(run: Runner, measurements: Measurements, model: TrackingMode
              for r in results]
     if stops:
         note = f"{note} ({'; '.join(stops)}: weight below {NEGLIGIBLE:.0e} from then on)"
-    return _mixed(results, mix, note, t_begin, parts)
+    return _mixed(results, mix, note, t_begin, parts, lag=_lag(settings))
 
 
 def _carried(part: Estimates, full: Estimates, motion: ConstantVelocity) -> Estimates:
@@ -334,19 +341,19 @@ def _carried(part: Estimates, full: Estimates, motion: ConstantVelocity) -> Esti
 
 
 def _mixed(results: list[TrackResult], mix: _Weights, note: str, t_begin: float,
-           parts: list[tuple[Estimates, ...]] | None = None) -> TrackResult:
+           parts: list[tuple[Estimates, ...]] | None = None, *, lag: float | None = None) -> TrackResult:
     """One track from the hypotheses' runs: the mixture of their estimates under the weights ``mix``.
 
-    ``parts`` are the runs' estimates on a common time grid (default: as they ran).
+    ``parts`` are the runs' estimates on a common time grid (default: as they ran).  Each estimate is
+    mixed with the weights of the data it has read (:func:`_read_weights`; ``lag``: the fixed-lag
+    smoother's).
     """
     parts = parts if parts is not None else [r.estimates for r in results]
-    mixed = tuple(_mixture(est.kind, [p[j] for p in parts],
-                           mix.at(est.times) if est.kind == "filtered" else mix.final(len(est)))
-                  for j, est in enumerate(parts[0]))
+    weights = [_read_weights(mix, est, lag) for est in parts[0]]
+    mixed = tuple(_mixture(est.kind, [p[j] for p in parts], weights[j]) for j, est in enumerate(parts[0]))
     W_end = mix.final(1)[:, 0]
     best = int(np.argmax(W_end))
-    primary = mixed[0]
-    hyp = np.argmax(mix.at(primary.times), axis=0) if primary.kind == "filtered" else np.full(len(primary), best)
+    hyp = np.argmax(weights[0], axis=0)
     event = Event(time=float(mix.times[-1]), message=(
         f"{note}; the estimates are their mixture, weighted by the data (hypothesis {best} carries "
         f"{W_end[best]:.2f} at the end)"))
@@ -355,6 +362,32 @@ def _mixed(results: list[TrackResult], mix: _Weights, note: str, t_begin: float,
                    events=(*results[best].events, event),
                    reasons=(*results[best].reasons, _modes_reason(W_end, ends)),
                    wall_time=time.perf_counter() - t_begin)
+
+
+def _read_weights(mix: _Weights, est: Estimates, lag: float | None) -> NDArray[np.float64]:
+    r"""The hypotheses' weights ``(H, n)`` given the data each of ``est``'s estimates has read.
+
+    A filtered estimate at :math:`t` has read the scans up to :math:`t`; a
+    lagged one (the fixed-lag smoother's) those up to :math:`t + \ell`,
+    :math:`\ell` = ``lag``: it left the smoother's window at the first scan
+    later than that, as estimated at the scan before; a smoothed one all of
+    them.  Weighing a lagged estimate with all the data would make it an
+    offline answer: in the paper's case a 5 km (100 runs, seed 2026) the
+    fixed-lag smoother's RMSE read 947 m so, 1,164 m with the data it has read.
+
+    Raises
+    ------
+    ValueError
+        For lagged estimates without a ``lag``.
+    """
+    if est.kind == "filtered":
+        return mix.at(est.times)
+    if est.kind == "lagged":
+        if lag is None:
+            raise ValueError("lagged estimates are mixed with the weights of the data up to one lag after "
+                             "them: give the lag")
+        return mix.at(est.times + lag)
+    return mix.final(len(est))
 
 
 #: A hypothesis weighing less than this (for good) takes no further part (:func:`resolve`).

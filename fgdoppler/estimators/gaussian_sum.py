@@ -70,7 +70,9 @@ before restarts carried the running estimate along, which adds the
 mixture's rounding to the restart's start).
 
 With the fixed-lag smoother, :meth:`GaussianSumTracker.lagged` gives each
-state once it is ``lag`` old, mixed with the weights of that moment.  :meth:`GaussianSumTracker.finish` solves the whole trajectory;
+state once it is ``lag`` old, mixed with the weights of the data it has
+read (the scans up to one lag after its time), as the registry mixes it:
+without restarts, the two agree.  :meth:`GaussianSumTracker.finish` solves the whole trajectory;
 after a restart the times before it come from the hypotheses it replaced,
 solved on the data up to the restart (the registry's trajectory there has
 seen the whole recording).  What this tracker does not give is the verdict,
@@ -261,11 +263,10 @@ class GaussianSumTracker:
 
         Each state is the mixture of the live hypotheses' lagged estimates
         (:attr:`FixedLagTracker.lagged <fgdoppler.estimators.fixed_lag.FixedLagTracker>`:
-        the state as estimated when it was ``lag`` old), weighted as they
-        were when the last of them left — online, so with the data up to
-        then (the registry's lagged mixture, with all the data at hand,
-        uses the final weights).  Covariances are ``None`` if any is
-        indeterminate.
+        the state as estimated when it was ``lag`` old, at the last scan
+        before it left the window), weighted by the same data: the scans up
+        to one lag after its time, as the registry weighs its lagged
+        mixture.  Covariances are ``None`` if any is indeterminate.
 
         Raises
         ------
@@ -310,6 +311,9 @@ class GaussianSumTracker:
         check_channels(self.tracking_model.observation, scan)
         c, zz, ss = scan.pair, scan.doppler, scan.sigma
         self.t = t
+        # the states this scan pushes out of a fixed-lag window were last smoothed without it:
+        # they are mixed with the weights of the data up to the scan before
+        before = _live(self._hyps) if self.estimator == "fixed-lag" else None
         for h in self._hyps:
             if not h.alive:
                 continue
@@ -320,8 +324,8 @@ class GaussianSumTracker:
                 # the trackers hold the model already moved into its frame: their answers are local
                 h.x, h.P = h.tracker.add_scan(self.t, c, zz, ss)
         self._stop_negligible()
-        if self.estimator == "fixed-lag":
-            self._emit_lagged()
+        if before is not None:
+            self._emit_lagged(*before)
         if self._restarts:
             self._kept.append((self.t, c, zz, ss))
             self._count += c.size
@@ -338,8 +342,11 @@ class GaussianSumTracker:
         smoothed trajectory (:meth:`~fgdoppler.estimators.isam2.ISAM2Tracker.finish`),
         the fixed-lag smoother's lagged one (every state as estimated when
         it was ``lag`` old, :meth:`~fgdoppler.estimators.fixed_lag.FixedLagTracker.finish`) —
-        and the trajectories are mixed with the final weights, as the
-        registry mixes them, on the times all of them hold.
+        and the trajectories are mixed, on the times all of them hold, as
+        the registry mixes them: iSAM2's with the final weights; the
+        fixed-lag smoother's states already given by :meth:`lagged` as they
+        were given there (weighted by the data up to one lag after them),
+        the rest, still in the window, with the final weights.
 
         Raises
         ------
@@ -363,6 +370,16 @@ class GaussianSumTracker:
             if np.any(keep):
                 times, mean = np.concatenate([t_old[keep], times]), np.concatenate([m_old[keep], mean])
                 cov = None if cov is None or c_old is None else np.concatenate([c_old[keep], cov])
+        if self._lagged:  # fixed-lag: the states already given keep the weights they were given with
+            given = {t: (x, P) for t, x, P in self._lagged}
+            at = [i for i, t in enumerate(times.tolist()) if t in given]
+            mean = mean.copy()
+            mean[at] = [given[times[i]][0] for i in at]
+            if cov is not None and all(given[times[i]][1] is not None for i in at):
+                cov = cov.copy()
+                cov[at] = [given[times[i]][1] for i in at]
+            else:
+                cov = None
         x_out, P_out = self.local.out(mean, cov)
         return times, x_out, P_out
 
@@ -430,9 +447,9 @@ class GaussianSumTracker:
         self._lagged_next = 0
         self.events.append(Event(time=self.t, message=message))
 
-    def _emit_lagged(self) -> None:
-        """Mix the states that every live fixed-lag tracker has now let go of (in order, each once)."""
-        idx, w = _live(self._hyps)
+    def _emit_lagged(self, idx: list[int], w: FloatArray) -> None:
+        """Mix the states that every fixed-lag tracker of hypotheses ``idx`` has now let go of (in order, each
+        once), with their weights ``w``."""
         live = [tr for i in idx if isinstance(tr := self._hyps[i].tracker, FixedLagTracker)]
         j = self._lagged_next
         while all(j in tr.lagged for tr in live):

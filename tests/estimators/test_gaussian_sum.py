@@ -98,6 +98,10 @@ def test_fed_scan_by_scan_it_equals_the_registry_from_the_same_initiation(name: 
         t, x, P = tracker.finish()
         assert P is not None
         _assert_same(t, x, P, ref.estimate("smoothed" if name == "isam2" else "lagged"), f"{name} final")
+    if name == "fixed-lag":  # each state as given online, weighted by the data it had read: the registry's too
+        t, x, P = tracker.lagged()
+        assert P is not None and t.size > 50
+        _assert_same(t, x, P, ref.estimate("lagged"), "fixed-lag given online")
 
 
 def test_the_answer_moves_with_a_rigidly_moved_problem() -> None:
