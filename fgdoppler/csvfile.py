@@ -128,14 +128,15 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
                what: str = "file", comments: bool = False,
                labels: Mapping[str, Mapping[str, float]] | None = None,
                layout: Callable[[tuple[str, ...]], tuple[tuple[str, ...], tuple[str, ...]]] | None = None,
-               blank: tuple[str, ...] = ()) -> Table:
+               blank: tuple[str, ...] = (), ignore: tuple[str, ...] = ()) -> Table:
     """Read a numeric CSV whose columns are those of ``header`` and any of ``optional``, in any order.
 
     The columns are matched by name (case-insensitively, surrounding spaces
     ignored) and returned in the order of ``header`` then ``optional``: a
     file written by another tool with its columns in another order reads
     the same.  An unknown or repeated column is an error, not ignored: a
-    misspelt ``sigma`` silently dropped would change every answer.
+    misspelt ``sigma`` silently dropped would change every answer.  Columns
+    the caller names in ``ignore`` are skipped where present, unread.
 
     Parameters
     ----------
@@ -162,15 +163,23 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
     blank
         Columns whose fields may be empty (read as NaN): a track file's
         covariance cells where the covariance is indeterminate.
+    ignore
+        Columns to skip where the file has them (names as the header's,
+        case-insensitively): another tool's extra columns, such as a
+        signal-to-noise ratio.  Their fields may hold anything but commas
+        outside quotes; none may be a column of ``header`` or ``optional``.
 
     Raises
     ------
+    ValueError
+        If ``ignore`` names a column the table reads.
     CSVError
         Naming the file and the line: unreadable, not text, a line too long,
         a bad header, a row with the wrong number of fields, a field that is
         empty or not an ASCII decimal, no data rows.
     """
     path = Path(path)
+    skip = tuple(dict.fromkeys(n.strip().lower() for n in ignore))
     rows = list(_lines(path, comments))
     if not rows:
         raise CSVError(f"{path}: empty {what}: expected the header {','.join(header)}")
@@ -178,7 +187,11 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
     names = _names(text0)
     if layout is not None:
         header, optional = layout(names)
-    problem = _header_problem(names, header, optional)
+    needed = [c for c in skip if c in header or c in optional]
+    if needed:
+        raise ValueError(f"cannot ignore {', '.join(map(repr, needed))}: the {what} needs "
+                         f"{'it' if len(needed) == 1 else 'them'}")
+    problem = _header_problem(names, header, (*optional, *skip))
     if problem:
         expected = ",".join(header) + (f" (and optionally {','.join(optional)})" if optional else "")
         raise CSVError(f"{path}:{line0}: bad header {','.join(names)!r}: {problem}; expected the columns "
@@ -187,7 +200,7 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
         raise CSVError(f"{path}: no data rows after the header")
     values = _plain_values(rows[1:], len(names))
     if values is None:
-        values = _checked_values(path, rows[1:], names, labels, blank)
+        values = _checked_values(path, rows[1:], names, labels, blank, skip)
     columns = tuple(c for c in (*header, *optional) if c in names)
     order = [names.index(c) for c in columns]
     return Table(path=path, header=columns, values=values[:, order],
@@ -213,17 +226,18 @@ def _plain_values(rows: list[tuple[int, str]], k: int) -> NDArray[np.float64] | 
 
 
 def _checked_values(path: Path, rows: list[tuple[int, str]], names: tuple[str, ...],
-                    labels: Mapping[str, Mapping[str, float]] | None, blank: tuple[str, ...] = ()
-                    ) -> NDArray[np.float64]:
-    """The rows' values read one field at a time (an empty field of a ``blank`` column as NaN), the first problem
-    named with its line (:class:`CSVError`)."""
+                    labels: Mapping[str, Mapping[str, float]] | None, blank: tuple[str, ...] = (),
+                    skip: tuple[str, ...] = ()) -> NDArray[np.float64]:
+    """The rows' values read one field at a time (an empty field of a ``blank`` column as NaN, any field of a
+    ``skip`` column as NaN, unread), the first problem named with its line (:class:`CSVError`)."""
     values = np.empty((len(rows), len(names)))
     for j, (line, text) in enumerate(rows):
         fields = next(csv.reader([text]))
         where = f"{path}:{line}"
         if len(fields) != len(names):
             raise CSVError(f"{where}: expected {len(names)} fields, got {len(fields)}")
-        values[j] = [np.nan if n in blank and not f.strip() else _field(f, where, n, (labels or {}).get(n))
+        values[j] = [np.nan if n in skip or (n in blank and not f.strip())
+                     else _field(f, where, n, (labels or {}).get(n))
                      for f, n in zip(fields, names, strict=True)]
     return values
 

@@ -324,6 +324,7 @@ class Measurements:
         *,
         geometry: Geometry | None = None,
         default_sigma: float | None = None,
+        ignore_columns: Sequence[str] = (),
     ) -> Measurements:
         r"""Read and validate a measurement CSV (:mod:`fgdoppler.csvfile` reads it strictly and boundedly).
 
@@ -341,9 +342,16 @@ class Measurements:
             Used when the file has no ``sigma`` (or ``sigma_hz``) column
             (required then), in the unit of its Doppler column: m/s, or Hz
             for ``doppler_hz``.
+        ignore_columns
+            Columns to skip where the file has them (another tool's extras,
+            e.g. ``("snr",)``); any other column not above is refused, so
+            that a misspelt ``sigma`` is never dropped unseen.
 
         Raises
         ------
+        ValueError
+            If ``ignore_columns`` names a column read here (``time``, ``pair``,
+            ``doppler``, ``sigma`` or their Hz names).
         MeasurementError
             Naming the file, the line and the problem: unreadable or not text,
             missing or bad header, wrong number of fields, an empty or
@@ -371,7 +379,8 @@ class Measurements:
         try:
             names = {} if geometry is None else {v: float(i) for i, v in enumerate(geometry.pair_names)}
             table = read_table(path, header=HEADER[:3], optional=HEADER[3:], what="measurement file",
-                               labels={"pair": names} if names else None, layout=_layout)
+                               labels={"pair": names} if names else None, layout=_layout,
+                               ignore=_ignored(ignore_columns))
         except CSVError as exc:
             raise MeasurementError(str(exc)) from None
         hz = "doppler_hz" in table.header
@@ -388,6 +397,26 @@ class Measurements:
         s = table.values[:, 3] if table.values.shape[1] == 4 else np.full(n, float(default_sigma))  # type: ignore[arg-type]
         p = _checked_rows(table, t, z, s, geometry, hz)
         return cls.from_arrays(t, p, z, s, sort=True)
+
+
+def _ignored(columns: Sequence[str]) -> tuple[str, ...]:
+    """The column names to skip, checked: none of them a column the measurement file is read by, in either layout.
+
+    Raises
+    ------
+    ValueError
+        If a name is not a string, or is one of :data:`HEADER` or :data:`HZ_HEADER`.
+    """
+    if isinstance(columns, str):
+        columns = (columns,)
+    if not all(isinstance(c, str) for c in columns):
+        raise ValueError(f"ignore_columns must be column names, got {columns!r}")
+    names = tuple(c.strip().lower() for c in columns)
+    read = [c for c in names if c in HEADER or c in HZ_HEADER]
+    if read:
+        raise ValueError(f"cannot ignore {', '.join(map(repr, read))}: a measurement file is read by "
+                         f"{'that column' if len(read) == 1 else 'those columns'}")
+    return names
 
 
 #: How a value read from a file in Hz is named in a message: what it was converted from.

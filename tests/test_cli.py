@@ -187,6 +187,26 @@ def test_an_unused_sigma_option_is_said_and_a_used_one_is_used(tmp_path: Path,
     assert two["cost"] == pytest.approx(one["cost"] / 4, rel=1e-4)
 
 
+def test_an_extra_column_is_refused_unless_named_to_skip(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A receiver's SNR column: ``track`` refuses the file (exit 2, the column named), reads it with
+    ``--ignore-column snr`` as the file without it, and will not skip a column it reads."""
+    out = tmp_path / "sim"
+    main(["simulate", "--case", "b", "--start-x", "5000", "--out", str(out)])
+    capsys.readouterr()
+    rows = (out / "measurements.csv").read_text().splitlines()
+    (tmp_path / "snr.csv").write_text("\n".join([rows[0] + ",snr", *(f"{r},{12 + k % 7}" for k, r in
+                                                                     enumerate(rows[1:]))]) + "\n")
+    args = ["--geometry", str(out / "geometry.toml"), "--estimator", "init", "--json"]
+    assert main(["track", str(tmp_path / "snr.csv"), *args]) == 2
+    assert "unknown column 'snr'" in capsys.readouterr().err
+    assert main(["track", str(out / "measurements.csv"), *args]) == 0
+    plain = json.loads(capsys.readouterr().out)
+    assert main(["track", str(tmp_path / "snr.csv"), *args, "--ignore-column", "snr"]) == 0
+    assert json.loads(capsys.readouterr().out)["x_start"] == plain["x_start"]
+    assert main(["track", str(tmp_path / "snr.csv"), *args, "--ignore-column", "snr", "--ignore-column", "sigma"]) == 2
+    assert "cannot ignore 'sigma'" in capsys.readouterr().err
+
+
 def test_a_recording_in_hz_tracks_as_the_same_recording_in_metres_per_second(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``simulate --wavelength`` writes the geometry's wavelengths and the Doppler in Hz (-range rate / wavelength,

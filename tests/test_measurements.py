@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -61,6 +62,44 @@ def test_columns_are_matched_by_name_in_any_order(tmp_path: Path) -> None:
     loose = GOOD.replace("time,pair,doppler,sigma", " Pair ,TIME,Doppler,sigma")
     loose = "\n".join([loose.splitlines()[0]] + [",".join((r[1], r[0], *r[2:])) for r in rows[1:]]) + "\n"
     np.testing.assert_array_equal(fd.Measurements.from_csv(_write(tmp_path / "l.csv", loose)).time, canonical.time)
+
+
+def test_named_extra_columns_are_skipped_and_no_others(tmp_path: Path) -> None:
+    """Another tool's extra columns (an SNR, a quality flag in words) are skipped when named, in either layout and
+    in any position; the measurements are the file's without them.  Unnamed, they are still refused, and naming a
+    column the file is read by is an error, not a way to drop it."""
+    rng = np.random.default_rng(5)
+    m = fd.simulate(fd.paper_scenarios()[0], rng).measurements.subset(np.arange(40))
+    m.to_csv(tmp_path / "m.csv")
+    rows = (tmp_path / "m.csv").read_text().splitlines()
+    snr = rng.uniform(5.0, 30.0, len(rows) - 1)
+    words = ["good" if v > 10 else "weak, noisy" for v in snr]  # text with a comma: quoted
+    extra = [f"SNR,{rows[0]}, Quality"] + [f"{v!r},{r},\"{w}\"" for v, r, w in zip(snr, rows[1:], words, strict=True)]
+    path = _write(tmp_path / "x.csv", "\n".join(extra) + "\n")
+    with pytest.raises(MeasurementError, match="unknown column 'snr', 'quality'"):
+        fd.Measurements.from_csv(path)
+    with pytest.raises(MeasurementError, match="unknown column 'quality'"):
+        fd.Measurements.from_csv(path, ignore_columns=("snr",))
+    back = fd.Measurements.from_csv(path, ignore_columns=("snr", "QUALITY ", "not-in-this-file"))
+    for col in ("time", "pair", "doppler", "sigma"):
+        np.testing.assert_array_equal(getattr(back, col), getattr(m, col))
+    # numbers only: the fast reader, the same answer
+    plain = _write(tmp_path / "p.csv", "\n".join(line.rsplit(",", 1)[0] if k == 0 else line.rsplit(",\"", 1)[0]
+                                                 for k, line in enumerate(extra)) + "\n")
+    back = fd.Measurements.from_csv(plain, ignore_columns="snr")
+    np.testing.assert_array_equal(back.doppler, m.doppler)
+    # in Hz too
+    lam = [0.5, 0.6]
+    m.to_csv(tmp_path / "hz.csv", wavelengths=lam)
+    hz = (tmp_path / "hz.csv").read_text().splitlines()
+    hz = [hz[0] + ",snr"] + [f"{r},{v!r}" for r, v in zip(hz[1:], snr, strict=True)]
+    geom = replace(fd.paper_geometry("a"), wavelengths=tuple(lam))
+    back = fd.Measurements.from_csv(_write(tmp_path / "h.csv", "\n".join(hz) + "\n"), geometry=geom,
+                                    ignore_columns=["snr"])
+    np.testing.assert_allclose(back.doppler, m.doppler, rtol=1e-15)
+    for needed in ("sigma", "Doppler", "sigma_hz"):
+        with pytest.raises(ValueError, match=f"cannot ignore '{needed.lower()}': a measurement file is read by"):
+            fd.Measurements.from_csv(path, ignore_columns=("snr", needed))
 
 
 def test_pairs_may_interleave_in_any_order(tmp_path: Path) -> None:

@@ -56,6 +56,9 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sigma", type=float, default=None,
                    help="default Doppler sigma when FILE has no sigma column, in its Doppler column's unit (m/s; Hz "
                         "for doppler_hz)")
+    p.add_argument("--ignore-column", action="append", default=[], metavar="NAME",
+                   help="skip this column of FILE where present (another tool's extra, e.g. snr; repeat for more); "
+                        "any other unknown column is refused")
     p.add_argument("--init-method", choices=METHODS, default="lm", help="initiation refinement (default lm)")
     p.add_argument("--init-per-pair", type=int, default=10,
                    help="initiation window: at least this many measurements per pair (default 10)")
@@ -293,7 +296,8 @@ def _run(args: argparse.Namespace) -> int:
         raise CLIError(f"--init-seconds must be a finite number >= 0, got {args.init_seconds:g}")
     spec = _geometry_spec(args)
     geom = geometry_with_zone(spec, args)
-    meas = Measurements.from_csv(args.file, geometry=geom, default_sigma=args.sigma)
+    meas = Measurements.from_csv(args.file, geometry=geom, default_sigma=args.sigma,
+                                 ignore_columns=tuple(args.ignore_column))
     names = header_names(args.file) if args.file.is_file() else ()  # a pipe was read once already
     _sigma_note(args, names)
     meas, dropped = _dropped_repeats(args, meas, geom)
