@@ -373,7 +373,8 @@ def _read_weights(mix: _Weights, est: Estimates, lag: float | None) -> NDArray[n
     later than that, as estimated at the scan before; a smoothed one all of
     them.  Weighing a lagged estimate with all the data would make it an
     offline answer: in the paper's case a 5 km (100 runs, seed 2026) the
-    fixed-lag smoother's RMSE read 947 m so, 1,164 m with the data it has read.
+    fixed-lag smoother's RMSE is 1,164 m with the weights of the data it has
+    read, and was 947 m with those of the whole recording.
 
     Raises
     ------
