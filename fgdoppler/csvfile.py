@@ -179,7 +179,6 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
         empty or not an ASCII decimal, no data rows.
     """
     path = Path(path)
-    skip = tuple(dict.fromkeys(n.strip().lower() for n in ignore))
     rows = list(_lines(path, comments))
     if not rows:
         raise CSVError(f"{path}: empty {what}: expected the header {','.join(header)}")
@@ -187,10 +186,7 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
     names = _names(text0)
     if layout is not None:
         header, optional = layout(names)
-    needed = [c for c in skip if c in header or c in optional]
-    if needed:
-        raise ValueError(f"cannot ignore {', '.join(map(repr, needed))}: the {what} needs "
-                         f"{'it' if len(needed) == 1 else 'them'}")
+    skip = _skipped(ignore, (*header, *optional), what)
     problem = _header_problem(names, header, (*optional, *skip))
     if problem:
         expected = ",".join(header) + (f" (and optionally {','.join(optional)})" if optional else "")
@@ -205,6 +201,17 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
     order = [names.index(c) for c in columns]
     return Table(path=path, header=columns, values=values[:, order],
                  lines=np.fromiter((line for line, _ in rows[1:]), dtype=np.intp, count=len(rows) - 1))
+
+
+def _skipped(ignore: tuple[str, ...], read: tuple[str, ...], what: str) -> tuple[str, ...]:
+    """The column names of ``ignore`` as the header's are matched (lower case, no surrounding spaces), none of
+    them one of the columns ``read``; :class:`ValueError` naming those that are."""
+    skip = tuple(dict.fromkeys(n.strip().lower() for n in ignore))
+    needed = [c for c in skip if c in read]
+    if needed:
+        raise ValueError(f"cannot ignore {', '.join(map(repr, needed))}: the {what} needs "
+                         f"{'it' if len(needed) == 1 else 'them'}")
+    return skip
 
 
 def _plain_values(rows: list[tuple[int, str]], k: int) -> NDArray[np.float64] | None:

@@ -759,7 +759,13 @@ def test_beyond_the_samples_reach_the_covariances_enclose_the_linearised_posteri
     """The same tiny covariances from 19.5 s on, with the offline smoother's track as ``reference``.
 
     Before 19.5 s the covariances are exactly those without a reference
-    (the samples reach there); from 19.5 s on, where no check samples, each
+    (the samples reach there).  From the first check at or after 19.5 s the
+    tiny covariances put the samples out of reach; when that check falls
+    depends on the track (the checks back off where they widen nothing:
+    iSAM2's and the old fixed-lag track's at 19.5 s, the fixed-lag track's
+    at 24.5 s since its lagged mixture weighs only the data read), and the
+    finding counts those times.  Up to it the covariances are the sampled
+    checks' alone; from it on, each
     encloses the estimator's own and the posterior mean-square error of its
     estimate under the posterior of the data it has read (up to its time
     for iSAM2's filtered estimates, up to ``lag`` after it for the fixed-lag
@@ -782,6 +788,12 @@ def test_beyond_the_samples_reach_the_covariances_enclose_the_linearised_posteri
     assert two.checked is not None
     np.testing.assert_array_equal(two.checked, one.covariances)
     assert "linearised about the offline smoother's track" in two.reason.message
+    found = re.search(r"of the (\d+) times beyond the samples' reach", two.reason.message)
+    assert found is not None
+    n_beyond = int(found.group(1))
+    assert 10 <= n_beyond <= np.count_nonzero(late)  # at least 5 s of the last 10.5 s
+    np.testing.assert_array_equal(two.covariances[:-n_beyond], one.covariances[:-n_beyond])
+    late = np.arange(e.times.size) >= e.times.size - n_beyond
     post = linearized_filter(m, model, ref.times, ref.states, e.times[0], e.states[0], one.covariances[0])
     means, covs = post.at(e.times[late], e.times[late] + lag)
     error = mean_square_errors(e.states[late], means, covs)
