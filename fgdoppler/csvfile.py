@@ -14,14 +14,14 @@ from __future__ import annotations
 
 import csv
 import re
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["MAX_LINE_BYTES", "CSVError", "Table", "header_names", "parse_number", "read_table"]
+__all__ = ["MAX_LINE_BYTES", "CSVError", "Table", "header_names", "parse_number", "read_table", "skipped_columns"]
 
 #: Longest line accepted (a row of fifteen full-precision numbers takes about 400 bytes).
 MAX_LINE_BYTES = 4096
@@ -186,7 +186,7 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
     names = _names(text0)
     if layout is not None:
         header, optional = layout(names)
-    skip = _skipped(ignore, (*header, *optional), what)
+    skip = skipped_columns(ignore, (*header, *optional), what)
     problem = _header_problem(names, header, (*optional, *skip))
     if problem:
         expected = ",".join(header) + (f" (and optionally {','.join(optional)})" if optional else "")
@@ -203,14 +203,21 @@ def read_table(path: str | Path, *, header: tuple[str, ...], optional: tuple[str
                  lines=np.fromiter((line for line, _ in rows[1:]), dtype=np.intp, count=len(rows) - 1))
 
 
-def _skipped(ignore: tuple[str, ...], read: tuple[str, ...], what: str) -> tuple[str, ...]:
-    """The column names of ``ignore`` as the header's are matched (lower case, no surrounding spaces), none of
-    them one of the columns ``read``; :class:`ValueError` naming those that are."""
+def skipped_columns(ignore: Sequence[str], read: Sequence[str], what: str = "file") -> tuple[str, ...]:
+    """The column names of ``ignore`` as a header's are matched (lower case, no surrounding spaces), checked.
+
+    Raises
+    ------
+    ValueError
+        If a name is not a string, or is one of the columns ``read``.
+    """
+    if not all(isinstance(n, str) for n in ignore):
+        raise ValueError(f"columns to ignore must be column names, got {ignore!r}")
     skip = tuple(dict.fromkeys(n.strip().lower() for n in ignore))
     needed = [c for c in skip if c in read]
     if needed:
-        raise ValueError(f"cannot ignore {', '.join(map(repr, needed))}: the {what} needs "
-                         f"{'it' if len(needed) == 1 else 'them'}")
+        raise ValueError(f"cannot ignore {', '.join(map(repr, needed))}: a {what} is read by "
+                         f"{'that column' if len(needed) == 1 else 'those columns'}")
     return skip
 
 

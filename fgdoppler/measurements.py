@@ -400,23 +400,12 @@ class Measurements:
 
 
 def _ignored(columns: Sequence[str]) -> tuple[str, ...]:
-    """The column names to skip, checked: none of them a column the measurement file is read by, in either layout.
+    """The column names to skip (one name may be given as a string), none of them a column a measurement file is
+    read by in either layout (:func:`~fgdoppler.csvfile.skipped_columns`; :class:`ValueError` otherwise)."""
+    from fgdoppler.csvfile import skipped_columns
 
-    Raises
-    ------
-    ValueError
-        If a name is not a string, or is one of :data:`HEADER` or :data:`HZ_HEADER`.
-    """
-    if isinstance(columns, str):
-        columns = (columns,)
-    if not all(isinstance(c, str) for c in columns):
-        raise ValueError(f"ignore_columns must be column names, got {columns!r}")
-    names = tuple(c.strip().lower() for c in columns)
-    read = [c for c in names if c in HEADER or c in HZ_HEADER]
-    if read:
-        raise ValueError(f"cannot ignore {', '.join(map(repr, read))}: a measurement file is read by "
-                         f"{'that column' if len(read) == 1 else 'those columns'}")
-    return names
+    return skipped_columns((columns,) if isinstance(columns, str) else tuple(columns), (*HEADER, *HZ_HEADER),
+                           "measurement file")
 
 
 #: How a value read from a file in Hz is named in a message: what it was converted from.
