@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 from fgdoppler._text import distance_text
 from fgdoppler.estimators.verdict import Reason
 
-__all__ = ["CURVATURE_LIMIT", "curvature_reason", "probe_axis", "probe_rises"]
+__all__ = ["CURVATURE_LIMIT", "curvature_check", "curvature_reason", "probe_axis", "probe_rises"]
 
 FloatArray = NDArray[np.float64]
 
@@ -127,15 +127,31 @@ def curvature_reason(cost: Callable[[FloatArray], float], x: FloatArray, P: Floa
     the Gauss–Newton model leaves out the residuals' second-order terms,
     which lower the curvature by themselves.
     """
+    return curvature_check(cost, x, P, information, at_optimum=at_optimum)[1]
+
+
+def curvature_check(cost: Callable[[FloatArray], float], x: FloatArray, P: FloatArray,
+                    information: FloatArray, *, at_optimum: bool = True) -> tuple[float, Reason | None]:
+    r"""The probe's ratio :math:`\min(\Delta_-, \Delta_+) / 9\,\boldsymbol\delta^\top\mathbf I\,\boldsymbol\delta`
+    and :func:`curvature_reason`'s finding from the same five costs.
+
+    The ratio is 1 where the covariance describes the likelihood, above 1
+    in a curved valley and below it in a flat one; on the paper's
+    initiation windows it is 1.1–1.7 in the well-observed scenarios and
+    3.2 and more in the others (module docstring).  The Gaussian trackers
+    split their start by it (:attr:`GaussianSumSettings.split_ratio
+    <fgdoppler.estimators.settings.GaussianSumSettings>`) before it is far
+    enough from 1 to be a finding.
+    """
     lo, hi, quad, sd = probe_rises(cost, x, P, information)
     ratio = min(lo, hi) / quad
     where = (f"{PROBE_SIGMAS:g} standard deviations ({distance_text(PROBE_SIGMAS * sd, km_decimals=2)}) along the position's "
              f"major axis raise the cost by {lo:.3g} and {hi:.3g} where its quadratic model predicts {quad:.3g}")
     if ratio > CURVATURE_LIMIT:
-        return Reason(code="nonlinear", status="doubtful", message=(
+        return ratio, Reason(code="nonlinear", status="doubtful", message=(
             f"the likelihood is a curved valley, not the ellipsoid of the covariance: {where}; "
             "the covariance misstates the uncertainty (poor observability)"))
     if at_optimum and ratio < 1.0 / CURVATURE_LIMIT:
-        return Reason(code="nonlinear", status="doubtful", message=(
+        return ratio, Reason(code="nonlinear", status="doubtful", message=(
             f"the likelihood is flatter than the covariance says: {where}; the uncertainty is larger than stated"))
-    return None
+    return ratio, None

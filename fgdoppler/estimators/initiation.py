@@ -68,7 +68,7 @@ from scipy.special import logsumexp
 from scipy.stats import chi2
 
 from fgdoppler._text import distance_text, first_line
-from fgdoppler.estimators.curvature import curvature_reason
+from fgdoppler.estimators.curvature import curvature_check
 from fgdoppler.estimators.grid import (
     GridResult,
     GridSpec,
@@ -307,6 +307,16 @@ class Initiation(Judged):
         the ``sign``, ``swapped`` or ``radial`` finding in :attr:`reasons`
         says the same in words).  ``None`` otherwise, and without
         ``mistake_check``.
+    curvature
+        The curvature probe's ratio at the solution
+        (:func:`~fgdoppler.estimators.curvature.curvature_check`): the
+        smaller cost rise three standard deviations along the position's
+        major axis over its quadratic model's; 1 where the covariance
+        describes the likelihood, beyond
+        :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` (or below its
+        inverse) a ``nonlinear`` finding.  The Gaussian trackers split their
+        start by it (:class:`~fgdoppler.estimators.settings.GaussianSumSettings`).
+        ``None`` without a covariance.
     """
 
     method: str
@@ -334,6 +344,7 @@ class Initiation(Judged):
     log_evidence: float | None = None
     window_summarised: bool = False
     mistake: Mistake | None = None
+    curvature: float | None = None
     #: The same initiation in the frame it was computed in, with that frame (see :meth:`in_frame_of`).
     computed_in: tuple[Frame, Initiation] | None = field(default=None, repr=False, compare=False)
 
@@ -600,9 +611,11 @@ def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: t
     if fit.P0 is None:
         reasons.append(Reason(code="covariance", status="doubtful",
                               message=f"initiation covariance indeterminate: {fit.cov_message}"))
+    curvature = None
     if fit.P0 is not None:
-        found = curvature_reason(lambda x: w.robust_cost(x, settings.huber_k), np.asarray(fit.x0, dtype=float),
-                                 fit.P0, w.information(fit.x0), at_optimum=settings.method == "lm")
+        curvature, found = curvature_check(lambda x: w.robust_cost(x, settings.huber_k),
+                                           np.asarray(fit.x0, dtype=float), fit.P0, w.information(fit.x0),
+                                           at_optimum=settings.method == "lm")
         if found is not None:
             reasons.append(found)
     if alternatives:
@@ -626,7 +639,7 @@ def _assemble(w: _Window, settings: InitiationSettings, fit: _Fit, candidates: t
         chi2_threshold=threshold, dof=dof, passes_chi2=passes, iterations=fit.iterations,
         candidates=candidates, alternatives=alternatives, n_measurements=len(w.meas),
         reasons=tuple(reasons), events=tuple(Event(time=w.t0, message=n) for n in fit.notes), wall_time=wall,
-        half_plane=settings.half_plane, log_evidence=fit.log_evidence,
+        half_plane=settings.half_plane, log_evidence=fit.log_evidence, curvature=curvature,
     )
 
 

@@ -52,6 +52,7 @@ from fgdoppler.estimators.search_memo import SearchMemo
 from fgdoppler.estimators.settings import (
     EKFSettings,
     FixedLagSettings,
+    GaussianSumSettings,
     ISAM2Settings,
     MapSettings,
     ParticleSettings,
@@ -370,15 +371,19 @@ def hypotheses_of(name: str, measurements: Measurements, model: TrackingModel, i
     """The hypotheses ``run_estimator(name, ...)`` starts from, and their prior weights (``None``: from the costs).
 
     The terms of the window posterior's Gaussian sum where the initiation is
-    ``nonlinear`` (at most ``settings.components``), its distinct solutions
+    ``nonlinear`` or its curvature probe lies beyond ``settings.split_ratio``
+    (at most ``settings.components``), its distinct solutions
     where it is ``ambiguous``, else the initiation alone; ``measurements``
     need only hold the initiation window.
     """
     return _hypotheses(estimator_info(name), measurements, model, init, settings)
 
 
-def _nonlinear(init: Initiation) -> bool:
-    return any(r.code == "nonlinear" and r.status != "ok" for r in init.reasons)
+def _split(init: Initiation, settings: TrackerSettings) -> bool:
+    """Whether a Gaussian tracker's start from ``init`` is split: its ``nonlinear`` finding, or a curvature beyond
+    ``settings.split_ratio``."""
+    return (any(r.code == "nonlinear" and r.status != "ok" for r in init.reasons)
+            or (isinstance(settings, GaussianSumSettings) and settings.splits(init.curvature)))
 
 
 def _hypotheses(info: EstimatorInfo, measurements: Measurements, model: TrackingModel, init: Initiation,
@@ -387,7 +392,7 @@ def _hypotheses(info: EstimatorInfo, measurements: Measurements, model: Tracking
     if info.resolution == "native":  # the estimator carries every solution itself
         return [init], None
     k = getattr(settings, "components", 1)
-    if info.resolution == "likelihood" and k > 1 and _nonlinear(init) and model.zone is not None:
+    if info.resolution == "likelihood" and k > 1 and _split(init, settings) and model.zone is not None:
         try:
             return posterior_hypotheses(init, measurements, model, k, huber_k=settings.huber_k, seed=settings.seed)
         except ValueError:  # nothing in the zone explains the window: keep the initiation's own answer
