@@ -7,7 +7,10 @@ trackers (EKF, iSAM2, fixed-lag) therefore start from several hypotheses
 (:func:`~fgdoppler.estimators.registry.run_estimator` chooses them):
 
 * :func:`posterior_hypotheses` — when the initiation's covariance
-  misdescribes its likelihood (a ``nonlinear`` finding): the window's
+  misdescribes its likelihood (a ``nonlinear`` finding) or its curvature
+  probe strays beyond
+  :attr:`~fgdoppler.estimators.settings.GaussianSumSettings.split_ratio`
+  (a Kalman filter linearises across the whole covariance): the window's
   posterior is sampled and split into at most
   :attr:`~fgdoppler.estimators.settings.GaussianSumSettings.components`
   Gaussian terms, each a short, nearly straight piece of the valley;

@@ -18,8 +18,9 @@ is over-confident (docs/concepts.md, "Feeding a tracker yourself").
 2. **Hypotheses** — the held scans are initiated
    (:func:`~fgdoppler.estimators.initiation.initiate`) and split into the
    registry's hypotheses: the terms of the window posterior's Gaussian sum
-   (at most ``components``) where the initiation is ``nonlinear``, its
-   distinct solutions where it is ``ambiguous``, else the initiation alone.
+   (at most ``components``) where the initiation is ``nonlinear`` or its
+   curvature probe lies beyond ``split_ratio``, its distinct solutions
+   where it is ``ambiguous``, else the initiation alone.
    Each gets a tracker started from the window exactly as the registry's
    runner starts it, and an EKF whose predictive likelihood weighs it (the
    EKF is the tracker itself for ``"ekf"``).

@@ -113,7 +113,7 @@ class TrackerSettings:
     seed : int, default 0
         Seed of every random number the estimator draws: the particle
         estimators' particles, the sampled posterior whose Gaussian sum
-        starts the filters where the initiation is ``nonlinear``, the
+        starts the filters where their start is split (``split_ratio``), the
         filters' sampled covariance checks, the smoother's sampled
         covariance and posterior mean, and those of the reference smoother
         that a filter's verdict runs.  The same input and seed give the same

@@ -113,14 +113,25 @@ def test_mirror_solutions_outside_the_zone_weigh_what_the_truth_says() -> None:
 
 
 def test_registry_starts_an_ambiguous_initiation_with_the_evidence_weights() -> None:
-    """The trackers' prior weights for an ambiguous window are :func:`hypothesis_weights` (case a 45 km, run 33 of seed 7)."""
+    """The trackers' prior weights for an ambiguous window are :func:`hypothesis_weights` (case a 45 km, run 33 of seed 7).
+
+    Where the start is not split: this window's curvature probe ratio (4.5)
+    lies beyond the default ``split_ratio`` (2.5), so by default the trackers
+    start from the terms of its sampled posterior instead, proposed from
+    both solutions; with ``split_ratio=inf`` (the split on the ``nonlinear``
+    finding alone) from one hypothesis per solution.
+    """
     s, seed, r = 2, 7, 33
     scen = fd.paper_scenarios()[s]
     sim = fd.simulate(scen, np.random.default_rng(np.random.SeedSequence([seed, s, r])))
     model = fd.TrackingModel.of(scen.geometry)
     init = fd.initiate(sim.measurements.first_per_pair(10), model)
     assert init.ambiguous and not any(x.code == "nonlinear" and x.status != "ok" for x in init.reasons)
-    hyps, w = hypotheses_of("ekf", sim.measurements, model, init, fd.EKFSettings())
+    assert init.curvature is not None and fd.EKFSettings().splits(init.curvature)
+    terms, tw = hypotheses_of("ekf", sim.measurements, model, init, fd.EKFSettings())
+    assert tw is not None and 2 < len(terms) == tw.size <= fd.EKFSettings().components
+    assert all(h.window_summarised for h in terms) and np.isclose(tw.sum(), 1.0)
+    hyps, w = hypotheses_of("ekf", sim.measurements, model, init, fd.EKFSettings(split_ratio=float("inf")))
     expected = hypothesis_weights(init)
     assert w is not None and expected is not None and len(hyps) == w.size == 2
     np.testing.assert_array_equal(w, expected)
