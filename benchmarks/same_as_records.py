@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 import fgdoppler as fd
-from benchmarks.bench_accuracy import _on_grid, recording
+from benchmarks.bench_accuracy import VARIANTS, _on_grid, recording
 from fgdoppler.analysis.workers import one_blas_thread
 from fgdoppler.estimators.registry import estimator_info
 
@@ -41,8 +41,9 @@ def one_run(args: tuple[int, int, int, tuple[str, ...]]) -> dict[str, Any]:
     reference = fd.run_estimator("smoother", m, model, init)
     out: dict[str, Any] = {"s": s, "r": r}
     for name in names:
+        estimator, settings = VARIANTS.get(name, (name, None))
         cpu, wall = time.process_time(), time.perf_counter()
-        res = fd.run_estimator(name, m, model, init, reference=reference)
+        res = fd.run_estimator(estimator, m, model, init, settings, reference=reference)
         cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
         e = res.primary
         se, ne = _on_grid(sim.truth.times, e.times, e.states, e.covariances, sim.truth.states, e.cov_ok)
@@ -86,13 +87,14 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("records", type=Path, help="the benchmark's per-run records (accuracy_seedS.npz)")
     p.add_argument("--seed", type=int, required=True, help="the seed the records were made with")
-    p.add_argument("--estimators", nargs="+", default=["particle", "map"])
+    p.add_argument("--estimators", nargs="+", default=["particle", "map"],
+                   help="registry names or the benchmark's variants (ekf-scan)")
     p.add_argument("--runs", type=int, default=100)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--write", type=Path, default=None,
                    help="save the records with the named estimators' runs replaced by the new ones here")
     a = p.parse_args()
-    names = tuple(estimator_info(n).name for n in a.estimators)
+    names = tuple(n if n in VARIANTS else estimator_info(n).name for n in a.estimators)
     records = np.load(a.records, allow_pickle=False)
     if records[f"se_0_{names[0]}"].shape[0] < a.runs:
         p.error(f"the records hold {records[f'se_0_{names[0]}'].shape[0]} runs per scenario, fewer than --runs")

@@ -137,8 +137,9 @@ def curvature_check(cost: Callable[[FloatArray], float], x: FloatArray, P: Float
 
     The ratio is 1 where the covariance describes the likelihood, above 1
     in a curved valley and below it in a flat one; on the paper's
-    initiation windows it is 1.1–1.7 in the well-observed scenarios and
-    3.2 and more in the others (module docstring).  The Gaussian trackers
+    initiation windows it is 1.1–2.0 in the well-observed scenarios and
+    3.2 and more in the others (docs/concepts.md, "Where a Gaussian start
+    is split").  The Gaussian trackers
     split their start by it (:attr:`GaussianSumSettings.split_ratio
     <fgdoppler.estimators.settings.GaussianSumSettings>`) before it is far
     enough from 1 to be a finding.

@@ -178,9 +178,9 @@ class GaussianSumSettings(TrackerSettings):
         prediction) exceeds this ratio or falls below its inverse.  A
         Kalman filter linearises the measurements over its whole covariance;
         where the valley already bends across it, narrower terms track
-        better.  On the paper's windows the ratio is 1.1–1.7 where the data
+        better.  On the paper's windows the ratio is 1.1–2.0 where the data
         observe the track well and 3.2 and more in the 25 km scenarios, which
-        the split makes 130–430 m more accurate (docs/concepts.md, "Where a
+        the split makes 120–430 m more accurate (docs/concepts.md, "Where a
         Gaussian start is split").  ``inf``: only on the ``nonlinear``
         finding.
     restarts : bool, default True
