@@ -142,10 +142,15 @@ def curvature_check(cost: Callable[[FloatArray], float], x: FloatArray, P: Float
     is split").  The Gaussian trackers
     split their start by it (:attr:`GaussianSumSettings.split_ratio
     <fgdoppler.estimators.settings.GaussianSumSettings>`) before it is far
-    enough from 1 to be a finding.
+    enough from 1 to be a finding.  Away from an optimum (``at_optimum``
+    false) a ratio below 1 says nothing (the Gauss–Newton model's missing
+    second-order terms lower it by themselves, :func:`curvature_reason`),
+    so it is returned as 1 there: only the curved side can be read.
     """
     lo, hi, quad, sd = probe_rises(cost, x, P, information)
     ratio = min(lo, hi) / quad
+    if not at_optimum:
+        ratio = max(ratio, 1.0)
     where = (f"{PROBE_SIGMAS:g} standard deviations ({distance_text(PROBE_SIGMAS * sd, km_decimals=2)}) along the position's "
              f"major axis raise the cost by {lo:.3g} and {hi:.3g} where its quadratic model predicts {quad:.3g}")
     if ratio > CURVATURE_LIMIT:

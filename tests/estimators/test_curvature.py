@@ -124,6 +124,10 @@ def test_the_ratio_is_the_probes_and_the_finding_is_read_from_it() -> None:
         assert ratio == pytest.approx(k, rel=1e-9)
         assert (found is not None) == (not 1.0 / CURVATURE_LIMIT <= k <= CURVATURE_LIMIT)
         assert found == curvature_reason(lambda x, k=k: k * _quadratic(x), MEAN, P, INFO)
+        # away from an optimum only the curved side is read: a flat ratio is returned as 1, with no finding
+        away, found = curvature_check(lambda x, k=k: k * _quadratic(x), MEAN, P, INFO, at_optimum=False)
+        assert away == pytest.approx(max(k, 1.0), rel=1e-9)
+        assert (found is not None) == (k > CURVATURE_LIMIT)
 
 
 def test_split_ratio_is_checked_and_splits_beyond_it_on_either_side() -> None:
