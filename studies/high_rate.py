@@ -84,7 +84,7 @@ def main() -> None:
              f"/ NEES over t >= {T_NEES:g} s / verdict / CPU s", "",
              "| scans/s | initiation window | " + " | ".join(RATES[0][1]) + " |",
              "|---|---|" + "---|" * len(RATES[0][1])]
-    for rate, names in RATES:
+    for rate, _names in RATES:
         for window in WINDOWS:
             cells = []
             for name in RATES[0][1]:

@@ -79,6 +79,10 @@ __all__ = ["ISAM2Tracker", "run_isam2"]
 
 FloatArray = NDArray[np.float64]
 
+#: States marginalised out of iSAM2 at a time (``ISAM2Settings.keep_states``), at least: each batch rebuilds
+#: iSAM2 from the kept states, so it comes once every max(this, keep / 4) scans.
+_MARGINALISE_BATCH = 100
+
 
 @dataclass
 class _ScanData:
@@ -88,6 +92,10 @@ class _ScanData:
     lin: FloatArray | None = None  # linearisation point of its factor (None: no factor)
     factor: int = -1  # index of its factor in iSAM2
     theta: FloatArray | None = None  # the state's value when inserted: iSAM2's linearisation point of it
+    rows: tuple[FloatArray, FloatArray] | None = None  # its factor's whitened A and absolute b (A x = b)
+    # its factors as added to iSAM2 (the Doppler one, the motion one from the state before), for a rebuild
+    doppler: gtsam.LinearContainerFactor | None = None
+    motion: gtsam.LinearContainerFactor | None = None
 
 
 class ISAM2Tracker:
@@ -132,6 +140,7 @@ class ISAM2Tracker:
         gn = gtsam.ISAM2GaussNewtonParams()
         gn.setWildfireThreshold(self.settings.wildfire_threshold)
         params.setOptimizationParams(gn)
+        self._params = params
         self.isam = gtsam.ISAM2(params)
         self.motion = MotionBlocks(self.motion_model)
         self.prior = self.local.prior_in(prior)  # in the computation frame
@@ -146,6 +155,11 @@ class ISAM2Tracker:
         self._pending: tuple[gtsam.NonlinearFactorGraph, gtsam.Values, list[int], list[int]] | None = None
         self._n_updates = 0
         self._warmup = WarmUp.of(self.settings, self.model.n_channels)
+        # states [0, _oldest) are marginalised out of iSAM2 (their estimates when they left start finish());
+        # _tail is their information on state _oldest, whitened rows A x = b
+        self._oldest = 0
+        self._left: list[FloatArray] = []
+        self._tail: tuple[FloatArray, FloatArray] | None = None
 
     # -- helpers ----------------------------------------------------------------
     def _meas_factor(self, k: int, x_lin: FloatArray) -> gtsam.LinearContainerFactor | None:
@@ -159,7 +173,9 @@ class ISAM2Tracker:
             self.events.append(Event(time=self.times[k], message=f"measurements skipped: {exc}"))
             sd.channels = sd.channels[:0]
             return None
-        return absolute_linear_factor([X(k)], [rows.A], rows.b + rows.A @ x_lin)
+        sd.rows = (rows.A, rows.b + rows.A @ x_lin)
+        sd.doppler = absolute_linear_factor([X(k)], [sd.rows[0]], sd.rows[1])
+        return sd.doppler
 
     def _marginal(self, k: int) -> tuple[FloatArray, FloatArray]:
         """Estimate and covariance of state ``k`` from its marginal, exact and O(1) near the newest state.
@@ -222,8 +238,8 @@ class ISAM2Tracker:
         return theta + np.linalg.solve(R, d[:, :, None])[:, :, 0]
 
     def _update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, remove: list[int],
-                owners: list[int]) -> None:
-        result = self.isam.update(graph, values, remove)
+                owners: list[int], order: gtsam.KeyGroupMap | None = None) -> None:
+        result = self.isam.update(graph, values, remove, order)
         for k, idx in zip(owners, result.getNewFactorsIndices(), strict=False):
             if k >= 0:
                 self.scans[k].factor = int(idx)
@@ -257,7 +273,10 @@ class ISAM2Tracker:
             start += counts[i]
             A, b = rows.A[sl], rows.b[sl]
             remove.append(self.scans[j].factor)
-            graph.add(absolute_linear_factor([X(j)], [A], b + A @ xsel[i]))
+            sd = self.scans[j]
+            sd.rows = (A, b + A @ xsel[i])
+            sd.doppler = absolute_linear_factor([X(j)], [A], sd.rows[1])
+            graph.add(sd.doppler)
             owners.append(j)
             self.scans[j].lin = xsel[i].copy()
         return len(sel)
@@ -362,7 +381,103 @@ class ISAM2Tracker:
             ) from exc
         self.relinearized.append(n_relin)
         self._last = self._filtered(k, t)
+        self._marginalise_old(k)
         return self._last
+
+    def _marginalise_old(self, k: int) -> None:
+        r"""Marginalise the states more than ``keep_states`` behind the newest ``k`` out of iSAM2, in batches.
+
+        GTSAM's iSAM2 update costs O(N) in the states it holds.  States beyond
+        the relinearisation's reach keep their linear factors for good, so
+        their Gaussian marginal is exact: the leaving states
+        :math:`\mathbf x_{o},\dots,\mathbf x_{o'-1}` are eliminated by QR
+        from their own factors (the tail's rows on :math:`\mathbf x_o`, the
+        motion factors up to :math:`\mathbf x_{o'}`, their Doppler rows),
+        which leaves rows :math:`\mathbf A\mathbf x_{o'} = \mathbf b` on the
+        first kept state, and iSAM2 is rebuilt in one update from those rows
+        and the kept states' factors at their linearisation points.  (GTSAM's
+        own ``marginalizeLeaves`` needs the old states to be leaves of the
+        Bayes tree, which the incremental ordering does not ensure: it raised
+        or crashed the process on the long benchmark's recordings.)  The
+        leaving states' current estimates start :meth:`finish`.
+        """
+        st = self.settings
+        if not st.keep_states:
+            return
+        keep = max(st.keep_states, st.relinearize_window + st.relinearize_history + 1)
+        if k - self._oldest < keep + max(_MARGINALISE_BATCH, keep // 4):
+            return
+        o, new = self._oldest, k - keep
+        best = self.isam.calculateBestEstimate()
+        old = gtsam.GaussianFactorGraph()
+        for f in self._linear_factors(o, new + 1, upto=new):
+            old.push_back(f)
+        leaving = gtsam.Ordering()
+        for j in range(o, new):
+            leaving.push_back(X(j))
+        _, rest = old.eliminatePartialSequential(leaving, gtsam.EliminateQR)
+        A, b = rest.jacobian()
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        owners: list[int] = []
+        graph.add(absolute_linear_factor([X(new)], [A], b))
+        owners.append(-1)
+        for j in range(new, k + 1):
+            theta, motion = self.scans[j].theta, self.scans[j].motion
+            assert theta is not None
+            values.insert(X(j), theta)
+            if j > new:
+                assert motion is not None
+                graph.add(motion)
+                owners.append(-1)
+        for j in range(new, k + 1):
+            sd = self.scans[j]
+            if sd.doppler is not None and sd.channels.size:
+                graph.add(sd.doppler)
+                owners.append(j)
+        self._left.extend(np.asarray(best.atVector(X(j)), dtype=float) for j in range(o, new))
+        for j in range(o, new):  # their information now lives in the tail
+            sd = self.scans[j]
+            sd.rows = sd.doppler = sd.motion = None
+        self._tail, self._oldest = (np.asarray(A), np.asarray(b)), new
+        # eliminated oldest first, as the incremental updates leave it: the newest state at the root, where
+        # the next scans attach (a fresh iSAM2 orders all-new keys freely by COLAMD)
+        groups = gtsam.KeyGroupMap()
+        for j in range(new, k + 1):
+            groups.insert2(X(j), j - new)
+        self.isam = gtsam.ISAM2(self._params)
+        self._update(graph, values, [], owners, groups)
+
+    def _linear_factors(self, first: int, stop: int, *, upto: int) -> list[gtsam.JacobianFactor]:
+        """Whitened Jacobian factors of states ``first`` .. ``stop - 1``: the tail (or the prior), the motion
+        factors between them, and the Doppler rows of the states before ``upto``."""
+        out = []
+        unit = gtsam.noiseModel.Unit.Create
+        if self._tail is not None:
+            out.append(gtsam.JacobianFactor(X(first), self._tail[0], self._tail[1], unit(self._tail[1].size)))
+        elif first == 0 and self.prior is not None:
+            Ri, rhs = self._prior_rows()
+            out.append(gtsam.JacobianFactor(X(0), Ri, rhs, unit(rhs.size)))
+        for j in range(first + 1, stop):
+            Ap, An = self.motion(self.times[j] - self.times[j - 1])  # cached by step length
+            out.append(gtsam.JacobianFactor(X(j - 1), Ap, X(j), An, np.zeros(An.shape[0]), unit(An.shape[0])))
+        for j in range(first, upto):
+            sd = self.scans[j]
+            if sd.rows is not None and sd.channels.size:
+                out.append(gtsam.JacobianFactor(X(j), sd.rows[0], sd.rows[1], unit(sd.rows[1].size)))
+        return out
+
+    def _prior_rows(self) -> tuple[FloatArray, FloatArray]:
+        r"""The prior on the first state as whitened rows :math:`\mathbf L^{-1}\mathbf x = \mathbf L^{-1}\mathbf m`."""
+        assert self.prior is not None
+        mean, cov = self.prior
+        Ri = np.linalg.inv(np.linalg.cholesky(cov))
+        return Ri, Ri @ mean
+
+    def _motion_factor(self, j: int) -> gtsam.LinearContainerFactor:
+        """The constant-velocity factor between states ``j - 1`` and ``j``."""
+        Ap, An = self.motion(self.times[j] - self.times[j - 1])
+        return absolute_linear_factor([X(j - 1), X(j)], [Ap, An], np.zeros(An.shape[0]))
 
     def _filtered(self, k: int, t: float) -> tuple[FloatArray, FloatArray | None]:
         """The newest state's estimate and covariance (``None`` and an event when indeterminate)."""
@@ -411,14 +526,13 @@ class ISAM2Tracker:
         values.insert(X(k), x_pred)
         self.scans[k].theta = x_pred.copy()
         if k == 0 and self.prior is not None:
-            mean, cov = self.prior
-            L = np.linalg.cholesky(cov)
-            Ri = np.linalg.inv(L)
-            graph.add(absolute_linear_factor([X(0)], [Ri], Ri @ mean))
+            Ri, rhs = self._prior_rows()
+            graph.add(absolute_linear_factor([X(0)], [Ri], rhs))
             owners.append(-1)
         if k:
-            Ap, An = self.motion(self.times[k] - self.times[k - 1])
-            graph.add(absolute_linear_factor([X(k - 1), X(k)], [Ap, An], np.zeros(An.shape[0])))
+            motion = self._motion_factor(k)
+            self.scans[k].motion = motion
+            graph.add(motion)
             owners.append(-1)
         f = self._meas_factor(k, x_pred)
         if f is not None:
@@ -453,8 +567,9 @@ class ISAM2Tracker:
             self._start_warmed_up()
         n = len(self.times)
         best = self.isam.calculateBestEstimate()
-        start = np.array([best.atVector(X(j)) for j in range(n)])
-        if not any(sd.channels.size for sd in self.scans):  # a prior and motion only: linear, solved already
+        start = np.array(self._left + [best.atVector(X(j)) for j in range(self._oldest, n)])
+        if not self._oldest and not any(sd.channels.size for sd in self.scans):
+            # a prior and motion only: linear, solved already
             covs = np.array([self.isam.marginalCovariance(X(j)) for j in range(n)]) if covariances else None
             return self.local.out(start, covs)
         lm = SmootherSettings(huber_k=self.settings.huber_k, max_iterations=self.settings.final_passes,
