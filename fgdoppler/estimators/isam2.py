@@ -407,6 +407,8 @@ class ISAM2Tracker:
         keep = max(st.keep_states, st.relinearize_window + st.relinearize_history + 1)
         if k - self._oldest < keep + max(_MARGINALISE_BATCH, keep // 4):
             return
+        if not any(sd.doppler is not None for sd in self.scans[self._oldest:]):
+            return  # no Doppler factor yet: the graph is linear and finish() reads every state from iSAM2
         o, new = self._oldest, k - keep
         best = self.isam.calculateBestEstimate()
         old = gtsam.GaussianFactorGraph()

@@ -585,6 +585,14 @@ def test_isam2_marginalising_old_states_changes_no_filtered_estimate() -> None:
         assert held <= n - tracker._oldest <= held + 100
         assert tracker._oldest >= 100
 
+    # with no Doppler factor at all the graph is linear and finish() reads every state's covariance from
+    # iSAM2: nothing leaves
+    empty = ISAM2Tracker(model, ISAM2Settings(warmup_seconds=0.0, warmup_per_pair=0, keep_states=1), model.prior())
+    for k in range(300):
+        empty.add_scan(0.2 * k, [], [], [], sim.truth.states[0] if k == 0 else None)
+    states, covs = empty.finish()
+    assert empty._oldest == 0 and states.shape == (300, 4) and covs is not None and np.all(np.isfinite(covs))
+
 
 def _stale(tracker: ISAM2Tracker, ks: list[int], xs: np.ndarray) -> np.ndarray:
     """Which of states ``ks`` have a factor linearised beyond the thresholds from their value ``xs``."""
