@@ -157,7 +157,7 @@ def curvature_check(cost: Callable[[FloatArray], float], x: FloatArray, P: Float
         return ratio, Reason(code="nonlinear", status="doubtful", message=(
             f"the likelihood is a curved valley, not the ellipsoid of the covariance: {where}; "
             "the covariance misstates the uncertainty (poor observability)"))
-    if at_optimum and ratio < 1.0 / CURVATURE_LIMIT:
+    if ratio < 1.0 / CURVATURE_LIMIT:  # never away from an optimum: the ratio is at least 1 there
         return ratio, Reason(code="nonlinear", status="doubtful", message=(
             f"the likelihood is flatter than the covariance says: {where}; the uncertainty is larger than stated"))
     return ratio, None

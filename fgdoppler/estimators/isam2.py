@@ -92,7 +92,6 @@ class _ScanData:
     lin: FloatArray | None = None  # linearisation point of its factor (None: no factor)
     factor: int = -1  # index of its factor in iSAM2
     theta: FloatArray | None = None  # the state's value when inserted: iSAM2's linearisation point of it
-    rows: tuple[FloatArray, FloatArray] | None = None  # its factor's whitened A and absolute b (A x = b)
     # its factors as added to iSAM2 (the Doppler one, the motion one from the state before), for a rebuild
     doppler: gtsam.LinearContainerFactor | None = None
     motion: gtsam.LinearContainerFactor | None = None
@@ -156,10 +155,10 @@ class ISAM2Tracker:
         self._n_updates = 0
         self._warmup = WarmUp.of(self.settings, self.model.n_channels)
         # states [0, _oldest) are marginalised out of iSAM2 (their estimates when they left start finish());
-        # _tail is their information on state _oldest, whitened rows A x = b
+        # _first is the factor on state _oldest that holds them (the prior, if any, before anything left)
         self._oldest = 0
         self._left: list[FloatArray] = []
-        self._tail: tuple[FloatArray, FloatArray] | None = None
+        self._first: gtsam.LinearContainerFactor | None = None
 
     # -- helpers ----------------------------------------------------------------
     def _meas_factor(self, k: int, x_lin: FloatArray) -> gtsam.LinearContainerFactor | None:
@@ -173,8 +172,7 @@ class ISAM2Tracker:
             self.events.append(Event(time=self.times[k], message=f"measurements skipped: {exc}"))
             sd.channels = sd.channels[:0]
             return None
-        sd.rows = (rows.A, rows.b + rows.A @ x_lin)
-        sd.doppler = absolute_linear_factor([X(k)], [sd.rows[0]], sd.rows[1])
+        sd.doppler = absolute_linear_factor([X(k)], [rows.A], rows.b + rows.A @ x_lin)
         return sd.doppler
 
     def _marginal(self, k: int) -> tuple[FloatArray, FloatArray]:
@@ -274,8 +272,7 @@ class ISAM2Tracker:
             A, b = rows.A[sl], rows.b[sl]
             remove.append(self.scans[j].factor)
             sd = self.scans[j]
-            sd.rows = (A, b + A @ xsel[i])
-            sd.doppler = absolute_linear_factor([X(j)], [A], sd.rows[1])
+            sd.doppler = absolute_linear_factor([X(j)], [A], b + A @ xsel[i])
             graph.add(sd.doppler)
             owners.append(j)
             self.scans[j].lin = xsel[i].copy()
@@ -391,11 +388,12 @@ class ISAM2Tracker:
         the relinearisation's reach keep their linear factors for good, so
         their Gaussian marginal is exact: the leaving states
         :math:`\mathbf x_{o},\dots,\mathbf x_{o'-1}` are eliminated by QR
-        from their own factors (the tail's rows on :math:`\mathbf x_o`, the
-        motion factors up to :math:`\mathbf x_{o'}`, their Doppler rows),
-        which leaves rows :math:`\mathbf A\mathbf x_{o'} = \mathbf b` on the
-        first kept state, and iSAM2 is rebuilt in one update from those rows
-        and the kept states' factors at their linearisation points.  (GTSAM's
+        from their own factors (the factor on :math:`\mathbf x_o` that holds
+        the states before it, or the prior; the motion factors up to
+        :math:`\mathbf x_{o'}`; their Doppler factors), which leaves rows
+        :math:`\mathbf A\mathbf x_{o'} = \mathbf b` on the first kept state,
+        and iSAM2 is rebuilt in one update from those rows and the kept
+        states' factors.  (GTSAM's
         own ``marginalizeLeaves`` needs the old states to be leaves of the
         Bayes tree, which the incremental ordering does not ensure: it raised
         or crashed the process on the long benchmark's recordings.)  The
@@ -411,18 +409,28 @@ class ISAM2Tracker:
             return  # no Doppler factor yet: the graph is linear and finish() reads every state from iSAM2
         o, new = self._oldest, k - keep
         best = self.isam.calculateBestEstimate()
-        old = gtsam.GaussianFactorGraph()
-        for f in self._linear_factors(o, new + 1, upto=new):
-            old.push_back(f)
+        # the leaving states' own factors (every one linear, in absolute coordinates: linearised at zero)
+        old = gtsam.NonlinearFactorGraph()
+        zero = gtsam.Values()
+        if self._first is not None:
+            old.add(self._first)
+        for j in range(o, new + 1):
+            zero.insert(X(j), np.zeros(self.motion_model.n))
+            sd = self.scans[j]
+            if j > o and sd.motion is not None:
+                old.add(sd.motion)
+            if j < new and sd.doppler is not None and sd.channels.size:
+                old.add(sd.doppler)
         leaving = gtsam.Ordering()
         for j in range(o, new):
             leaving.push_back(X(j))
-        _, rest = old.eliminatePartialSequential(leaving, gtsam.EliminateQR)
+        _, rest = old.linearize(zero).eliminatePartialSequential(leaving, gtsam.EliminateQR)
         A, b = rest.jacobian()
+        self._first = absolute_linear_factor([X(new)], [A], b)
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         owners: list[int] = []
-        graph.add(absolute_linear_factor([X(new)], [A], b))
+        graph.add(self._first)
         owners.append(-1)
         for j in range(new, k + 1):
             theta, motion = self.scans[j].theta, self.scans[j].motion
@@ -438,10 +446,10 @@ class ISAM2Tracker:
                 graph.add(sd.doppler)
                 owners.append(j)
         self._left.extend(np.asarray(best.atVector(X(j)), dtype=float) for j in range(o, new))
-        for j in range(o, new):  # their information now lives in the tail
-            sd = self.scans[j]
-            sd.rows = sd.doppler = sd.motion = None
-        self._tail, self._oldest = (np.asarray(A), np.asarray(b)), new
+        for j in range(o, new):  # their information now lives in _first
+            self.scans[j].doppler = self.scans[j].motion = None
+        self.scans[new].motion = None
+        self._oldest = new
         # eliminated oldest first, as the incremental updates leave it: the newest state at the root, where
         # the next scans attach (a fresh iSAM2 orders all-new keys freely by COLAMD)
         groups = gtsam.KeyGroupMap()
@@ -449,32 +457,6 @@ class ISAM2Tracker:
             groups.insert2(X(j), j - new)
         self.isam = gtsam.ISAM2(self._params)
         self._update(graph, values, [], owners, groups)
-
-    def _linear_factors(self, first: int, stop: int, *, upto: int) -> list[gtsam.JacobianFactor]:
-        """Whitened Jacobian factors of states ``first`` .. ``stop - 1``: the tail (or the prior), the motion
-        factors between them, and the Doppler rows of the states before ``upto``."""
-        out = []
-        unit = gtsam.noiseModel.Unit.Create
-        if self._tail is not None:
-            out.append(gtsam.JacobianFactor(X(first), self._tail[0], self._tail[1], unit(self._tail[1].size)))
-        elif first == 0 and self.prior is not None:
-            Ri, rhs = self._prior_rows()
-            out.append(gtsam.JacobianFactor(X(0), Ri, rhs, unit(rhs.size)))
-        for j in range(first + 1, stop):
-            Ap, An = self.motion(self.times[j] - self.times[j - 1])  # cached by step length
-            out.append(gtsam.JacobianFactor(X(j - 1), Ap, X(j), An, np.zeros(An.shape[0]), unit(An.shape[0])))
-        for j in range(first, upto):
-            sd = self.scans[j]
-            if sd.rows is not None and sd.channels.size:
-                out.append(gtsam.JacobianFactor(X(j), sd.rows[0], sd.rows[1], unit(sd.rows[1].size)))
-        return out
-
-    def _prior_rows(self) -> tuple[FloatArray, FloatArray]:
-        r"""The prior on the first state as whitened rows :math:`\mathbf L^{-1}\mathbf x = \mathbf L^{-1}\mathbf m`."""
-        assert self.prior is not None
-        mean, cov = self.prior
-        Ri = np.linalg.inv(np.linalg.cholesky(cov))
-        return Ri, Ri @ mean
 
     def _motion_factor(self, j: int) -> gtsam.LinearContainerFactor:
         """The constant-velocity factor between states ``j - 1`` and ``j``."""
@@ -528,8 +510,10 @@ class ISAM2Tracker:
         values.insert(X(k), x_pred)
         self.scans[k].theta = x_pred.copy()
         if k == 0 and self.prior is not None:
-            Ri, rhs = self._prior_rows()
-            graph.add(absolute_linear_factor([X(0)], [Ri], rhs))
+            mean, cov = self.prior
+            Ri = np.linalg.inv(np.linalg.cholesky(cov))
+            self._first = absolute_linear_factor([X(0)], [Ri], Ri @ mean)
+            graph.add(self._first)
             owners.append(-1)
         if k:
             motion = self._motion_factor(k)
