@@ -9,6 +9,7 @@ from pathlib import Path
 
 from benchmarks import (
     bench_accuracy,
+    bench_check_values,
     bench_ekf,
     bench_factors,
     bench_grid,
@@ -29,7 +30,8 @@ BENCHES = {"grid": bench_grid, "ekf": bench_ekf, "scaling": bench_scaling, "mont
            "long": bench_long, "particle": bench_particle, "modes": bench_mode_search,
            "motion": bench_motion_check, "shared": bench_shared_reference, "widening": bench_widening,
            "accuracy": bench_accuracy, "factors": bench_factors, "io": bench_io,
-           "startup": bench_startup, "inverse": bench_small_inverse}
+           "startup": bench_startup, "inverse": bench_small_inverse,
+           "check": bench_check_values}
 
 
 def main() -> None:

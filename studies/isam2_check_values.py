@@ -3,12 +3,13 @@ r"""How exact are the values that iSAM2's relinearisation checks read?
 iSAM2 relinearises a Doppler factor when its state has moved beyond
 ``relinearize_position`` / ``relinearize_velocity`` from the factor's
 linearisation point (:mod:`fgdoppler.estimators.isam2`).  The states'
-values come from their marginals (:meth:`ISAM2Tracker._means`), one
-``marginalFactor`` per state, not from iSAM2's own estimate, which stops
-back-substituting at the wildfire threshold.  In exact arithmetic a Gaussian
-marginal's mean is the MAP of the linear system; in floating point the
-marginal of an old state is assembled from the Bayes tree's shortcuts, which
-lose digits in the ill-conditioned chain of a poorly observed track.
+values come from their joint marginal (:meth:`ISAM2Tracker._means`, one
+``jointBayesNet`` per check; until 2026-12-06 one ``marginalFactor`` per
+state), not from iSAM2's own estimate, which stops back-substituting at the
+wildfire threshold.  In exact arithmetic a Gaussian marginal's mean is the
+MAP of the linear system; in floating point the marginal is assembled from
+the Bayes tree's cliques and shortcuts, which can lose digits in the
+ill-conditioned chain of a poorly observed track.
 
 This study runs iSAM2 (the mixture, as ``fgdoppler track`` does, without
 the verdict) on the long benchmark's slow three-pair recording

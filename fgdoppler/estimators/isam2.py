@@ -24,14 +24,15 @@ before them, which on a poorly observed track go on moving long after their
 scan) are checked and those whose state moved more than
 ``relinearize_position`` / ``relinearize_velocity`` from their linearisation
 point are replaced (removed and re-added in the same update).  The states'
-values for the check come from their marginals (:meth:`ISAM2Tracker._means`),
-which do not stop where iSAM2's own estimate stops back-substituting (the
-wildfire threshold); eliminated by QR they agree with iSAM2's full
-back-substitution to 1.2e-9 standard deviations (1.3 µm on the first 300 s
-of the long benchmark's slow recording: ``python
-studies/isam2_check_values.py``; by Cholesky they were up to 13 m, 0.5 % of
-a standard deviation, off there, and kilometres off where pairs report
-milliseconds apart, :meth:`ISAM2Tracker._means`).  iSAM2's own relinearisation is
+values for the check come from their joint marginal
+(:meth:`ISAM2Tracker._means`), which does not stop where iSAM2's own
+estimate stops back-substituting (the wildfire threshold); eliminated by QR
+it agrees with iSAM2's full back-substitution to 5e-11 standard deviations
+(7e-11 m on the first 300 s of the long benchmark's slow recording:
+``python studies/isam2_check_values.py``; by Cholesky the per-state
+marginals were up to 13 m, 0.5 % of a standard deviation, off there, and
+kilometres off where pairs report milliseconds apart,
+:meth:`ISAM2Tracker._means`).  iSAM2's own relinearisation is
 switched off (all factors are linear), and the factorisation is QR, which
 survives the ill-conditioning of Doppler-only graphs.
 
@@ -203,9 +204,24 @@ class ISAM2Tracker:
         return theta + Ri @ np.asarray(c.d()), Ri @ Ri.T
 
     def _means(self, ks: list[int]) -> FloatArray:
-        """Estimates of states ``ks`` from their marginals (as :meth:`_marginal`), solved in one call.
+        r"""Estimates of states ``ks``: the mean of their joint marginal, solved in one call.
 
-        The marginals are eliminated by QR, as :meth:`_marginal`'s are.
+        With every factor linear, the joint marginal of the states
+        :math:`\mathbf x_{k_1},\dots,\mathbf x_{k_m}` is a Gaussian Bayes
+        net :math:`\mathbf R\,\delta\mathbf x = \mathbf d` about their
+        linearisation points (iSAM2's ``jointBayesNet``, which assembles it
+        from the Bayes tree's cliques on the way to the root), and its mean,
+        the MAP of the linear system, is the back-substitution
+        :math:`\boldsymbol\theta + \mathbf R^{-1}\mathbf d`.  One joint
+        marginal costs less than half of a ``marginalFactor`` per state (the
+        tracker's check of its 10 recent states: median 0.13 against 0.31 ms;
+        of those and the 120 before them every tenth update: 1.7 against
+        3.9 ms, on the long benchmark's slow recording, ``python -m
+        benchmarks --only check``) and is more exact: 5e-11 standard
+        deviations from the full back-substitution against 1.2e-9 (``python
+        studies/isam2_check_values.py``).
+
+        The marginal is eliminated by QR, as :meth:`_marginal`'s is.
         GTSAM's default (Cholesky; with it :func:`run_isam2` took 0.85-0.89
         times the CPU time on the paper's scenarios, four runs each) squares
         the condition number, and where two states lie milliseconds
@@ -216,24 +232,19 @@ class ISAM2Tracker:
         relinearised there and the track diverged (case a 45 km with pair 2's
         times 10 ms after pair 1's, two recordings: filtered position RMSE 35
         and 146 km, NEES 9e8 and 2e5, against 138 and 111 m, NEES 1.2, by QR,
-        whose means agree with iSAM2's full back-substitution to 2e-8
-        standard deviations; ``tests/estimators/test_trackers.py``,
-        ``python studies/async_pairs.py``).  An old state's marginal is
-        assembled from the Bayes tree's shortcuts; by QR it still agrees with
-        the full back-substitution to 1.2e-9 standard deviations on the long
-        benchmark's slow recording (the module docstring), where Cholesky's
-        were up to 0.5 % off.  Where QR calls the system indeterminate, iSAM2's own
-        back-substitution is used.
+        whose joint means agree with iSAM2's full back-substitution to 5e-12
+        standard deviations, the per-state marginals' to 2e-8;
+        ``tests/estimators/test_trackers.py``, ``python
+        studies/async_pairs.py``).  Where QR calls the system indeterminate,
+        iSAM2's own back-substitution is used.
         """
         try:
-            conds = [self.isam.marginalFactor(X(k), gtsam.EliminateQR) for k in ks]
+            delta = self.isam.jointBayesNet([X(k) for k in ks], gtsam.EliminateQR).optimize()
         except RuntimeError:
             est = self.isam.calculateEstimate([X(k) for k in ks])
             return np.array([est.atVector(X(k)) for k in ks])
-        R = np.array([c.R() for c in conds])
-        d = np.array([c.d() for c in conds])
         theta = np.array([self.scans[k].theta for k in ks])
-        return theta + np.linalg.solve(R, d[:, :, None])[:, :, 0]
+        return theta + np.array([delta.at(X(k)) for k in ks])
 
     def _update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, remove: list[int],
                 owners: list[int], order: gtsam.KeyGroupMap | None = None) -> None:
