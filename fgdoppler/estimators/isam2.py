@@ -236,7 +236,8 @@ class ISAM2Tracker:
         standard deviations, the per-state marginals' to 2e-8;
         ``tests/estimators/test_trackers.py``, ``python
         studies/async_pairs.py``).  Where QR calls the system indeterminate,
-        iSAM2's own back-substitution is used.
+        iSAM2's own estimate is used (its back-substitution, which stops where
+        the solution moved less than the wildfire threshold).
         """
         try:
             delta = self.isam.jointBayesNet([X(k) for k in ks], gtsam.EliminateQR).optimize()
