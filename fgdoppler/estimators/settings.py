@@ -67,9 +67,11 @@ def _in_space_unless_given(given: bool | None, dim: int) -> bool:
     return dim == 3 if given is None else given
 
 
-def _count(value: int, name: str) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"{name} must be a whole number >= 1, got {value!r}")
+def _count(value: int, name: str, minimum: int = 1, meaning: str = "") -> None:
+    """Raise unless ``value`` is a whole number (not a bool) of at least ``minimum``; ``meaning`` adds what a
+    special value does to the message."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise ValueError(f"{name} must be a whole number >= {minimum}{meaning}, got {value!r}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -142,8 +144,7 @@ class TrackerSettings:
         object.__setattr__(self, "bias_sigma", _bias_sigma(self.bias_sigma))
         object.__setattr__(self, "clock_sigma", _clock_sigma(self.clock_sigma))
         object.__setattr__(self, "site_sigma", _site_sigma(self.site_sigma))
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ValueError(f"seed must be a whole number >= 0, got {self.seed!r}")
+        _count(self.seed, "seed", 0)
 
     @property
     def gate(self) -> float:
@@ -242,9 +243,7 @@ class StreamingSettings(GaussianSumSettings):
         if isinstance(self.warmup_seconds, bool) or not (
                 math.isfinite(self.warmup_seconds) and self.warmup_seconds >= 0):
             raise ValueError(f"warmup_seconds must be a finite number >= 0, got {self.warmup_seconds!r}")
-        if isinstance(self.warmup_per_pair, bool) or not isinstance(self.warmup_per_pair, int) \
-                or self.warmup_per_pair < 0:
-            raise ValueError(f"warmup_per_pair must be a whole number >= 0, got {self.warmup_per_pair!r}")
+        _count(self.warmup_per_pair, "warmup_per_pair", 0)
 
     @property
     def warms_up(self) -> bool:
@@ -516,8 +515,7 @@ class ISAM2Settings(StreamingSettings, SampledCovarianceSettings):
             _count(self.relinearize_history, "relinearize_history")
         _count(self.relinearize_every, "relinearize_every")
         _count(self.final_passes, "final_passes")
-        if isinstance(self.keep_states, bool) or not isinstance(self.keep_states, int) or self.keep_states < 0:
-            raise ValueError(f"keep_states must be a whole number >= 0 (0: keep every state), got {self.keep_states!r}")
+        _count(self.keep_states, "keep_states", 0, " (0: keep every state)")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -916,9 +914,7 @@ class ParticleSettings(TrackerSettings):
         if not 0 < self.ess_threshold <= 1:
             raise ValueError(f"ess_threshold must be in (0, 1], got {self.ess_threshold!r}")
         for name in ("move_steps", "start_move_steps"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise ValueError(f"{name} must be a whole number >= 0, got {v!r}")
+            _count(getattr(self, name), name, 0)
         _positive(self.max_span, "max_span")
         if isinstance(self.max_noise_share, bool) or not self.max_noise_share > 0:
             raise ValueError(f"max_noise_share must be a positive number (math.inf: off), got {self.max_noise_share!r}")
