@@ -2,11 +2,14 @@ r"""How exact are the values that iSAM2's relinearisation checks read?
 
 iSAM2 relinearises a Doppler factor when its state has moved beyond
 ``relinearize_position`` / ``relinearize_velocity`` from the factor's
-linearisation point (:mod:`fgdoppler.estimators.isam2`).  The states'
-values come from their joint marginal (:meth:`ISAM2Tracker._means`, one
-``jointBayesNet`` per check; until 2026-12-06 one ``marginalFactor`` per
+linearisation point (:mod:`fgdoppler.estimators.isam2`).  The recent
+states' values come from their joint marginal (:meth:`ISAM2Tracker._means`,
+one ``jointBayesNet`` per check; until 2026-12-06 one ``marginalFactor`` per
 state), not from iSAM2's own estimate, which stops back-substituting at the
-wildfire threshold.  In exact arithmetic a Gaussian marginal's mean is the
+wildfire threshold.  (The history check, every tenth update, reads iSAM2's
+full back-substitution itself since later that day,
+:meth:`ISAM2Tracker._solved`: it is compared with that by construction, and
+this study compares the recent checks.)  In exact arithmetic a Gaussian marginal's mean is the
 MAP of the linear system; in floating point the marginal is assembled from
 the Bayes tree's cliques and shortcuts, which can lose digits in the
 ill-conditioned chain of a poorly observed track.

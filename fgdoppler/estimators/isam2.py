@@ -23,8 +23,8 @@ the factors of the ``relinearize_window`` most recent states (and every
 before them, which on a poorly observed track go on moving long after their
 scan) are checked and those whose state moved more than
 ``relinearize_position`` / ``relinearize_velocity`` from their linearisation
-point are replaced (removed and re-added in the same update).  The states'
-values for the check come from their joint marginal
+point are replaced (removed and re-added in the same update).  The recent
+states' values for the check come from their joint marginal
 (:meth:`ISAM2Tracker._means`), which does not stop where iSAM2's own
 estimate stops back-substituting (the wildfire threshold); eliminated by QR
 it agrees with iSAM2's full back-substitution to 5e-11 standard deviations
@@ -32,7 +32,10 @@ it agrees with iSAM2's full back-substitution to 5e-11 standard deviations
 ``python studies/isam2_check_values.py``; by Cholesky the per-state
 marginals were up to 13 m, 0.5 % of a standard deviation, off there, and
 kilometres off where pairs report milliseconds apart,
-:meth:`ISAM2Tracker._means`).  iSAM2's own relinearisation is
+:meth:`ISAM2Tracker._means`).  The history check, which reaches 130
+states back, reads that full back-substitution itself
+(:meth:`ISAM2Tracker._solved`): O(N) in the states held, and cheaper there
+than the joint marginal of so many states.  iSAM2's own relinearisation is
 switched off (all factors are linear), and the factorisation is QR, which
 survives the ill-conditioning of Doppler-only graphs.
 
@@ -247,6 +250,27 @@ class ISAM2Tracker:
         theta = np.array([self.scans[k].theta for k in ks])
         return theta + np.array([delta.at(X(k)) for k in ks])
 
+    def _solved(self, ks: list[int]) -> FloatArray:
+        r"""Estimates of states ``ks`` from iSAM2's full back-substitution, for a check that reaches far back.
+
+        ``calculateBestEstimate`` solves every state iSAM2 holds,
+        :math:`\boldsymbol\theta + \delta` with :math:`\delta` back-substituted
+        through the whole Bayes tree (no wildfire threshold): the MAP of the
+        linear system, as :meth:`_means` gives it, to 1e-9 m on the long
+        benchmark's slow recording.  It costs O(N) in the states held (at
+        most ``keep_states`` and a quarter), where the joint marginal of
+        the 130 states the history check reads costs more: 2.3-3.3 against
+        0.3-1.2 ms, the reading of the values included (slow recording, first
+        2,400 s, one hypothesis; docs/concepts.md, "The history check reads
+        the full solution").  For the 10 recent states alone the joint
+        marginal is the cheaper (0.14-0.26 against 0.24-1.06 ms).  If the
+        back-substitution is not finite (a singular factor), the joint
+        marginal is read instead.
+        """
+        best = self.isam.calculateBestEstimate()
+        xs = np.array([best.atVector(X(k)) for k in ks])
+        return xs if np.all(np.isfinite(xs)) else self._means(ks)
+
     def _update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, remove: list[int],
                 owners: list[int], order: gtsam.KeyGroupMap | None = None) -> None:
         result = self.isam.update(graph, values, remove, order)
@@ -255,12 +279,17 @@ class ISAM2Tracker:
                 self.scans[k].factor = int(idx)
 
     def _relinearize(self, candidates: range, graph: gtsam.NonlinearFactorGraph, owners: list[int],
-                     remove: list[int]) -> int:
-        """Replace the factors of the states in ``candidates`` that moved; vectorised over all of them."""
+                     remove: list[int], *, history: bool = False) -> int:
+        """Replace the factors of the states in ``candidates`` that moved; vectorised over all of them.
+
+        ``history``: the check reaches the older states too; their values come
+        from the full back-substitution (:meth:`_solved`), else from the joint
+        marginal (:meth:`_means`).
+        """
         js = [j for j in candidates if self.scans[j].lin is not None and self.scans[j].channels.size]
         if not js:
             return 0
-        xs = self._means(js)
+        xs = self._solved(js) if history else self._means(js)
         lin = np.array([self.scans[j].lin for j in js])
         d = np.abs(xs - lin)
         st = self.settings
@@ -377,9 +406,10 @@ class ISAM2Tracker:
         self._pending = None
         st = self.settings
         start = max(0, k - st.relinearize_window)
-        if st.relinearize_history and self._n_updates % st.relinearize_every == 0:
+        history = bool(st.relinearize_history) and self._n_updates % st.relinearize_every == 0
+        if history:
             start = max(0, start - st.relinearize_history)
-        n_relin = self._relinearize(range(start, k), graph, owners, remove) if self._n_updates else 0
+        n_relin = self._relinearize(range(start, k), graph, owners, remove, history=history) if self._n_updates else 0
         self._n_updates += 1
         try:
             self._update(graph, values, remove, owners)

@@ -783,3 +783,77 @@ def test_isam2_check_reads_its_own_estimate_where_the_joint_marginal_is_indeterm
     assert len(seen) >= 5
     assert max(seen) <= 1e-3
     assert np.all(np.isfinite(tracker.finish(covariances=False)[0]))
+
+
+@pytest.mark.parametrize("recording", ["b 25 km", "pairs 10 ms apart"])
+def test_isam2_history_check_reads_the_full_solution_and_it_is_the_joint_marginals(
+        recording: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    # The history check (every relinearize_every updates, the states before the recent window too) reads
+    # iSAM2's full back-substitution (_solved), which on 130 states costs less than their joint marginal;
+    # the recent window alone reads the joint marginal (_means).  Both are the MAP of the same linear
+    # system: on a poorly observed track (case b 25 km) and where the information matrix spans some 16
+    # orders (pairs 10 ms apart) they must agree to 1e-9 of the states' marginal standard deviations
+    # (the joint marginal's own distance from the full back-substitution, measured: 3e-12 / 5e-12).
+    if recording == "b 25 km":
+        _, sim, model, init = _setup("b", 25e3, seed=3)
+    else:
+        sim, model, init = _paper_a45_with_pair_2_late(1)
+    every = 5
+    st = ISAM2Settings(relinearize_every=every)
+    calls: list[tuple[int, str, int]] = []
+    worst: list[float] = []
+    solved, joint = ISAM2Tracker._solved, ISAM2Tracker._means
+
+    def solved_and_compared(self: ISAM2Tracker, ks: list[int]) -> np.ndarray:
+        calls.append((self._n_updates, "solved", len(ks)))
+        full = solved(self, ks)
+        sd = np.array([np.sqrt(np.diag(self.isam.marginalCovariance(X(k)))) for k in ks])
+        worst.append(float(np.max(np.abs(joint(self, ks) - full) / sd)))
+        return full
+
+    def counted(self: ISAM2Tracker, ks: list[int]) -> np.ndarray:
+        calls.append((self._n_updates, "joint", len(ks)))
+        return joint(self, ks)
+
+    monkeypatch.setattr(ISAM2Tracker, "_solved", solved_and_compared)
+    monkeypatch.setattr(ISAM2Tracker, "_means", counted)
+    _isam2_feed(model, sim.measurements, init, st)
+    assert len(worst) >= 5
+    assert max(worst) <= 1e-9
+    # each update's check reads one way: the full solution exactly on the history updates
+    assert calls and all((n % every == 0) == (way == "solved") for n, way, _ in calls)
+    assert all(size <= st.relinearize_window for _, way, size in calls if way == "joint")
+    assert any(size > st.relinearize_window for _, way, size in calls if way == "solved")
+
+
+class _NaNSolution:
+    """An iSAM2 whose full back-substitution is not finite (a singular factor); everything else the wrapped one's."""
+
+    def __init__(self, isam: object) -> None:
+        self._isam = isam
+
+    def calculateBestEstimate(self) -> object:
+        best = self._isam.calculateBestEstimate()  # type: ignore[attr-defined]
+        out = gtsam.Values()
+        for key in best.keys():
+            out.insert(key, np.full(4, np.nan))
+        return out
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._isam, name)
+
+
+def test_isam2_history_check_reads_the_joint_marginal_where_the_full_solution_is_not_finite() -> None:
+    # Back-substitution through a singular factor gives infinities or NaN rather than an error: the history
+    # check then reads the joint marginal, which eliminates again by QR (and falls back further itself).
+    _, sim, model, init = _setup("b", 25e3, seed=3)
+    tracker = _isam2_feed(model, sim.measurements, init, ISAM2Settings(), n_scans=15)
+    ks = list(range(len(tracker.times)))
+    joint = tracker._means(ks)
+    tracker.isam, real = _NaNSolution(tracker.isam), tracker.isam  # type: ignore[assignment]
+    try:
+        fallback = tracker._solved(ks)
+    finally:
+        tracker.isam = real
+    np.testing.assert_array_equal(fallback, joint)
+    assert np.max(np.abs(tracker._solved(ks) - joint)) <= 1e-6 * np.max(np.abs(joint))
