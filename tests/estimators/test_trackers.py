@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -743,6 +744,16 @@ def test_isam2_survives_a_marginal_that_cholesky_calls_indeterminate(monkeypatch
     assert np.all(np.isfinite(result.primary.states))
 
 
+def _read_through(tracker: ISAM2Tracker, wrapper: type, read: Callable[[ISAM2Tracker, list[int]], np.ndarray],
+                  ks: list[int]) -> np.ndarray:
+    """``read(tracker, ks)`` with the tracker's iSAM2 wrapped in ``wrapper`` for that call only."""
+    tracker.isam, real = wrapper(tracker.isam), tracker.isam
+    try:
+        return read(tracker, ks)
+    finally:
+        tracker.isam = real
+
+
 class _JointRefused:
     """An iSAM2 whose joint marginal is refused as indeterminate; everything else is the wrapped one's."""
 
@@ -771,11 +782,7 @@ def test_isam2_check_reads_its_own_estimate_where_the_joint_marginal_is_indeterm
         def after(_x: np.ndarray, _P: np.ndarray | None) -> None:
             ks = list(range(max(0, k - 10), k + 1))
             joint = tracker._means(ks)
-            tracker.isam, real = _JointRefused(tracker.isam), tracker.isam  # type: ignore[assignment]
-            try:
-                fallback = tracker._means(ks)
-            finally:
-                tracker.isam = real
+            fallback = _read_through(tracker, _JointRefused, ISAM2Tracker._means, ks)
             seen.append(float(np.max(np.abs(fallback - joint))))
         return after
 
@@ -850,10 +857,6 @@ def test_isam2_history_check_reads_the_joint_marginal_where_the_full_solution_is
     tracker = _isam2_feed(model, sim.measurements, init, ISAM2Settings(), n_scans=15)
     ks = list(range(len(tracker.times)))
     joint = tracker._means(ks)
-    tracker.isam, real = _NaNSolution(tracker.isam), tracker.isam  # type: ignore[assignment]
-    try:
-        fallback = tracker._solved(ks)
-    finally:
-        tracker.isam = real
+    fallback = _read_through(tracker, _NaNSolution, ISAM2Tracker._solved, ks)
     np.testing.assert_array_equal(fallback, joint)
     assert np.max(np.abs(tracker._solved(ks) - joint)) <= 1e-6 * np.max(np.abs(joint))
