@@ -73,12 +73,6 @@ def _values(recent: Means, history: Means) -> Iterator[None]:
         ISAM2Tracker._means, ISAM2Tracker._solved = saved  # type: ignore[method-assign]
 
 
-def _full(tracker: ISAM2Tracker, ks: list[int]) -> NDArray[np.float64]:
-    """iSAM2's full back-substitution of states ``ks`` (what ``_solved`` reads, without its fallback)."""
-    best = tracker.isam.calculateBestEstimate()
-    return np.array([best.atVector(X(k)) for k in ks])
-
-
 def _problem() -> tuple[fd.Measurements, fd.Geometry, fd.Initiation]:
     sim = fd.simulate(replace(recording("slow"), duration=DURATION), np.random.default_rng(0))
     g = sim.scenario.geometry
@@ -88,7 +82,7 @@ def _problem() -> tuple[fd.Measurements, fd.Geometry, fd.Initiation]:
 def _per_check(m: fd.Measurements, g: fd.Geometry, init: fd.Initiation) -> dict[str, list[float]]:
     """Every way at every check of one run (the tracker's own values drive it): times (s) and deviations (sd)."""
     joint, solved = ISAM2Tracker._means, ISAM2Tracker._solved
-    ways: dict[str, Means] = {"joint": joint, "per-state": _per_state_means, "full": _full}
+    ways: dict[str, Means] = {"joint": joint, "per-state": _per_state_means, "full": solved}
     out: dict[str, list[float]] = {f"{w} {kind}": [] for w in ways for kind in ("recent", "history", "sd")}
     count = [0]
 

@@ -217,12 +217,13 @@ class ISAM2Tracker:
         the MAP of the linear system, is the back-substitution
         :math:`\boldsymbol\theta + \mathbf R^{-1}\mathbf d`.  One joint
         marginal costs less than half of a ``marginalFactor`` per state (the
-        tracker's check of its 10 recent states: median 0.13 against 0.31 ms;
-        of those and the 120 before them every tenth update: 1.7 against
-        3.9 ms, on the long benchmark's slow recording, ``python -m
-        benchmarks --only check``) and is more exact: 5e-11 standard
-        deviations from the full back-substitution against 1.2e-9 (``python
-        studies/isam2_check_values.py``).
+        tracker's check of its 10 recent states: median 0.13 against 0.31 ms
+        on the long benchmark's slow recording, ``python -m benchmarks
+        --only check``) and is more exact: 5e-11 standard deviations from the
+        full back-substitution against 1.2e-9 (``python
+        studies/isam2_check_values.py``).  The history check, which reaches
+        130 states back, reads the full back-substitution instead
+        (:meth:`_solved`): the joint marginal of so many states costs more.
 
         The marginal is eliminated by QR, as :meth:`_marginal`'s is.
         GTSAM's default (Cholesky; with it :func:`run_isam2` took 0.85-0.89
