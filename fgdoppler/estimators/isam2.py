@@ -265,10 +265,13 @@ class ISAM2Tracker:
         2,400 s, one hypothesis; docs/concepts.md, "The history check reads
         the full solution").  For the 10 recent states alone the joint
         marginal is the cheaper (0.14-0.26 against 0.24-1.06 ms).  If the
-        back-substitution is not finite (a singular factor), the joint
-        marginal is read instead.
+        back-substitution is not finite (a singular factor) or GTSAM refuses
+        it as indeterminate, the joint marginal is read instead.
         """
-        best = self.isam.calculateBestEstimate()
+        try:
+            best = self.isam.calculateBestEstimate()
+        except RuntimeError:  # GTSAM's indeterminate system: the joint marginal eliminates again by QR
+            return self._means(ks)
         xs = np.array([best.atVector(X(k)) for k in ks])
         return xs if np.all(np.isfinite(xs)) else self._means(ks)
 

@@ -754,17 +754,21 @@ def _read_through(tracker: ISAM2Tracker, wrapper: type, read: Callable[[ISAM2Tra
         tracker.isam = real
 
 
-class _JointRefused:
-    """An iSAM2 whose joint marginal is refused as indeterminate; everything else is the wrapped one's."""
+class _WrappedISAM2:
+    """An iSAM2 with some methods replaced by a subclass; everything else is the wrapped one's."""
 
     def __init__(self, isam: object) -> None:
         self._isam = isam
 
-    def jointBayesNet(self, *args: object) -> None:
-        raise RuntimeError("indeterminant linear system (refused by the test)")
-
     def __getattr__(self, name: str) -> object:
         return getattr(self._isam, name)
+
+
+class _JointRefused(_WrappedISAM2):
+    """An iSAM2 whose joint marginal is refused as indeterminate."""
+
+    def jointBayesNet(self, *args: object) -> None:
+        raise RuntimeError("indeterminant linear system (refused by the test)")
 
 
 def test_isam2_check_reads_its_own_estimate_where_the_joint_marginal_is_indeterminate() -> None:
@@ -833,11 +837,8 @@ def test_isam2_history_check_reads_the_full_solution_and_it_is_the_joint_margina
     assert any(size > st.relinearize_window for _, way, size in calls if way == "solved")
 
 
-class _NaNSolution:
-    """An iSAM2 whose full back-substitution is not finite (a singular factor); everything else the wrapped one's."""
-
-    def __init__(self, isam: object) -> None:
-        self._isam = isam
+class _NaNSolution(_WrappedISAM2):
+    """An iSAM2 whose full back-substitution is not finite (a singular factor)."""
 
     def calculateBestEstimate(self) -> object:
         best = self._isam.calculateBestEstimate()  # type: ignore[attr-defined]
@@ -846,8 +847,22 @@ class _NaNSolution:
             out.insert(key, np.full(4, np.nan))
         return out
 
-    def __getattr__(self, name: str) -> object:
-        return getattr(self._isam, name)
+
+class _RefusedSolution(_WrappedISAM2):
+    """An iSAM2 whose full back-substitution GTSAM refuses as indeterminate."""
+
+    def calculateBestEstimate(self) -> object:
+        raise RuntimeError("indeterminant linear system (refused by the test)")
+
+
+def test_isam2_history_check_reads_the_joint_marginal_where_the_full_solution_is_refused() -> None:
+    # GTSAM reports an indeterminate system as a plain RuntimeError: the history check must not crash the
+    # tracker but read the joint marginal, as it does where the back-substitution is not finite.
+    _, sim, model, init = _setup("b", 25e3, seed=3)
+    tracker = _isam2_feed(model, sim.measurements, init, ISAM2Settings(), n_scans=15)
+    ks = list(range(len(tracker.times)))
+    np.testing.assert_array_equal(_read_through(tracker, _RefusedSolution, ISAM2Tracker._solved, ks),
+                                  tracker._means(ks))
 
 
 def test_isam2_history_check_reads_the_joint_marginal_where_the_full_solution_is_not_finite() -> None:
