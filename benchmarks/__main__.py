@@ -14,6 +14,7 @@ from benchmarks import (
     bench_factors,
     bench_grid,
     bench_io,
+    bench_kernels,
     bench_long,
     bench_mode_search,
     bench_montecarlo,
@@ -31,7 +32,7 @@ BENCHES = {"grid": bench_grid, "ekf": bench_ekf, "scaling": bench_scaling, "mont
            "motion": bench_motion_check, "shared": bench_shared_reference, "widening": bench_widening,
            "accuracy": bench_accuracy, "factors": bench_factors, "io": bench_io,
            "startup": bench_startup, "inverse": bench_small_inverse,
-           "check": bench_check_values}
+           "check": bench_check_values, "kernels": bench_kernels}
 
 
 def main() -> None:

@@ -67,7 +67,7 @@ def _shared_row(repeat: int = 7) -> Row:
                                   for r in [(20e3, 5e3), (-15e3, 10e3), (5e3, -20e3), (-10e3, -15e3)]))
     sc = dataclasses.replace(fd.paper_scenario("a", 5e3), geometry=geo, time_offsets=(0.0,) * 4)
     w = fd.simulate(sc, np.random.default_rng(1)).measurements.spread(16)
-    (shared, afresh), same, n, m = _alternate(geo, w, "MAX_SHARED_TERMS", (grid.MAX_SHARED_TERMS, 0), repeat)
+    (shared, afresh), same, n, m = _alternate(geo, w, "SHARE_TERMS", (True, False), repeat)
     return _paired_row(f"grid search, 1 Tx + 4 synchronous Rx ({n} candidates x {m} measurements): each sensor "
                        "term once vs every term computed", shared, afresh, "identical costs" if same else
                        "COSTS DIFFER", same, 0.8)

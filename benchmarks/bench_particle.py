@@ -7,8 +7,8 @@ in a fresh process (the C allocator's state depends on what ran before in a
 process: timed one after the other in one process, the second variant
 inherited a heap the first had grown and looked twice as fast as it is):
 
-* now: :func:`fgdoppler.models.doppler._along`, coordinate by coordinate in
-  blocks of :data:`~fgdoppler.models.doppler.ALONG_BLOCK` entries;
+* now: :func:`fgdoppler.models.doppler._along`, the compiled loop of
+  :func:`fgdoppler.models.doppler_kernels.along` (one pass per entry);
 * before: the per-state model's ``(n, m, d)`` layout in one block
   (:func:`fgdoppler.models.doppler._terms`), and the likelihood in blocks of
   2^20 entries.
@@ -126,8 +126,8 @@ def run() -> list[Row]:
     rows = []
     for what, before, name, unit, target in (
             ("kernel", "before",
-             "Doppler of 4,096 tracks x 120 measurements: blocked, per coordinate vs (n, m, d) layout", 1e3, 0.5),
-            ("run", "before", "particle run, case a 25 km: blocked likelihood vs the earlier evaluation", 1.0, 0.7),
+             "Doppler of 4,096 tracks x 120 measurements: compiled loop vs (n, m, d) layout", 1e3, 0.5),
+            ("run", "before", "particle run, case a 25 km: compiled likelihood vs the earlier evaluation", 1.0, 0.7),
             ("weights", "scipy", "particle + map runs, case b 45 km: log_sum_exp vs scipy.special.logsumexp",
              1.0, 0.95),
             ("mode", "fresh", "map run, case b 45 km: the information at each mode from its climb vs afresh "

@@ -42,7 +42,7 @@ from gtsam.symbol_shorthand import X
 from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.geometry import Geometry
-from fgdoppler.models.doppler import StackedTimes, _cv
+from fgdoppler.models.doppler import StackedTimes, _cv, _cv_along
 from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.observation import DopplerModel, MeasurementModel
 from fgdoppler.models.robust import huber_residuals
@@ -257,6 +257,7 @@ def region_factor(key: int, zone: Zone, *, wall_sigma: tuple[float, float] = (10
 def _cv_error(
     geometry: Geometry,
     times: StackedTimes,
+    sensors: tuple[FloatArray, FloatArray],
     z: FloatArray,
     sigma: FloatArray,
     huber_k: float | None,
@@ -265,7 +266,10 @@ def _cv_error(
     jacobians: list[FloatArray] | None,
 ) -> FloatArray:
     x0 = values.atVector(this.keys()[0])
-    g, J, _ = _cv(x0, geometry, times, jacobian=jacobians is not None)
+    if x0.size == 2 * sensors[0].shape[1]:  # the window's sensors, picked and checked when the factor was built
+        g, J, _ = _cv_along(x0, times.t, *sensors, jacobian=jacobians is not None)
+    else:
+        g, J, _ = _cv(x0, geometry, times, jacobian=jacobians is not None)
     e, J = _robust(g - z, J, sigma, huber_k)
     if jacobians is not None:
         assert J is not None
@@ -295,4 +299,6 @@ def cv_factor(
         raise ValueError(f"{z.size} measurements for {bt.size} batch times")
     _check_huber(huber_k)
     s = np.broadcast_to(np.asarray(sigma, dtype=float), z.shape).copy()
-    return gtsam.CustomFactor(noise_model(s), [int(key)], partial(_cv_error, geometry, bt, z.copy(), s, huber_k))
+    tx, rx = geometry.positions(geometry.dim)
+    return gtsam.CustomFactor(noise_model(s), [int(key)],
+                              partial(_cv_error, geometry, bt, (tx[bt.pair], rx[bt.pair]), z.copy(), s, huber_k))

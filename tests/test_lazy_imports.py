@@ -18,7 +18,7 @@ from fgdoppler.estimators.names import ALIASES, DEFAULT_ESTIMATORS, METHODS, SUM
 
 PACKAGES = (fgdoppler, fgdoppler.estimators)
 #: What the estimators load and the command line's parser must not.
-HEAVY = ("gtsam", "scipy", "matplotlib")
+HEAVY = ("gtsam", "scipy", "matplotlib", "numba")
 
 
 def _type_checking_imports(package: object) -> dict[str, tuple[str, ...]]:

@@ -71,7 +71,6 @@ Speed lower bound
 
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -87,9 +86,9 @@ from fgdoppler.zone import Zone
 __all__ = ["GridResult", "GridSpec", "HalfPlane", "grid_costs", "grid_search", "grid_states", "speed_lower_bound"]
 
 FloatArray = NDArray[np.float64]
-#: Sensor terms :func:`_product_costs` holds at once for later measurements at the same instant (each a chunk's
-#: worth of candidates, 128 KiB at the default chunk): bounds the memory a long synchronous window can take.
-MAX_SHARED_TERMS = 64
+#: Whether each (sensor, time) term is computed once and read by every measurement that needs it
+#: (:func:`_term_plan`); off, every measurement computes its own two (the same numbers, more work).
+SHARE_TERMS = True
 #: The pruned search (:func:`_best_minima`) first scores every candidate on about one measurement in this many
 #: (each pair's, evenly spread): a lower bound of its cost.
 PRUNE_STRIDE = 4
@@ -367,21 +366,23 @@ def _product_costs(
     A term :math:`\dot r` depends on the sensor and the time only, so where
     several pairs share a sensor and measure at the same instant (one
     transmitter seen by several receivers, as in the paper's case a with its
-    shared receiver) it is computed once and held for the later measurements
-    (at most :data:`MAX_SHARED_TERMS` at a time); the sums are taken in the
-    same order, so the costs are the same to the bit.  With one transmitter
-    and four synchronous receivers this takes the grid from 4 × 2 to 4 + 1
-    terms per instant.
+    shared receiver) it is computed once per candidate and read by every
+    measurement that needs it (:data:`SHARE_TERMS`); the sums are taken in
+    the same order, so the costs are the same to the bit.  With one
+    transmitter and four synchronous receivers this takes the grid from 4 × 2
+    to 4 + 1 terms per instant.  The terms and the sum over the measurements
+    run in a compiled loop (:mod:`fgdoppler.estimators.grid_kernels`), one
+    pass per candidate instead of numpy's pass per operation.
     """
     d = pos.shape[1]
-    sensors, sensor_idx, uses = _term_plan(geometry, times, d)
+    sensors, plan = _term_plan(geometry, times, d)
     s2 = _squared_speed(vel)
     out = np.empty((pos.shape[0], vel.shape[0]))
     step = max(1, chunk // max(1, vel.shape[0]))
     for start in range(0, pos.shape[0], step):
         offsets, c = _offsets(pos[start:start + step], sensors)
         U = _dot(offsets, [vel[None, None, :, k] for k in range(d)])  # (P, S, V)
-        acc = _chunk_costs(U, c, s2, times, sensor_idx, uses, z, w, huber_k)
+        acc = _chunk_costs(U, c, s2, plan, z, w, huber_k)
         acc[~np.isfinite(acc)] = np.inf
         out[start:start + step] = acc
     return out
@@ -391,31 +392,44 @@ def _pair_costs(geometry: Geometry, times: StackedTimes, z: FloatArray, w: Float
                 vel: FloatArray, chunk: int, huber_k: float | None = None) -> FloatArray:
     """Costs ``(n,)`` of the candidates ``(pos[i], vel[i])``: :func:`_product_costs`'s arithmetic, to the bit."""
     d = pos.shape[1]
-    sensors, sensor_idx, uses = _term_plan(geometry, times, d)
+    sensors, plan = _term_plan(geometry, times, d)
     s2 = _squared_speed(vel)
     out = np.empty(pos.shape[0])
     for start in range(0, pos.shape[0], max(1, chunk)):
         sl = slice(start, start + max(1, chunk))
         offsets, c = _offsets(pos[sl], sensors)
         U = _dot(offsets, [vel[sl, None, None, k] for k in range(d)])  # (n, S, 1)
-        acc = _chunk_costs(U, c, s2[sl, None], times, sensor_idx, uses, z, w, huber_k)[:, 0]
+        acc = _chunk_costs(U, c, s2[sl, None], plan, z, w, huber_k)[:, 0]
         acc[~np.isfinite(acc)] = np.inf
         out[sl] = acc
     return out
 
 
-def _term_plan(geometry: Geometry, times: StackedTimes, d: int
-               ) -> tuple[FloatArray, tuple[NDArray[np.intp], NDArray[np.intp]], Counter[tuple[int, float]]]:
-    """The distinct sensors, each measurement's transmitter and receiver among them, and each term's uses."""
+@dataclass(frozen=True, kw_only=True)
+class _TermPlan:
+    """The distinct (sensor, time) terms of a window and each measurement's transmitter and receiver term."""
+
+    sensor: NDArray[np.intp]
+    time: FloatArray
+    tx: NDArray[np.intp]
+    rx: NDArray[np.intp]
+
+
+def _term_plan(geometry: Geometry, times: StackedTimes, d: int) -> tuple[FloatArray, _TermPlan]:
+    """The distinct sensors and the window's terms among them (:data:`SHARE_TERMS`)."""
     sensors, inverse = np.unique(np.vstack(geometry.positions(d)), axis=0, return_inverse=True)
     inverse = inverse.reshape(-1)
-    t_idx = inverse[times.pair]
-    r_idx = inverse[geometry.n_pairs + times.pair]
-    # how many times each (sensor, time) term is needed: a transmitter seen by several receivers at one
-    # instant (or a receiver shared by several transmitters) needs its term once
-    uses = Counter(zip((int(i) for i in np.concatenate([t_idx, r_idx])),
-                       (float(v) for v in np.concatenate([times.t, times.t])), strict=True))
-    return sensors, (t_idx, r_idx), uses
+    sensor = np.concatenate([inverse[times.pair], inverse[geometry.n_pairs + times.pair]])
+    time = np.concatenate([times.t, times.t])
+    if SHARE_TERMS:
+        # a transmitter seen by several receivers at one instant (or a receiver shared by several transmitters)
+        # needs its term once
+        key, index = np.unique(np.stack([sensor.astype(float), time]), axis=1, return_inverse=True)
+        index = index.reshape(-1)
+        return sensors, _TermPlan(sensor=key[0].astype(np.intp), time=key[1], tx=index[:times.size],
+                                  rx=index[times.size:])
+    every = np.arange(sensor.size, dtype=np.intp)
+    return sensors, _TermPlan(sensor=sensor.astype(np.intp), time=time, tx=every[:times.size], rx=every[times.size:])
 
 
 def _squared_speed(vel: FloatArray) -> FloatArray:
@@ -436,53 +450,18 @@ def _dot(offsets: list[FloatArray], vel: list[FloatArray]) -> FloatArray:
     return U + offsets[2][:, :, None] * vel[2] if len(offsets) == 3 else U
 
 
-def _chunk_costs(U: FloatArray, c: FloatArray, s2: FloatArray, times: StackedTimes,
-                 sensor_idx: tuple[NDArray[np.intp], NDArray[np.intp]], uses: Counter[tuple[int, float]],
-                 z: FloatArray, w: FloatArray, huber_k: float | None) -> FloatArray:
-    """:func:`_product_costs` for one chunk of positions: ``U`` ``(P, S, V)``, ``c`` ``(P, S)``, ``s2`` ``(V,)``.
+def _chunk_costs(U: FloatArray, c: FloatArray, s2: FloatArray, plan: _TermPlan, z: FloatArray, w: FloatArray,
+                 huber_k: float | None) -> FloatArray:
+    """:func:`_product_costs` for one chunk of positions: ``U`` ``(P, S, V)``, ``c`` ``(P, S)``, ``s2`` ``(V,)``
+    (or ``(P, 1)`` with ``V`` = 1: each position's own velocity), in the compiled loop of
+    :func:`fgdoppler.estimators.grid_kernels.window_costs`.
 
-    ``uses`` counts how often each (sensor, time) term is needed; a term
-    needed again later is held until its last use (at most
-    :data:`MAX_SHARED_TERMS` at once, beyond that it is computed again).
+    No per-element guard: a trajectory through a sensor makes the root 0 (or NaN for a round-off negative) and
+    its cost inf or NaN, mapped to inf once by the caller.
     """
-    t_idx, r_idx = sensor_idx
-    acc = np.zeros(U[:, 0, :].shape)
-    h = np.empty_like(acc)
-    d2 = np.empty_like(acc)
-    num = np.empty_like(acc)
-    left = dict(uses)
-    kept: dict[tuple[int, float], FloatArray] = {}
-    # In place and without a per-element guard: a trajectory through a sensor makes
-    # d2 = 0 (or a round-off negative) and its cost inf/NaN, mapped to inf once by the caller.
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for j in range(times.size):
-            t = times.t[j]
-            ts2 = t * s2
-            h.fill(0.0)
-            for si in (int(t_idx[j]), int(r_idx[j])):
-                key = (si, float(t))
-                left[key] -= 1
-                term = kept.pop(key, None) if left[key] == 0 else kept.get(key)
-                if term is None:
-                    term = num if left[key] == 0 or len(kept) >= MAX_SHARED_TERMS else np.empty_like(acc)
-                    Us = U[:, si, :]
-                    np.multiply(Us, 2.0 * t, out=d2)
-                    d2 += c[:, si, None]
-                    d2 += t * ts2
-                    np.sqrt(d2, out=d2)
-                    np.add(Us, ts2, out=term)
-                    term /= d2
-                    if term is not num:
-                        kept[key] = term
-                h += term
-            np.subtract(z[j], h, out=h)
-            h *= w[j]
-            if huber_k is None:
-                h *= h
-            else:
-                huber_rho(h, huber_k, out=h)
-            acc += h
-    return acc
+    from fgdoppler.estimators.grid_kernels import window_costs
+
+    return window_costs(U, c, s2, plan.sensor, plan.time, plan.tx, plan.rx, z, w, huber_k)
 
 
 def grid_search(

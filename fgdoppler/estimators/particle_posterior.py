@@ -46,7 +46,7 @@ __all__: list[str] = []
 FloatArray = NDArray[np.float64]
 
 #: (Particle, measurement) entries of the likelihood evaluated at once: bounds the memory of a move and keeps
-#: its arrays small (the Doppler inside is blocked further, :data:`fgdoppler.models.doppler.ALONG_BLOCK`).
+#: its arrays small.
 CHUNK_ROWS = 1 << 15
 #: Smallest tempering step of the start (:meth:`_Posterior.sample_from`): at most 100 stages.
 MIN_TEMPER_STEP = 0.01

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -93,11 +94,7 @@ def _terms(
     d = pos.shape[-1]
     rT, rR, pT, pR, bad = _ranges([dT[..., k] for k in range(d)], [dR[..., k] for k in range(d)],
                                   [vel[..., k] for k in range(d)])
-    mask: NDArray[np.bool_] | None = None
-    if np.any(bad):
-        if singular == "raise":
-            raise _singular_error(bad)
-        mask = bad
+    mask = _singular_mask(bad, singular)
     rdT = pT / rT
     rdR = pR / rR
     h = rdT + rdR
@@ -111,7 +108,7 @@ def _terms(
     return h, dh_dp, dh_dv, mask
 
 
-def _ranges(dT: Sequence[FloatArray], dR: Sequence[FloatArray], v: Sequence[FloatArray], *, scratch: bool = False
+def _ranges(dT: Sequence[FloatArray], dR: Sequence[FloatArray], v: Sequence[FloatArray]
             ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
     r"""The pieces of :math:`h = \Delta\mathbf p_T\cdot\mathbf v/r_T + \Delta\mathbf p_R\cdot\mathbf v/r_R`.
 
@@ -120,25 +117,20 @@ def _ranges(dT: Sequence[FloatArray], dR: Sequence[FloatArray], v: Sequence[Floa
     Returns ``(r_T, r_R, Δp_T·v, Δp_R·v, singular)``, with the distance 1 as
     a placeholder where a target sits on a sensor (``singular``; the caller
     raises or masks).  Explicit component sums in a fixed order: the 3-D model
-    at z = 0 is then the 2-D model to the bit, and every layout that calls
-    this gives the same numbers.  With ``scratch`` the arrays of ``dT`` and
-    ``dR`` are the caller's temporaries, each of the result's shape, and are
-    overwritten (the products with :math:`\mathbf v` are formed in them):
-    the same operations in the same order, on fewer fresh arrays
-    (:func:`_along`'s blocks).
+    at z = 0 is then the 2-D model to the bit, and the compiled loops of
+    :mod:`fgdoppler.models.doppler_kernels`, which follow the same order,
+    give the same numbers.
     """
     # the sums are this function's own arrays (or scalars, for 0-d input), accumulated in place
     rT2, rR2 = dT[0] * dT[0], dR[0] * dR[0]
-    pT = np.multiply(dT[0], v[0], out=dT[0] if scratch else None)
-    pR = np.multiply(dR[0], v[0], out=dR[0] if scratch else None)
+    pT, pR = dT[0] * v[0], dR[0] * v[0]
     for a, b, w in zip(dT[1:], dR[1:], v[1:], strict=True):
         rT2 += a * a
         rR2 += b * b
-        pT += np.multiply(a, w, out=a if scratch else None)
-        pR += np.multiply(b, w, out=b if scratch else None)
-    # with scratch the squares are arrays of the result's shape; without, 0-d input makes them scalars
-    rT = np.sqrt(rT2, out=rT2) if scratch else np.sqrt(rT2)
-    rR = np.sqrt(rR2, out=rR2) if scratch else np.sqrt(rR2)
+        pT += a * w
+        pR += b * w
+    rT = np.sqrt(rT2)
+    rR = np.sqrt(rR2)
     bad = (rT <= SENSOR_EPS) | (rR <= SENSOR_EPS)
     if np.any(bad):
         rT = np.where(rT <= SENSOR_EPS, 1.0, rT)
@@ -146,13 +138,12 @@ def _ranges(dT: Sequence[FloatArray], dR: Sequence[FloatArray], v: Sequence[Floa
     return rT, rR, pT, pR, bad
 
 
-#: Track-measurement entries :func:`_along` evaluates at once.  Its dozen temporaries of 64 KiB each then
-#: stay in the processor's cache and below glibc's default threshold for serving an allocation by mapping
-#: fresh pages (128 KiB): larger ones are mapped and unmapped block after block, and the page faults cost
-#: more than the arithmetic.  Measured on a particle run (4,096 tracks × up to 120 measurements, fresh
-#: process): 0.44-0.65 s in blocks of 2^13-2^14 entries, 1.0 s in blocks of 2^15, 1.1 s with the per-state
-#: model's layout in one block (``python -m benchmarks --only particle``).
-ALONG_BLOCK = 1 << 13
+def _kernels() -> ModuleType:
+    """The compiled loops, imported on first use: numba (and the SciPy it loads) stays out of the command line's
+    parser, which reads this module's neighbours for its defaults."""
+    from fgdoppler.models import doppler_kernels
+
+    return doppler_kernels
 
 
 def _along(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray, *, singular: str = "raise"
@@ -161,45 +152,22 @@ def _along(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray, *, sing
 
     ``x`` holds the start states ``(..., 2d)``, ``t`` the times ``(m,)``,
     ``tx`` and ``rx`` the sensors of each time ``(m, d)``.  The arithmetic of
-    :func:`_terms` (without the Jacobian) — the same operations in the same
-    order, so the same numbers to the bit — but one coordinate at a time on
-    contiguous arrays and in blocks of :data:`ALONG_BLOCK` entries, whose
-    temporaries stay in the cache and need no fresh pages: several times
-    faster than the ``(..., m, d)`` layout, whose coordinate slices are
-    strided and whose temporaries do not fit the cache.  ``singular`` as in
-    :func:`_terms`; returns ``(h, mask)``.
+    :func:`_terms` (without the Jacobian), compiled
+    (:func:`fgdoppler.models.doppler_kernels.along`): the same numbers to the
+    bit, several times faster than numpy's pass per operation.
+    ``singular`` as in :func:`_terms`; returns ``(h, mask)``.
     """
-    lead = x.shape[:-1]
-    flat = x.reshape(-1, x.shape[-1])
-    h = np.empty((flat.shape[0], t.size))
-    bad = np.zeros(h.shape, dtype=bool)
-    rows = max(1, ALONG_BLOCK // max(t.size, 1))
-    for a in range(0, flat.shape[0], rows):
-        h[a:a + rows], bad[a:a + rows] = _along_block(flat[a:a + rows], t, tx, rx)
-    mask: NDArray[np.bool_] | None = None
-    if np.any(bad):
-        if singular == "raise":
-            raise _singular_error(bad)
-        mask = bad.reshape(*lead, t.size)
-    return h.reshape(*lead, t.size), mask
+    h, bad = _kernels().along(x, t, tx, rx)
+    return h, _singular_mask(bad, singular)
 
 
-def _along_block(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray
-                 ) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """:func:`_along` for one block of tracks ``(n, 2d)``: Doppler and where a track meets a sensor."""
-    d = x.shape[-1] // 2
-    # contiguous (n, m) arrays per coordinate: p = p0 + t v, then its offsets from the sensors, each formed in
-    # place where the arithmetic allows (x + y and y + x are the same number): two fresh arrays a coordinate
-    dT, dR = [], []
-    for k in range(d):
-        p = t * x[:, d + k, None]
-        p += x[:, k, None]
-        dT.append(p - tx[:, k])
-        dR.append(np.subtract(p, rx[:, k], out=p))
-    rT, rR, pT, pR, bad = _ranges(dT, dR, [x[:, d + k, None] for k in range(d)], scratch=True)
-    pT /= rT
-    pT += np.divide(pR, rR, out=pR)
-    return pT, bad
+def _singular_mask(bad: NDArray[np.bool_], singular: str) -> NDArray[np.bool_] | None:
+    """``None`` where no track meets a sensor; else the mask, or the error when ``singular`` is ``"raise"``."""
+    if not np.any(bad):
+        return None
+    if singular == "raise":
+        raise _singular_error(bad)
+    return bad
 
 
 def bistatic_doppler(states: ArrayLike, geometry: Geometry) -> FloatArray:
@@ -306,15 +274,18 @@ def _cv(
     d = x.shape[-1] // 2
     bt = _stacked_times(times, geometry)
     tx, rx = geometry.positions(d)
+    return _cv_along(x, bt.t, tx[bt.pair], rx[bt.pair], jacobian=jacobian, singular=singular)
+
+
+def _cv_along(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray, *, jacobian: bool,
+              singular: str = "raise") -> tuple[FloatArray, FloatArray | None, NDArray[np.bool_] | None]:
+    """:func:`_cv` with each measurement's sensors given ``(m, d)`` and nothing checked: for a caller that
+    evaluates one window many times (the window factor) and has checked it once."""
     if not jacobian:
-        h, mask = _along(x, bt.t, tx[bt.pair], rx[bt.pair], singular=singular)
+        h, mask = _along(x, t, tx, rx, singular=singular)
         return h, None, mask
-    t = bt.t[:, None]
-    vel = x[..., None, d:]
-    pos = x[..., None, :d] + t * vel
-    h, dp, dv, mask = _terms(pos, vel, tx[bt.pair], rx[bt.pair], jacobian=jacobian, singular=singular)
-    assert dp is not None and dv is not None
-    return h, np.concatenate([dp, t * dp + dv], axis=-1), mask
+    h, jac, bad = _kernels().along_and_jacobian(x, t, tx, rx)
+    return h, jac, _singular_mask(bad, singular)
 
 
 def cv_doppler(

@@ -49,7 +49,7 @@ def test_shared_sensor_terms_change_no_cost(monkeypatch: pytest.MonkeyPatch, dim
     """One transmitter seen by three receivers at the same instants, one receiver shared with a second
     transmitter, on the ground (2-D) or at heights (3-D, the grid's altitude levels): the product kernel
     computes each (sensor, time) term once and reuses it; the costs are those it gives computing every term
-    afresh (no reuse, or a store of one term), to the bit, and the per-state kernel's to rounding."""
+    afresh for each measurement, to the bit, and the per-state kernel's to rounding."""
     import dataclasses
 
     import fgdoppler.estimators.grid as grid
@@ -66,8 +66,8 @@ def test_shared_sensor_terms_change_no_cost(monkeypatch: pytest.MonkeyPatch, dim
     zone = geo.zone if dim == 3 else fd.Zone(along=(15e3, 35e3), across=(2e3, 12e3), speed_max=300.0)
     spec = GridSpec(position_step=2e3) if dim == 3 else KM
     results = []
-    for cap in (grid.MAX_SHARED_TERMS, 1, 0):
-        monkeypatch.setattr(grid, "MAX_SHARED_TERMS", cap)
+    for share in (True, False):
+        monkeypatch.setattr(grid, "SHARE_TERMS", share)
         results.append(grid_search(geo, bt, w.doppler[o], w.sigma[o], zone, spec, k_best=10, chunk=500))
     assert results[0].states.shape[1] == 2 * dim
     for r in results[1:]:

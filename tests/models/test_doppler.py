@@ -240,3 +240,32 @@ def test_one_states_pairs_are_the_checked_model_to_the_bit(rng: np.random.Genera
     for n in (1, 5):
         with pytest.raises(ValueError, match="coincide with a sensor"):
             model.at_state(at_rx, np.ones(n, dtype=np.intp), jacobian=True)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_window_jacobian_is_the_per_state_models_chain_rule_to_the_bit(rng: np.random.Generator, dim: int) -> None:
+    r"""The window's compiled Jacobian is the per-state model's (numpy, another layout) through the chain rule
+    :math:`\partial g/\partial\mathbf v = t\,\partial h/\partial\mathbf p + \partial h/\partial\mathbf v`, exactly;
+    any leading shape and memory layout of the states gives the same numbers."""
+    g, model, x = _model_and_states(rng, dim, 3, 30)
+    t = np.sort(rng.uniform(0.0, 30.0, 20))
+    c = rng.integers(0, 3, 20)
+    times = fd.StackedTimes(pair=c, t=t)
+    h, J = fd.cv_doppler_and_jacobian(x, g, times)
+    assert J.shape == (30, 20, 2 * dim)
+    for i in range(30):
+        xt = x[i] + t[:, None] * np.concatenate([x[i, dim:], np.zeros(dim)])
+        h_ref, H = model.predict_and_jacobian(xt, c)
+        np.testing.assert_array_equal(h[i], h_ref)
+        np.testing.assert_array_equal(J[i], np.concatenate([H[:, :dim], t[:, None] * H[:, :dim] + H[:, dim:]], 1))
+    h6, J6 = fd.cv_doppler_and_jacobian(x.reshape(5, 6, 2 * dim), g, times)
+    np.testing.assert_array_equal(h6.reshape(30, 20), h)
+    np.testing.assert_array_equal(J6.reshape(30, 20, 2 * dim), J)
+    strided = np.zeros((30, 4 * dim))
+    strided[:, ::2] = x
+    h_s, J_s = fd.cv_doppler_and_jacobian(strided[:, ::2], g, times)  # a view with gaps between its entries
+    np.testing.assert_array_equal(h_s, h)
+    np.testing.assert_array_equal(J_s, J)
+    h1, J1 = fd.cv_doppler_and_jacobian(x[7], g, times)
+    np.testing.assert_array_equal(h1, h[7])
+    np.testing.assert_array_equal(J1, J[7])

@@ -1,0 +1,186 @@
+r"""Compiled loops of the bistatic Doppler along constant-velocity tracks (numba).
+
+The hot paths of the library — the particles' likelihoods, the restart and
+mistake checks' predictions, the initiation's window factor — evaluate
+
+.. math::
+
+    h_{ij} = \frac{\Delta\mathbf p_{T,ij}\cdot\mathbf v_i}{r_{T,ij}}
+           + \frac{\Delta\mathbf p_{R,ij}\cdot\mathbf v_i}{r_{R,ij}},
+    \qquad \Delta\mathbf p_{S,ij} = \mathbf p_{0,i} + t_j\mathbf v_i - \mathbf s_j,
+
+for many tracks :math:`i` and measurements :math:`j`, and the window factor
+also its Jacobian with respect to the start state,
+
+.. math::
+
+    \frac{\partial h_{ij}}{\partial\mathbf p_0} = \mathbf a_{ij} = \sum_{S}
+        \frac{\mathbf v_i - \dot r^S_{ij}\,\mathbf u_{S,ij}}{r_{S,ij}},
+    \qquad
+    \frac{\partial h_{ij}}{\partial\mathbf v} = t_j\,\mathbf a_{ij} + \sum_S \mathbf u_{S,ij},
+
+with :math:`\mathbf u_S = \Delta\mathbf p_S / r_S` and
+:math:`\dot r^S = \Delta\mathbf p_S\cdot\mathbf v / r_S`.  In numpy each of
+the dozen operations is a pass over a temporary array, and for the small
+windows of the factors the per-call overhead is several times the
+arithmetic; here every entry is computed in one pass.
+
+The operations are those of :func:`fgdoppler.models.doppler._terms` in the
+same order (component sums :math:`x` first, the placeholder distance 1 on a
+sensor), and numba compiles without fast-math (no reassociation, no fused
+multiply-add), so the numbers are the numpy model's to the bit
+(``tests/models/test_doppler_kernels.py``).  Compiled code is cached on disk
+beside this module (numba's ``cache=True``), so only the first process after
+an install pays the compilation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from fgdoppler.geometry import SENSOR_EPS
+
+__all__ = ["along", "along_and_jacobian"]
+
+FloatArray = NDArray[np.float64]
+
+
+@njit(cache=True, error_model="numpy")
+def _along_loop(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray,
+                h: FloatArray, bad: NDArray[np.bool_]) -> None:  # pragma: no cover - compiled
+    d = x.shape[1] // 2
+    p = np.empty(d)
+    for i in range(x.shape[0]):
+        for j in range(t.shape[0]):
+            rT2 = 0.0
+            rR2 = 0.0
+            pT = 0.0
+            pR = 0.0
+            for k in range(d):
+                v = x[i, d + k]
+                p[k] = t[j] * v + x[i, k]
+                a = p[k] - tx[j, k]
+                b = p[k] - rx[j, k]
+                if k == 0:
+                    rT2 = a * a
+                    rR2 = b * b
+                    pT = a * v
+                    pR = b * v
+                else:
+                    rT2 += a * a
+                    rR2 += b * b
+                    pT += a * v
+                    pR += b * v
+            rT = np.sqrt(rT2)
+            rR = np.sqrt(rR2)
+            if rT <= SENSOR_EPS or rR <= SENSOR_EPS:
+                bad[i, j] = True
+                if rT <= SENSOR_EPS:
+                    rT = 1.0
+                if rR <= SENSOR_EPS:
+                    rR = 1.0
+            h[i, j] = pT / rT + pR / rR
+
+
+@njit(cache=True, error_model="numpy")
+def _jacobian_loop(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray, h: FloatArray,
+                   jac: FloatArray, bad: NDArray[np.bool_]) -> None:  # pragma: no cover - compiled
+    d = x.shape[1] // 2
+    a = np.empty(d)
+    b = np.empty(d)
+    for i in range(x.shape[0]):
+        for j in range(t.shape[0]):
+            rT2 = 0.0
+            rR2 = 0.0
+            pT = 0.0
+            pR = 0.0
+            for k in range(d):
+                v = x[i, d + k]
+                p = x[i, k] + t[j] * v
+                a[k] = p - tx[j, k]
+                b[k] = p - rx[j, k]
+                if k == 0:
+                    rT2 = a[k] * a[k]
+                    rR2 = b[k] * b[k]
+                    pT = a[k] * v
+                    pR = b[k] * v
+                else:
+                    rT2 += a[k] * a[k]
+                    rR2 += b[k] * b[k]
+                    pT += a[k] * v
+                    pR += b[k] * v
+            rT = np.sqrt(rT2)
+            rR = np.sqrt(rR2)
+            if rT <= SENSOR_EPS or rR <= SENSOR_EPS:
+                bad[i, j] = True
+                if rT <= SENSOR_EPS:
+                    rT = 1.0
+                if rR <= SENSOR_EPS:
+                    rR = 1.0
+            rdT = pT / rT
+            rdR = pR / rR
+            h[i, j] = rdT + rdR
+            for k in range(d):
+                v = x[i, d + k]
+                uT = a[k] / rT
+                uR = b[k] / rR
+                dp = (v - rdT * uT) / rT + (v - rdR * uR) / rR
+                jac[i, j, k] = dp
+                jac[i, j, d + k] = t[j] * dp + (uT + uR)
+
+
+def _flat(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray
+          ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    flat = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, x.shape[-1])
+    return (flat, np.ascontiguousarray(t, dtype=np.float64), np.ascontiguousarray(tx, dtype=np.float64),
+            np.ascontiguousarray(rx, dtype=np.float64))
+
+
+def along(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray
+          ) -> tuple[FloatArray, NDArray[np.bool_]]:
+    r"""Doppler of constant-velocity tracks at the measurements' times.
+
+    Parameters
+    ----------
+    x : ndarray, shape ``(..., 2d)``
+        Start states :math:`[\mathbf p_0', \mathbf v']'` of the tracks (``d`` = 2 or 3).
+    t : ndarray, shape ``(m,)``
+        Times relative to the start.
+    tx, rx : ndarray, shape ``(m, d)``
+        The transmitter and receiver of each measurement.
+
+    Returns
+    -------
+    h : ndarray, shape ``(..., m)``
+        :math:`h_{ij}`; where a track meets a sensor, the value with the placeholder distance 1.
+    singular : ndarray of bool, shape ``(..., m)``
+        Where a track meets a sensor (within :data:`fgdoppler.geometry.SENSOR_EPS`).
+    """
+    flat, t, tx, rx = _flat(x, t, tx, rx)
+    h = np.empty((flat.shape[0], t.size))
+    bad = np.zeros(h.shape, dtype=np.bool_)
+    _along_loop(flat, t, tx, rx, h, bad)
+    return h.reshape(*x.shape[:-1], t.size), bad.reshape(*x.shape[:-1], t.size)
+
+
+def along_and_jacobian(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray
+                       ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+    r""":func:`along` and the Jacobian of each Doppler with respect to its track's start state.
+
+    Returns
+    -------
+    h : ndarray, shape ``(..., m)``
+    jacobian : ndarray, shape ``(..., m, 2d)``
+        :math:`[\partial h_{ij}/\partial\mathbf p_0, \partial h_{ij}/\partial\mathbf v]`.
+    singular : ndarray of bool, shape ``(..., m)``
+    """
+    flat, t, tx, rx = _flat(x, t, tx, rx)
+    n = flat.shape[1]
+    h = np.empty((flat.shape[0], t.size))
+    jac = np.empty((flat.shape[0], t.size, n))
+    bad = np.zeros(h.shape, dtype=np.bool_)
+    _jacobian_loop(flat, t, tx, rx, h, jac, bad)
+    lead = x.shape[:-1]
+    return h.reshape(*lead, t.size), jac.reshape(*lead, t.size, n), bad.reshape(*lead, t.size)
