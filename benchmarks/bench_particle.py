@@ -63,7 +63,7 @@ fn = strided if before else _along
 if before:
     particle_posterior.CHUNK_ROWS, observation._along = 1 << 20, strided
 if sys.argv[1] == "fresh":
-    particle_posterior._Posterior._remember = lambda self, x, A: None
+    particle_posterior._Posterior._remember = lambda self, *args: None
 if sys.argv[1] == "scipy":
     import fgdoppler.estimators.particle as particle
     from scipy.special import logsumexp
