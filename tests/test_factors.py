@@ -76,6 +76,22 @@ def test_cv_factor_equals_g_and_J(rng: np.random.Generator, paper_geom: fd.Geome
         np.testing.assert_allclose(b, -(g - Z) / 1.5, rtol=1e-12, atol=1e-12)
 
 
+def test_cv_factor_of_a_ground_layout_serves_states_in_space(rng: np.random.Generator,
+                                                               paper_geom: fd.Geometry) -> None:
+    """A 2-D geometry serves 3-D states with its sensors at z = 0: its window factor at a state in space (the
+    sensors looked up at each call) is the factor of the same sensors given in 3-D (looked up once), exactly."""
+    lifted = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=(*p.tx, 0.0), rx=(*p.rx, 0.0)) for p in paper_geom.pairs))
+    times = [np.arange(10) * 0.5, 0.25 + np.arange(10) * 0.5]
+    for x2 in random_states(rng, paper_geom, 5, min_dist=3e3):
+        x0 = np.r_[x2[:2], rng.uniform(500.0, 3e3), x2[2:], rng.uniform(-20.0, 20.0)]
+        Z = rng.normal(0, 30, 20)
+        flat, space = (factors.cv_factor(X(0), g, times, Z, 1.5) for g in (paper_geom, lifted))
+        v = _values(x0=x0)
+        assert flat.error(v) == space.error(v)
+        for a, b in zip(flat.linearize(v).jacobian(), space.linearize(v).jacobian(), strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
 def test_motion_factor_is_exact_and_finite(rng: np.random.Generator) -> None:
     m = fd.ConstantVelocity(q=0.01)
     for dt in (0.01, 0.5, 7.0):

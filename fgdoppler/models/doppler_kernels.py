@@ -29,7 +29,7 @@ The operations are those of :func:`fgdoppler.models.doppler._terms` in the
 same order (component sums :math:`x` first, the placeholder distance 1 on a
 sensor), and numba compiles without fast-math (no reassociation, no fused
 multiply-add), so the numbers are the numpy model's to the bit
-(``tests/models/test_doppler_kernels.py``).  Compiled code is cached on disk
+(``tests/models/test_doppler.py``).  Compiled code is cached on disk
 beside this module (numba's ``cache=True``), so only the first process after
 an install pays the compilation.
 """
@@ -161,6 +161,13 @@ def _jacobian_loop(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray,
 def _flat(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray
           ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     flat = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, x.shape[-1])
+    # the loops do not check their indices: sensors of another dimension, or fewer of them than times, would be
+    # read out of bounds
+    if flat.shape[1] != 2 * tx.shape[-1] or rx.shape[-1] != tx.shape[-1]:
+        raise ValueError(f"states of {flat.shape[1]} numbers need sensors of {flat.shape[1] // 2} coordinates, "
+                         f"got {tx.shape[-1]} and {rx.shape[-1]}")
+    if not len(tx) == len(rx) == np.size(t):
+        raise ValueError(f"{np.size(t)} times need as many transmitters and receivers, got {len(tx)} and {len(rx)}")
     return (flat, np.ascontiguousarray(t, dtype=np.float64), np.ascontiguousarray(tx, dtype=np.float64),
             np.ascontiguousarray(rx, dtype=np.float64))
 
@@ -189,9 +196,6 @@ def along(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray
     h = np.empty((flat.shape[0], t.size))
     bad = np.zeros(h.shape, dtype=np.bool_)
     d = tx.shape[1]
-    if flat.shape[1] != 2 * d or rx.shape[1] != d:
-        raise ValueError(f"states of {flat.shape[1]} numbers need sensors of {flat.shape[1] // 2} coordinates, "
-                         f"got {tx.shape[1]} and {rx.shape[1]}")
     rows = np.empty((2 * d, t.size))
     rows[:d], rows[d:] = tx.T, rx.T
     if (_along_plane if flat.shape[1] == 4 else _along_space)(flat, t, rows, h):
