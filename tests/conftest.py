@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 
 import numpy as np
 import pytest
@@ -70,3 +71,21 @@ def benchmark_run(scenario: int, run: int, seed: int = 2026) -> tuple[fd.Simulat
     from benchmarks.bench_accuracy import recording
 
     return recording(scenario, run, seed)
+
+
+def with_jumps(m: fd.Measurements, jumps: dict[int, float]) -> fd.Measurements:
+    """``m`` with measurement ``i`` moved by ``jumps[i]`` of its sigma."""
+    bad = np.zeros(len(m))
+    bad[list(jumps)] = list(jumps.values())
+    return fd.Measurements(time=m.time, pair=m.pair, doppler=m.doppler + bad * m.sigma, sigma=m.sigma)
+
+
+def assert_names_the_jumps(message: str, m: fd.Measurements, jumps: dict[int, float]) -> None:
+    """An ``outliers`` finding's ``message`` names exactly the measurements of ``m`` that ``jumps`` moved (pair and
+    time), each with its residual within 4 sigma of its jump."""
+    named = re.findall(r"pair (\d) at t = ([\d.]+) s: ([+-][\d.]+) sigma", message)
+    assert sorted((int(p), float(t)) for p, t, _ in named) == sorted(
+        (int(m.pair[i]), float(m.time[i])) for i in jumps)
+    for p, t, sigmas in named:
+        [i] = [i for i in jumps if (m.pair[i], m.time[i]) == (int(p), float(t))]
+        assert abs(float(sigmas) - jumps[i]) < 4.0

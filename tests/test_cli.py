@@ -984,6 +984,13 @@ def test_a_mistake_finding_comes_before_any_zone_or_half_plane_advice() -> None:
     assert mistake_hint([small]) is None and mistake_hint([replace(small, message="the target ..."), widen]) is None
     for advice in (widen, mirror):
         assert "sigma look too small: give their right sigma before" in (mistake_hint([small, advice]) or "")
+    # outliers the window or the whole recording fits without come before that: with them out the sigma fit
+    recording = Reason(code="outliers", status="doubtful", message=f"fitted with one ..., the recording fits: "
+                                                                   f"{WITH_OUTLIERS}; ...")
+    for found, where in ((outliers, "the initiation window fits"), (recording, "the data fit")):
+        hint = mistake_hint([small, found, widen]) or ""
+        assert f"says {where} without a few measurements: track with the Huber loss (--huber) before" in hint
+        assert "or sigma advice" in hint and mistake_hint([small, found]) is None
 
 
 def test_the_zone_hint_is_the_union_of_the_advised_zones() -> None:

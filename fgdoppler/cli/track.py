@@ -413,8 +413,9 @@ def mistake_hint(reasons: Any) -> str | None:
     """The hint to correct a likely mistake in the file or the geometry first, where a finding names one (a
     ``sign``, ``swapped`` or ``radial`` change of the data, the geometry in kilometres or the times in another
     unit) and another advises a zone or a half plane: that advice reads the mistaken data or units as given.
-    Likewise to give the right sigma first where the manoeuvre finding says they look too small, and to track with
-    the Huber loss first where the initiation window fits without a few outliers (an ``outliers`` finding), and
+    Likewise to track with the Huber loss first where the initiation window or the whole recording fits without a
+    few outliers (an ``outliers`` finding; before the sigma advice too), to give the right sigma first where the
+    manoeuvre finding says they look too small, and
     before all of these to leave out repeated values where a ``data`` finding says a pair repeats them (every other
     finding reads them as measurements).  ``None`` otherwise."""
     from fgdoppler.estimators.judge import REPEATS_ADVICE
@@ -441,17 +442,20 @@ def mistake_hint(reasons: Any) -> str | None:
                 "following any zone advice, which reads them as seconds")
     outliers = [r for r in reasons if r.status != "ok" and WITH_OUTLIERS in r.message]
     advised = any(r.status != "ok" and (r.zone is not None or r.mirror is not None) for r in reasons)
-    if advised and any(r.status != "ok" and SIGMA_ADVICE in r.message for r in reasons):
-        return ("the manoeuvre finding above says the measurements' sigma look too small: give their right sigma "
-                "before following any zone or half-plane advice, which reads the misfit they make as the target's")
+    # outliers come before sigma that look too small: with them left out the data fit the sigma as given, and their
+    # misfit is what made the recording's halves misfit
     if outliers and any(OR_OUTSIDE_THE_ZONE in r.message for r in outliers):
         return ("an outliers finding above says the initiation window fits without a few measurements, "
                 "but it fits as given with a start outside the zone too: check those measurements, and if they are "
                 "right, follow the zone advice")
     if outliers and advised:
-        return ("an outliers finding above says the initiation window fits without a few measurements: "
-                "track with the Huber loss (--huber) before following any zone or half-plane advice, which reads the "
-                "outliers as data")
+        where = "the initiation window" if all(r.code.startswith("initiation-") for r in outliers) else "the data"
+        return (f"an outliers finding above says {where} fit{'s' if where != 'the data' else ''} without a few "
+                "measurements: track with the Huber loss (--huber) before following any zone, half-plane or sigma "
+                "advice, which reads the outliers as data")
+    if advised and any(r.status != "ok" and SIGMA_ADVICE in r.message for r in reasons):
+        return ("the manoeuvre finding above says the measurements' sigma look too small: give their right sigma "
+                "before following any zone or half-plane advice, which reads the misfit they make as the target's")
     if any(OR_OUTSIDE_THE_ZONE in r.message for r in mistakes):
         return (f"a {mistakes[0].code.removeprefix('initiation-')} finding above names a likely mistake in the "
                 "measurement file, but the data fit as given with a start outside the zone too: check the file, and "

@@ -484,7 +484,8 @@ def _fit_reasons(statistic: float, dof: int, n: int, rejected: int, lost: int | 
         hint = "" if robust or not doubtful else (
             "; if the data have outliers, try the Huber loss (--huber)" if fraction <= REJECT_ROBUST else
             f"; more than {REJECT_ROBUST:.0%} are not a few outliers (the Huber loss would find the track doubtful "
-            "too): the sigma, the motion model or the geometry more likely misfit the data")
+            "too): the sigma, the motion model or the geometry more likely misfit the data, unless a few outliers "
+            "dragged the track off the rest (an outliers finding then says so)")
         out.append(Reason(code="rejections", status="doubtful" if doubtful else "ok", message=(
             f"{rejected} of {n} measurements ({fraction:.1%}) are rejected or outliers{hint}")))
     if lost is not None and lost > LOST * max(n // 4, 8):

@@ -42,6 +42,16 @@ named.  (The sign and swapped labels, which windows mostly name, are not
 tried there: that would cost :math:`1 + P + P(P-1)/2` more initiations on
 every track that misfits, a manoeuvring one included.)
 
+Where no change is named, a few gross errors may explain the misfit: the
+initiation window names them only where they are a few of *its*
+measurements, and several in one window drag a least-squares track off the
+rest of the recording.  The whole recording (:data:`OUTLIERS_PER_PAIR`
+measurements a pair spread over it) is then fitted with one
+constant-velocity track as given, with the Huber loss and without the
+measurements that fit leaves far off; where the last passes the χ² test and
+those left out are at most a tenth, an ``outliers`` finding names them and
+advises the Huber loss.
+
 The geometry in kilometres
 (:func:`~fgdoppler.estimators.window_mistakes.units_reason`) and times in
 milliseconds or microseconds
@@ -105,6 +115,7 @@ from fgdoppler.estimators.window_mistakes import (
     kilometre_extent,
     median_interval,
     mistake_reason,
+    outliers_reason,
     radar_pairs,
     time_units_reason,
     tries_time_units,
@@ -114,8 +125,8 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 from fgdoppler.repeats import find_repeats
 
-__all__ = ["CONFIRMED_AT_MOST", "LATER_WINDOWS", "MISTAKE_CODES", "UNCONFIRMED", "WHOLE_CODES", "WHOLE_PER_PAIR",
-           "is_mistake_finding", "later_mistakes"]
+__all__ = ["CONFIRMED_AT_MOST", "LATER_WINDOWS", "MISTAKE_CODES", "OUTLIERS_PER_PAIR", "UNCONFIRMED", "WHOLE_CODES",
+           "WHOLE_PER_PAIR", "is_later_finding", "is_mistake_finding", "later_mistakes"]
 
 #: Windows initiated after the initiation window where a track fails its residual test.
 LATER_WINDOWS = 3
@@ -136,14 +147,18 @@ WHOLE_CODES: tuple[MistakeCode, ...] = ("radial",)
 #: The findings of a mistake in the measurement file (:func:`~fgdoppler.estimators.window_mistakes.with_mistake`).
 MISTAKE_CODES = ("sign", "swapped", "radial")
 
+#: Measurements per pair, spread evenly over the recording, that the outliers check fits in one constant-velocity
+#: track (every measurement of a recording of up to that many a pair: the paper's 30 s hold 61).
+OUTLIERS_PER_PAIR = 100
+
 
 def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initiation, reasons: tuple[Reason, ...],
                    *, huber_k: float | None = None, windows: int = LATER_WINDOWS,
                    reference: TrackResult | None = None) -> list[Reason]:
-    r"""A ``sign``, ``swapped``, ``radial`` or ``units`` finding from later in the recording, where the track
-    does not fit (``reasons``, the track's, hold a ``fit`` finding that is not ``ok``) and ``init`` did not find
-    the geometry in kilometres or the times in other units (the module docstring: those are tried first); no
-    change of the data where a pair repeats its values (:func:`_changes`).
+    r"""A ``sign``, ``swapped``, ``radial``, ``units`` or ``outliers`` finding from later in the recording, where
+    the track does not fit (``reasons``, the track's, hold a ``fit`` finding that is not ``ok``) and ``init`` did
+    not find the geometry in kilometres or the times in other units (the module docstring: those are tried first);
+    no change of the data where a pair repeats its values (:func:`_changes`).
 
     Where the track fits but ``init`` named a change, an ``unconfirmed`` finding where the data do not need it
     (:func:`_unconfirmed`).  Where ``init`` names a change (:attr:`~.initiation.Initiation.mistake`), the
@@ -167,7 +182,8 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     change (else the next, up to :data:`CONFIRMED_AT_MOST` changes).  Where no
     window names one and the geometry has radars, those spread measurements
     are tried with the changes of :data:`WHOLE_CODES` (a radar's Doppler
-    doubled, or doubled and negated).  Nothing more where ``reference``, a
+    doubled, or doubled and negated); then a few outliers
+    (:func:`_outliers_on_whole`).  Nothing more where ``reference``, a
     track on the same data and initiation with the same ``huber_k`` that
     misfits too, made the same check: its finding (or none) is the answer.
 
@@ -211,7 +227,7 @@ def later_mistakes(measurements: Measurements, model: TrackingModel, init: Initi
     if reference is not None and windows == LATER_WINDOWS and _misfits(reference.reasons) \
             and reference.settings.huber_k == huber_k:
         # the same windows, fits and votes: the answer depends on nothing else
-        return [r for r in reference.reasons if is_mistake_finding(r)]
+        return [r for r in reference.reasons if is_later_finding(r)]
     whole = _Whole(measurements, model, init, huber_k)
     if init.mistake is not None:
         return _ranked_on_whole(model, whole, init.mistake)
@@ -225,7 +241,49 @@ def _changes(measurements: Measurements, model: TrackingModel, init: Initiation,
     held or dead receiver misfits every track, which the track's ``data`` finding names."""
     if find_repeats(measurements, level=VERDICT_LEVEL):
         return []
-    return _from_windows(measurements, model, init, windows, whole) or _from_whole(model, whole, WHOLE_CODES)
+    return (_from_windows(measurements, model, init, windows, whole) or _from_whole(model, whole, WHOLE_CODES)
+            or _outliers_on_whole(measurements, model, init, whole.settings))
+
+
+def _outliers_on_whole(measurements: Measurements, model: TrackingModel, init: Initiation,
+                       settings: InitiationSettings) -> list[Reason]:
+    r"""An ``outliers`` finding of the track where the recording fits one constant-velocity track without a few
+    of its measurements, which lie far from it
+    (:func:`~fgdoppler.estimators.window_mistakes.outliers_reason` on the whole recording), else none.
+
+    The initiation window names a few outliers only where they are at most a
+    tenth of *its* measurements; several in one window (four of its twenty)
+    are not, and a least-squares track dragged by them misfits the rest of
+    the recording too, so that its rejections and its halves' misfit read as
+    sigma too small or a manoeuvre.  Fitted over the whole recording, the
+    same outliers are a few again.  :data:`OUTLIERS_PER_PAIR` measurements a
+    pair spread over the recording are fitted (all of a short one): as
+    given, with the Huber loss, and without the measurements that fit leaves
+    beyond the cut; the finding is made where the last passes the verdict's
+    χ² test (99.9 %) and those left out are at most a tenth.  A manoeuvre or
+    a wrong sigma leaves more than a tenth beyond the cut, and no finding.  Not where the
+    track used the Huber loss, nor where the initiation window already named
+    its outliers.  Three initiations of the sample, only for a track that
+    misfits and that no change of the data explains.
+    """
+    if settings.huber_k is not None or any(r.code == "outliers" and r.status != "ok" for r in init.reasons):
+        return []
+    sample = measurements.spread(OUTLIERS_PER_PAIR)
+    if len(sample) <= init.n_measurements:
+        return []  # nothing beyond the window, whose own check has run
+    quiet = replace(settings, mistake_check=False)
+    try:
+        given = initiate(sample, model, quiet)
+    except ValueError:  # no start in the zone explains them
+        return []
+    every = len(sample) == len(measurements)
+    found = outliers_reason(sample, model, quiet, given, level=VERDICT_LEVEL,
+                            what="the recording" if every else "the sample spread over the recording")
+    if found is None:
+        return []
+    return [replace(found, message=(
+        "the track fails its residual test and no window named a mistake in the file; fitted with one "
+        f"constant-velocity track, {found.message}"))]
 
 
 def is_mistake_finding(reason: Reason) -> bool:
@@ -234,6 +292,12 @@ def is_mistake_finding(reason: Reason) -> bool:
     than seconds (not the verdict's own ``units`` findings of speed and distance)."""
     return reason.code in MISTAKE_CODES or (reason.code == "units" and (
         IN_KILOMETRES in reason.message or IN_SECONDS in reason.message))
+
+
+def is_later_finding(reason: Reason) -> bool:
+    """Whether :func:`later_mistakes` may have made ``reason``: a finding of :func:`is_mistake_finding`, or a
+    track's ``outliers`` finding (an initiation's carries the ``initiation-`` prefix on a track)."""
+    return is_mistake_finding(reason) or reason.code == "outliers"
 
 
 def _misfits(reasons: tuple[Reason, ...]) -> bool:

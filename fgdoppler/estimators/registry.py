@@ -262,9 +262,10 @@ def _run_estimator(name: str, measurements: Measurements, model: TrackingModel |
 
 def _with_later_mistakes(result: TrackResult, measurements: Measurements, model: TrackingModel, init: Initiation,
                          settings: TrackerSettings, reference: TrackResult | None) -> TrackResult:
-    """The result with a ``sign``, ``swapped`` or ``radial`` finding from windows later in the recording where the
-    track does not fit and the initiation named no mistake (:func:`~fgdoppler.estimators.later_mistakes.later_mistakes`;
-    taken from the reference smoother where it made the same check)."""
+    """The result with a ``sign``, ``swapped``, ``radial`` or ``outliers`` finding from later in the recording where
+    the track does not fit and the initiation named no mistake
+    (:func:`~fgdoppler.estimators.later_mistakes.later_mistakes`; taken from the reference smoother where it made the
+    same check)."""
     found = later_mistakes(measurements, model, init, result.reasons, huber_k=settings.huber_k, reference=reference)
     return replace(result, reasons=(*result.reasons, *found)) if found else result
 

@@ -255,7 +255,8 @@ def fits_beyond_the_zone(measurements: Measurements, model: TrackingModel, setti
 
 
 def outliers_reason(measurements: Measurements, model: TrackingModel, settings: InitiationSettings,
-                    result: Initiation) -> Reason | None:
+                    result: Initiation, *, what: str = "the window", level: float | None = None
+                    ) -> Reason | None:
     r"""An ``outliers`` finding where ``measurements`` (``result`` their fit, with the Gaussian loss) fail the
     verdict's χ² test and fit without a few of them, which the Huber loss picks out, else ``None``.
 
@@ -280,6 +281,13 @@ def outliers_reason(measurements: Measurements, model: TrackingModel, settings: 
     the model (a manoeuvre, a wrong sigma), not outliers.  Not tried where
     ``settings`` already use the Huber loss.  Two initiations more, only for
     a window that fails and that no change of :func:`find_mistake` mends.
+    ``what`` names ``measurements`` in the message and ``level`` is the χ²
+    test's level for the fit without the outliers (``None``: the settings'
+    confidence); the track's check of the whole recording
+    (:func:`~fgdoppler.estimators.later_mistakes.later_mistakes`) passes
+    ``"the recording"`` and the verdict's 99.9 %, as its other checks of the
+    whole recording do: a recording's one constant-velocity fit fails the
+    95 % test on one recording in twenty as simulated.
     """
     if settings.huber_k is not None or fits(result, VERDICT_LEVEL):
         return None
@@ -293,7 +301,7 @@ def outliers_reason(measurements: Measurements, model: TrackingModel, settings: 
         kept = initiate(measurements.subset(~out), model, quiet)
     except ValueError:
         return None
-    if not fits(kept):
+    if not fits(kept, level):
         return None
     r = _residuals(measurements, model, kept)
     label = pair_labels(model.observation)
@@ -301,8 +309,9 @@ def outliers_reason(measurements: Measurements, model: TrackingModel, settings: 
     which = "; ".join(f"pair {label(int(measurements.pair[i]))} at t = {time_text(float(measurements.time[i]))} s: "
                       f"{r[i]:+.1f} sigma" for i in named[np.argsort(-np.abs(r[named]))])
     return Reason(code="outliers", status="doubtful", message=(
-        f"without {named.size} of its {n} measurements the window fits (cost {kept.cost:.2f}, passing the "
-        f"{settings.confidence:.0%} chi-square test, against {result.cost:.2f} as given), and "
+        f"without {named.size} of its {n} measurements {what} fits (cost {kept.cost:.2f}, passing the "
+        f"{100 * (settings.confidence if level is None else level):g}% chi-square test, against {result.cost:.2f} "
+        "as given), and "
         f"{'it lies' if named.size == 1 else 'they lie'} beyond "
         f"{OUTLIER_CUT:.2f} sigma of that fit ({which}): {WITH_OUTLIERS}; if so, track with the Huber loss "
         "(--huber), which down-weights them"))

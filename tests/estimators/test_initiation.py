@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import re
-
 import numpy as np
 import pytest
 
@@ -11,6 +9,7 @@ import fgdoppler as fd
 from fgdoppler.estimators.grid import HalfPlane
 from fgdoppler.estimators.initiation import InitiationSettings, initiate
 from fgdoppler.zone import ZoneLimits
+from tests.conftest import assert_names_the_jumps, with_jumps
 
 
 def _noise_free_window(sc: fd.Scenario, n_per_pair: int = 10) -> fd.Measurements:
@@ -324,19 +323,12 @@ def test_a_window_with_a_few_outliers_names_them() -> None:
     w = fd.simulate(sc, np.random.default_rng(5)).measurements.first_per_pair(10)
     assert not [x for x in initiate(w, sc.geometry).reasons if x.code == "outliers"]
     for jumps in ({7: 40.0}, {4: -25.0, 15: 30.0}):
-        bad = np.zeros(len(w))
-        bad[list(jumps)] = list(jumps.values())
-        corrupted = fd.Measurements(time=w.time, pair=w.pair, doppler=w.doppler + bad * w.sigma, sigma=w.sigma)
+        corrupted = with_jumps(w, jumps)
         r = initiate(corrupted, sc.geometry)
         assert any(x.code == "chi2" and x.status == "doubtful" for x in r.reasons)
         [found] = [x for x in r.reasons if x.code == "outliers"]
         assert found.status == "doubtful" and WITH_OUTLIERS in found.message
-        named = re.findall(r"pair (\d) at t = ([\d.]+) s: ([+-][\d.]+) sigma", found.message)
-        assert sorted((int(p), float(t)) for p, t, _ in named) == sorted(
-            (int(w.pair[i]), float(w.time[i])) for i in jumps)
-        for p, t, sigmas in named:
-            [i] = [i for i in jumps if (w.pair[i], w.time[i]) == (int(p), float(t))]
-            assert abs(float(sigmas) - jumps[i]) < 4.0
+        assert_names_the_jumps(found.message, w, jumps)
         robust = initiate(corrupted, sc.geometry, InitiationSettings(huber_k=1.345))
         assert [x.status for x in robust.reasons if x.code == "outliers"] == ["ok"]
         # the same words in a moved and turned copy of the problem (the check runs in the sensors' frame)

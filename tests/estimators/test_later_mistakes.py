@@ -11,7 +11,8 @@ from scipy.stats import chi2
 import fgdoppler as fd
 from fgdoppler.estimators.later_mistakes import MISTAKE_CODES, later_mistakes
 from fgdoppler.estimators.verdict import Reason
-from tests.conftest import benchmark_recording
+from fgdoppler.estimators.window_mistakes import WITH_OUTLIERS
+from tests.conftest import assert_names_the_jumps, benchmark_recording, with_jumps
 
 #: A track's finding that its residuals fail the whole-track chi-square test, as the verdict writes it.
 MISFIT = (Reason(code="fit", status="doubtful", message="the residuals fail the chi-square test"),)
@@ -156,13 +157,20 @@ def test_a_reference_that_made_the_same_check_gives_its_finding_and_saves_the_wi
     windows: list[float] = []
 
     def refused(window: fd.Measurements, *args: object, **kwargs: object) -> fd.Initiation:
-        windows.append(float(window.time[0]))
+        # the whole recording, which the outliers check fits once after the windows, is not a window
+        if len(window) < len(m):
+            windows.append(float(window.time[0]))
         raise ValueError("no start in the zone explains the window")
 
     monkeypatch.setattr(module, "initiate", refused)
     planted = Reason(code="swapped", status="doubtful", message="planted")
     reference = replace(track, estimator="smoother", settings=fd.SmootherSettings(), reasons=(*MISFIT, planted))
     assert later_mistakes(m, model, init, MISFIT, reference=reference) == [planted] and windows == []
+    # so is its finding that the recording holds a few outliers (not its initiation's, prefixed, nor another)
+    few = Reason(code="outliers", status="doubtful", message="planted")
+    inherited = Reason(code="initiation-outliers", status="doubtful", message="planted")
+    assert later_mistakes(m, model, init, MISFIT, reference=replace(reference, reasons=(*MISFIT, few, inherited))
+                          ) == [few] and windows == []
     for other, n in ((replace(reference, settings=fd.SmootherSettings(huber_k=1.5)), 3),
                      (replace(reference, reasons=(planted,)), 3), (reference, 2)):
         assert later_mistakes(m, model, init, MISFIT, windows=n, reference=other) == [] and len(windows) == n
@@ -431,3 +439,62 @@ def test_a_robust_fit_that_leaves_a_pair_out_does_not_name_a_change() -> None:
     assert not fits(negated) and not fits(negated, VERDICT_LEVEL)
     gaussian = fd.initiate(m.first_per_pair(10), scen.geometry)
     assert gaussian.n_outliers == 0 and fits(gaussian) == gaussian.passes_chi2
+
+
+#: Six measurements 100 sigma off: four among the initiation window's 20 (a fifth of it, more than the tenth
+#: that are a few outliers of a window) and two later.
+JUMPS = {1: 100.0, 6: -100.0, 9: 100.0, 14: -100.0, 60: 100.0, 95: -100.0}
+
+
+@pytest.mark.parametrize("s", [1, 3])
+def test_outliers_too_many_for_the_window_are_named_from_the_whole_recording(s: int) -> None:
+    """Case a 25 km and case b 5 km, run 0 (seed 2026), with :data:`JUMPS`.
+
+    The window fails its test and names no outliers (four of its 20 are not a
+    few of it); the track that misfits gets an ``outliers`` finding from the
+    whole recording, which one constant-velocity track fits without exactly
+    the six corrupted measurements (pair and time), each named with its
+    residual within 4 sigma of its jump.  Tracked with the Huber loss,
+    nothing is searched; as simulated, nothing is named (the six scenarios'
+    test above).
+    """
+    sim, model = benchmark_recording(s, 0)
+    m = sim.measurements
+    bad = with_jumps(m, JUMPS)
+    init = fd.initiate(bad.first_per_pair(10), model)
+    assert any(r.code == "chi2" and r.status == "doubtful" for r in init.reasons)
+    assert not [r for r in init.reasons if r.code == "outliers"]
+    [found] = later_mistakes(bad, model, init, MISFIT)
+    assert found.code == "outliers" and found.status == "doubtful" and WITH_OUTLIERS in found.message
+    assert "of its 12" in found.message and "the recording fits" in found.message and "(--huber)" in found.message
+    assert_names_the_jumps(found.message, m, JUMPS)
+    robust = fd.initiate(bad.first_per_pair(10), model, fd.InitiationSettings(huber_k=1.345))
+    assert not [r for r in later_mistakes(bad, model, robust, MISFIT, huber_k=1.345) if r.code == "outliers"]
+
+
+def test_more_than_a_tenth_of_the_recording_off_are_not_named_outliers() -> None:
+    """Case b 5 km, run 0 (seed 2026), with every sixth measurement 30 sigma off (20 of 121, a sixth): not a few
+    outliers of the recording, but a misfit of the model, so no ``outliers`` finding."""
+    sim, model = benchmark_recording(3, 0)
+    m = sim.measurements
+    bad = with_jumps(m, {i: 30.0 * (-1) ** i for i in range(0, len(m), 6)})
+    init = fd.initiate(bad.first_per_pair(10), model)
+    assert not [r for r in later_mistakes(bad, model, init, MISFIT) if r.code == "outliers"]
+
+
+def test_the_smoother_gets_the_outliers_finding_and_the_huber_loss_it_advises_mends_the_track() -> None:
+    """Case b 5 km, run 0 (seed 2026), with :data:`JUMPS`, through the registry: the offline smoother's track is
+    not ``ok`` and carries the recording's ``outliers`` finding; tracked with the Huber loss, as the finding
+    advises, its track is ``ok``, with no such finding, and within 3 sigma of the truth at its end."""
+    sim, model = benchmark_recording(3, 0)
+    bad = with_jumps(sim.measurements, JUMPS)
+    init = fd.initiate(bad.first_per_pair(10), model)
+    given = fd.run_estimator("smoother", bad, model, init)
+    assert given.status != "ok" and [r.status for r in given.reasons if r.code == "outliers"] == ["doubtful"]
+    robust = fd.InitiationSettings(huber_k=1.345)
+    rinit = fd.initiate(bad.first_per_pair(10), model, robust)
+    mended = fd.run_estimator("smoother", bad, model, rinit, fd.SmootherSettings(huber_k=1.345))
+    assert mended.status == "ok" and not [r for r in mended.reasons if r.code == "outliers" and r.status != "ok"]
+    end = mended.primary
+    err = end.states[-1] - sim.truth.at(end.times[-1:])[0]
+    assert float(err @ np.linalg.solve(end.covariances[-1], err)) < 3.0**2 * 4
