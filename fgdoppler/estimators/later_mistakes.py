@@ -281,9 +281,10 @@ def _outliers_on_whole(measurements: Measurements, model: TrackingModel, init: I
                             what="the recording" if every else "the sample spread over the recording")
     if found is None:
         return []
+    unsampled = "" if every else " (the measurements between the sample's may hold more)"
     return [replace(found, message=(
         "the track fails its residual test and no window named a mistake in the file; fitted with one "
-        f"constant-velocity track, {found.message}"))]
+        f"constant-velocity track, {found.message}{unsampled}"))]
 
 
 def is_mistake_finding(reason: Reason) -> bool:

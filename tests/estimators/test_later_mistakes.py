@@ -498,3 +498,28 @@ def test_the_smoother_gets_the_outliers_finding_and_the_huber_loss_it_advises_me
     end = mended.primary
     err = end.states[-1] - sim.truth.at(end.times[-1:])[0]
     assert float(err @ np.linalg.solve(end.covariances[-1], err)) < 3.0**2 * 4
+
+
+def test_a_long_recordings_outliers_are_named_from_a_sample_spread_over_it() -> None:
+    """Case b 5 km flown for 120 s (481 measurements, more than ``OUTLIERS_PER_PAIR`` a pair), fourteen
+    measurements 60 sigma off (four in the window): the check fits the sample of 100 a pair spread over the
+    recording, names exactly the corrupted measurements that sample holds, and says the rest may hold more."""
+    from fgdoppler.estimators.later_mistakes import OUTLIERS_PER_PAIR
+
+    sc = replace(fd.paper_scenario("b", 5e3), duration=120.0)
+    m = fd.simulate(sc, np.random.default_rng(3)).measurements
+    model = fd.TrackingModel.of(sc.geometry)
+    rows = np.r_[0, 4, 8, 12, np.random.default_rng(1).choice(np.arange(20, len(m)), 10, replace=False)]
+    jumps = {int(i): 60.0 * (-1) ** k for k, i in enumerate(rows)}
+    bad = with_jumps(m, jumps)
+    init = fd.initiate(bad.first_per_pair(10), model)
+    [found] = later_mistakes(bad, model, init, MISFIT)
+    sample = bad.spread(OUTLIERS_PER_PAIR)
+    assert len(m) > len(sample) == 2 * OUTLIERS_PER_PAIR
+    assert f"of its {len(sample)} measurements the sample spread over the recording fits" in found.message
+    assert found.message.endswith("(the measurements between the sample's may hold more)")
+    # the corrupted measurements the sample holds, as rows of the sample
+    held = {int(np.flatnonzero((sample.time == m.time[i]) & (sample.pair == m.pair[i]))[0]): v
+            for i, v in jumps.items() if np.any((sample.time == m.time[i]) & (sample.pair == m.pair[i]))}
+    assert 0 < len(held) < len(jumps)
+    assert_names_the_jumps(found.message, sample, held)
