@@ -40,7 +40,7 @@ def one_run(task: tuple[int, int, int]) -> dict[str, Any]:
     misfit = (Reason(code="fit", status="doubtful", message="the residuals fail the chi-square test"),)
     m = sim.measurements
     rng = np.random.default_rng(np.random.SeedSequence([seed, s, r, 6]))
-    window = _window_rows(m)
+    window = np.flatnonzero(m._first_mask(10, "n"))  # the rows first_per_pair(10) keeps
     made = np.r_[rng.choice(window, 4, replace=False),
                  rng.choice(np.setdiff1d(np.arange(len(m)), window), 2, replace=False)]
     jump = np.zeros(len(m))
@@ -60,12 +60,6 @@ def one_run(task: tuple[int, int, int]) -> dict[str, Any]:
             "huber_hint": "--huber" in hint,
             "false_as_simulated": bool([x for x in later_mistakes(m, model, clean_init, misfit)
                                         if x.code == "outliers"])}
-
-
-def _window_rows(m: Any) -> np.ndarray:
-    """The rows of ``m`` in the initiation window (each pair's first 10, as ``first_per_pair(10)`` takes them)."""
-    rows = [np.flatnonzero(m.pair == k)[:10] for k in np.unique(m.pair)]
-    return np.sort(np.concatenate(rows))
 
 
 def main() -> None:

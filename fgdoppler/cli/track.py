@@ -449,9 +449,9 @@ def mistake_hint(reasons: Any) -> str | None:
                 "but it fits as given with a start outside the zone too: check those measurements, and if they are "
                 "right, follow the zone advice")
     if outliers and advised:
-        where = "the initiation window" if all(r.code.startswith("initiation-") for r in outliers) else "the data"
-        return (f"an outliers finding above says {where} fit{'s' if where != 'the data' else ''} without a few "
-                "measurements: track with the Huber loss (--huber) before following any zone, half-plane or sigma "
+        window = all(r.code.startswith("initiation-") for r in outliers)
+        return (f"an outliers finding above says {'the initiation window fits' if window else 'the data fit'} "
+                "without a few measurements: track with the Huber loss (--huber) before following any zone, half-plane or sigma "
                 "advice, which reads the outliers as data")
     if advised and any(r.status != "ok" and SIGMA_ADVICE in r.message for r in reasons):
         return ("the manoeuvre finding above says the measurements' sigma look too small: give their right sigma "

@@ -242,11 +242,11 @@ def _changes(measurements: Measurements, model: TrackingModel, init: Initiation,
     if find_repeats(measurements, level=VERDICT_LEVEL):
         return []
     return (_from_windows(measurements, model, init, windows, whole) or _from_whole(model, whole, WHOLE_CODES)
-            or _outliers_on_whole(measurements, model, init, whole.settings))
+            or _outliers_on_whole(measurements, model, init, whole))
 
 
-def _outliers_on_whole(measurements: Measurements, model: TrackingModel, init: Initiation,
-                       settings: InitiationSettings) -> list[Reason]:
+def _outliers_on_whole(measurements: Measurements, model: TrackingModel, init: Initiation, whole: _Whole
+                       ) -> list[Reason]:
     r"""An ``outliers`` finding of the track where the recording fits one constant-velocity track without a few
     of its measurements, which lie far from it
     (:func:`~fgdoppler.estimators.window_mistakes.outliers_reason` on the whole recording), else none.
@@ -264,17 +264,25 @@ def _outliers_on_whole(measurements: Measurements, model: TrackingModel, init: I
     a wrong sigma leaves more than a tenth beyond the cut, and no finding.  Not where the
     track used the Huber loss, nor where the initiation window already named
     its outliers.  Three initiations of the sample, only for a track that
-    misfits and that no change of the data explains.
+    misfits and that no change of the data explains; where the sample is
+    ``whole``'s spread measurements (a recording of at most
+    :data:`WHOLE_PER_PAIR` a pair), their fit as given is ``whole``'s.
     """
+    settings = whole.settings
     if settings.huber_k is not None or any(r.code == "outliers" and r.status != "ok" for r in init.reasons):
         return []
     sample = measurements.spread(OUTLIERS_PER_PAIR)
     if len(sample) <= init.n_measurements:
         return []  # nothing beyond the window, whose own check has run
     quiet = replace(settings, mistake_check=False)
-    try:
-        given = initiate(sample, model, quiet)
-    except ValueError:  # no start in the zone explains them
+    if len(sample) == len(whole.spread):
+        given = whole.given()
+    else:
+        try:
+            given = initiate(sample, model, quiet)
+        except ValueError:  # no start in the zone explains them
+            given = None
+    if given is None:
         return []
     every = len(sample) == len(measurements)
     found = outliers_reason(sample, model, quiet, given, level=VERDICT_LEVEL,
