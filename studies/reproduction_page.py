@@ -128,7 +128,8 @@ truth as well as the likelihood promises (docs/concepts.md, "What the
 exact posterior says").
 
 Rebuild with `python -m benchmarks.bench_accuracy --runs 100 --seed 2026`
-and `--seed 7` (extras `bench`, `stonesoup`; about 30 minutes each on 2 cores),
+and `--seed 7` (extras `bench`, `stonesoup`; with `--no-exact`, which leaves
+out the exact posterior's row, 16–17 minutes each on 2 cores on 2026-12-06),
 then this page with `--accuracy output/bench_accuracy`.
 """
 

@@ -27,7 +27,7 @@ def pytest_configure(config: pytest.Config) -> None:
 def random_geometry(rng: np.random.Generator, n_pairs: int | None = None) -> fd.Geometry:
     """A random geometry of 1–4 pairs with sensors in a 60 km box."""
     n = int(rng.integers(1, 5)) if n_pairs is None else n_pairs
-    pairs = []
+    pairs: list[fd.BistaticPair] = []
     while len(pairs) < n:
         tx, rx = rng.uniform(-30e3, 30e3, 2), rng.uniform(-30e3, 30e3, 2)
         if np.linalg.norm(tx - rx) > 1e3:
