@@ -1020,6 +1020,60 @@ def _precise(sigma: float = 0.05) -> tuple[fd.Measurements, fd.TrackingModel, fd
     return sim.measurements, model, fd.initiate(sim.measurements.first_per_pair(10), model)
 
 
+def _four_pairs_in_space() -> tuple[fd.Simulation, fd.TrackingModel, fd.Initiation]:
+    """Four pairs of two transmitters and two receivers on masts, an aircraft 60 km out at 4 km, 60 s."""
+    from fgdoppler.zone import ZoneLimits
+
+    tx, rx = ((0.0, 0.0, 100.0), (30e3, 30e3, 200.0)), ((20e3, 5e3, 50.0), (-10e3, 15e3, 0.0))
+    g = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=t, rx=r) for t in tx for r in rx)).with_zone(
+        ZoneLimits(along=(-47165.0, 24981.0), across=(-48319.0, 23527.0), speed_max=280.0, altitude=(0.0, 10611.0)))
+    rng = np.random.default_rng([9, 0])
+    x0 = (60e3 + rng.uniform(-10e3, 10e3), -20e3 + rng.uniform(-10e3, 10e3), rng.uniform(1e3, 6e3), -200.0, 100.0, 0.0)
+    sim = fd.simulate(fd.Scenario(geometry=g, x0=x0, duration=60.0, dt=0.5), rng)
+    model = fd.TrackingModel.of(g)
+    return sim, model, fd.initiate(sim.measurements.first_per_pair(10), model)
+
+
+def test_a_bend_beyond_trust_is_reported_where_the_process_noise_forbids_sampling() -> None:
+    """The Laplace covariance stands where the process noise sets the variance, but not as ``ok`` beyond trust.
+
+    Four pairs in 3-D over 60 s: along the probe's axis the constant-
+    velocity cost accounts for about a seventh of the smoother's variance
+    (measured 0.13), below DETERMINISTIC_MIN, so no samples are drawn; that
+    cost still bends thousands of times beyond its quadratic model there
+    (measured 8.5e4), and the truth lies far outside the Laplace covariance
+    in six dimensions (measured run-averaged NEES 58; the position block
+    alone 0.25, so the stretch is in a thin direction mixing speed and
+    position).  Until 2026-12-06 this track was ``ok``.  Now a
+    ``doubtful`` ``nonlinear`` finding says so, its track and covariances the
+    Laplace ones to the bit.
+    """
+    sim, model, init = _four_pairs_in_space()
+    m = sim.measurements
+    laplace = fd.run_estimator("smoother", m, model, init, fd.SmootherSettings(sampled_covariance=False),
+                               verify=False).primary
+    x0, P0 = laplace.states[0], laplace.covariances[0]
+    _, data = _posterior(m, model, float(laplace.times[0]), None, 0, 64)
+    axis = probe_axis(P0)[0]
+    icv = _information(model, data, x0, None, P0)
+    assert 1.0 / float(axis @ icv @ axis) < DETERMINISTIC_MIN
+
+    out = fd.run_estimator("smoother", m, model, init, verify=False)
+    found = [r for r in out.reasons if r.code == "nonlinear"]
+    assert [r.status for r in found] == ["doubtful"], out.message
+    assert "process noise sets most of the variance" in found[0].message
+    assert re.search(r"track accounts for 0\.\d\d of it", found[0].message), found[0].message
+    bend = re.search(r"raise the cost of a constant-velocity track (\S+) times", found[0].message)
+    assert bend is not None and float(bend.group(1)) > spread.TRUST_LIMIT
+    assert all(r.status == "ok" for r in out.reasons if r.code != "nonlinear"), out.message
+    np.testing.assert_array_equal(out.primary.states, laplace.states)
+    np.testing.assert_array_equal(out.primary.covariances, laplace.covariances)
+    # what the finding warns of: the truth far outside the reported covariance
+    err = out.primary.states - sim.truth.states
+    nees = np.einsum("ki,ki->k", err, np.linalg.solve(out.primary.covariances, err[..., None])[..., 0])
+    assert nees[out.primary.times >= 10.0].mean() > chi2.ppf(0.999, 6)
+
+
 def test_the_sampled_costs_information_is_its_curvature() -> None:
     """Gauss–Newton information of the constant-velocity cost against its second differences, per axis and mixed.
 
