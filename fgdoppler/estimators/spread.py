@@ -444,6 +444,9 @@ MAX_SPAN = 300.0
 #: 120 s of the 25 km scenarios, where a limit of 0.5 cost 8 and 17 m of RMSE over 20 runs); the limit lies between
 #: (``studies/process_noise_share.py``).
 DETERMINISTIC_MIN = 0.25
+#: What a ``"doubtful"`` ``nonlinear`` finding beyond :data:`TRUST_LIMIT` says.
+_BEYOND_TRUST = f"beyond {TRUST_LIMIT:g} times no Gaussian covariance describes the posterior"
+_FAR_OFF = ": the estimate and its covariance may be far off (the data barely determine the state)"
 #: Metropolis sweeps after resampling (enough for the samples to spread along a curved valley).
 MOVES = 20
 #: Squared Mahalanobis length (in the Laplace covariance) of the sampled posterior's mode's distance from the
@@ -587,6 +590,15 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     laplace, own = np.asarray(covariances, dtype=float), _own_model(icv, P0)
     if 1.0 / SAMPLING_LIMIT <= ratio <= SAMPLING_LIMIT:
         return _skewed(post, model, times, states, laplace, own, info, ratio, rng) if mean else None
+    return _curved(post, model, times, states, laplace, own, ratio, rng)
+
+
+def _curved(post: _Posterior, model: TrackingModel, times: FloatArray, states: FloatArray, laplace: FloatArray,
+            own: FloatArray, ratio: float, rng: np.random.Generator) -> PosteriorSpread | None:
+    """The sampled covariances and their ``nonlinear`` finding where the probe's ``ratio`` is beyond
+    :data:`SAMPLING_LIMIT`; ``None`` where no sample reaches the posterior.  ``laplace``: the smoother's
+    covariances; ``own``: the sampled cost's Gaussian model of the first state (:func:`_own_model`)."""
+    x0, P0 = np.asarray(states[0], dtype=float), laplace[0]
     drawn = _sample_reaching(post, x0, P0, ratio, model.dim, rng)
     if drawn is None:
         return None
@@ -597,9 +609,7 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     sd_laplace, sd_sampled, sd_reported = (_major_sd(M, pos) for M in (P0, sampled, carried[0]))
     bias = float(np.linalg.norm(post.x[:, pos].mean(axis=0) - x0[pos]))
     trusted = 1.0 / TRUST_LIMIT <= ratio <= TRUST_LIMIT
-    warning = "" if trusted else (
-        f"; beyond {TRUST_LIMIT:g} times no Gaussian covariance describes the posterior and local samples cannot "
-        "map it: the estimate and its covariance may be far off (the data barely determine the state)")
+    warning = "" if trusted else f"; {_BEYOND_TRUST} and local samples cannot map it{_FAR_OFF}"
     reason = Reason(code="nonlinear", status="ok" if trusted else "doubtful", message=(
         f"the likelihood is not Gaussian about the estimate (3 standard deviations along the major axis raise "
         f"the cost {ratio:.3g} times its quadratic model): covariances from {SAMPLES} posterior samples "
@@ -630,9 +640,7 @@ def _untrusted_laplace(states: FloatArray, covariances: FloatArray, ratio: float
         f"the likelihood is not Gaussian about the estimate (3 standard deviations along the major axis raise the "
         f"cost of a constant-velocity track {ratio:.3g} times its quadratic model), and the process noise sets "
         f"most of the variance along that axis (the constant-velocity track accounts for {share:.2f} of it), so no "
-        f"posterior samples can map it: the Laplace covariance is reported, but beyond {TRUST_LIMIT:g} times no "
-        "Gaussian covariance describes the posterior: the estimate and its covariance may be far off (the data "
-        "barely determine the state)"))
+        f"posterior samples can map it: the Laplace covariance is reported, but {_BEYOND_TRUST}{_FAR_OFF}"))
     return PosteriorSpread(states=np.asarray(states, dtype=float), covariances=np.asarray(covariances, dtype=float),
                            reason=reason)
 
