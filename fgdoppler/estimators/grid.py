@@ -358,10 +358,10 @@ def _product_costs(
 
     .. math:: \dot r = \frac{U + t s^2}{\sqrt{\lVert\mathbf a\rVert^2 + 2tU + t^2 s^2}},\qquad s^2 = \lVert\mathbf v\rVert^2,
 
-    so each sensor needs one outer product, and each measurement a handful of
-    element-wise operations.  Positions are processed ``chunk // n_vel`` at a
-    time so the working set stays in cache; the arithmetic per element does
-    not depend on the chunking, so results are identical for any chunk.
+    so each position and sensor need one dot product per velocity, and each
+    measurement a handful of element-wise operations.  Positions are processed
+    ``chunk // n_vel`` at a time; the arithmetic per element does not depend
+    on the chunking, so results are identical for any chunk.
 
     A term :math:`\dot r` depends on the sensor and the time only, so where
     several pairs share a sensor and measure at the same instant (one
@@ -370,9 +370,11 @@ def _product_costs(
     measurement that needs it (:data:`SHARE_TERMS`); the sums are taken in
     the same order, so the costs are the same to the bit.  With one
     transmitter and four synchronous receivers this takes the grid from 4 × 2
-    to 4 + 1 terms per instant.  The terms and the sum over the measurements
-    run in a compiled loop (:mod:`fgdoppler.estimators.grid_kernels`), one
-    pass per candidate instead of numpy's pass per operation.
+    to 4 + 1 terms per instant.  The offsets, the dot products, the terms and
+    the sum over the measurements run in one compiled loop
+    (:mod:`fgdoppler.estimators.grid_kernels`), one pass per position instead
+    of numpy's pass per operation over arrays of positions × sensors ×
+    velocities.
     """
     d = pos.shape[1]
     sensors, plan = _term_plan(geometry, times, d)
@@ -380,9 +382,7 @@ def _product_costs(
     out = np.empty((pos.shape[0], vel.shape[0]))
     step = max(1, chunk // max(1, vel.shape[0]))
     for start in range(0, pos.shape[0], step):
-        offsets, c = _offsets(pos[start:start + step], sensors)
-        U = _dot(offsets, [vel[None, None, :, k] for k in range(d)])  # (P, S, V)
-        acc = _chunk_costs(U, c, s2, plan, z, w, huber_k)
+        acc = _chunk_costs(pos[start:start + step], sensors, vel, s2, False, plan, z, w, huber_k)
         acc[~np.isfinite(acc)] = np.inf
         out[start:start + step] = acc
     return out
@@ -397,9 +397,7 @@ def _pair_costs(geometry: Geometry, times: StackedTimes, z: FloatArray, w: Float
     out = np.empty(pos.shape[0])
     for start in range(0, pos.shape[0], max(1, chunk)):
         sl = slice(start, start + max(1, chunk))
-        offsets, c = _offsets(pos[sl], sensors)
-        U = _dot(offsets, [vel[sl, None, None, k] for k in range(d)])  # (n, S, 1)
-        acc = _chunk_costs(U, c, s2[sl, None], plan, z, w, huber_k)[:, 0]
+        acc = _chunk_costs(pos[sl], sensors, vel[sl], s2[sl], True, plan, z, w, huber_k)[:, 0]
         acc[~np.isfinite(acc)] = np.inf
         out[sl] = acc
     return out
@@ -437,23 +435,10 @@ def _squared_speed(vel: FloatArray) -> FloatArray:
     return s2 + vel[:, 2] ** 2 if vel.shape[1] == 3 else s2
 
 
-def _offsets(p: FloatArray, sensors: FloatArray) -> tuple[list[FloatArray], FloatArray]:
-    """Per coordinate the offsets ``(P, S)`` of positions from the sensors, and their squared lengths."""
-    offsets = [p[:, None, k] - sensors[None, :, k] for k in range(p.shape[1])]
-    c = offsets[0] * offsets[0] + offsets[1] * offsets[1]
-    return offsets, (c + offsets[2] * offsets[2] if len(offsets) == 3 else c)
-
-
-def _dot(offsets: list[FloatArray], vel: list[FloatArray]) -> FloatArray:
-    r""":math:`U = \mathbf a\cdot\mathbf v`, with the velocity's coordinates broadcast against ``(P, S, 1)``."""
-    U = offsets[0][:, :, None] * vel[0] + offsets[1][:, :, None] * vel[1]
-    return U + offsets[2][:, :, None] * vel[2] if len(offsets) == 3 else U
-
-
-def _chunk_costs(U: FloatArray, c: FloatArray, s2: FloatArray, plan: _TermPlan, z: FloatArray, w: FloatArray,
-                 huber_k: float | None) -> FloatArray:
-    """:func:`_product_costs` for one chunk of positions: ``U`` ``(P, S, V)``, ``c`` ``(P, S)``, ``s2`` ``(V,)``
-    (or ``(P, 1)`` with ``V`` = 1: each position's own velocity), in the compiled loop of
+def _chunk_costs(pos: FloatArray, sensors: FloatArray, vel: FloatArray, s2: FloatArray, per_position: bool,
+                 plan: _TermPlan, z: FloatArray, w: FloatArray, huber_k: float | None) -> FloatArray:
+    """:func:`_product_costs` for one chunk of positions ``(P, d)`` against every velocity ``(V, d)``, or with
+    ``per_position`` each position with its own velocity (the result ``(P, 1)``), in the compiled loop of
     :func:`fgdoppler.estimators.grid_kernels.window_costs`.
 
     No per-element guard: a trajectory through a sensor makes the root 0 (or NaN for a round-off negative) and
@@ -461,7 +446,8 @@ def _chunk_costs(U: FloatArray, c: FloatArray, s2: FloatArray, plan: _TermPlan, 
     """
     from fgdoppler.estimators.grid_kernels import window_costs
 
-    return window_costs(U, c, s2, plan.sensor, plan.time, plan.tx, plan.rx, z, w, huber_k)
+    return window_costs(pos, sensors, vel, s2, per_position, plan.sensor, plan.time, plan.tx, plan.rx, z, w,
+                        huber_k)
 
 
 def grid_search(

@@ -4,8 +4,7 @@ For a candidate start position :math:`\mathbf p_0` and velocity
 :math:`\mathbf v`, and a sensor :math:`\mathbf s`, with
 :math:`\mathbf a = \mathbf p_0 - \mathbf s`, :math:`U = \mathbf a\cdot\mathbf v`,
 :math:`c = \lVert\mathbf a\rVert^2` and :math:`s^2 = \lVert\mathbf v\rVert^2`
-(:func:`fgdoppler.estimators.grid._product_costs` forms :math:`U` and
-:math:`c` as outer products), the range rate at time :math:`t` is
+the range rate at time :math:`t` is
 
 .. math:: \dot r(t) = \frac{U + t s^2}{\sqrt{c + 2tU + t^2 s^2}},
 
@@ -17,10 +16,14 @@ and the cost of the candidate is
 (:func:`fgdoppler.models.robust.huber_rho`) with a threshold.  Each distinct
 (sensor, time) term is computed once per candidate and read by every
 measurement that needs it (a transmitter seen by several receivers at one
-instant).  The operations are numpy's in the same order (the terms, then the
-sum over measurements in window order), and numba compiles without
-fast-math, so the costs are those of the numpy loop this replaced to the bit
-(``tests/estimators/test_grid.py``).
+instant).  The operations are numpy's in the same order (:math:`\mathbf a`,
+:math:`c` and :math:`U` coordinate by coordinate, the terms, then the sum over
+measurements in window order), and numba compiles without fast-math, so the
+costs are those of the numpy loop this replaced to the bit
+(``tests/estimators/test_grid.py``).  Until 2026-12-06 numpy formed
+:math:`\mathbf a`, :math:`c` and :math:`U` as arrays of positions × sensors
+(× velocities) before this loop; forming them here, per position, spares that
+memory traffic (``benchmarks/bench_grid.py``).
 """
 
 from __future__ import annotations
@@ -33,31 +36,51 @@ __all__ = ["window_costs"]
 
 FloatArray = NDArray[np.float64]
 #: Velocities whose terms are held at once per position: bounds the loop's scratch to
-#: ``TERM_BLOCK`` × (distinct terms) numbers, in the processor's cache for the windows the library scores.
+#: ``TERM_BLOCK`` × (distinct terms + sensors) numbers, in the processor's cache for the windows the library scores.
 TERM_BLOCK = 64
 
 
 @njit(cache=True, error_model="numpy")
-def _costs_loop(U: FloatArray, c: FloatArray, s2: FloatArray, per_position: bool, term_sensor: NDArray[np.intp],
-                term_time: FloatArray, tx_term: NDArray[np.intp], rx_term: NDArray[np.intp], z: FloatArray,
-                w: FloatArray, huber_k: float, out: FloatArray) -> None:  # pragma: no cover - compiled
-    n_pos, _, n_vel = U.shape
+def _costs_loop(pos: FloatArray, sensors: FloatArray, vel: FloatArray, s2: FloatArray, per_position: bool,
+                term_sensor: NDArray[np.intp], term_time: FloatArray, tx_term: NDArray[np.intp],
+                rx_term: NDArray[np.intp], z: FloatArray, w: FloatArray, huber_k: float,
+                out: FloatArray) -> None:  # pragma: no cover - compiled
+    n_pos, dim = pos.shape
+    n_sensors = sensors.shape[0]
+    n_vel = out.shape[1]
     robust = huber_k > 0.0
     two_k = 2.0 * huber_k
     k_squared = huber_k * huber_k
     block = min(n_vel, TERM_BLOCK)
     terms = np.empty((term_sensor.size, block))
+    u = np.empty((n_sensors, block))
+    a = np.empty((n_sensors, 3))
+    c = np.empty(n_sensors)
     for p in range(n_pos):
+        for si in range(n_sensors):
+            for k in range(dim):
+                a[si, k] = pos[p, k] - sensors[si, k]
+            cs = a[si, 0] * a[si, 0] + a[si, 1] * a[si, 1]
+            if dim == 3:
+                cs += a[si, 2] * a[si, 2]
+            c[si] = cs
         for v0 in range(0, n_vel, block):
             nv = min(block, n_vel - v0)
+            for si in range(n_sensors):
+                for b in range(nv):
+                    vi = p if per_position else v0 + b
+                    us = a[si, 0] * vel[vi, 0] + a[si, 1] * vel[vi, 1]
+                    if dim == 3:
+                        us += a[si, 2] * vel[vi, 2]
+                    u[si, b] = us
             for q in range(term_sensor.size):
                 si = term_sensor[q]
                 t = term_time[q]
                 t2 = 2.0 * t
-                cp = c[p, si]
+                cp = c[si]
                 for b in range(nv):
                     sv = s2[p] if per_position else s2[v0 + b]
-                    us = U[p, si, v0 + b]
+                    us = u[si, b]
                     ts2 = t * sv
                     d2 = us * t2
                     d2 += cp
@@ -66,13 +89,13 @@ def _costs_loop(U: FloatArray, c: FloatArray, s2: FloatArray, per_position: bool
             for b in range(nv):
                 out[p, v0 + b] = 0.0
             for j in range(z.size):
-                a = tx_term[j]
+                ta = tx_term[j]
                 r_ = rx_term[j]
                 zj = z[j]
                 wj = w[j]
                 for b in range(nv):
                     h = 0.0
-                    h += terms[a, b]
+                    h += terms[ta, b]
                     h += terms[r_, b]
                     r = (zj - h) * wj
                     if robust and abs(r) > huber_k:
@@ -81,19 +104,23 @@ def _costs_loop(U: FloatArray, c: FloatArray, s2: FloatArray, per_position: bool
                         out[p, v0 + b] += r * r
 
 
-def window_costs(U: FloatArray, c: FloatArray, s2: FloatArray, term_sensor: NDArray[np.intp],
-                 term_time: FloatArray, tx_term: NDArray[np.intp], rx_term: NDArray[np.intp], z: FloatArray,
-                 w: FloatArray, huber_k: float | None) -> FloatArray:
+def window_costs(pos: FloatArray, sensors: FloatArray, vel: FloatArray, s2: FloatArray, per_position: bool,
+                 term_sensor: NDArray[np.intp], term_time: FloatArray, tx_term: NDArray[np.intp],
+                 rx_term: NDArray[np.intp], z: FloatArray, w: FloatArray, huber_k: float | None) -> FloatArray:
     r"""Costs ``(P, V)`` of ``P`` positions × ``V`` velocities (or ``(n, 1)`` of ``n`` pairs of them).
 
     Parameters
     ----------
-    U : ndarray, shape ``(P, S, V)``
-        :math:`U` of each position, sensor and velocity.
-    c : ndarray, shape ``(P, S)``
-        :math:`c` of each position and sensor.
-    s2 : ndarray, shape ``(V,)`` or ``(P, 1)``
-        :math:`s^2` of each velocity, or of each position's own velocity (then ``V`` is 1).
+    pos : ndarray, shape ``(P, d)``
+        Start positions (``d`` = 2 or 3).
+    sensors : ndarray, shape ``(S, d)``
+        The distinct sensor positions.
+    vel : ndarray, shape ``(V, d)``, or ``(P, d)`` with ``per_position``
+        Velocities.
+    s2 : ndarray, shape ``(V,)``, or ``(P,)`` with ``per_position``
+        :math:`s^2` of each velocity.
+    per_position : bool
+        Each position with its own velocity (the result is ``(P, 1)``) instead of with every velocity.
     term_sensor, term_time : ndarray, shape ``(T,)``
         The distinct (sensor, time) terms.
     tx_term, rx_term : ndarray, shape ``(m,)``
@@ -108,10 +135,10 @@ def window_costs(U: FloatArray, c: FloatArray, s2: FloatArray, term_sensor: NDAr
     ndarray, shape ``(P, V)``
         The costs; ``inf`` or NaN where a trajectory passes through a sensor.
     """
-    n_pos, _, n_vel = U.shape
-    out = np.empty((n_pos, n_vel))
-    _costs_loop(np.ascontiguousarray(U), np.ascontiguousarray(c), np.ascontiguousarray(s2, dtype=np.float64).reshape(-1),
-                s2.ndim == 2, np.ascontiguousarray(term_sensor, dtype=np.intp), np.ascontiguousarray(term_time),
+    out = np.empty((pos.shape[0], 1 if per_position else vel.shape[0]))
+    _costs_loop(np.ascontiguousarray(pos, dtype=np.float64), np.ascontiguousarray(sensors, dtype=np.float64),
+                np.ascontiguousarray(vel, dtype=np.float64), np.ascontiguousarray(s2, dtype=np.float64).reshape(-1),
+                per_position, np.ascontiguousarray(term_sensor, dtype=np.intp), np.ascontiguousarray(term_time),
                 np.ascontiguousarray(tx_term, dtype=np.intp), np.ascontiguousarray(rx_term, dtype=np.intp),
                 np.ascontiguousarray(z, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64),
                 0.0 if huber_k is None else float(huber_k), out)

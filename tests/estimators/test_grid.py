@@ -77,6 +77,58 @@ def test_shared_sensor_terms_change_no_cost(monkeypatch: pytest.MonkeyPatch, dim
                                rtol=1e-12)
 
 
+def _numpy_costs(geo: fd.Geometry, bt: fd.StackedTimes, z: np.ndarray, w: np.ndarray, pos: np.ndarray,
+                 vel: np.ndarray, huber_k: float | None) -> np.ndarray:
+    """The grid's cost of every (position, velocity) in numpy's array operations, the kernel's order of operations:
+    offsets and dot products coordinate by coordinate, each measurement's transmitter term then receiver term."""
+    from fgdoppler.models.robust import huber_rho
+
+    d = pos.shape[1]
+    tx, rx = (np.array([getattr(p, end)[:d] for p in geo.pairs], dtype=float) for end in ("tx", "rx"))
+    s2 = vel[:, 0] * vel[:, 0] + vel[:, 1] * vel[:, 1]
+    s2 = s2 + vel[:, 2] * vel[:, 2] if d == 3 else s2
+    out = np.zeros((pos.shape[0], vel.shape[0]))
+
+    def rate(sensor: np.ndarray, t: float) -> np.ndarray:
+        a = [pos[:, k] - sensor[k] for k in range(d)]
+        c = a[0] * a[0] + a[1] * a[1]
+        c = c + a[2] * a[2] if d == 3 else c
+        U = a[0][:, None] * vel[None, :, 0] + a[1][:, None] * vel[None, :, 1]
+        U = U + a[2][:, None] * vel[None, :, 2] if d == 3 else U
+        ts2 = t * s2
+        d2 = U * (2.0 * t) + c[:, None] + t * ts2
+        return (U + ts2) / np.sqrt(d2)
+
+    for j in range(bt.size):
+        h = 0.0 + rate(tx[bt.pair[j]], bt.t[j]) + rate(rx[bt.pair[j]], bt.t[j])
+        out += huber_rho((z[j] - h) * w[j], huber_k)
+    return out
+
+
+@pytest.mark.parametrize(("dim", "huber_k"), [(2, None), (3, 1.345)])
+def test_the_compiled_costs_are_numpys_to_the_bit(dim: int, huber_k: float | None) -> None:
+    """The compiled loop forms the offsets, the dot products, the terms and the sum itself; every cost is the one
+    numpy's array operations give in the same order, to the bit, for every position against every velocity and
+    for positions each with its own velocity (a pruned search's survivors), chunked or not."""
+    import fgdoppler.estimators.grid as grid
+
+    rng = np.random.default_rng(11)
+    geo = random_geometry(rng, 3)
+    if dim == 3:
+        geo = fd.Geometry(pairs=tuple(fd.BistaticPair(tx=(*p.tx, rng.uniform(0, 300)), rx=(*p.rx, rng.uniform(0, 300)))
+                                      for p in geo.pairs))
+    t = np.repeat(np.arange(8) * 0.5, 3)
+    bt = fd.StackedTimes(pair=np.tile(np.arange(3), 8), t=t)
+    z, w = rng.normal(0.0, 50.0, t.size), 1.0 / rng.uniform(0.5, 2.0, t.size)
+    pos, vel = rng.uniform(-40e3, 40e3, (70, dim)), rng.uniform(-250.0, 250.0, (90, dim))
+    expected = _numpy_costs(geo, bt, z, w, pos, vel, huber_k)
+    for chunk in (1, 500, 10**6):
+        np.testing.assert_array_equal(grid._product_costs(geo, bt, z, w, pos, vel, chunk, huber_k), expected)
+    every = np.arange(pos.shape[0] * vel.shape[0])[::37]
+    pairs = grid._pair_costs(geo, bt, z, w, pos[every // vel.shape[0]], vel[every % vel.shape[0]], 13, huber_k)
+    np.testing.assert_array_equal(pairs, expected.reshape(-1)[every])
+
+
 def test_candidates_are_distinct_local_minima() -> None:
     sim, bt, z, s = _window("a", 25e3)
     r = grid_search(sim.scenario.geometry, bt, z, s, PAPER_ZONE, k_best=8)
