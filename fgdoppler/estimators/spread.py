@@ -229,20 +229,23 @@ slowly (case a 5 km and case b 45 km: 120 s).
 
 Below the limit the probe still runs (five costs), against the sampled
 cost's own quadratic model as above: that cost is the data's likelihood of
-a straight track, and where it bends beyond :data:`TRUST_LIMIT` times its
-quadratic model no Gaussian describes the smoother's posterior either,
-which only adds the process noise's freedom to it.  The track and the
-Laplace covariances are then reported unchanged with a ``doubtful``
-``nonlinear`` finding (:func:`_untrusted_laplace`).  Measured
-(2026-12-06, a script not kept): four pairs in 3-D over 60 s, shares
-0.13-0.15 and ratios 1.7·10³-8.5·10⁴ in three of six recordings, every
-one ``ok`` before with a run-averaged NEES of 24-123 for six dimensions
-(the position block alone 0.23-0.87: the truth lies off a thin direction
-mixing speed and position); the 2-D cells above (shares 0.09-0.11) give
-ratios 0.89-1.0 and stay as they were.  A random 3-D layout over 60 s
-with share 0.23 and ratio 271 became ``doubtful`` at a NEES of 4.3, as
-the same ratio above the limit already made it: the finding is the
-probe's, not the NEES's.
+a straight track, and where it bends beyond the verdict's
+:data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` times its quadratic
+model the smoother's posterior, which only adds the process noise's
+freedom to it, is misdescribed by the Laplace covariance too, and no
+samples correct it.  The track and the Laplace covariances are then
+reported unchanged with a ``doubtful`` ``nonlinear`` finding
+(:func:`_untrusted_laplace`; beyond :data:`TRUST_LIMIT` it adds that no
+Gaussian describes the posterior).  Measured (``python
+studies/process_noise_share.py``, its 3-D cell: four pairs on masts, an
+aircraft 50-70 km out, 60 s, 20 runs): eight runs had shares 0.045-0.24
+and ratios 56-3.0·10⁴, every one ``ok`` before with a run-averaged NEES
+of 8-435 for six dimensions (the position block alone 0.29-1.72 in all
+of them: the truth lies off a thin direction mixing speed and position);
+the 2-D cells above (shares 0.09-0.11) give ratios 0.89-1.0 and stay as
+they were.  A random 3-D layout over 60 s with share 0.23 and ratio 271
+became ``doubtful`` at a NEES of 4.3, as the same ratio above the limit
+already made it: the finding is the probe's, not the NEES's.
 
 Above the limit the process noise still has its share, so both tests that
 decide on sampling compare the sampled cost with itself, not with the
@@ -365,7 +368,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from fgdoppler.estimators.curvature import probe_axis, probe_rises
+from fgdoppler.estimators.curvature import CURVATURE_LIMIT, probe_axis, probe_rises
 from fgdoppler.estimators.linearized_posterior import linearized_filter, mean_square_errors
 from fgdoppler.estimators.particle_posterior import _Data, _Posterior, _weighted_cov
 from fgdoppler.estimators.settings import ParticleSettings
@@ -622,25 +625,30 @@ def _curved(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
 def _untrusted_laplace(states: FloatArray, covariances: FloatArray, ratio: float, share: float
                        ) -> PosteriorSpread | None:
     r"""A ``"doubtful"`` ``nonlinear`` finding, the Laplace track unchanged, where the process noise's share of
-    the variance forbids sampling and the probe's ``ratio`` lies beyond :data:`TRUST_LIMIT` (either way); ``None``
-    within it.
+    the variance forbids sampling and the probe's ``ratio`` lies beyond
+    :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` (either way); ``None`` within it.
 
     Below :data:`DETERMINISTIC_MIN` the samples, moving at exactly constant velocity, would map another
     posterior than the smoother's, so none are drawn (module docstring, "Where the process noise matters").
-    The constant-velocity cost is still the data's own likelihood of a straight track: where it bends beyond
-    :data:`TRUST_LIMIT` times its quadratic model, no Gaussian describes that posterior and the smoother's,
-    which adds only the process noise's freedom to it, is not described by its Laplace covariance either.
-    Measured on 60 s recordings of four pairs in 3-D (a script of 2026-12-06, not kept; docs/concepts.md,
-    "Where the process noise matters"): shares 0.13-0.15, ratios 1.7·10³-8.5·10⁴, run-averaged NEES 24-123 for
-    six dimensions, the status ``ok`` before this finding.
+    The constant-velocity cost is still the data's own likelihood of a straight track: where it bends
+    :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` times beyond its quadratic model (the verdict's
+    level for a covariance that misdescribes the likelihood), the smoother's posterior, which adds only the
+    process noise's freedom to it, is not described by its Laplace covariance either, and nothing here
+    corrects it; beyond :data:`TRUST_LIMIT` the message says that no Gaussian could.  Measured with
+    ``python studies/process_noise_share.py`` (its 3-D cell, four pairs on masts, 60 s, 20 runs): eight of the
+    smoother's runs had shares 0.045-0.24 and ratios 56-3.0·10⁴, every one ``ok`` before with a run-averaged
+    NEES of 8-435 for six dimensions (docs/concepts.md, "A bend beyond trust where nothing is sampled"); the
+    2-D cells' shares of 0.09-0.11 come with ratios of 0.89-1.0.
     """
-    if 1.0 / TRUST_LIMIT <= ratio <= TRUST_LIMIT:
+    if 1.0 / CURVATURE_LIMIT <= ratio <= CURVATURE_LIMIT:
         return None
+    beyond = "" if 1.0 / TRUST_LIMIT <= ratio <= TRUST_LIMIT else f"; {_BEYOND_TRUST}{_FAR_OFF}"
     reason = Reason(code="nonlinear", status="doubtful", message=(
         f"the likelihood is not Gaussian about the estimate (3 standard deviations along the major axis raise the "
         f"cost of a constant-velocity track {ratio:.3g} times its quadratic model), and the process noise sets "
         f"most of the variance along that axis (the constant-velocity track accounts for {share:.2f} of it), so no "
-        f"posterior samples can map it: the Laplace covariance is reported, but {_BEYOND_TRUST}{_FAR_OFF}"))
+        f"posterior samples can map it: the Laplace covariance is reported, and it misstates the uncertainty "
+        f"(poor observability){beyond}"))
     return PosteriorSpread(states=np.asarray(states, dtype=float), covariances=np.asarray(covariances, dtype=float),
                            reason=reason)
 
