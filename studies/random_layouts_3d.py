@@ -11,7 +11,7 @@ layout's extent along its first baseline), at least 2 km from
 every sensor — at 50 m/s to ``--speed-max`` (default the zone's bound of
 200 m/s; faster targets the initiation refuses, counted as refused) in a
 uniform heading, climbing or descending by up to 3 degrees; it records 30 s
-at 2 scans/s.  Every estimator runs from the default initiation (the 3-D
+(``--duration``) at 2 scans/s.  Every estimator runs from the default initiation (the 3-D
 smoother always searches its altitude levels and the whole recording; the
 filters' verdict uses it as the reference).  An answer is *wrong* as in the
 2-D study: its final position is farther from the truth than three standard
@@ -24,7 +24,7 @@ start height stays above the ground): the frame's third axis is then the sensors
 the sky's side (:func:`fgdoppler.frames.sensor_frame`).
 
 Run: ``python studies/random_layouts_3d.py [--draws 60] [--first 0] [--speed-max 200] [--ceiling 4500]
-[--square 40] [--sites 0] [--out DIR]`` (draws ``first`` to ``first + draws - 1``; a smaller square brings the
+[--square 40] [--sites 0] [--duration 30] [--out DIR]`` (draws ``first`` to ``first + draws - 1``; a smaller square brings the
 sensors closer to the aircraft, which sees its height better).
 """
 
@@ -85,9 +85,9 @@ def draw(i: int, speed_max: float = 200.0, ceiling: float = 4500.0, square: floa
 
 @one_blas_thread
 def one(k: int, speed_max: float = 200.0, first: float = 0.0, ceiling: float = 4500.0,
-        square: float = SQUARE / 1e3, sites: float = 0.0) -> dict[str, Any]:
+        square: float = SQUARE / 1e3, sites: float = 0.0, duration: float = 30.0) -> dict[str, Any]:
     i = k + int(first)
-    out, sim, init = recorded(i, *draw(i, speed_max, ceiling, square * 1e3, sites))
+    out, sim, init = recorded(i, *draw(i, speed_max, ceiling, square * 1e3, sites), duration=duration)
     if init is None:
         return out
     out["initiation"] = str(init.status)
@@ -100,7 +100,7 @@ def one(k: int, speed_max: float = 200.0, first: float = 0.0, ceiling: float = 4
 def main() -> None:
     a, all_rows = _common.each_count(one, __doc__.splitlines()[0], "draws", 60,
                                      {"speed_max": 200.0, "first": 0.0, "ceiling": 4500.0, "square": SQUARE / 1e3,
-                                      "sites": 0.0})
+                                      "sites": 0.0, "duration": 30.0})
     rows = saved(all_rows, a.out, "random_layouts_3d.json", "wrong and ok / ok / all")
     for name in fd.ESTIMATORS:
         wrong = sum(r["rows"][name][3] for r in rows)
