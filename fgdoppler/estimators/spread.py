@@ -521,7 +521,8 @@ class PosteriorSpread:
         the finding says that they are not to be trusted.
     reason
         An informational ``nonlinear`` finding that says what was done
-        (``"doubtful"`` beyond :data:`TRUST_LIMIT`).
+        (``"doubtful"`` beyond :data:`TRUST_LIMIT`, and always with the
+        untrusted Laplace covariances).
     """
 
     states: FloatArray
@@ -559,7 +560,8 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
         fair and the posterior mean is not shifted (or ``mean`` is off),
         the recording is longer than :data:`MAX_SPAN`, the process noise
         sets the variance along the probe's axis (:data:`DETERMINISTIC_MIN`)
-        and the probe finds the bend within :data:`TRUST_LIMIT` (beyond it
+        and the probe finds the bend within
+        :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` (beyond it
         the input track and covariances come back unchanged, with a
         ``"doubtful"`` finding), or the sampler cannot run (no finite
         posterior around the estimate).
@@ -587,7 +589,7 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     ratio = min(lo, hi) / quad
     if share < DETERMINISTIC_MIN:
         # the process noise, not the data, sets the uncertainty the samples would map: none are drawn, but a
-        # bend no Gaussian describes still leaves the Laplace covariance untrustworthy
+        # bend the Laplace covariance cannot describe must still be said
         return _untrusted_laplace(states, covariances, ratio, share)
     rng = np.random.default_rng(seed)
     laplace, own = np.asarray(covariances, dtype=float), _own_model(icv, P0)
