@@ -24,6 +24,11 @@ costs are those of the numpy loop this replaced to the bit
 :math:`\mathbf a`, :math:`c` and :math:`U` as arrays of positions × sensors
 (× velocities) before this loop; forming them here, per position, spares that
 memory traffic (``benchmarks/bench_grid.py``).
+
+:func:`minima_among` tells which of some candidates are local minima of the
+grid, looking at their neighbours only: the pruned search scores a few per
+cent of the grid, and a filter over the whole grid (mostly infinite) cost
+about as much as scoring them.
 """
 
 from __future__ import annotations
@@ -32,7 +37,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["window_costs"]
+__all__ = ["minima_among", "window_costs"]
 
 FloatArray = NDArray[np.float64]
 #: Velocities whose terms are held at once per position: bounds the loop's scratch to
@@ -142,4 +147,75 @@ def window_costs(pos: FloatArray, sensors: FloatArray, vel: FloatArray, s2: Floa
                 np.ascontiguousarray(tx_term, dtype=np.intp), np.ascontiguousarray(rx_term, dtype=np.intp),
                 np.ascontiguousarray(z, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64),
                 0.0 if huber_k is None else float(huber_k), out)
+    return out
+
+
+@njit(cache=True)
+def _minima_loop(cost: FloatArray, shape: NDArray[np.intp], wrap_last: bool, flat: NDArray[np.intp],
+                 out: NDArray[np.bool_]) -> None:  # pragma: no cover - compiled
+    d = shape.size
+    strides = np.empty(d, dtype=np.intp)
+    stride = 1
+    for k in range(d - 1, -1, -1):
+        strides[k] = stride
+        stride *= shape[k]
+    index = np.empty(d, dtype=np.intp)
+    for i in range(flat.size):
+        f = flat[i]
+        here = cost[f]
+        rest = f
+        for k in range(d):
+            index[k] = rest // strides[k]
+            rest -= index[k] * strides[k]
+        lowest = True
+        for code in range(3 ** d):
+            g = 0
+            inside = True
+            c = code
+            for k in range(d - 1, -1, -1):
+                j = index[k] + c % 3 - 1
+                c //= 3
+                if j < 0 or j >= shape[k]:
+                    if k == d - 1 and wrap_last:
+                        j %= shape[k]
+                    else:
+                        # clamped to the edge, the neighbour is another member of the box: nothing to compare
+                        inside = False
+                        break
+                g += j * strides[k]
+            if inside and cost[g] < here:
+                lowest = False
+                break
+        out[i] = lowest
+
+
+def minima_among(cost: FloatArray, shape: tuple[int, ...], wrap_last: bool,
+                 flat: NDArray[np.intp]) -> NDArray[np.bool_]:
+    r"""Which of the candidates ``flat`` are no worse than any grid neighbour.
+
+    A candidate :math:`i` of the grid ``cost.reshape(shape)`` is a local
+    minimum when :math:`e_i \le e_j` for every :math:`j` in the
+    :math:`3^d` box around it: ``cube == minimum_filter(cube, size=3)`` with
+    the mode ``"nearest"`` on every axis (a neighbour beyond the edge is
+    another member of the box) and ``"wrap"`` on the last where
+    ``wrap_last`` (headings over the full circle).
+
+    Parameters
+    ----------
+    cost : ndarray, shape ``(prod(shape),)``
+        The grid's costs, flat; no NaN (the scorers map it to ``inf``).
+    shape : tuple of int
+        The grid's axes.
+    wrap_last : bool
+        Whether the last axis wraps around.
+    flat : ndarray of int
+        The candidates to test.
+
+    Returns
+    -------
+    ndarray of bool, shape ``flat.shape``
+    """
+    out = np.empty(flat.size, dtype=np.bool_)
+    _minima_loop(np.ascontiguousarray(cost, dtype=np.float64), np.asarray(shape, dtype=np.intp), bool(wrap_last),
+                 np.ascontiguousarray(flat, dtype=np.intp), out)
     return out

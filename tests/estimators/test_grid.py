@@ -129,6 +129,29 @@ def test_the_compiled_costs_are_numpys_to_the_bit(dim: int, huber_k: float | Non
     np.testing.assert_array_equal(pairs, expected.reshape(-1)[every])
 
 
+@pytest.mark.parametrize("shape", [(7,), (5, 6), (4, 3, 5, 6), (3, 4, 2, 3, 5), (3, 1, 2)])
+@pytest.mark.parametrize("wrap_last", [False, True])
+def test_local_minima_among_candidates_are_the_filters(shape: tuple[int, ...], wrap_last: bool) -> None:
+    """The neighbour test on some candidates agrees with scipy's minimum filter over the whole grid: integer costs
+    (many ties), infinite patches (unscored candidates), edges clamped or wrapped."""
+    from scipy.ndimage import minimum_filter
+
+    from fgdoppler.estimators.grid_kernels import minima_among
+
+    rng = np.random.default_rng(len(shape) + 10 * wrap_last)
+    for _ in range(20):
+        cost = rng.integers(0, 4, size=int(np.prod(shape))).astype(float)
+        cost[rng.random(cost.size) < 0.3] = np.inf
+        modes = ["nearest"] * (len(shape) - 1) + ["wrap" if wrap_last else "nearest"]
+        cube = cost.reshape(shape)
+        expected = np.flatnonzero((cube == minimum_filter(cube, size=3, mode=modes)) & np.isfinite(cube))
+        finite = np.flatnonzero(np.isfinite(cost))
+        np.testing.assert_array_equal(finite[minima_among(cost, shape, wrap_last, finite)], expected)
+        some = rng.permutation(finite)[: finite.size // 2]  # any order, any subset: each judged on its own
+        np.testing.assert_array_equal(np.sort(some[minima_among(cost, shape, wrap_last, some)]),
+                                      np.intersect1d(some, expected))
+
+
 def test_candidates_are_distinct_local_minima() -> None:
     sim, bt, z, s = _window("a", 25e3)
     r = grid_search(sim.scenario.geometry, bt, z, s, PAPER_ZONE, k_best=8)
