@@ -1062,6 +1062,7 @@ def test_a_bend_the_process_noise_keeps_from_sampling_is_reported(run: int) -> N
     out = fd.run_estimator("smoother", m, model, init, verify=False)
     found = [r for r in out.reasons if r.code == "nonlinear"]
     assert [r.status for r in found] == ["doubtful"], out.message
+    assert "process noise sets most of the variance" in found[0].message
     assert re.search(r"track accounts for 0\.\d\d of it", found[0].message), found[0].message
     bend = re.search(r"raise the cost of a constant-velocity track (\S+) times", found[0].message)
     assert bend is not None and float(bend.group(1)) > CURVATURE_LIMIT
