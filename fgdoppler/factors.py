@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from functools import partial
+from typing import TYPE_CHECKING
 
 import gtsam
 import numpy as np
@@ -42,11 +43,14 @@ from gtsam.symbol_shorthand import X
 from numpy.typing import ArrayLike, NDArray
 
 from fgdoppler.geometry import Geometry
-from fgdoppler.models.doppler import StackedTimes, _cv, _cv_along
+from fgdoppler.models.doppler import StackedTimes, _cv, _kernels, _singular_error
 from fgdoppler.models.motion import ConstantVelocity
 from fgdoppler.models.observation import DopplerModel, MeasurementModel
 from fgdoppler.models.robust import huber_residuals
 from fgdoppler.zone import Zone
+
+if TYPE_CHECKING:
+    from fgdoppler.models.doppler_kernels import Along
 
 __all__ = [
     "X",
@@ -90,15 +94,14 @@ def _checked(jac: FloatArray, rows: int, cols: int, what: str) -> FloatArray:
     out = np.ascontiguousarray(jac, dtype=float)
     if out.shape != (rows, cols):
         raise RuntimeError(f"{what}: Jacobian shape {out.shape}, expected {(rows, cols)}")
-    # The entries' sum is finite exactly when every entry is, unless it overflows, where the entry-wise test
-    # rules.  Summed as plain floats for a scan's few rows, by numpy for a window's: either costs a fraction of
-    # the entry-wise test.
+    # For a scan's few rows: the entries' sum as plain floats, finite exactly when every entry is unless it
+    # overflows, where the entry-wise test rules (numpy's per-call overhead is most of the cost there).  For a
+    # window's rows numpy's entry-wise test costs less than the sum under np.errstate (1.4 against 2.4 us for
+    # 20 to 100 rows).
     if out.size <= 64:
-        total = sum(out.ravel().tolist())
-    else:
-        with np.errstate(over="ignore", invalid="ignore"):  # an overflow or inf - inf is what is tested for
-            total = float(out.sum())
-    if not math.isfinite(total) and not np.all(np.isfinite(out)):
+        if not math.isfinite(sum(out.ravel().tolist())) and not np.all(np.isfinite(out)):
+            raise RuntimeError(f"{what}: non-finite Jacobian")
+    elif not np.isfinite(out).all():
         raise RuntimeError(f"{what}: non-finite Jacobian")
     return out
 
@@ -257,7 +260,7 @@ def region_factor(key: int, zone: Zone, *, wall_sigma: tuple[float, float] = (10
 def _cv_error(
     geometry: Geometry,
     times: StackedTimes,
-    sensors: tuple[FloatArray, FloatArray],
+    along: Along,
     z: FloatArray,
     sigma: FloatArray,
     huber_k: float | None,
@@ -266,8 +269,10 @@ def _cv_error(
     jacobians: list[FloatArray] | None,
 ) -> FloatArray:
     x0 = values.atVector(this.keys()[0])
-    if x0.size == 2 * sensors[0].shape[1]:  # the window's sensors, picked and checked when the factor was built
-        g, J, _ = _cv_along(x0, times.t, *sensors, jacobian=jacobians is not None)
+    if x0.size == along.state_size:  # the window's sensors, picked, checked and laid out when the factor was built
+        g, J, singular = along(x0, jacobian=jacobians is not None)
+        if singular is not None:
+            raise _singular_error(singular)
     else:
         g, J, _ = _cv(x0, geometry, times, jacobian=jacobians is not None)
     e, J = _robust(g - z, J, sigma, huber_k)
@@ -300,5 +305,5 @@ def cv_factor(
     _check_huber(huber_k)
     s = np.broadcast_to(np.asarray(sigma, dtype=float), z.shape).copy()
     tx, rx = geometry.positions(geometry.dim)
-    return gtsam.CustomFactor(noise_model(s), [int(key)],
-                              partial(_cv_error, geometry, bt, (tx[bt.pair], rx[bt.pair]), z.copy(), s, huber_k))
+    along = _kernels().Along(bt.t, tx[bt.pair], rx[bt.pair])
+    return gtsam.CustomFactor(noise_model(s), [int(key)], partial(_cv_error, geometry, bt, along, z.copy(), s, huber_k))

@@ -237,27 +237,30 @@ class Zone:
         Jacobian rows of the position terms are the local axes.  ``d + 1``
         rows for a ``d``-dimensional zone.
         """
-        # plain floats: this runs once per LM iteration as a Python callback, where numpy's
-        # per-call overhead would be most of the cost
+        # Plain floats: this runs at every Levenberg-Marquardt step of the initiation as the zone wall's Python
+        # callback (a third of a constant-velocity window's refinement), where numpy's per-call overhead would
+        # be most of the cost.  Inside the zone, the common case, nothing but the tests is computed.
         d = self.dim
-        x = [float(v) for v in np.asarray(state, dtype=float).reshape(-1)]
+        x = np.asarray(state, dtype=float).reshape(-1).tolist()
         if len(x) != 2 * d:
             raise ValueError(f"a {d}-D zone takes a state of {2 * d} numbers, got {len(x)}")
-        origin, basis = self.frame.origin, self.frame.basis
+        e = np.zeros(d + 1)
+        J = np.zeros((d + 1, 2 * d))
+        origin = self.frame.origin
         rel = [x[i] - origin[i] for i in range(d)]
-        local = [sum(row[i] * rel[i] for i in range(d)) for row in basis]
-        e = [0.0] * (d + 1)
-        J = [[0.0] * (2 * d) for _ in range(d + 1)]
-        for i, (v, (lo, hi), row) in enumerate(zip(local, self.intervals, basis, strict=True)):
+        for i, ((lo, hi), row) in enumerate(zip(self.intervals, self.frame.basis, strict=True)):
+            v = 0.0
+            for k in range(d):
+                v += row[k] * rel[k]
             if v < lo or v > hi:
                 e[i] = v - lo if v < lo else v - hi
-                J[i][:d] = row
+                J[i, :d] = row
         vel = x[d:]
         speed = math.hypot(*vel)
         if speed > self.speed_max:
             e[d] = speed - self.speed_max
-            J[d][d:] = [c / speed for c in vel]
-        return np.array(e), np.array(J)
+            J[d, d:] = [c / speed for c in vel]
+        return e, J
 
     def excess_text(self, state: ArrayLike) -> str:
         """:meth:`excess` of ``state`` in a finding's words, each number named by its axis

@@ -9,6 +9,7 @@ import pytest
 import fgdoppler as fd
 from fgdoppler import factors
 from fgdoppler.factors import X
+from fgdoppler.models.doppler_kernels import Along
 from fgdoppler.models.observation import DopplerModel
 from tests.conftest import random_states
 
@@ -50,19 +51,22 @@ def test_error_only_call_computes_no_jacobian(monkeypatch: pytest.MonkeyPatch) -
     monkeypatch.setattr(DopplerModel, "at_state", spy)
     assert np.isfinite(f.error(v))
     assert asked == [False]
-    real_cv = factors._cv
+    real_along = Along.__call__
+    window_asked: list[bool] = []  # the window factor's calls of its laid-out evaluator
 
-    def batch_no_jac(*args: object, jacobian: bool, **kwargs: object):
-        if jacobian:
-            raise AssertionError("Jacobian computed in an error-only call")
-        return real_cv(*args, jacobian=jacobian, **kwargs)
+    def window_spy(self: Along, *args: object, jacobian: bool):
+        window_asked.append(jacobian)
+        return real_along(self, *args, jacobian=jacobian)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(factors, "_cv", batch_no_jac)
+    monkeypatch.setattr(Along, "__call__", window_spy)
     assert np.isfinite(bf.error(v))
-    # and the linearising call does use the Jacobian path, once
+    assert window_asked == [False]
+    # and the linearising calls do use the Jacobian path, once
     asked.clear()
+    window_asked.clear()
     f.linearize(v)
-    assert asked == [True]
+    bf.linearize(v)
+    assert asked == [True] and window_asked == [True]
 
 
 def test_cv_factor_equals_g_and_J(rng: np.random.Generator, paper_geom: fd.Geometry) -> None:
@@ -74,6 +78,18 @@ def test_cv_factor_equals_g_and_J(rng: np.random.Generator, paper_geom: fd.Geome
         g, J = fd.cv_doppler_and_jacobian(x0, paper_geom, times)
         np.testing.assert_allclose(A, J / 1.5, rtol=1e-12)
         np.testing.assert_allclose(b, -(g - Z) / 1.5, rtol=1e-12, atol=1e-12)
+
+
+def test_cv_factor_refuses_a_track_through_a_sensor(paper_geom: fd.Geometry) -> None:
+    """A start whose track meets a sensor at a measurement's time has no Doppler there: the window factor raises
+    the model's error (Levenberg-Marquardt reports the step as failed), with and without the Jacobian."""
+    times = [np.array([0.0, 1.0]), np.array([0.0, 1.0])]
+    f = factors.cv_factor(X(0), paper_geom, times, np.zeros(4), 1.0)
+    through_rx = np.r_[paper_geom.rx[0] - np.array([100.0, -50.0]), 100.0, -50.0]  # at receiver 0 at t = 1 s
+    sharing = int(np.sum(np.all(paper_geom.rx == paper_geom.rx[0], axis=1)))  # case a's pairs share it
+    for call in (f.error, f.linearize):
+        with pytest.raises(ValueError, match=f"^{sharing} target position"):
+            call(_values(x0=through_rx))
 
 
 def test_cv_factor_of_a_ground_layout_serves_states_in_space(rng: np.random.Generator,

@@ -279,8 +279,8 @@ def _cv(
 
 def _cv_along(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray, *, jacobian: bool,
               singular: str = "raise") -> tuple[FloatArray, FloatArray | None, NDArray[np.bool_] | None]:
-    """:func:`_cv` with each measurement's sensors given ``(m, d)`` and nothing checked: for a caller that
-    evaluates one window many times (the window factor) and has checked it once."""
+    """:func:`_cv` with each measurement's sensors given ``(m, d)``, laid out at every call (the window factor,
+    which evaluates one window many times, lays them out once: :class:`~fgdoppler.models.doppler_kernels.Along`)."""
     if not jacobian:
         h, mask = _along(x, t, tx, rx, singular=singular)
         return h, None, mask

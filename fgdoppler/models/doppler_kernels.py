@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 
 from fgdoppler.geometry import SENSOR_EPS
 
-__all__ = ["along", "along_and_jacobian"]
+__all__ = ["Along", "along", "along_and_jacobian"]
 
 FloatArray = NDArray[np.float64]
 
@@ -222,3 +222,55 @@ def along_and_jacobian(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatAr
     _jacobian_loop(flat, t, tx, rx, h, jac, bad)
     lead = x.shape[:-1]
     return h.reshape(*lead, t.size), jac.reshape(*lead, t.size, n), bad.reshape(*lead, t.size)
+
+
+class Along:
+    r""":func:`along` and :func:`along_and_jacobian` of one start state at fixed times and sensors.
+
+    For the window factor, which evaluates the same window at every step of
+    Levenberg–Marquardt: the times and sensors are checked and laid out once
+    here, where :func:`along` lays them out at every call (for a window of
+    20 measurements that took most of its time).  The same loops on the same
+    arrays: the numbers of :func:`along` and :func:`along_and_jacobian` to the
+    bit.
+
+    Parameters
+    ----------
+    t : ndarray, shape ``(m,)``
+        Times relative to the start.
+    tx, rx : ndarray, shape ``(m, d)``
+        The transmitter and receiver of each measurement.
+    """
+
+    __slots__ = ("_rows", "_rx", "_t", "_tx")
+
+    def __init__(self, t: FloatArray, tx: FloatArray, rx: FloatArray) -> None:
+        _, self._t, self._tx, self._rx = _flat(np.zeros(2 * np.shape(tx)[-1]), t, tx, rx)
+        d = self._tx.shape[1]
+        self._rows = np.empty((2 * d, self._t.size))
+        self._rows[:d], self._rows[d:] = self._tx.T, self._rx.T
+
+    @property
+    def state_size(self) -> int:
+        """``2d``: the length of the start states it takes."""
+        return 2 * self._tx.shape[1]
+
+    def __call__(self, x: FloatArray, *, jacobian: bool
+                 ) -> tuple[FloatArray, FloatArray | None, NDArray[np.bool_] | None]:
+        """Doppler ``(m,)`` of the track from ``x`` ``(2d,)``, with ``jacobian`` its Jacobian ``(m, 2d)``, and
+        where the track meets a sensor (``None`` where it meets none)."""
+        n = 2 * self._tx.shape[1]
+        if x.shape != (n,):
+            raise ValueError(f"a window of {n // 2}-D sensors takes a start state of {n} numbers, got {x.shape}")
+        flat = np.ascontiguousarray(x, dtype=np.float64).reshape(1, n)
+        m = self._t.size
+        h = np.empty((1, m))
+        bad = np.zeros((1, m), dtype=np.bool_)
+        if jacobian:
+            jac = np.empty((1, m, n))
+            _jacobian_loop(flat, self._t, self._tx, self._rx, h, jac, bad)
+            return h[0], jac[0], bad[0] if bad.any() else None
+        if (_along_plane if n == 4 else _along_space)(flat, self._t, self._rows, h):
+            _singular_flags(flat, self._t, self._tx, self._rx, bad)
+            return h[0], None, bad[0]
+        return h[0], None, None

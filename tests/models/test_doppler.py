@@ -269,3 +269,43 @@ def test_window_jacobian_is_the_per_state_models_chain_rule_to_the_bit(rng: np.r
     h1, J1 = fd.cv_doppler_and_jacobian(x[7], g, times)
     np.testing.assert_array_equal(h1, h[7])
     np.testing.assert_array_equal(J1, J[7])
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_window_laid_out_once_is_the_compiled_loops_to_the_bit(rng: np.random.Generator, dim: int) -> None:
+    """The window factor's evaluator (times and sensors checked and laid out once) gives the numbers, the
+    Jacobian and the singular entries of :func:`~fgdoppler.models.doppler_kernels.along` and
+    ``along_and_jacobian`` exactly, and refuses what they refuse."""
+    from fgdoppler.models import doppler_kernels
+
+    g, _, x = _model_and_states(rng, dim, 3, 20)
+    t = np.sort(rng.uniform(0.0, 30.0, 24))
+    c = rng.integers(0, 3, 24)
+    tx, rx = g.positions(dim)
+    along = doppler_kernels.Along(t, tx[c], rx[c])
+    assert along.state_size == 2 * dim
+    for xi in x:
+        h, none, clear = along(xi, jacobian=False)
+        h_ref, bad_ref = doppler_kernels.along(xi, t, tx[c], rx[c])
+        np.testing.assert_array_equal(h, h_ref)
+        assert none is None and clear is None and not bad_ref.any()
+        hj, J, clear = along(xi, jacobian=True)
+        hj_ref, J_ref, _ = doppler_kernels.along_and_jacobian(xi, t, tx[c], rx[c])
+        np.testing.assert_array_equal(hj, hj_ref)
+        np.testing.assert_array_equal(J, J_ref)
+        assert clear is None
+    # a track that reaches pair 0's receiver at t = 1 s: that entry flagged, by both paths
+    v = np.ones(dim) * 100.0
+    on = doppler_kernels.Along(np.array([0.0, 1.0, 2.0]), tx[[0, 0, 0]], rx[[0, 0, 0]])
+    start = np.concatenate([g.rx[0] - v, v])
+    for jacobian in (False, True):
+        h, _, bad = on(start, jacobian=jacobian)
+        assert bad is not None and bad.tolist() == [False, True, False]
+        np.testing.assert_array_equal(h, doppler_kernels.along(start, np.array([0.0, 1.0, 2.0]),
+                                                                tx[[0, 0, 0]], rx[[0, 0, 0]])[0])
+    with pytest.raises(ValueError, match="start state of"):
+        along(x[0][:-1], jacobian=False)
+    with pytest.raises(ValueError, match="as many transmitters"):
+        doppler_kernels.Along(t[:-1], tx[c], rx[c])
+    with pytest.raises(ValueError, match="coordinates"):
+        doppler_kernels.Along(t, tx[c], rx[c][:, :1])
