@@ -67,6 +67,19 @@ def test_error_only_call_computes_no_jacobian(monkeypatch: pytest.MonkeyPatch) -
     f.linearize(v)
     bf.linearize(v)
     assert asked == [True] and window_asked == [True]
+    # a state in space on the ground layout's window factor: the sensors looked up at each call, by _cv
+    real_cv = factors._cv
+    cv_asked: list[bool] = []
+
+    def cv_spy(*args: object, jacobian: bool, **kwargs: object):
+        cv_asked.append(jacobian)
+        return real_cv(*args, jacobian=jacobian, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(factors, "_cv", cv_spy)
+    in_space = _values(x0=[25e3, 2e3, 1e3, 10.0, -100.0, 0.0])
+    assert np.isfinite(bf.error(in_space))
+    bf.linearize(in_space)
+    assert cv_asked == [False, True] and window_asked == [True]
 
 
 def test_cv_factor_equals_g_and_J(rng: np.random.Generator, paper_geom: fd.Geometry) -> None:
