@@ -158,18 +158,53 @@ def _jacobian_loop(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray,
                 jac[i, j, d + k] = t[j] * dp + (uT + uR)
 
 
-def _flat(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray
-          ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    flat = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, x.shape[-1])
+def _sensors(t: FloatArray, tx: FloatArray, rx: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The times and each measurement's sensors, checked and contiguous."""
     # the loops do not check their indices: sensors of another dimension, or fewer of them than times, would be
     # read out of bounds
-    if flat.shape[1] != 2 * tx.shape[-1] or rx.shape[-1] != tx.shape[-1]:
-        raise ValueError(f"states of {flat.shape[1]} numbers need sensors of {flat.shape[1] // 2} coordinates, "
-                         f"got {tx.shape[-1]} and {rx.shape[-1]}")
+    if rx.shape[-1] != tx.shape[-1]:
+        raise ValueError(f"transmitters of {tx.shape[-1]} coordinates need receivers of as many, got {rx.shape[-1]}")
     if not len(tx) == len(rx) == np.size(t):
         raise ValueError(f"{np.size(t)} times need as many transmitters and receivers, got {len(tx)} and {len(rx)}")
-    return (flat, np.ascontiguousarray(t, dtype=np.float64), np.ascontiguousarray(tx, dtype=np.float64),
+    return (np.ascontiguousarray(t, dtype=np.float64), np.ascontiguousarray(tx, dtype=np.float64),
             np.ascontiguousarray(rx, dtype=np.float64))
+
+
+def _rows(tx: FloatArray, rx: FloatArray) -> FloatArray:
+    """The sensors' coordinates as contiguous rows ``(2d, m)``, as the Doppler loops read them."""
+    d = tx.shape[1]
+    rows = np.empty((2 * d, tx.shape[0]))
+    rows[:d], rows[d:] = tx.T, rx.T
+    return rows
+
+
+def _tracks(x: FloatArray, n: int) -> FloatArray:
+    """Start states ``(..., n)`` as contiguous rows ``(k, n)``; ``n`` is twice the sensors' dimension."""
+    if x.shape[-1] != n:
+        raise ValueError(f"states of {x.shape[-1]} numbers need sensors of {x.shape[-1] // 2} coordinates, "
+                         f"got {n // 2}")
+    return np.ascontiguousarray(x, dtype=np.float64).reshape(-1, n)
+
+
+def _doppler(flat: FloatArray, t: FloatArray, rows: FloatArray, tx: FloatArray, rx: FloatArray
+             ) -> tuple[FloatArray, NDArray[np.bool_], bool]:
+    """Doppler ``(k, m)`` of the tracks ``flat``, where a track meets a sensor, and whether any does."""
+    h = np.empty((flat.shape[0], t.size))
+    bad = np.zeros(h.shape, dtype=np.bool_)
+    singular = bool((_along_plane if flat.shape[1] == 4 else _along_space)(flat, t, rows, h))
+    if singular:
+        _singular_flags(flat, t, tx, rx, bad)
+    return h, bad, singular
+
+
+def _doppler_and_jacobian(flat: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray
+                          ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+    """:func:`_doppler` and the Jacobian ``(k, m, 2d)`` with respect to each start state."""
+    h = np.empty((flat.shape[0], t.size))
+    jac = np.empty((flat.shape[0], t.size, flat.shape[1]))
+    bad = np.zeros(h.shape, dtype=np.bool_)
+    _jacobian_loop(flat, t, tx, rx, h, jac, bad)
+    return h, jac, bad
 
 
 def along(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray
@@ -192,15 +227,10 @@ def along(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray
     singular : ndarray of bool, shape ``(..., m)``
         Where a track meets a sensor (within :data:`fgdoppler.geometry.SENSOR_EPS`).
     """
-    flat, t, tx, rx = _flat(x, t, tx, rx)
-    h = np.empty((flat.shape[0], t.size))
-    bad = np.zeros(h.shape, dtype=np.bool_)
-    d = tx.shape[1]
-    rows = np.empty((2 * d, t.size))
-    rows[:d], rows[d:] = tx.T, rx.T
-    if (_along_plane if flat.shape[1] == 4 else _along_space)(flat, t, rows, h):
-        _singular_flags(flat, t, tx, rx, bad)
-    return h.reshape(*x.shape[:-1], t.size), bad.reshape(*x.shape[:-1], t.size)
+    t, tx, rx = _sensors(t, tx, rx)
+    h, bad, _ = _doppler(_tracks(x, 2 * tx.shape[1]), t, _rows(tx, rx), tx, rx)
+    lead = x.shape[:-1]
+    return h.reshape(*lead, t.size), bad.reshape(*lead, t.size)
 
 
 def along_and_jacobian(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatArray
@@ -214,12 +244,9 @@ def along_and_jacobian(x: FloatArray, t: FloatArray, tx: FloatArray, rx: FloatAr
         :math:`[\partial h_{ij}/\partial\mathbf p_0, \partial h_{ij}/\partial\mathbf v]`.
     singular : ndarray of bool, shape ``(..., m)``
     """
-    flat, t, tx, rx = _flat(x, t, tx, rx)
-    n = flat.shape[1]
-    h = np.empty((flat.shape[0], t.size))
-    jac = np.empty((flat.shape[0], t.size, n))
-    bad = np.zeros(h.shape, dtype=np.bool_)
-    _jacobian_loop(flat, t, tx, rx, h, jac, bad)
+    t, tx, rx = _sensors(t, tx, rx)
+    n = 2 * tx.shape[1]
+    h, jac, bad = _doppler_and_jacobian(_tracks(x, n), t, tx, rx)
     lead = x.shape[:-1]
     return h.reshape(*lead, t.size), jac.reshape(*lead, t.size, n), bad.reshape(*lead, t.size)
 
@@ -229,10 +256,9 @@ class Along:
 
     For the window factor, which evaluates the same window at every step of
     Levenberg–Marquardt: the times and sensors are checked and laid out once
-    here, where :func:`along` lays them out at every call (for a window of
-    20 measurements that took most of its time).  The same loops on the same
-    arrays: the numbers of :func:`along` and :func:`along_and_jacobian` to the
-    bit.
+    here, where :func:`along` does so at every call (for a window of 20
+    measurements that took most of its time).  The same loops on the same
+    arrays: their numbers to the bit.
 
     Parameters
     ----------
@@ -245,32 +271,24 @@ class Along:
     __slots__ = ("_rows", "_rx", "_t", "_tx")
 
     def __init__(self, t: FloatArray, tx: FloatArray, rx: FloatArray) -> None:
-        _, self._t, self._tx, self._rx = _flat(np.zeros(2 * np.shape(tx)[-1]), t, tx, rx)
-        d = self._tx.shape[1]
-        self._rows = np.empty((2 * d, self._t.size))
-        self._rows[:d], self._rows[d:] = self._tx.T, self._rx.T
+        self._t, self._tx, self._rx = _sensors(t, tx, rx)
+        self._rows = _rows(self._tx, self._rx)
 
     @property
     def state_size(self) -> int:
         """``2d``: the length of the start states it takes."""
-        return 2 * self._tx.shape[1]
+        return self._rows.shape[0]
 
     def __call__(self, x: FloatArray, *, jacobian: bool
                  ) -> tuple[FloatArray, FloatArray | None, NDArray[np.bool_] | None]:
         """Doppler ``(m,)`` of the track from ``x`` ``(2d,)``, with ``jacobian`` its Jacobian ``(m, 2d)``, and
         where the track meets a sensor (``None`` where it meets none)."""
-        n = 2 * self._tx.shape[1]
+        n = self._rows.shape[0]
         if x.shape != (n,):
             raise ValueError(f"a window of {n // 2}-D sensors takes a start state of {n} numbers, got {x.shape}")
         flat = np.ascontiguousarray(x, dtype=np.float64).reshape(1, n)
-        m = self._t.size
-        h = np.empty((1, m))
-        bad = np.zeros((1, m), dtype=np.bool_)
         if jacobian:
-            jac = np.empty((1, m, n))
-            _jacobian_loop(flat, self._t, self._tx, self._rx, h, jac, bad)
+            h, jac, bad = _doppler_and_jacobian(flat, self._t, self._tx, self._rx)
             return h[0], jac[0], bad[0] if bad.any() else None
-        if (_along_plane if n == 4 else _along_space)(flat, self._t, self._rows, h):
-            _singular_flags(flat, self._t, self._tx, self._rx, bad)
-            return h[0], None, bad[0]
-        return h[0], None, None
+        h, bad, singular = _doppler(flat, self._t, self._rows, self._tx, self._rx)
+        return h[0], None, bad[0] if singular else None
