@@ -98,10 +98,8 @@ def _checked(jac: FloatArray, rows: int, cols: int, what: str) -> FloatArray:
     # overflows, where the entry-wise test rules (numpy's per-call overhead is most of the cost there).  For a
     # window's rows numpy's entry-wise test costs less than the sum under np.errstate (1.4 against 2.4 us for
     # 20 to 100 rows).
-    if out.size <= 64:
-        if not math.isfinite(sum(out.ravel().tolist())) and not np.all(np.isfinite(out)):
-            raise RuntimeError(f"{what}: non-finite Jacobian")
-    elif not np.isfinite(out).all():
+    few = out.size <= 64
+    if not (few and math.isfinite(sum(out.ravel().tolist()))) and not np.isfinite(out).all():
         raise RuntimeError(f"{what}: non-finite Jacobian")
     return out
 
