@@ -57,12 +57,32 @@ def test_every_estimator_counts_each_task_to_its_total(case_b, name: str) -> Non
     if name == "smoother":
         lm = [t for t in rec.tasks if t[0] == "smoother: Levenberg-Marquardt"]
         assert len(lm) == 1 and lm[0][2] == with_progress.iterations
+        # the split test of the motion model: the whole recording and its two halves, nothing simulated (no finding)
+        assert [t[1:] for t in rec.tasks if t[0] == "smoother: split test of the motion model"] == [[None, 3]]
+        assert "manoeuvre" not in [r.code for r in with_progress.reasons]
     else:
         own = rec.tasks[0]
         assert own[0] == name
         # the window is one step of the streaming trackers; the EKF and the particle estimators start after it
         assert own[1] == n_after_window + (0 if name in ("ekf", "particle", "map") else 1)
         assert any(n.startswith("reference: smoother") for n in names)  # the verdict's reference run
+
+
+def test_the_split_tests_simulated_recordings_are_counted() -> None:
+    # Where the split statistic exceeds its chi-square level, recordings simulated under the model are split and
+    # fitted too (manoeuvre.simulated_scale): three fits for the data and three for each of 4 to 16 of them, each
+    # a step of the one task, so that a long recording's check is seen to move.
+    from fgdoppler.estimators.manoeuvre import MIN_REPLICATES, REPLICATES
+    from tests.estimators.test_manoeuvre import _manoeuvring_two_pair_recording
+
+    g, sim = _manoeuvring_two_pair_recording(4)
+    m = sim.measurements
+    rec = Recorder()
+    res = fd.run_estimator("smoother", m, g, fd.initiate(m.first_per_pair(10), g), progress=rec, verify=False)
+    assert [r.status for r in res.reasons if r.code == "manoeuvre"] == ["doubtful"]
+    # an ambiguous initiation: the hypotheses' smoothers run apart and the best one's findings are made once
+    [(total, steps)] = [t[1:] for t in rec.tasks if t[0].endswith("smoother: split test of the motion model")]
+    assert total is None and steps % 3 == 0 and 3 + 3 * MIN_REPLICATES <= steps <= 3 + 3 * REPLICATES, steps
 
 
 def test_hypotheses_are_named(case_b) -> None:

@@ -130,17 +130,20 @@ def _final_findings(measurements: Measurements, model: TrackingModel, settings: 
         reasons = _outside_findings(measurements, model, settings, sol, init, reasons, progress, memo, walls)
     reasons = _held_with_offsets(measurements, model, settings, sol, reasons, walls)
     return [*reasons, *_model_findings(measurements, model, settings, sol.times, sol.states, joint,
-                                       half_plane=init.half_plane is not None, reported=reported)]
+                                       half_plane=init.half_plane is not None, reported=reported,
+                                       progress=progress)]
 
 
 def _model_findings(measurements: Measurements, model: TrackingModel, settings: SmootherSettings, times: FloatArray,
                     states: FloatArray, joint: JointSolution | str | None, *, half_plane: bool,
-                    reported: Callable[[], FloatArray | None] | None = None) -> list[Reason]:
+                    reported: Callable[[], FloatArray | None] | None = None, progress: Progress | None = None
+                    ) -> list[Reason]:
     """The findings about the model of the track ``states``: the mirror image that free offsets can make a rival
     (``mode_search``, a ``joint`` solution, no ``half_plane``: :func:`_mirror_reason`, with the ``reported``
     covariances where given) and the split test of the
     motion model (``motion_check``), re-fitting the offsets where there is a joint solution
-    (:func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`)."""
+    (:func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`); ``progress`` is told of the split
+    test's fits (:func:`~fgdoppler.estimators.manoeuvre.manoeuvre_reason`)."""
     from fgdoppler.estimators.smoother_offsets import JointSolution, joint_split_statistics
 
     solved = joint if isinstance(joint, JointSolution) else None
@@ -150,7 +153,7 @@ def _model_findings(measurements: Measurements, model: TrackingModel, settings: 
         out += [mirror] if mirror is not None else []
     if settings.motion_check:
         stats = None if solved is None else joint_split_statistics(measurements, model, settings, solved)
-        manoeuvre = manoeuvre_reason(measurements, model, times, states, settings, stats=stats)
+        manoeuvre = manoeuvre_reason(measurements, model, times, states, settings, stats=stats, progress=progress)
         out += [manoeuvre] if manoeuvre is not None else []
     return out
 
