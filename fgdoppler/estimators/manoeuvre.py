@@ -262,18 +262,18 @@ def simulated_scale(measurements: Measurements, model: TrackingModel, times: Flo
     from that track, as on the data from the fitted one.  (Not the fitted
     track itself: fitted to a manoeuvre, it bends more than the process
     noise allows, and data drawn about it make the parts disagree as the
-    manoeuvre did.)  With :math:`ar D` and :math:`s` the mean
+    manoeuvre did.)  With :math:`\bar D` and :math:`s` the mean
     and standard deviation of the largest statistic over :math:`B`
     replicates, the scale is the lower two-standard-error bound of the
     Bartlett factor (Rocke 1989, the bootstrap Bartlett correction),
 
-    .. math:: c = \max\Bigl(1,\ igl(ar D - 2 s / \sqrt{B}igr) / n\Bigr),
+    .. math:: c = \max\Bigl(1,\ \bigl(\bar D - 2 s / \sqrt{B}\bigr) / n\Bigr),
 
     what the simulation shows for certain of how far the statistic's mean
     exceeds the :math:`\chi^2_n` law's :math:`n`; :math:`D / c` then follows
     :math:`\chi^2_n` more closely (module docstring, "Poorly observed
     parts").  Replicates are drawn until ``statistic`` lies beyond the
-    ``level`` scaled by the upper bound (:math:`ar D + 2 s / \sqrt{B}`)
+    ``level`` scaled by the upper bound (:math:`\bar D + 2 s / \sqrt{B}`)
     or within it scaled by the lower one, from :data:`MIN_REPLICATES` to
     :data:`REPLICATES` of them: a clear answer costs few fits.  Random
     numbers from ``settings.seed``; ``progress`` advances once per fit.
@@ -281,7 +281,7 @@ def simulated_scale(measurements: Measurements, model: TrackingModel, times: Flo
     Returns
     -------
     tuple
-        :math:`c`, :math:`ar D`, its standard error :math:`s / \sqrt{B}`
+        :math:`c`, :math:`\bar D`, its standard error :math:`s / \sqrt{B}`
         and :math:`B` (``(1, nan, nan, B)`` where fewer than two replicates
         could be split).
     """
