@@ -445,19 +445,8 @@ def simulate(scenario: Scenario, rng: np.random.Generator) -> Simulation:
         # constant velocity is the manoeuvre that never turns or changes speed
         states = (scenario.manoeuvre or Manoeuvre()).states(x0, times)
     else:
-        noise = replace(scenario.process_noise, dim=d)
-        states = np.empty((times.size, 2 * d))
-        x = x0.copy()
-        t_prev = 0.0
-        for k, t in enumerate(times):
-            if t < 0:  # recorded by a clock running early: before the start, where the truth has no noise
-                states[k] = noise.propagate(x0, t)
-                continue
-            dt = t - t_prev
-            if dt > 0:
-                x = noise.propagate(x, dt) + noise.sample_noise(dt, rng)
-            states[k] = x
-            t_prev = t
+        # before t = 0 (a clock running early) the truth has no noise
+        states = replace(scenario.process_noise, dim=d).sample_track(x0, times, rng)
     truth = Trajectory(times=times, states=states)
     per_pair = scenario.measurement_times()
     t_all = np.concatenate(per_pair)

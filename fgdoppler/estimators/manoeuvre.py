@@ -288,15 +288,14 @@ def simulated_scale(measurements: Measurements, model: TrackingModel, times: Flo
     settings = settings or SmootherSettings()
     rng = np.random.default_rng([settings.seed, SIMULATION_STREAM])
     t = np.asarray(times, dtype=float)
+    x0 = np.asarray(states, dtype=float)[0]
     scan_of = measurements.scans().scan_of
     values: list[float] = []
     scale, mean, se = 1.0, float("nan"), float("nan")
     for b in range(1, REPLICATES + 1):
-        track = _drawn_track(model, t, np.asarray(states, dtype=float)[0], rng)
-        doppler = (model.observation.predict(track[scan_of], measurements.pair)
-                   + measurements.sigma * rng.standard_normal(len(measurements)))
-        drawn = Measurements(time=measurements.time, pair=measurements.pair, doppler=doppler,
-                             sigma=measurements.sigma)
+        track = model.motion.sample_track(x0, t - t[0], rng)
+        drawn = replace(measurements, doppler=model.observation.predict(track[scan_of], measurements.pair)
+                        + measurements.sigma * rng.standard_normal(len(measurements)))
         try:
             found = splits(drawn, model, t, track, settings, progress=progress)
         except ValueError:  # a drawn track onto a sensor
@@ -312,16 +311,6 @@ def simulated_scale(measurements: Measurements, model: TrackingModel, times: Flo
         if b >= MIN_REPLICATES and (statistic > upper * level or statistic <= scale * level):
             return scale, mean, se, b
     return scale, mean, se, REPLICATES
-
-
-def _drawn_track(model: TrackingModel, times: FloatArray, x0: FloatArray, rng: np.random.Generator) -> FloatArray:
-    r"""A track of the motion model from ``x0`` at ``times``: :math:`\mathbf x_{k+1} = \mathbf F(\Delta t_k)
-    \mathbf x_k + \mathbf w_k`, :math:`\mathbf w_k \sim \mathcal N(0, \mathbf Q(\Delta t_k))`."""
-    out = np.empty((times.size, x0.size))
-    out[0] = x0
-    for k, dt in enumerate(np.diff(times)):
-        out[k + 1] = model.motion.propagate(out[k], dt) + model.motion.sample_noise(float(dt), rng)
-    return out
 
 
 def manoeuvre_reason(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,

@@ -139,6 +139,30 @@ class ConstantVelocity:
         L = np.linalg.cholesky(self.Q(dt))
         return np.linalg.inv(L)
 
+    def sample_track(self, x0: ArrayLike, times: ArrayLike, rng: np.random.Generator) -> FloatArray:
+        r"""A track of this model from ``x0`` at time 0, read at ``times`` (increasing), ``(m, 2d)``.
+
+        From :math:`t = 0` on, :math:`\mathbf x_{k+1} = \mathbf F(\Delta t_k)\mathbf x_k + \mathbf w_k`,
+        :math:`\mathbf w_k \sim \mathcal N(0, \mathbf Q(\Delta t_k))` (one draw of :meth:`sample_noise` per
+        step, in time order; a repeated time repeats the state); before it, :math:`\mathbf F(t)\mathbf x_0`
+        without noise (a clock running early reads the track before its start).
+        """
+        x0 = np.asarray(x0, dtype=float)
+        t_all = np.asarray(times, dtype=float)
+        states = np.empty((t_all.size, x0.size))
+        x = x0.copy()
+        t_prev = 0.0
+        for k, t in enumerate(t_all):
+            if t < 0:
+                states[k] = self.propagate(x0, t)
+                continue
+            dt = t - t_prev
+            if dt > 0:
+                x = self.propagate(x, dt) + self.sample_noise(dt, rng)
+            states[k] = x
+            t_prev = t
+        return states
+
     def sample_noise(self, dt: float, rng: np.random.Generator, size: int | None = None) -> FloatArray:
         """Draw process noise ``w ~ N(0, Q(dt))`` (works for the rank-2 form too)."""
         Q = self.Q(dt)
