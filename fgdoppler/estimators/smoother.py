@@ -144,7 +144,7 @@ def _model_findings(measurements: Measurements, model: TrackingModel, settings: 
     motion model (``motion_check``), re-fitting the offsets where there is a joint solution
     (:func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`); ``progress`` is told of the split
     test's fits (:func:`~fgdoppler.estimators.manoeuvre.manoeuvre_reason`)."""
-    from fgdoppler.estimators.smoother_offsets import JointSolution, joint_split_statistics
+    from fgdoppler.estimators.smoother_offsets import JointSolution
 
     solved = joint if isinstance(joint, JointSolution) else None
     out: list[Reason] = []
@@ -152,8 +152,7 @@ def _model_findings(measurements: Measurements, model: TrackingModel, settings: 
         mirror = _mirror_reason(measurements, model, settings, solved, reported)
         out += [mirror] if mirror is not None else []
     if settings.motion_check:
-        stats = None if solved is None else joint_split_statistics(measurements, model, settings, solved)
-        manoeuvre = manoeuvre_reason(measurements, model, times, states, settings, stats=stats, progress=progress)
+        manoeuvre = manoeuvre_reason(measurements, model, times, states, settings, joint=solved, progress=progress)
         out += [manoeuvre] if manoeuvre is not None else []
     return out
 

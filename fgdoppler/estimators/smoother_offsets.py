@@ -73,6 +73,7 @@ from fgdoppler.estimators.smoother_solve import _levenberg_marquardt, _Problem
 from fgdoppler.geometry import mirrored
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
+from fgdoppler.progress import Progress, advance
 from fgdoppler.zone import Zone
 
 __all__ = ["JointSolution", "joint_split_statistics", "joint_wall_gain", "mirror_solution", "mirrored",
@@ -309,7 +310,8 @@ def mirror_solution(measurements: Measurements, model: TrackingModel, settings: 
 
 
 def joint_split_statistics(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
-                           joint: JointSolution) -> list[tuple[float, float]]:
+                           times: FloatArray, states: FloatArray, offsets: FloatArray, *,
+                           progress: Progress | None = None) -> list[tuple[float, float]]:
     r"""The split test of the motion model (:mod:`fgdoppler.estimators.manoeuvre`) with the offsets in the model.
 
     :math:`D(t_c) = C - C_{12}`: :math:`C` the least cost of one track and the offsets, :math:`C_{12}` that of
@@ -317,8 +319,10 @@ def joint_split_statistics(measurements: Measurements, model: TrackingModel, set
     share the offsets, both re-fitted (without the zone's prior and wall, as there).  Under the model
     :math:`D \sim \chi^2_n` as without offsets; a test that fixed the offsets at the one-track values would
     be biased toward silence (the offsets can absorb part of a manoeuvre), and one without them fires on
-    offsets alone (docs/concepts.md, "Calibration offsets").  ``joint`` (its track and offsets) starts every
-    fit; the split times and the parts' minimum size are the module's.
+    offsets alone (docs/concepts.md, "Calibration offsets").  The track ``states`` at ``times`` (one per scan) and
+    the ``offsets`` of the pairs ``settings.bias_sigma`` declares uncertain, in their order (a
+    :class:`JointSolution`'s), start every fit; the split times and the parts' minimum size are the module's.
+    ``progress`` advances once per fit.
 
     Returns
     -------
@@ -329,14 +333,16 @@ def joint_split_statistics(measurements: Measurements, model: TrackingModel, set
     from fgdoppler.estimators.manoeuvre import MIN_PART, SPLITS
 
     sigmas = bias_sigmas(settings.bias_sigma, model.observation.n_channels)
-    times = joint.times
+    times = np.asarray(times, dtype=float)
     bare = replace(settings, covariances=False)
-    z = np.concatenate([joint.states.ravel(), joint.offsets.values])
+    z = np.concatenate([np.asarray(states, dtype=float).ravel(), np.asarray(offsets, dtype=float)])
     try:
         whole = _JointProblem(model, measurements, bare, times, sigmas, bare=True)
         z, c_whole, *_ = _levenberg_marquardt(whole, z, settings.max_iterations)
     except (RuntimeError, ValueError, np.linalg.LinAlgError):
         return []
+    finally:
+        advance(progress)
     t0, t1 = float(times[0]), float(times[-1])
     need = MIN_PART * model.n
     out: list[tuple[float, float]] = []
@@ -351,5 +357,7 @@ def joint_split_statistics(measurements: Measurements, model: TrackingModel, set
             _, c_parts, *_ = _levenberg_marquardt(parts, z, settings.max_iterations)
         except (RuntimeError, ValueError, np.linalg.LinAlgError):
             continue
+        finally:
+            advance(progress)
         out.append((tc, max(c_whole - c_parts, 0.0)))
     return out

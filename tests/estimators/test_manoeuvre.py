@@ -11,13 +11,16 @@ from scipy.stats import chi2
 
 import fgdoppler as fd
 from fgdoppler.estimators.manoeuvre import (
+    MIN_REPLICATES,
     SIGMA_ADVICE,
     Split,
+    _per_measurement,
     _sigma_instead,
     manoeuvre_reason,
     simulated_scale,
     split_statistics,
 )
+from fgdoppler.estimators.smoother_offsets import joint_split_statistics, solve_with_offsets
 from fgdoppler.estimators.smoother_solve import solve_smoother
 
 
@@ -96,6 +99,16 @@ def test_a_manoeuvre_that_fools_every_estimator_is_reported() -> None:
     np.testing.assert_array_equal(on["ekf"].primary.states, off["ekf"].primary.states)
 
 
+def _long_process_noise_recording(duration: float, seed: int) -> tuple[fd.TrackingModel, fd.Simulation]:
+    """Case a from (25, 3) km at (20, -60) m/s, sampled every 0.5 s, the truth drawn with process noise
+    q = 0.05 m^2/s^3 and the model told so."""
+    motion = fd.ConstantVelocity(q=0.05)
+    g = fd.paper_geometry("a")
+    scen = fd.Scenario(geometry=g, x0=(25e3, 3e3, 20.0, -60.0), duration=duration, dt=0.5,
+                       time_offsets=(0.0, 0.0), process_noise=motion)
+    return fd.TrackingModel.of(g, motion=motion), fd.simulate(scen, np.random.default_rng(seed))
+
+
 def test_parts_too_poorly_observed_for_the_chi_square_law_do_not_make_a_manoeuvre() -> None:
     # A target that follows the tracker's motion model exactly: case a from (25, 3) km at (20, -60) m/s for 400 s,
     # sampled every 0.5 s, the truth drawn with process noise q = 0.05 m^2/s^3 and the tracker told so.  After
@@ -104,13 +117,8 @@ def test_parts_too_poorly_observed_for_the_chi_square_law_do_not_make_a_manoeuvr
     # 99.9 % level at 18.5.  Recordings drawn the same way from the track's start show the law there: a mean of
     # D well above 4, and the level scaled by it holds this D.  (Eight recordings of 600 s: D 9-53, above 18.5
     # in four, every one of those within its scaled level; docs/concepts.md, "Manoeuvring targets".)
-    motion = fd.ConstantVelocity(q=0.05)
-    g = fd.paper_geometry("a")
-    scen = fd.Scenario(geometry=g, x0=(25e3, 3e3, 20.0, -60.0), duration=400.0, dt=0.5, time_offsets=(0.0, 0.0),
-                       process_noise=motion)
-    sim = fd.simulate(scen, np.random.default_rng(3))
+    model, sim = _long_process_noise_recording(400.0, 3)
     m = sim.measurements
-    model = fd.TrackingModel.of(g, motion=motion)
     times = m.scans().times
     best = solve_smoother(m, model, sim.truth.at(times), fd.SmootherSettings(covariances=False, region_bound=False))
     [(_, d)] = split_statistics(m, model, times, best.states)
@@ -121,6 +129,69 @@ def test_parts_too_poorly_observed_for_the_chi_square_law_do_not_make_a_manoeuvr
     found = manoeuvre_reason(m, model, times, best.states, fd.SmootherSettings())
     assert found is not None and found.status == "ok", found
     assert f"scaled by {scale:.2f}" in found.message and f"{d:.1f}, beyond the chi-square level 18.5" in found.message
+
+
+def test_with_offsets_declared_the_poorly_observed_parts_are_read_by_their_simulated_law_too() -> None:
+    # The recording of the test above, offsets declared (sigma 0.5 m/s, none in the data).  The joint split
+    # test re-fits the offsets with the parts, which frees them to slide further: D = 52.8 (35.4 without).
+    # Eight recordings of 600 s (seeds 1-8) gave D = 22-54 with offsets declared, every one above 18.5, and
+    # every one within the level scaled by its simulated law (docs/concepts.md, "Manoeuvring targets").  The
+    # simulated recordings carry the joint mode's offsets and re-fit them as the data's split did: 2 fits each
+    # (one problem with the link and one without), counted by the task.
+    from tests.test_progress import Recorder
+
+    model, sim = _long_process_noise_recording(400.0, 3)
+    m = sim.measurements
+    times = m.scans().times
+    best = solve_smoother(m, model, sim.truth.at(times), fd.SmootherSettings(covariances=False, region_bound=False))
+    declared = fd.SmootherSettings(bias_sigma=0.5, estimate_offsets=True)
+    joint = solve_with_offsets(m, model, declared, times, best.states)
+    assert not isinstance(joint, str)
+    [(_, d)] = joint_split_statistics(m, model, declared, joint.times, joint.states, joint.offsets.values)
+    assert d > float(chi2.ppf(0.999, 4))
+    rec = Recorder()
+    found = manoeuvre_reason(m, model, times, best.states, declared, joint=joint, progress=rec)
+    assert found is not None and found.status == "ok", found
+    law = re.search(r"by ([\d.]+), beyond .* (\d+) recordings simulated .* mean ([\d.]+) ± ([\d.]+), .* "
+                    r"scaled by ([\d.]+), the level is ([\d.]+)", found.message)
+    assert law is not None, found.message
+    stated, drawn, mean, se, _, scaled = (float(v) for v in law.groups())
+    assert stated == pytest.approx(d, abs=0.05) and mean - 3.0 * se > 4.0 and d <= scaled
+    assert rec.tasks == [["split test of the motion model", None, 2 + 2 * int(drawn)]]
+    with pytest.raises(ValueError, match="settings that declare them"):
+        manoeuvre_reason(m, model, times, best.states, joint=joint)
+
+
+def test_the_simulated_law_with_offsets_pinned_is_the_law_without() -> None:
+    # With the offsets' prior pinned at 0 (sigma 1e-6 m/s) and their values 0, the simulated recordings are the
+    # same draws, and the joint split statistic -- one problem, the link removed, the offsets shared -- equals
+    # the split statistic without offsets, which fits the parts as separate problems (measured: relative
+    # differences below 4e-7, tests/estimators/test_smoother_offsets.py).  So the law read from them must be
+    # the same to that precision: the offsets' plumbing into the simulation is checked against the plain one.
+    # Statistic 0: the replicates stop at MIN_REPLICATES.
+    scen = fd.paper_scenario("a", 45e3)
+    model = fd.TrackingModel.of(scen.geometry)
+    sim = fd.simulate(scen, np.random.default_rng(5))
+    m = sim.measurements
+    times = m.scans().times
+    pinned = fd.SmootherSettings(bias_sigma=1e-6, estimate_offsets=True)
+    plain = simulated_scale(m, model, times, sim.truth.at(times), pinned, statistic=0.0, level=18.5)
+    joint = simulated_scale(m, model, times, sim.truth.at(times), pinned, statistic=0.0, level=18.5,
+                            offsets=np.zeros(2))
+    assert plain[3] == joint[3] == MIN_REPLICATES
+    np.testing.assert_allclose(joint[:3], plain[:3], rtol=1e-5)
+    with pytest.raises(ValueError, match="1 offsets for the 2 pairs"):
+        simulated_scale(m, model, times, sim.truth.at(times), pinned, statistic=0.0, level=18.5, offsets=np.zeros(1))
+
+
+def test_each_measurement_carries_the_offset_of_its_pair() -> None:
+    # case b, only pair 1 declared uncertain: its measurements carry the one offset, pair 0's none
+    scen = fd.paper_scenario("b", 5e3)
+    model = fd.TrackingModel.of(scen.geometry)
+    m = fd.simulate(scen, np.random.default_rng(0)).measurements
+    got = _per_measurement(m, model, fd.SmootherSettings(bias_sigma=(0.0, 1.0)), np.array([0.7]))
+    np.testing.assert_array_equal(got, np.where(m.pair == 1, 0.7, 0.0))
+    assert set(m.pair.tolist()) == {0, 1}
 
 
 def test_the_statistic_moves_with_the_problem() -> None:

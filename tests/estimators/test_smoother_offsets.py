@@ -309,7 +309,7 @@ def test_the_split_test_with_pinned_offsets_is_the_split_test_without(case: str,
     joint = solve_with_offsets(m, model, pinned, track.times, track.states)
     assert not isinstance(joint, str)
     (tc, d), = split_statistics(m, model, track.times, track.states, pinned)
-    (tc_joint, d_joint), = joint_split_statistics(m, model, pinned, joint)
+    (tc_joint, d_joint), = joint_split_statistics(m, model, pinned, joint.times, joint.states, joint.offsets.values)
     assert tc_joint == tc and d_joint == pytest.approx(d, rel=1e-5) and d > 1.0
 
 
