@@ -375,7 +375,8 @@ def manoeuvre_reason(measurements: Measurements, model: TrackingModel, times: Fl
     the joint mode of track and offsets, from which the statistics re-fit the
     offsets with the parts
     (:func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`) and
-    the simulated recordings carry them.  ``progress`` is told of a task,
+    the simulated recordings carry them; its track then takes the place of
+    ``times`` and ``states``.  ``progress`` is told of a task,
     "split test of the motion model", advanced once per fit.
     """
     if joint is not None and settings is None:
