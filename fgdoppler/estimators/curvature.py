@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 from fgdoppler._text import distance_text
 from fgdoppler.estimators.verdict import Reason
 
-__all__ = ["CURVATURE_LIMIT", "curvature_check", "curvature_reason", "probe_axis", "probe_rises"]
+__all__ = ["CURVATURE_LIMIT", "curvature_check", "curvature_reason", "probe_axis", "probe_rises", "rises_along"]
 
 FloatArray = NDArray[np.float64]
 
@@ -91,6 +91,16 @@ def probe_rises(cost: Callable[[FloatArray], Any], x: FloatArray, P: FloatArray,
     cost instead of five).
     """
     d, sd = probe_axis(P)
+    lo, hi = rises_along(cost, x, d, rows=rows)
+    step = PROBE_SIGMAS * d
+    return lo, hi, float(step @ information @ step), sd
+
+
+def rises_along(cost: Callable[[FloatArray], Any], x: FloatArray, d: FloatArray, *, rows: bool = False
+                ) -> tuple[float, float]:
+    r"""The cost's rises at ``x ∓ 3d`` less the linear term :math:`\pm 3\,\nabla c^\top\mathbf d` (a central
+    difference): :func:`probe_rises` for a given step ``d`` (one standard deviation) of ``x``'s shape (a state, or
+    with ``rows`` false a whole trajectory)."""
     h = 1e-3
     steps = np.array([0.0, h, -h, -PROBE_SIGMAS, PROBE_SIGMAS])
 
@@ -111,10 +121,7 @@ def probe_rises(cost: Callable[[FloatArray], Any], x: FloatArray, P: FloatArray,
     c0, ch, cmh, clo, chi = (float(c) if np.isfinite(c) else np.inf for c in costs)
     slope = (ch - cmh) / (2.0 * h)
     slope = slope if np.isfinite(slope) else 0.0
-    lo = clo - c0 + PROBE_SIGMAS * slope
-    hi = chi - c0 - PROBE_SIGMAS * slope
-    step = PROBE_SIGMAS * d
-    return lo, hi, float(step @ information @ step), sd
+    return clo - c0 + PROBE_SIGMAS * slope, chi - c0 - PROBE_SIGMAS * slope
 
 
 def curvature_reason(cost: Callable[[FloatArray], float], x: FloatArray, P: FloatArray,

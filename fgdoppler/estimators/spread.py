@@ -372,6 +372,7 @@ from fgdoppler.estimators.curvature import CURVATURE_LIMIT, probe_axis, probe_ri
 from fgdoppler.estimators.linearized_posterior import linearized_filter, mean_square_errors
 from fgdoppler.estimators.particle_posterior import _Data, _Posterior, _weighted_cov
 from fgdoppler.estimators.settings import ParticleSettings
+from fgdoppler.estimators.trajectory_bend import long_track_reason
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.robust import huber_weights
@@ -558,7 +559,12 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     PosteriorSpread or None
         ``None`` when the Laplace approximation stands: the probe finds it
         fair and the posterior mean is not shifted (or ``mean`` is off),
-        the recording is longer than :data:`MAX_SPAN`, the process noise
+        the recording is longer than :data:`MAX_SPAN` and the probe of the
+        whole track finds its likelihood within
+        :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` of the
+        Laplace model (beyond it the input track and covariances come back
+        unchanged with a ``"doubtful"`` finding:
+        :func:`~fgdoppler.estimators.trajectory_bend.long_track_reason`), the process noise
         sets the variance along the probe's axis (:data:`DETERMINISTIC_MIN`)
         and the probe finds the bend within
         :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` (beyond it
@@ -567,8 +573,11 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
         posterior around the estimate).
     """
     t0 = float(times[0])
-    if float(times[-1]) - t0 > MAX_SPAN:
-        return None
+    if float(times[-1]) - t0 > MAX_SPAN:  # nothing is sampled: the Laplace covariance stands if the probe allows
+        long = long_track_reason(measurements, model, times, states, covariances, huber_k=huber_k)
+        return None if long is None else PosteriorSpread(states=np.asarray(states, dtype=float),
+                                                         covariances=np.asarray(covariances, dtype=float),
+                                                         reason=long)
     x0, P0 = np.asarray(states[0], dtype=float), np.asarray(covariances[0], dtype=float)
     try:
         info = np.linalg.inv(P0)
