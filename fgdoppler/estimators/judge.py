@@ -300,6 +300,10 @@ def _one_line_reason(used: NDArray[np.int64], dim: int) -> Reason:
 
 
 def _reference_reasons(est: Estimates, reference: TrackResult) -> list[Reason]:
+    """The ``reference`` findings of the offline smoother's own verdict and of the final state: ``est`` lying
+    beyond the χ² :data:`LEVEL` quantile of the smoother's final state in ``est``'s covariance — the tracker's
+    own Gaussian one, before its sampled checks and the enclosure built from the reference widen it (those
+    are judged by :func:`covariance_reference` and :func:`track_reference`), which the message says."""
     out: list[Reason] = []
     own = [r for r in reference.reasons if not r.code.startswith("initiation-")]  # the track has those already
     worst = status_of(own)
@@ -326,7 +330,9 @@ def _reference_reasons(est: Estimates, reference: TrackResult) -> list[Reason]:
         out.append(Reason(code="reference", status="doubtful", message=(
             f"the final state lies {np.sqrt(m2):.1f} of its own sigma ({distance_text(np.linalg.norm(d[:n // 2]), km_decimals=2)}) "
             f"from the offline smoother's, which uses the same data (chi-square {m2:.1f} > {limit:.1f}, {n} dof): "
-            f"the {est.kind} estimates understate their error here (poor observability)")))
+            f"the {est.kind} estimates understate their error here (poor observability); the sigma are the "
+            "filter's own Gaussian covariance's, before any widening by its covariance checks (the nonlinear "
+            "finding says where)")))
     return out
 
 

@@ -10,6 +10,8 @@ errors with metre-sized sigmas that a verdict must never call ok.
 
 from __future__ import annotations
 
+import dataclasses
+import re
 from collections.abc import Callable
 from typing import Any
 
@@ -419,3 +421,33 @@ def test_the_rejections_finding_suggests_the_huber_loss_only_for_a_few_outliers(
     many = rejections(30).message
     assert f"more than {REJECT_ROBUST:.0%} are not a few outliers" in many and "try the Huber loss" not in many
     assert "Huber" not in rejections(30, robust=True).message
+
+
+def test_the_final_state_reference_finding_reads_the_filters_own_covariance_and_says_so() -> None:
+    # Case a from (25, 3) km at (20, -60) m/s for 200 s, the truth with q = 0.05 m^2/s^3 and the model told so
+    # (seed 2): the EKF's own Gaussian covariance puts the smoother's final state at chi-square 145 (measured);
+    # its covariance checks widen it to enclose the posterior, and the reported one puts it at 0.93.  The
+    # finding is the own covariance's (its widening, towards the posterior linearised about the smoother's
+    # track, could not disagree with the smoother), so its number is the run without the checks' number, and
+    # its message must say which covariance it read, or a user holding the reported one reads a contradiction.
+    motion = fd.ConstantVelocity(q=0.05)
+    g = fd.paper_geometry("a")
+    model = fd.TrackingModel.of(g, motion=motion)
+    scen = fd.Scenario(geometry=g, x0=(25e3, 3e3, 20.0, -60.0), duration=200.0, dt=0.5, time_offsets=(0.0, 0.0),
+                       process_noise=motion)
+    m = fd.simulate(scen, np.random.default_rng(2)).measurements
+    init = fd.initiate(m.first_per_pair(10), model)
+    ref = fd.run_estimator("smoother", m, model, init)
+    on = fd.run_estimator("ekf", m, model, init, reference=ref)
+    off = fd.run_estimator("ekf", m, model, init, dataclasses.replace(fd.EKFSettings(), sampled_covariance=False),
+                           reference=ref)
+    np.testing.assert_array_equal(on.primary.states, off.primary.states)
+    [message] = [r.message for r in on.reasons if r.code == "reference" and "final state lies" in r.message]
+    d = on.primary.states[-1] - ref.primary.states[-1]
+    own = float(d @ np.linalg.solve(off.primary.covariances[-1], d))
+    reported = float(d @ np.linalg.solve(on.primary.covariances[-1], d))
+    found = re.search(r"chi-square ([\d.]+) >", message)
+    assert found is not None, message
+    stated = float(found.group(1))
+    assert stated == pytest.approx(own, abs=0.05) and own > 18.5 > reported
+    assert "the filter's own Gaussian covariance's, before any widening by its covariance checks" in message
