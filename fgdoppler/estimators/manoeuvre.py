@@ -127,6 +127,8 @@ from scipy.stats import chi2
 from scipy.stats import f as f_distribution
 
 from fgdoppler._text import time_text
+from fgdoppler.estimators.calibration import bias_sigmas, shifted_by
+from fgdoppler.estimators.results import OffsetEstimate
 from fgdoppler.estimators.settings import SmootherSettings
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.measurements import Measurements
@@ -262,7 +264,7 @@ def split_statistics(measurements: Measurements, model: TrackingModel, times: Fl
 
 def simulated_scale(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
                     settings: SmootherSettings | None = None, *, statistic: float, level: float,
-                    offsets: FloatArray | None = None, progress: Progress | None = None
+                    offsets: OffsetEstimate | None = None, progress: Progress | None = None
                     ) -> tuple[float, float, float, int]:
     r"""The split statistic's law under the model at this track, read from recordings simulated from it.
 
@@ -290,8 +292,8 @@ def simulated_scale(measurements: Measurements, model: TrackingModel, times: Flo
     numbers from ``settings.seed``; ``progress`` advances once per fit.
 
     With ``offsets`` — the calibration offsets at the joint mode of track and
-    offsets, of the pairs ``settings.bias_sigma`` declares uncertain, in their
-    order — each replicate's Doppler carries them, and its statistic is the
+    offsets, of the pairs ``settings.bias_sigma`` declares uncertain — each
+    replicate's Doppler carries them, and its statistic is the
     joint one that re-fits them with the parts
     (:func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`), as
     the data's was; ``states`` is then the joint mode's track.
@@ -308,13 +310,19 @@ def simulated_scale(measurements: Measurements, model: TrackingModel, times: Flo
     t = np.asarray(times, dtype=float)
     x0 = np.asarray(states, dtype=float)[0]
     scan_of = measurements.scans().scan_of
-    offset = 0.0 if offsets is None else _per_measurement(measurements, model, settings, offsets)
+    n_pairs = model.observation.n_channels
+    if offsets is not None:
+        declared = np.flatnonzero(bias_sigmas(settings.bias_sigma, n_pairs) > 0)
+        if not np.array_equal(offsets.pairs, declared):
+            raise ValueError(f"offsets of pairs {offsets.pairs.tolist()} where the settings declare pairs "
+                             f"{declared.tolist()} uncertain")
     values: list[float] = []
     scale, mean, se = 1.0, float("nan"), float("nan")
     for b in range(1, REPLICATES + 1):
         track = model.motion.sample_track(x0, t - t[0], rng)
-        drawn = replace(measurements, doppler=model.observation.predict(track[scan_of], measurements.pair) + offset
+        drawn = replace(measurements, doppler=model.observation.predict(track[scan_of], measurements.pair)
                         + measurements.sigma * rng.standard_normal(len(measurements)))
+        drawn = drawn if offsets is None else shifted_by(drawn, offsets.full(n_pairs))
         try:
             found = _statistics(drawn, model, t, track, settings, offsets, progress)
         except ValueError:  # a drawn track onto a sensor
@@ -332,23 +340,8 @@ def simulated_scale(measurements: Measurements, model: TrackingModel, times: Flo
     return scale, mean, se, REPLICATES
 
 
-def _per_measurement(measurements: Measurements, model: TrackingModel, settings: SmootherSettings,
-                     offsets: FloatArray) -> FloatArray:
-    """Each measurement's calibration offset: ``offsets`` of the pairs ``settings.bias_sigma`` declares uncertain,
-    in their order, 0 for the others."""
-    from fgdoppler.estimators.calibration import bias_sigmas
-
-    uncertain = np.flatnonzero(bias_sigmas(settings.bias_sigma, model.observation.n_channels) > 0)
-    values = np.asarray(offsets, dtype=float)
-    if values.shape != uncertain.shape:
-        raise ValueError(f"{values.size} offsets for the {uncertain.size} pairs the settings declare uncertain")
-    full = np.zeros(model.observation.n_channels)
-    full[uncertain] = values
-    return full[measurements.pair]
-
-
 def _statistics(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
-                settings: SmootherSettings, offsets: FloatArray | None, progress: Progress | None
+                settings: SmootherSettings, offsets: OffsetEstimate | None, progress: Progress | None
                 ) -> list[tuple[float, float]]:
     """The split statistics ``(t_c, D)`` from the track ``states``: :func:`split_statistics`'s, or with ``offsets``
     the joint ones that re-fit them (:func:`~fgdoppler.estimators.smoother_offsets.joint_split_statistics`)."""
@@ -356,7 +349,7 @@ def _statistics(measurements: Measurements, model: TrackingModel, times: FloatAr
         return [(x.time, x.statistic) for x in splits(measurements, model, times, states, settings, progress=progress)]
     from fgdoppler.estimators.smoother_offsets import joint_split_statistics
 
-    return joint_split_statistics(measurements, model, settings, times, states, offsets, progress=progress)
+    return joint_split_statistics(measurements, model, settings, times, states, offsets.values, progress=progress)
 
 
 def manoeuvre_reason(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
@@ -382,7 +375,7 @@ def manoeuvre_reason(measurements: Measurements, model: TrackingModel, times: Fl
     if joint is not None and settings is None:
         raise ValueError("the split test with offsets needs the settings that declare them (bias_sigma)")
     settings = settings or SmootherSettings()
-    offsets = None if joint is None else joint.offsets.values
+    offsets = None if joint is None else joint.offsets
     if joint is not None:
         times, states = joint.times, joint.states
     start_task(progress, "split test of the motion model", None)

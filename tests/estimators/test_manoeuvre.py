@@ -10,11 +10,11 @@ import pytest
 from scipy.stats import chi2
 
 import fgdoppler as fd
+from fgdoppler.estimators import manoeuvre
 from fgdoppler.estimators.manoeuvre import (
     MIN_REPLICATES,
     SIGMA_ADVICE,
     Split,
-    _per_measurement,
     _sigma_instead,
     manoeuvre_reason,
     simulated_scale,
@@ -176,22 +176,42 @@ def test_the_simulated_law_with_offsets_pinned_is_the_law_without() -> None:
     times = m.scans().times
     pinned = fd.SmootherSettings(bias_sigma=1e-6, estimate_offsets=True)
     plain = simulated_scale(m, model, times, sim.truth.at(times), pinned, statistic=0.0, level=18.5)
-    joint = simulated_scale(m, model, times, sim.truth.at(times), pinned, statistic=0.0, level=18.5,
-                            offsets=np.zeros(2))
+    zero = fd.OffsetEstimate(pairs=np.array([0, 1]), values=np.zeros(2), covariance=np.eye(2) * 1e-12)
+    joint = simulated_scale(m, model, times, sim.truth.at(times), pinned, statistic=0.0, level=18.5, offsets=zero)
     assert plain[3] == joint[3] == MIN_REPLICATES
     np.testing.assert_allclose(joint[:3], plain[:3], rtol=1e-5)
-    with pytest.raises(ValueError, match="1 offsets for the 2 pairs"):
-        simulated_scale(m, model, times, sim.truth.at(times), pinned, statistic=0.0, level=18.5, offsets=np.zeros(1))
+    one = fd.OffsetEstimate(pairs=np.array([0]), values=np.zeros(1), covariance=np.eye(1))
+    with pytest.raises(ValueError, match=r"offsets of pairs \[0\] where the settings declare pairs \[0, 1\]"):
+        simulated_scale(m, model, times, sim.truth.at(times), pinned, statistic=0.0, level=18.5, offsets=one)
 
 
-def test_each_measurement_carries_the_offset_of_its_pair() -> None:
-    # case b, only pair 1 declared uncertain: its measurements carry the one offset, pair 0's none
+def test_each_simulated_measurement_carries_the_offset_of_its_pair(monkeypatch: pytest.MonkeyPatch) -> None:
+    # case b, only pair 1 declared uncertain: the recordings simulated with its offset of 0.7 m/s are the same
+    # draws as without, pair 1's measurements 0.7 m/s higher and pair 0's unchanged; offsets of other pairs than
+    # those the settings declare are refused
     scen = fd.paper_scenario("b", 5e3)
     model = fd.TrackingModel.of(scen.geometry)
-    m = fd.simulate(scen, np.random.default_rng(0)).measurements
-    got = _per_measurement(m, model, fd.SmootherSettings(bias_sigma=(0.0, 1.0)), np.array([0.7]))
-    np.testing.assert_array_equal(got, np.where(m.pair == 1, 0.7, 0.0))
-    assert set(m.pair.tolist()) == {0, 1}
+    sim = fd.simulate(scen, np.random.default_rng(0))
+    m = sim.measurements
+    times = m.scans().times
+    settings = fd.SmootherSettings(bias_sigma=(0.0, 1.0))
+    seen: list[np.ndarray] = []
+
+    def record(data: fd.Measurements, *args: object) -> list[tuple[float, float]]:
+        seen.append(data.doppler)
+        return [(15.0, 1.0)]
+
+    monkeypatch.setattr(manoeuvre, "_statistics", record)
+    one = fd.OffsetEstimate(pairs=np.array([1]), values=np.array([0.7]), covariance=np.eye(1))
+    for offsets in (None, one):
+        simulated_scale(m, model, times, sim.truth.at(times), settings, statistic=0.0, level=18.5, offsets=offsets)
+    half = len(seen) // 2
+    assert half == MIN_REPLICATES and set(m.pair.tolist()) == {0, 1}
+    for plain, shifted in zip(seen[:half], seen[half:], strict=True):
+        np.testing.assert_allclose(shifted - plain, np.where(m.pair == 1, 0.7, 0.0), rtol=0, atol=1e-9)
+    both = fd.OffsetEstimate(pairs=np.array([0, 1]), values=np.zeros(2), covariance=np.eye(2))
+    with pytest.raises(ValueError, match=r"pairs \[0, 1\] where the settings declare pairs \[1\]"):
+        simulated_scale(m, model, times, sim.truth.at(times), settings, statistic=0.0, level=18.5, offsets=both)
 
 
 def test_the_statistic_moves_with_the_problem() -> None:
