@@ -372,7 +372,7 @@ from fgdoppler.estimators.curvature import CURVATURE_LIMIT, probe_axis, probe_ri
 from fgdoppler.estimators.linearized_posterior import linearized_filter, mean_square_errors
 from fgdoppler.estimators.particle_posterior import _Data, _Posterior, _weighted_cov
 from fgdoppler.estimators.settings import ParticleSettings
-from fgdoppler.estimators.trajectory_bend import long_track_reason
+from fgdoppler.estimators.trajectory_bend import long_track_bend
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.robust import huber_weights
@@ -560,11 +560,10 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
         ``None`` when the Laplace approximation stands: the probe finds it
         fair and the posterior mean is not shifted (or ``mean`` is off),
         the recording is longer than :data:`MAX_SPAN` and the probe of the
-        whole track finds its likelihood within
-        :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` of the
-        Laplace model (beyond it the input track and covariances come back
-        unchanged with a ``"doubtful"`` finding:
-        :func:`~fgdoppler.estimators.trajectory_bend.long_track_reason`), the process noise
+        whole track finds its likelihood within :data:`SAMPLING_LIMIT` of
+        the Laplace model (beyond it the input track comes back with the
+        covariances widened to enclose its profiles' second moments:
+        :func:`~fgdoppler.estimators.trajectory_bend.long_track_bend`), the process noise
         sets the variance along the probe's axis (:data:`DETERMINISTIC_MIN`)
         and the probe finds the bend within
         :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` (beyond it
@@ -573,11 +572,8 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
         posterior around the estimate).
     """
     t0 = float(times[0])
-    if float(times[-1]) - t0 > MAX_SPAN:  # nothing is sampled: the Laplace covariance stands if the probe allows
-        long = long_track_reason(measurements, model, times, states, covariances, huber_k=huber_k)
-        return None if long is None else PosteriorSpread(states=np.asarray(states, dtype=float),
-                                                         covariances=np.asarray(covariances, dtype=float),
-                                                         reason=long)
+    if float(times[-1]) - t0 > MAX_SPAN:  # nothing is sampled: the cost is profiled where the probe finds it bent
+        return _profiled(measurements, model, times, states, covariances, huber_k)
     x0, P0 = np.asarray(states[0], dtype=float), np.asarray(covariances[0], dtype=float)
     try:
         info = np.linalg.inv(P0)
@@ -605,6 +601,21 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     if 1.0 / SAMPLING_LIMIT <= ratio <= SAMPLING_LIMIT:
         return _skewed(post, model, times, states, laplace, own, info, ratio, rng) if mean else None
     return _curved(post, model, times, states, laplace, own, ratio, rng)
+
+
+def _profiled(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
+              covariances: FloatArray, huber_k: float | None) -> PosteriorSpread | None:
+    """Beyond :data:`MAX_SPAN`: the Laplace covariances enclosing the second moments of the profiles of
+    :func:`~fgdoppler.estimators.trajectory_bend.long_track_bend` (taken where its probe strays beyond
+    :data:`SAMPLING_LIMIT`), with its finding; ``None`` where it takes none."""
+    bend = long_track_bend(measurements, model, times, states, covariances, limit=SAMPLING_LIMIT, huber_k=huber_k)
+    if bend is None:
+        return None
+    widened = np.asarray(covariances, dtype=float)
+    for profile in bend.profiles:
+        if np.all(np.isfinite(profile.moments)):
+            widened = _widened_stack(widened, profile.moments, 1.0)[0]
+    return PosteriorSpread(states=np.asarray(states, dtype=float), covariances=widened, reason=bend.reason)
 
 
 def _curved(post: _Posterior, model: TrackingModel, times: FloatArray, states: FloatArray, laplace: FloatArray,
