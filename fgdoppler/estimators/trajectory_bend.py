@@ -155,6 +155,10 @@ class _HeldProblem(_Problem):
         """Hold ``row @ x_k[:dim]`` (``row``: the axis weighted by :data:`HELD` over its σ) at ``target``."""
         self._held = (k, np.asarray(row, dtype=float), float(target))
 
+    def release(self) -> None:
+        """Back to the smoother's cost."""
+        self._held = None
+
     def _hold_residual(self, states: FloatArray) -> float:
         if self._held is None:
             return 0.0
@@ -252,7 +256,8 @@ def probe_state(prob: _Problem, states: FloatArray, covariance: FloatArray, k: i
     lo, hi = rises_along(prob.data_cost, np.asarray(states, dtype=float), step)
     predicted = PROBE_SIGMAS**2 * quad
     dim = covariance.shape[0] // 2
-    axis = np.linalg.eigh(covariance[:dim, :dim])[1][:, -1]
+    position = probe_axis(covariance)[0][:dim]  # the major axis times its variance over σ
+    axis = position / np.linalg.norm(position)
     return TrackProbe(index=k, ratio=min(lo, hi) / predicted, rises=(lo, hi), predicted=predicted, sd=sd,
                       axis=axis, step=step)
 
@@ -354,7 +359,7 @@ def valley_profile(prob: _HeldProblem, states: FloatArray, covariances: FloatArr
         try:
             found, why = _profile_point(prob, x + s * probe.step)
         finally:
-            prob._held = None
+            prob.release()
         offsets[i] = found - x
         rises[i] = prob.data_cost(found) - c0
         if why is not None:
@@ -367,9 +372,10 @@ def valley_profile(prob: _HeldProblem, states: FloatArray, covariances: FloatArr
     rate = rises[off] / xi[off] ** 2
     far = ~((1.0 / CURVATURE_LIMIT <= rate) & (rate <= CURVATURE_LIMIT))
     if np.any(far):
-        worst = int(np.argmax(np.abs(np.log(np.abs(rate) + 1e-300)) * far))
-        failures.append(f"the floor rises {rate[worst]:.3g} times the Gaussian's at {xi[off][worst]:+.2f} "
-                        "standard deviations")
+        worst = int(np.argmax(np.where(rate > 0.0, np.abs(np.log(np.where(rate > 0.0, rate, 1.0))), np.inf)))
+        at = f"at {xi[off][worst]:+.2f} standard deviations"
+        failures.append(f"the floor rises {rate[worst]:.3g} times the Gaussian's {at}" if rate[worst] > 0.0 else
+                        f"the floor lies {-rises[off][worst]:.3g} below the estimate's cost {at}")
     moments = (P - np.einsum("ni,nj->nij", probe.step, probe.step)
                + np.einsum("q,qni,qnj->nij", weights, offsets, offsets))
     if not np.all(np.isfinite(moments)):
