@@ -233,10 +233,13 @@ a straight track, and where it bends beyond the verdict's
 :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` times its quadratic
 model the smoother's posterior, which only adds the process noise's
 freedom to it, is misdescribed by the Laplace covariance too, and no
-samples correct it.  The track and the Laplace covariances are then
-reported unchanged with a ``doubtful`` ``nonlinear`` finding
-(:func:`_untrusted_laplace`; beyond :data:`TRUST_LIMIT` it adds that no
-Gaussian describes the posterior).  Measured (``python
+samples correct it.  The track is then reported unchanged with a
+``doubtful`` ``nonlinear`` finding (:func:`_unsampled_bend`; beyond
+:data:`TRUST_LIMIT` it adds that no Gaussian describes the posterior),
+and since 2026-12-07 its covariances are widened to the second moments of
+the smoother's own cost profiled along the valley, as beyond
+:data:`MAX_SPAN` (:mod:`~fgdoppler.estimators.trajectory_bend`; until
+then they were the Laplace ones).  Measured (``python
 studies/process_noise_share.py``, its 3-D cell: four pairs on masts, an
 aircraft 50-70 km out, 60 s, 20 runs): eight runs had shares 0.045-0.24
 and ratios 56-3.0·10⁴, every one ``ok`` before with a run-averaged NEES
@@ -372,7 +375,7 @@ from fgdoppler.estimators.curvature import CURVATURE_LIMIT, probe_axis, probe_ri
 from fgdoppler.estimators.linearized_posterior import linearized_filter, mean_square_errors
 from fgdoppler.estimators.particle_posterior import _Data, _Posterior, _weighted_cov
 from fgdoppler.estimators.settings import ParticleSettings
-from fgdoppler.estimators.trajectory_bend import long_track_bend
+from fgdoppler.estimators.trajectory_bend import LongTrackBend, long_track_bend
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.robust import huber_weights
@@ -595,12 +598,12 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     if share < DETERMINISTIC_MIN:
         # the process noise, not the data, sets the uncertainty the samples would map: none are drawn, but a
         # bend the Laplace covariance cannot describe must still be said
-        return _untrusted_laplace(states, covariances, ratio, share)
+        return _unsampled_bend(measurements, model, times, states, covariances, ratio, share, huber_k)
     rng = np.random.default_rng(seed)
     laplace, own = np.asarray(covariances, dtype=float), _own_model(icv, P0)
     if 1.0 / SAMPLING_LIMIT <= ratio <= SAMPLING_LIMIT:
         return _skewed(post, model, times, states, laplace, own, info, ratio, rng) if mean else None
-    return _curved(post, model, times, states, laplace, own, ratio, rng)
+    return _curved(post, model, times, states, laplace, own, ratio, rng, (measurements, huber_k))
 
 
 def _profiled(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
@@ -611,18 +614,32 @@ def _profiled(measurements: Measurements, model: TrackingModel, times: FloatArra
     bend = long_track_bend(measurements, model, times, states, covariances, limit=SAMPLING_LIMIT, huber_k=huber_k)
     if bend is None:
         return None
+    return PosteriorSpread(states=np.asarray(states, dtype=float), covariances=_enclosing_profiles(covariances, bend),
+                           reason=bend.reason)
+
+
+def _enclosing_profiles(covariances: FloatArray, bend: LongTrackBend) -> FloatArray:
+    """``covariances`` widened in every whitened direction to enclose each profile's finite second moments."""
     widened = np.asarray(covariances, dtype=float)
     for profile in bend.profiles:
         if np.all(np.isfinite(profile.moments)):
             widened = _widened_stack(widened, profile.moments, 1.0)[0]
-    return PosteriorSpread(states=np.asarray(states, dtype=float), covariances=widened, reason=bend.reason)
+    return widened
 
 
 def _curved(post: _Posterior, model: TrackingModel, times: FloatArray, states: FloatArray, laplace: FloatArray,
-            own: FloatArray, ratio: float, rng: np.random.Generator) -> PosteriorSpread | None:
+            own: FloatArray, ratio: float, rng: np.random.Generator,
+            recording: tuple[Measurements, float | None]) -> PosteriorSpread | None:
     """The sampled covariances and their ``nonlinear`` finding where the probe's ``ratio`` is beyond
     :data:`SAMPLING_LIMIT`; ``None`` where no sample reaches the posterior.  ``laplace``: the smoother's
-    covariances; ``own``: the sampled cost's Gaussian model of the first state (:func:`_own_model`)."""
+    covariances; ``own``: the sampled cost's Gaussian model of the first state (:func:`_own_model`);
+    ``recording``: the measurements and the Huber threshold.
+
+    Beyond :data:`TRUST_LIMIT` the covariances are widened further to the second moments of the smoother's own
+    cost profiled along the valley (:func:`~fgdoppler.estimators.trajectory_bend.long_track_bend`): measured on
+    the 3-D cell of ``studies/process_noise_share.py`` (four pairs on masts, 60 s, 20 runs), the twelve sampled
+    runs beyond it had a run-averaged NEES of 2.0-569 with the samples alone, 7 of them beyond the χ²₆ 99.9 %
+    point (22.5), and 0.9-367 with both, 4 beyond it (docs/concepts.md, "The valley followed")."""
     x0, P0 = np.asarray(states[0], dtype=float), laplace[0]
     drawn = _sample_reaching(post, x0, P0, ratio, model.dim, rng)
     if drawn is None:
@@ -630,11 +647,17 @@ def _curved(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
     sampled, rate, broad = drawn
     carried = _carried(model, laplace, _enclosing(own, sampled) - own, times, 1.0)
     spread = _weighted_cov(post.x, np.full(SAMPLES, 1.0 / SAMPLES))
+    trusted = 1.0 / TRUST_LIMIT <= ratio <= TRUST_LIMIT
+    warning = "" if trusted else f"; {_BEYOND_TRUST} and local samples cannot map it{_FAR_OFF}"
+    if not trusted:
+        measurements, huber_k = recording
+        bend = long_track_bend(measurements, model, times, states, laplace, limit=SAMPLING_LIMIT, huber_k=huber_k)
+        if bend is not None:
+            carried = _enclosing_profiles(carried, bend)
+            warning += f"; widened further to the second moments of the smoother's own cost, {bend.widening}"
     pos = slice(0, model.dim)
     sd_laplace, sd_sampled, sd_reported = (_major_sd(M, pos) for M in (P0, sampled, carried[0]))
     bias = float(np.linalg.norm(post.x[:, pos].mean(axis=0) - x0[pos]))
-    trusted = 1.0 / TRUST_LIMIT <= ratio <= TRUST_LIMIT
-    warning = "" if trusted else f"; {_BEYOND_TRUST} and local samples cannot map it{_FAR_OFF}"
     reason = Reason(code="nonlinear", status="ok" if trusted else "doubtful", message=(
         f"the likelihood is not Gaussian about the estimate (3 standard deviations along the major axis raise "
         f"the cost {ratio:.3g} times its quadratic model): covariances from {SAMPLES} posterior samples "
@@ -644,35 +667,51 @@ def _curved(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
     return PosteriorSpread(states=np.asarray(states, dtype=float), covariances=carried, reason=reason)
 
 
-def _untrusted_laplace(states: FloatArray, covariances: FloatArray, ratio: float, share: float
-                       ) -> PosteriorSpread | None:
-    r"""A ``"doubtful"`` ``nonlinear`` finding, the Laplace track unchanged, where the process noise's share of
-    the variance forbids sampling and the probe's ``ratio`` lies beyond
-    :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` (either way); ``None`` within it.
+def _unsampled_bend(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
+                    covariances: FloatArray, ratio: float, share: float, huber_k: float | None
+                    ) -> PosteriorSpread | None:
+    r"""A ``"doubtful"`` ``nonlinear`` finding where the process noise's share of the variance forbids sampling and
+    the probe's ``ratio`` lies beyond :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` (either way), the
+    covariances widened to the valley's profile where the probe of the whole track finds one; ``None`` within it.
 
     Below :data:`DETERMINISTIC_MIN` the samples, moving at exactly constant velocity, would map another
     posterior than the smoother's, so none are drawn (module docstring, "Where the process noise matters").
     The constant-velocity cost is still the data's own likelihood of a straight track: where it bends
     :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` times beyond its quadratic model (the verdict's
     level for a covariance that misdescribes the likelihood), the smoother's posterior, which adds only the
-    process noise's freedom to it, is not described by its Laplace covariance either, and nothing here
-    corrects it; beyond :data:`TRUST_LIMIT` the message says that no Gaussian could.  Measured with
+    process noise's freedom to it, is not described by its Laplace covariance either; beyond
+    :data:`TRUST_LIMIT` the message says that no Gaussian could.  Measured with
     ``python studies/process_noise_share.py`` (its 3-D cell, four pairs on masts, 60 s, 20 runs): eight of the
     smoother's runs had shares 0.045-0.24 and ratios 56-3.0·10⁴, every one ``ok`` before with a run-averaged
     NEES of 8-435 for six dimensions (docs/concepts.md, "A bend beyond trust where nothing is sampled"); the
     2-D cells' shares of 0.09-0.11 come with ratios of 0.89-1.0.
+
+    Until 2026-12-07 the Laplace covariances were reported unchanged there.  Now the smoother's own cost is
+    profiled along the valley as beyond :data:`MAX_SPAN`
+    (:func:`~fgdoppler.estimators.trajectory_bend.long_track_bend`, the probe of the whole track at
+    :data:`SAMPLING_LIMIT`) and the covariances enclose its second moments; the finding stays ``"doubtful"``
+    (those runs are 3-D, where one axis profiled does not follow the second poorly observed direction).  On the
+    eight runs the NEES went from 8.0-435 to 0.9-12.2, those beyond the χ²₆ 99.9 % point (22.5) from 6 to 0
+    (docs/concepts.md, "The valley followed").
     """
     if 1.0 / CURVATURE_LIMIT <= ratio <= CURVATURE_LIMIT:
         return None
     beyond = "" if 1.0 / TRUST_LIMIT <= ratio <= TRUST_LIMIT else f"; {_BEYOND_TRUST}{_FAR_OFF}"
+    bend = long_track_bend(measurements, model, times, states, covariances, limit=SAMPLING_LIMIT, huber_k=huber_k)
+    if bend is None:
+        reported = "the Laplace covariance is reported, and it misstates the uncertainty"
+        widened = np.asarray(covariances, dtype=float)
+    else:
+        trust = f", itself not to be trusted ({'; '.join(bend.failures)})" if bend.failures else ""
+        reported = (f"the covariances are widened to the second moments of the smoother's own cost, {bend.widening}"
+                    f"{trust}, and may still misstate the uncertainty")
+        widened = _enclosing_profiles(covariances, bend)
     reason = Reason(code="nonlinear", status="doubtful", message=(
         f"the likelihood is not Gaussian about the estimate (3 standard deviations along the major axis raise the "
         f"cost of a constant-velocity track {ratio:.3g} times its quadratic model), and the process noise sets "
         f"most of the variance along that axis (the constant-velocity track accounts for {share:.2f} of it), so no "
-        f"posterior samples can map it: the Laplace covariance is reported, and it misstates the uncertainty "
-        f"(poor observability){beyond}"))
-    return PosteriorSpread(states=np.asarray(states, dtype=float), covariances=np.asarray(covariances, dtype=float),
-                           reason=reason)
+        f"posterior samples can map it: {reported} (poor observability){beyond}"))
+    return PosteriorSpread(states=np.asarray(states, dtype=float), covariances=widened, reason=reason)
 
 
 def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: FloatArray, laplace: FloatArray,

@@ -60,11 +60,19 @@ bend's own variance and offset where it is not.  The reported covariances
 are the Laplace ones widened, in every whitened direction, to enclose the
 profiles' :math:`\mathbf M` (:func:`~fgdoppler.estimators.spread._widened_stack`;
 never narrower).  The finding stays, informational (``"ok"``), where every
-profile is trusted: each point found, and the floor's cost rising within
+profile is trusted — each point found, and the floor's cost rising within
 :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` times the
-Gaussian's :math:`\xi^2` at every point.  Otherwise it is ``"doubtful"``,
-and the covariances are still widened by what the profile found
-(:class:`LongTrackBend`).
+Gaussian's :math:`\xi^2` at every point — and the state is 2-D.  Otherwise
+it is ``"doubtful"``, and the covariances are still widened by what the
+profile found (:class:`LongTrackBend`).  In 3-D one axis profiled does not
+follow the second poorly observed direction, the target's rotation about
+the sensors' near-collinear line: on the 3-D cell of
+``studies/process_noise_share.py`` (four pairs on masts, 60 s, 20 runs)
+profiles whose every check passed left run-averaged NEES of 68, 73 and 100
+in three runs.  The same profile widens the smoother's covariances where a
+shorter recording cannot be sampled, or is sampled beyond trust
+(:func:`~fgdoppler.estimators.spread._unsampled_bend`,
+:func:`~fgdoppler.estimators.spread._curved`).
 
 Measured (the smoother from its default initiation, each recording's
 truth with the process noise the model is told; the run-averaged NEES of
@@ -115,7 +123,7 @@ from fgdoppler._text import distance_text, time_text
 from fgdoppler.estimators.curvature import CURVATURE_LIMIT, PROBE_SIGMAS, probe_axis, rises_along
 from fgdoppler.estimators.marginals import chain_solve
 from fgdoppler.estimators.smoother_solve import _levenberg_marquardt, _Problem
-from fgdoppler.estimators.verdict import Reason
+from fgdoppler.estimators.verdict import Reason, Status
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
@@ -386,19 +394,26 @@ def valley_profile(prob: _HeldProblem, states: FloatArray, covariances: FloatArr
 
 @dataclass(frozen=True, kw_only=True)
 class LongTrackBend:
-    """What the probe and the profiles of a long recording found (:func:`long_track_bend`).
+    """What the probe and the profiles of a track found (:func:`long_track_bend`).
 
     Attributes
     ----------
     profiles
         The profiles taken (one per probed state whose ratio is beyond the limit).
     reason
-        The ``nonlinear`` finding: ``"ok"`` where every profile is trusted,
-        ``"doubtful"`` otherwise.
+        The ``nonlinear`` finding of a recording beyond the sampled span:
+        ``"ok"`` where every profile is trusted in 2-D, ``"doubtful"``
+        otherwise.
+    widening
+        What widened the covariances, in words (for a caller's own finding).
+    failures
+        Why a profile is not to be trusted, one entry per such profile (empty: none).
     """
 
     profiles: tuple[ValleyProfile, ...]
     reason: Reason
+    widening: str
+    failures: tuple[str, ...]
 
 
 def long_track_bend(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
@@ -407,9 +422,12 @@ def long_track_bend(measurements: Measurements, model: TrackingModel, times: Flo
     finding; ``None`` where none does (also where every probe's linear solve fails: nothing is said then).
 
     The finding names the farthest probe.  It is ``"ok"`` (informational)
-    where every profile is trusted, ``"doubtful"`` where one is not
-    (:attr:`ValleyProfile.failure`); the caller widens the covariances to
-    the profiles' second moments either way, never narrowing them.
+    where every profile is trusted (:attr:`ValleyProfile.failure`) and the
+    state is 2-D; ``"doubtful"`` where one is not, and in 3-D, where the one
+    axis profiled does not follow the second poorly observed direction (the
+    target's rotation about the sensors' line; module docstring).  The
+    caller widens the covariances to the profiles' second moments either
+    way, never narrowing them.
     """
     prob = _problem(measurements, model, times, huber_k)
     x = np.asarray(states, dtype=float)
@@ -428,7 +446,7 @@ def long_track_bend(measurements: Measurements, model: TrackingModel, times: Flo
         return None
     worst = max(bent, key=lambda p: abs(np.log(p.ratio)))
     profiles = tuple(valley_profile(prob, x, P, p) for p in bent)
-    failed = [f"t = {time_text(float(prob.times[pr.index]))} s: {pr.failure}" for pr in profiles if pr.failure]
+    failed = tuple(f"t = {time_text(float(prob.times[pr.index]))} s: {pr.failure}" for pr in profiles if pr.failure)
     shape = ("a curved valley, not the straight ellipsoid of the smoother's Laplace covariance" if worst.ratio > 1.0
              else "flatter than the smoother's Laplace covariance says")
     found = (f"the likelihood is {shape}: at t = {time_text(float(prob.times[worst.index]))} s, {PROBE_SIGMAS:g} "
@@ -436,15 +454,23 @@ def long_track_bend(measurements: Measurements, model: TrackingModel, times: Flo
              f"major axis, the rest of the track following, raise the cost by {worst.rises[0]:.3g} and "
              f"{worst.rises[1]:.3g} where its quadratic model predicts {worst.predicted:.3g}")
     at = ", ".join(f"{time_text(float(prob.times[pr.index]))}" for pr in profiles)
-    across = _across_text(profiles, worst, P)
+    widening = (f"the cost profiled along the valley's floor at {NODES} Gauss-Hermite points along the axis at "
+                f"t = {at} s ({_across_text(profiles, worst, P)})")
     if failed:
-        return LongTrackBend(profiles=profiles, reason=Reason(code="nonlinear", status="doubtful", message=(
-            f"{found}; over a recording this long no posterior samples are drawn, and the cost profiled along the "
-            f"valley's floor at t = {at} s is not to be trusted ({'; '.join(failed)}): the covariances are widened "
-            f"by what it found ({across}) and may still misstate the uncertainty (poor observability)")))
-    return LongTrackBend(profiles=profiles, reason=Reason(code="nonlinear", status="ok", message=(
-        f"{found}; the covariances are widened to the second moment about the estimate along the valley's floor, "
-        f"the cost profiled at {NODES} Gauss-Hermite points along the axis at t = {at} s ({across})")))
+        message = (f"{found}; over a recording this long no posterior samples are drawn, and {widening} is not to "
+                   f"be trusted ({'; '.join(failed)}): the covariances are widened by what it found and may still "
+                   "misstate the uncertainty (poor observability)")
+    elif model.dim == 3:
+        message = (f"{found}; over a recording this long no posterior samples are drawn: the covariances are "
+                   f"widened to the second moment about the estimate along the valley's floor, {widening}, but in "
+                   "3-D that one axis does not follow the second poorly observed direction (the target's rotation "
+                   "about the sensors' line), and they may still misstate the uncertainty (poor observability)")
+    else:
+        message = (f"{found}; the covariances are widened to the second moment about the estimate along the "
+                   f"valley's floor, {widening}")
+    status: Status = "ok" if not failed and model.dim == 2 else "doubtful"
+    return LongTrackBend(profiles=profiles, reason=Reason(code="nonlinear", status=status, message=message),
+                         widening=widening, failures=failed)
 
 
 def _across_text(profiles: tuple[ValleyProfile, ...], worst: TrackProbe, laplace: FloatArray) -> str:
