@@ -77,7 +77,7 @@ shorter recording cannot be sampled, or is sampled beyond trust
 Measured (the smoother from its default initiation, each recording's
 truth with the process noise the model is told; the run-averaged NEES of
 the 4-D state over t ≥ 10 s, Laplace → widened; a script, not kept:
-docs/concepts.md, "A bend beyond the sampled span", says how to rebuild
+docs/concepts.md, "The valley followed", says how to rebuild
 it):
 
 - the 600 s recordings above, seeds 1–16: mean 12.8 → 4.0 (per
