@@ -375,7 +375,7 @@ from fgdoppler.estimators.curvature import CURVATURE_LIMIT, probe_axis, probe_ri
 from fgdoppler.estimators.linearized_posterior import linearized_filter, mean_square_errors
 from fgdoppler.estimators.particle_posterior import _Data, _Posterior, _weighted_cov
 from fgdoppler.estimators.settings import ParticleSettings
-from fgdoppler.estimators.trajectory_bend import LongTrackBend, long_track_bend
+from fgdoppler.estimators.trajectory_bend import TrackBend, track_bend
 from fgdoppler.estimators.verdict import Reason
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.robust import huber_weights
@@ -566,7 +566,7 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
         whole track finds its likelihood within :data:`SAMPLING_LIMIT` of
         the Laplace model (beyond it the input track comes back with the
         covariances widened to enclose its profiles' second moments:
-        :func:`~fgdoppler.estimators.trajectory_bend.long_track_bend`), the process noise
+        :func:`~fgdoppler.estimators.trajectory_bend.track_bend`), the process noise
         sets the variance along the probe's axis (:data:`DETERMINISTIC_MIN`)
         and the probe finds the bend within
         :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` (beyond it
@@ -603,22 +603,22 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
     laplace, own = np.asarray(covariances, dtype=float), _own_model(icv, P0)
     if 1.0 / SAMPLING_LIMIT <= ratio <= SAMPLING_LIMIT:
         return _skewed(post, model, times, states, laplace, own, info, ratio, rng) if mean else None
-    return _curved(post, model, times, states, laplace, own, ratio, rng, (measurements, huber_k))
+    return _curved(post, model, times, states, laplace, own, ratio, rng, measurements=measurements, huber_k=huber_k)
 
 
 def _profiled(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
               covariances: FloatArray, huber_k: float | None) -> PosteriorSpread | None:
     """Beyond :data:`MAX_SPAN`: the Laplace covariances enclosing the second moments of the profiles of
-    :func:`~fgdoppler.estimators.trajectory_bend.long_track_bend` (taken where its probe strays beyond
+    :func:`~fgdoppler.estimators.trajectory_bend.track_bend` (taken where its probe strays beyond
     :data:`SAMPLING_LIMIT`), with its finding; ``None`` where it takes none."""
-    bend = long_track_bend(measurements, model, times, states, covariances, limit=SAMPLING_LIMIT, huber_k=huber_k)
+    bend = track_bend(measurements, model, times, states, covariances, limit=SAMPLING_LIMIT, huber_k=huber_k)
     if bend is None:
         return None
     return PosteriorSpread(states=np.asarray(states, dtype=float), covariances=_enclosing_profiles(covariances, bend),
                            reason=bend.reason)
 
 
-def _enclosing_profiles(covariances: FloatArray, bend: LongTrackBend) -> FloatArray:
+def _enclosing_profiles(covariances: FloatArray, bend: TrackBend) -> FloatArray:
     """``covariances`` widened in every whitened direction to enclose each profile's finite second moments."""
     widened = np.asarray(covariances, dtype=float)
     for profile in bend.profiles:
@@ -628,15 +628,15 @@ def _enclosing_profiles(covariances: FloatArray, bend: LongTrackBend) -> FloatAr
 
 
 def _curved(post: _Posterior, model: TrackingModel, times: FloatArray, states: FloatArray, laplace: FloatArray,
-            own: FloatArray, ratio: float, rng: np.random.Generator,
-            recording: tuple[Measurements, float | None]) -> PosteriorSpread | None:
+            own: FloatArray, ratio: float, rng: np.random.Generator, *, measurements: Measurements,
+            huber_k: float | None) -> PosteriorSpread | None:
     """The sampled covariances and their ``nonlinear`` finding where the probe's ``ratio`` is beyond
     :data:`SAMPLING_LIMIT`; ``None`` where no sample reaches the posterior.  ``laplace``: the smoother's
     covariances; ``own``: the sampled cost's Gaussian model of the first state (:func:`_own_model`);
-    ``recording``: the measurements and the Huber threshold.
+    ``measurements`` and ``huber_k``: the recording and the Huber threshold (for the profile beyond trust).
 
     Beyond :data:`TRUST_LIMIT` the covariances are widened further to the second moments of the smoother's own
-    cost profiled along the valley (:func:`~fgdoppler.estimators.trajectory_bend.long_track_bend`): measured on
+    cost profiled along the valley (:func:`~fgdoppler.estimators.trajectory_bend.track_bend`): measured on
     the 3-D cell of ``studies/process_noise_share.py`` (four pairs on masts, 60 s, 20 runs), the twelve sampled
     runs beyond it had a run-averaged NEES of 2.0-569 with the samples alone, 7 of them beyond the χ²₆ 99.9 %
     point (22.5), and 0.9-367 with both, 4 beyond it (docs/concepts.md, "The valley followed")."""
@@ -650,8 +650,7 @@ def _curved(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
     trusted = 1.0 / TRUST_LIMIT <= ratio <= TRUST_LIMIT
     warning = "" if trusted else f"; {_BEYOND_TRUST} and local samples cannot map it{_FAR_OFF}"
     if not trusted:
-        measurements, huber_k = recording
-        bend = long_track_bend(measurements, model, times, states, laplace, limit=SAMPLING_LIMIT, huber_k=huber_k)
+        bend = track_bend(measurements, model, times, states, laplace, limit=SAMPLING_LIMIT, huber_k=huber_k)
         if bend is not None:
             carried = _enclosing_profiles(carried, bend)
             warning += f"; widened further to the second moments of the smoother's own cost, {bend.widening}"
@@ -688,7 +687,7 @@ def _unsampled_bend(measurements: Measurements, model: TrackingModel, times: Flo
 
     Until 2026-12-07 the Laplace covariances were reported unchanged there.  Now the smoother's own cost is
     profiled along the valley as beyond :data:`MAX_SPAN`
-    (:func:`~fgdoppler.estimators.trajectory_bend.long_track_bend`, the probe of the whole track at
+    (:func:`~fgdoppler.estimators.trajectory_bend.track_bend`, the probe of the whole track at
     :data:`SAMPLING_LIMIT`) and the covariances enclose its second moments; the finding stays ``"doubtful"``
     (those runs are 3-D, where one axis profiled does not follow the second poorly observed direction).  On the
     eight runs the NEES went from 8.0-435 to 0.9-12.2, those beyond the χ²₆ 99.9 % point (22.5) from 6 to 0
@@ -697,7 +696,7 @@ def _unsampled_bend(measurements: Measurements, model: TrackingModel, times: Flo
     if 1.0 / CURVATURE_LIMIT <= ratio <= CURVATURE_LIMIT:
         return None
     beyond = "" if 1.0 / TRUST_LIMIT <= ratio <= TRUST_LIMIT else f"; {_BEYOND_TRUST}{_FAR_OFF}"
-    bend = long_track_bend(measurements, model, times, states, covariances, limit=SAMPLING_LIMIT, huber_k=huber_k)
+    bend = track_bend(measurements, model, times, states, covariances, limit=SAMPLING_LIMIT, huber_k=huber_k)
     if bend is None:
         reported = "the Laplace covariance is reported, and it misstates the uncertainty"
         widened = np.asarray(covariances, dtype=float)

@@ -64,7 +64,7 @@ profile is trusted — each point found, and the floor's cost rising within
 :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` times the
 Gaussian's :math:`\xi^2` at every point — and the state is 2-D.  Otherwise
 it is ``"doubtful"``, and the covariances are still widened by what the
-profile found (:class:`LongTrackBend`).  In 3-D one axis profiled does not
+profile found (:class:`TrackBend`).  In 3-D one axis profiled does not
 follow the second poorly observed direction, the target's rotation about
 the sensors' near-collinear line: on the 3-D cell of
 ``studies/process_noise_share.py`` (four pairs on masts, 60 s, 20 runs)
@@ -127,8 +127,8 @@ from fgdoppler.estimators.verdict import Reason, Status
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
-__all__ = ["HELD", "NODES", "PROBED", "PROFILE_ITERATIONS", "PROFILE_TOLERANCE", "LongTrackBend", "TrackProbe",
-           "ValleyProfile", "conditional_step", "long_track_bend", "probe_state", "valley_profile"]
+__all__ = ["HELD", "NODES", "PROBED", "PROFILE_ITERATIONS", "PROFILE_TOLERANCE", "TrackBend", "TrackProbe",
+           "ValleyProfile", "conditional_step", "probe_state", "track_bend", "valley_profile"]
 
 FloatArray = NDArray[np.float64]
 
@@ -393,8 +393,8 @@ def valley_profile(prob: _HeldProblem, states: FloatArray, covariances: FloatArr
 
 
 @dataclass(frozen=True, kw_only=True)
-class LongTrackBend:
-    """What the probe and the profiles of a track found (:func:`long_track_bend`).
+class TrackBend:
+    """What the probe and the profiles of a track found (:func:`track_bend`).
 
     Attributes
     ----------
@@ -416,8 +416,8 @@ class LongTrackBend:
     failures: tuple[str, ...]
 
 
-def long_track_bend(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
-                    covariances: FloatArray, *, limit: float, huber_k: float | None = None) -> LongTrackBend | None:
+def track_bend(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
+               covariances: FloatArray, *, limit: float, huber_k: float | None = None) -> TrackBend | None:
     """The profiles where the probe at one of :data:`PROBED` strays beyond ``limit`` (either way), and their
     finding; ``None`` where none does (also where every probe's linear solve fails: nothing is said then).
 
@@ -469,7 +469,7 @@ def long_track_bend(measurements: Measurements, model: TrackingModel, times: Flo
         message = (f"{found}; the covariances are widened to the second moment about the estimate along the "
                    f"valley's floor, {widening}")
     status: Status = "ok" if not failed and model.dim == 2 else "doubtful"
-    return LongTrackBend(profiles=profiles, reason=Reason(code="nonlinear", status=status, message=message),
+    return TrackBend(profiles=profiles, reason=Reason(code="nonlinear", status=status, message=message),
                          widening=widening, failures=failed)
 
 

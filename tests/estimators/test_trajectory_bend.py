@@ -20,8 +20,8 @@ from fgdoppler.estimators.spread import MAX_SPAN, SAMPLING_LIMIT, _whitened_eige
 from fgdoppler.estimators.trajectory_bend import (
     _problem,
     conditional_step,
-    long_track_bend,
     probe_state,
+    track_bend,
     valley_profile,
 )
 
@@ -87,7 +87,7 @@ def test_a_long_recordings_curved_valley_is_profiled_and_a_straight_one_is_left_
     assert np.max(_whitened(covs, five.moments)) > 5.0
     np.testing.assert_allclose(_whitened(five.moments, seven.moments), 1.0, atol=0.01)
     np.testing.assert_allclose(five.rises[five.nodes != 0] / five.nodes[five.nodes != 0] ** 2, 1.0, atol=0.25)
-    bend = long_track_bend(sim.measurements, model, times, x, covs, limit=SAMPLING_LIMIT)
+    bend = track_bend(sim.measurements, model, times, x, covs, limit=SAMPLING_LIMIT)
     assert bend is not None and bend.reason.code == "nonlinear" and bend.reason.status == "ok", bend
     assert "t = 400 s" in bend.reason.message and "curved valley" in bend.reason.message
     assert "widened" in bend.reason.message and last.index in [pr.index for pr in bend.profiles]
@@ -104,7 +104,7 @@ def test_a_long_recordings_curved_valley_is_profiled_and_a_straight_one_is_left_
         straight = valley_profile(prob, x, covs, probe)
         assert straight.failure is None
         np.testing.assert_allclose(_whitened(covs, straight.moments), 1.0, atol=0.07)
-    assert long_track_bend(sim.measurements, model, times, x, covs, limit=SAMPLING_LIMIT) is None
+    assert track_bend(sim.measurements, model, times, x, covs, limit=SAMPLING_LIMIT) is None
 
 
 def test_the_widened_covariances_hold_the_truth_where_the_laplace_ones_do_not() -> None:
@@ -133,7 +133,7 @@ def test_a_profile_that_cannot_be_followed_is_doubtful_and_still_widens(monkeypa
     model, sim = _long("a", (25e3, 3e3, 20.0, -60.0), 400.0, 0.05, 3)
     times, x, covs = _optimum(model, sim)
     monkeypatch.setattr(trajectory_bend, "_profile_point", lambda prob, start: (start, "not found here"))
-    bend = long_track_bend(sim.measurements, model, times, x, covs, limit=SAMPLING_LIMIT)
+    bend = track_bend(sim.measurements, model, times, x, covs, limit=SAMPLING_LIMIT)
     assert bend is not None and bend.reason.status == "doubtful"
     assert "4 of 4 points not found (not found here)" in bend.reason.message
     assert "may still misstate the uncertainty" in bend.reason.message
