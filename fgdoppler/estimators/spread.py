@@ -227,28 +227,38 @@ carried with :math:`\mathbf Q(t_k - t_0)` as they then were, made the last covar
 195 times the EKF's in variance.  Long recordings reach the same point more
 slowly (case a 5 km and case b 45 km: 120 s).
 
-Below the limit the probe still runs (five costs), against the sampled
-cost's own quadratic model as above: that cost is the data's likelihood of
-a straight track, and where it bends beyond the verdict's
+Below the limit nothing is sampled; the smoother's own cost is probed along
+the whole track and profiled along its valley where the probe strays beyond
+:data:`SAMPLING_LIMIT`, as beyond :data:`MAX_SPAN`
+(:mod:`~fgdoppler.estimators.trajectory_bend`, :func:`_unsampled_bend`):
+the track is reported unchanged, its covariances enclosing the profiles'
+second moments, with the profile's ``nonlinear`` finding (informational
+in 2-D where every profile is trusted, ``doubtful`` in 3-D or where one is
+not).  The constant-velocity probe still runs (five costs), against the
+sampled cost's own quadratic model as above: that cost is the data's
+likelihood of a straight track, and where it rises beyond the verdict's
 :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` times its quadratic
-model the smoother's posterior, which only adds the process noise's
-freedom to it, is misdescribed by the Laplace covariance too, and no
-samples correct it.  The track is then reported unchanged with a
-``doubtful`` ``nonlinear`` finding (:func:`_unsampled_bend`; beyond
-:data:`TRUST_LIMIT` it adds that no Gaussian describes the posterior),
-and since 2026-12-07 its covariances are widened to the second moments of
-the smoother's own cost profiled along the valley, as beyond
-:data:`MAX_SPAN` (:mod:`~fgdoppler.estimators.trajectory_bend`; until
-then they were the Laplace ones).  Measured (``python
-studies/process_noise_share.py``, its 3-D cell: four pairs on masts, an
-aircraft 50-70 km out, 60 s, 20 runs): eight runs had shares 0.045-0.24
-and ratios 56-3.0·10⁴, every one ``ok`` before with a run-averaged NEES
-of 8-435 for six dimensions (the position block alone 0.29-1.72 in all
-of them: the truth lies off a thin direction mixing speed and position);
-the 2-D cells above (shares 0.09-0.11) give ratios 0.89-1.0 and stay as
-they were.  A random 3-D layout over 60 s with share 0.23 and ratio 271
-became ``doubtful`` at a NEES of 4.3, as the same ratio above the limit
-already made it: the finding is the probe's, not the NEES's.
+model the message says so, beyond :data:`TRUST_LIMIT` the finding is
+``doubtful``, and where the whole-track probe finds no valley the Laplace
+covariance is reported with a ``doubtful`` finding.  Where that cost falls
+off the estimate (a negative ratio: the process noise moved the smoother's
+track off the straight track's minimum) it says nothing about the
+smoother's posterior.  Measured (``python studies/process_noise_share.py``,
+its 3-D cell: four pairs on masts, an aircraft 50-70 km out, 60 s, 20
+runs): eight runs had shares 0.045-0.24 and ratios 56-3.0·10⁴, every one
+``ok`` before 2026-12-06 with a run-averaged NEES of 8-435 for six
+dimensions (the position block alone 0.29-1.72 in all of them: the truth
+lies off a thin direction mixing speed and position), 0.9-12.2 with the
+profiles, ``doubtful``; the 2-D cells above (shares 0.09-0.11) give
+ratios 0.89-1.0 and stay as they were.  A random 3-D layout over 60 s with
+share 0.23 and ratio 271 became ``doubtful`` at a NEES of 4.3, as the same
+ratio above the limit already made it: the finding is the probe's, not the
+NEES's.  On 2-D recordings of 150-300 s (``python
+studies/unsampled_profiles.py``; docs/concepts.md, "Where nothing is
+sampled") the profiles took the run-averaged NEES of sixteen 300 s
+recordings of case a from 5.10 to 4.38 (final NEES beyond the χ²₄ 99.9 %
+point 1 → 0), and the four ``doubtful`` findings there, all from negative
+constant-velocity ratios, became informational.
 
 Above the limit the process noise still has its share, so both tests that
 decide on sampling compare the sampled cost with itself, not with the
@@ -376,7 +386,7 @@ from fgdoppler.estimators.linearized_posterior import linearized_filter, mean_sq
 from fgdoppler.estimators.particle_posterior import _Data, _Posterior, _weighted_cov
 from fgdoppler.estimators.settings import ParticleSettings
 from fgdoppler.estimators.trajectory_bend import TrackBend, track_bend
-from fgdoppler.estimators.verdict import Reason
+from fgdoppler.estimators.verdict import Reason, Status
 from fgdoppler.measurements import Measurements
 from fgdoppler.models.robust import huber_weights
 from fgdoppler.models.tracking import TrackingModel
@@ -568,11 +578,13 @@ def posterior_spread(measurements: Measurements, model: TrackingModel, times: Fl
         covariances widened to enclose its profiles' second moments:
         :func:`~fgdoppler.estimators.trajectory_bend.track_bend`), the process noise
         sets the variance along the probe's axis (:data:`DETERMINISTIC_MIN`)
-        and the probe finds the bend within
-        :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` (beyond it
-        the input track and covariances come back unchanged, with a
-        ``"doubtful"`` finding), or the sampler cannot run (no finite
-        posterior around the estimate).
+        and neither the probe of the whole track strays beyond
+        :data:`SAMPLING_LIMIT` (beyond it the input track comes back with
+        the covariances enclosing its profiles) nor the constant-velocity
+        probe beyond :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT`
+        (beyond it the input track and covariances come back unchanged,
+        with a ``"doubtful"`` finding), or the sampler cannot run (no
+        finite posterior around the estimate).
     """
     t0 = float(times[0])
     if float(times[-1]) - t0 > MAX_SPAN:  # nothing is sampled: the cost is profiled where the probe finds it bent
@@ -669,48 +681,61 @@ def _curved(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
 def _unsampled_bend(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
                     covariances: FloatArray, ratio: float, share: float, huber_k: float | None
                     ) -> PosteriorSpread | None:
-    r"""A ``"doubtful"`` ``nonlinear`` finding where the process noise's share of the variance forbids sampling and
-    the probe's ``ratio`` lies beyond :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` (either way), the
-    covariances widened to the valley's profile where the probe of the whole track finds one; ``None`` within it.
+    r"""Where the process noise's share of the variance forbids sampling: the covariances widened to the valley's
+    profile where the probe of the whole track finds one (:func:`~fgdoppler.estimators.trajectory_bend.track_bend`
+    at :data:`SAMPLING_LIMIT`, as beyond :data:`MAX_SPAN`), with its finding; a ``"doubtful"`` ``nonlinear``
+    finding on the Laplace covariances where it finds none but the constant-velocity probe's ``ratio`` lies beyond
+    :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` (either way); ``None`` otherwise.
 
     Below :data:`DETERMINISTIC_MIN` the samples, moving at exactly constant velocity, would map another
     posterior than the smoother's, so none are drawn (module docstring, "Where the process noise matters").
-    The constant-velocity cost is still the data's own likelihood of a straight track: where it bends
-    :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` times beyond its quadratic model (the verdict's
-    level for a covariance that misdescribes the likelihood), the smoother's posterior, which adds only the
-    process noise's freedom to it, is not described by its Laplace covariance either; beyond
-    :data:`TRUST_LIMIT` the message says that no Gaussian could.  Measured with
-    ``python studies/process_noise_share.py`` (its 3-D cell, four pairs on masts, 60 s, 20 runs): eight of the
-    smoother's runs had shares 0.045-0.24 and ratios 56-3.0·10⁴, every one ``ok`` before with a run-averaged
-    NEES of 8-435 for six dimensions (docs/concepts.md, "A bend beyond trust where nothing is sampled"); the
-    2-D cells' shares of 0.09-0.11 come with ratios of 0.89-1.0.
+    The smoother's own cost is profiled instead, and its finding is the profile's: informational in 2-D where
+    every profile is trusted, ``"doubtful"`` otherwise and in 3-D.  The constant-velocity cost is the data's own
+    likelihood of a straight track: where it bends
+    :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` times beyond its quadratic model, the message says so
+    too, and beyond :data:`TRUST_LIMIT` the finding is ``"doubtful"`` whatever the profile (no such 2-D
+    recording has been measured).
 
-    Until 2026-12-07 the Laplace covariances were reported unchanged there.  Now the smoother's own cost is
-    profiled along the valley as beyond :data:`MAX_SPAN`
-    (:func:`~fgdoppler.estimators.trajectory_bend.track_bend`, the probe of the whole track at
-    :data:`SAMPLING_LIMIT`) and the covariances enclose its second moments; the finding stays ``"doubtful"``
-    (those runs are 3-D, where one axis profiled does not follow the second poorly observed direction).  On the
-    eight runs the NEES went from 8.0-435 to 0.9-12.2, those beyond the χ²₆ 99.9 % point (22.5) from 6 to 0
-    (docs/concepts.md, "The valley followed").
+    Until 2026-12-07 (later) the profile was taken only beyond that limit and the finding was ``"doubtful"``
+    whatever it found.  Measured with ``python studies/unsampled_profiles.py`` (case a from (25, 3) km at
+    (20, −60) m/s, q = 0.05, seeds 1–16, and case b from (25, 2) km at (50, −50) m/s, q = 0.01, seeds 1–8, for
+    150, 225 and 300 s; docs/concepts.md, "Where nothing is sampled"): on the sixteen 300 s recordings of case a
+    (shares 0.007-0.07) the run-averaged NEES went from 5.10 to 4.38, final NEES beyond the χ²₄ 99.9 % point
+    from 1 to 0 (42.2 → 14.1), and the four ``"doubtful"`` findings, whose constant-velocity ratios were all
+    negative (−2.4 to −0.6), became informational.  On the 3-D cell of ``studies/process_noise_share.py`` (four
+    pairs on masts, 60 s, 20 runs) the eight unsampled runs (shares 0.045-0.24, ratios 56-3.0·10⁴) had a
+    run-averaged NEES of 8-435 for six dimensions with the Laplace covariances and 0.9-12.2 widened, all
+    ``"doubtful"``.
     """
-    if 1.0 / CURVATURE_LIMIT <= ratio <= CURVATURE_LIMIT:
+    why = (f"the process noise sets most of the variance along the major axis (the constant-velocity track "
+           f"accounts for {share:.2f} of it), so")
+    bent = not 1.0 / CURVATURE_LIMIT <= ratio <= CURVATURE_LIMIT
+    trusted = 1.0 / TRUST_LIMIT <= ratio <= TRUST_LIMIT
+    if ratio > 0.0:
+        straight = (f"3 standard deviations along the major axis raise the cost of a constant-velocity track "
+                    f"{ratio:.3g} times its quadratic model{'' if trusted else f'; {_BEYOND_TRUST}{_FAR_OFF}'}")
+    else:  # the smoother's estimate is not that cost's minimum: the process noise moved the track off it
+        straight = (f"3 standard deviations along the major axis lower the cost of a constant-velocity track below "
+                    f"the estimate's (ratio {ratio:.3g} to its quadratic model's rise)")
+    bend = track_bend(measurements, model, times, states, covariances, limit=SAMPLING_LIMIT, huber_k=huber_k,
+                      unsampled=why)
+    if bend is not None:
+        # the profile describes the smoother's own cost; a straight track's cost falling off the estimate says
+        # nothing against it, and one rising beyond TRUST_LIMIT has not been measured in 2-D
+        steep = bent and ratio > 0.0
+        status: Status = "doubtful" if steep and not trusted else bend.reason.status
+        message = f"{bend.reason.message}; {straight}" if steep else bend.reason.message
+        return PosteriorSpread(states=np.asarray(states, dtype=float),
+                               covariances=_enclosing_profiles(covariances, bend),
+                               reason=Reason(code="nonlinear", status=status, message=message))
+    if not bent:
         return None
-    beyond = "" if 1.0 / TRUST_LIMIT <= ratio <= TRUST_LIMIT else f"; {_BEYOND_TRUST}{_FAR_OFF}"
-    bend = track_bend(measurements, model, times, states, covariances, limit=SAMPLING_LIMIT, huber_k=huber_k)
-    if bend is None:
-        reported = "the Laplace covariance is reported, and it misstates the uncertainty"
-        widened = np.asarray(covariances, dtype=float)
-    else:
-        trust = f", itself not to be trusted ({'; '.join(bend.failures)})" if bend.failures else ""
-        reported = (f"the covariances are widened to the second moments of the smoother's own cost, {bend.widening}"
-                    f"{trust}, and may still misstate the uncertainty")
-        widened = _enclosing_profiles(covariances, bend)
     reason = Reason(code="nonlinear", status="doubtful", message=(
-        f"the likelihood is not Gaussian about the estimate (3 standard deviations along the major axis raise the "
-        f"cost of a constant-velocity track {ratio:.3g} times its quadratic model), and the process noise sets "
-        f"most of the variance along that axis (the constant-velocity track accounts for {share:.2f} of it), so no "
-        f"posterior samples can map it: {reported} (poor observability){beyond}"))
-    return PosteriorSpread(states=np.asarray(states, dtype=float), covariances=widened, reason=reason)
+        f"the likelihood is not Gaussian about the estimate: {straight}; {why} no posterior samples can map it, "
+        "and the probe of the whole track finds no valley to follow: the Laplace covariance is reported, and it "
+        "misstates the uncertainty (poor observability)"))
+    return PosteriorSpread(states=np.asarray(states, dtype=float), covariances=np.asarray(covariances, dtype=float),
+                           reason=reason)
 
 
 def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: FloatArray, laplace: FloatArray,

@@ -69,10 +69,11 @@ follow the second poorly observed direction, the target's rotation about
 the sensors' near-collinear line: on the 3-D cell of
 ``studies/process_noise_share.py`` (four pairs on masts, 60 s, 20 runs)
 profiles whose every check passed left run-averaged NEES of 68, 73 and 100
-in three runs.  The same profile widens the smoother's covariances where a
-shorter recording cannot be sampled, or is sampled beyond trust
-(:func:`~fgdoppler.estimators.spread._unsampled_bend`,
-:func:`~fgdoppler.estimators.spread._curved`).
+in three runs.  The same profile, with the same finding, serves a shorter
+recording that the process noise keeps from being sampled
+(:func:`~fgdoppler.estimators.spread._unsampled_bend`), and widens the
+covariances of one sampled beyond trust
+(:func:`~fgdoppler.estimators.spread._curved`).
 
 Measured (the smoother from its default initiation, each recording's
 truth with the process noise the model is told; the run-averaged NEES of
@@ -401,7 +402,8 @@ class TrackBend:
     profiles
         The profiles taken (one per probed state whose ratio is beyond the limit).
     reason
-        The ``nonlinear`` finding of a recording beyond the sampled span:
+        The ``nonlinear`` finding of a recording that is not sampled (beyond
+        the sampled span, or where the process noise sets the variance):
         ``"ok"`` where every profile is trusted in 2-D, ``"doubtful"``
         otherwise.
     widening
@@ -417,9 +419,12 @@ class TrackBend:
 
 
 def track_bend(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
-               covariances: FloatArray, *, limit: float, huber_k: float | None = None) -> TrackBend | None:
+               covariances: FloatArray, *, limit: float, huber_k: float | None = None,
+               unsampled: str = "over a recording this long") -> TrackBend | None:
     """The profiles where the probe at one of :data:`PROBED` strays beyond ``limit`` (either way), and their
     finding; ``None`` where none does (also where every probe's linear solve fails: nothing is said then).
+    ``unsampled`` says in the finding why no posterior samples are drawn (it is followed by "no posterior
+    samples are drawn").
 
     The finding names the farthest probe.  It is ``"ok"`` (informational)
     where every profile is trusted (:attr:`ValleyProfile.failure`) and the
@@ -457,17 +462,17 @@ def track_bend(measurements: Measurements, model: TrackingModel, times: FloatArr
     widening = (f"the cost profiled along the valley's floor at {NODES} Gauss-Hermite points along the axis at "
                 f"t = {at} s ({_across_text(profiles, worst, P)})")
     if failed:
-        message = (f"{found}; over a recording this long no posterior samples are drawn, and {widening} is not to "
+        message = (f"{found}; {unsampled} no posterior samples are drawn, and {widening} is not to "
                    f"be trusted ({'; '.join(failed)}): the covariances are widened by what it found and may still "
                    "misstate the uncertainty (poor observability)")
     elif model.dim == 3:
-        message = (f"{found}; over a recording this long no posterior samples are drawn: the covariances are "
+        message = (f"{found}; {unsampled} no posterior samples are drawn: the covariances are "
                    f"widened to the second moment about the estimate along the valley's floor, {widening}, but in "
                    "3-D that one axis does not follow the second poorly observed direction (the target's rotation "
                    "about the sensors' line), and they may still misstate the uncertainty (poor observability)")
     else:
-        message = (f"{found}; the covariances are widened to the second moment about the estimate along the "
-                   f"valley's floor, {widening}")
+        message = (f"{found}; {unsampled} no posterior samples are drawn: the covariances are widened to the "
+                   f"second moment about the estimate along the valley's floor, {widening}")
     status: Status = "ok" if not failed and model.dim == 2 else "doubtful"
     return TrackBend(profiles=profiles, reason=Reason(code="nonlinear", status=status, message=message),
                          widening=widening, failures=failed)

@@ -1071,7 +1071,7 @@ def test_a_bend_the_process_noise_keeps_from_sampling_is_reported(run: int) -> N
     assert bend is not None and float(bend.group(1)) > CURVATURE_LIMIT
     assert ("no Gaussian covariance describes the posterior" in found[0].message) == (
         float(bend.group(1)) > spread.TRUST_LIMIT)
-    assert "widened to the second moments of the smoother's own cost" in found[0].message
+    assert "the cost profiled along the valley's floor" in found[0].message
     assert all(r.status == "ok" for r in out.reasons if r.code != "nonlinear"), out.message
     np.testing.assert_array_equal(out.primary.states, laplace.states)
     grown = np.concatenate([_whitened_eigenvalues(a, b) for a, b in zip(laplace.covariances,
