@@ -104,10 +104,13 @@ def checked(family: str, i: int) -> dict[str, Any]:
     out["status"] = str(r.status)
     said = " ".join(x.message for x in r.reasons if x.code == "nonlinear")
     # the two sampled paths of fgdoppler.estimators.spread: a curved valley, a skewed one (the mean reported)
-    out["sampled"] = "curved" if "posterior samples" in said else "skewed" if "posterior mean of" in said else ""
+    # (the unsampled findings say "no posterior samples are drawn" or "can map it")
+    curved = re.search(r"covariances from \d+ posterior samples", said) is not None
+    out["sampled"] = "curved" if curved else "skewed" if "posterior mean of" in said else ""
     out["broad"] = "tempered from a proposal" in said
     if out["sampled"]:  # the probe's ratio, as the finding states it
-        ratio = re.search(r"(\d[\d.e+-]*) times its quadratic model", said)
+        ratio = (re.search(r"(\d[\d.e+-]*) times its quadratic model", said)
+                 or re.search(r"ratio (-?\d[\d.e+-]*) to its quadratic model's rise", said))
         if ratio is None:
             raise RuntimeError(f"the nonlinear finding no longer states the probe's ratio: {said!r}")
         out["ratio"] = float(ratio.group(1))

@@ -671,8 +671,8 @@ def _curved(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
     sd_laplace, sd_sampled, sd_reported = (_major_sd(M, pos) for M in (P0, sampled, carried[0]))
     bias = float(np.linalg.norm(post.x[:, pos].mean(axis=0) - x0[pos]))
     reason = Reason(code="nonlinear", status="ok" if trusted else "doubtful", message=(
-        f"the likelihood is not Gaussian about the estimate (3 standard deviations along the major axis raise "
-        f"the cost {ratio:.3g} times its quadratic model): covariances from {SAMPLES} posterior samples "
+        f"the likelihood is not Gaussian about the estimate ({_probe_text(ratio, 'the cost')}): covariances from "
+        f"{SAMPLES} posterior samples "
         f"({broad}Metropolis acceptance {rate:.2f}); position sigma along the major axis {sd_reported:.0f} m (Laplace "
         f"{sd_laplace:.0f} m, samples {sd_sampled:.0f} m), posterior mean {bias:.0f} m from the estimate, spread "
         f"{_major_sd(spread, pos):.0f} m{warning}"))
@@ -718,12 +718,9 @@ def _unsampled_bend(measurements: Measurements, model: TrackingModel, times: Flo
            f"accounts for {share:.2f} of it), so")
     bent = not 1.0 / CURVATURE_LIMIT <= ratio <= CURVATURE_LIMIT
     trusted = 1.0 / TRUST_LIMIT <= ratio <= TRUST_LIMIT
-    if ratio > 0.0:
-        straight = (f"3 standard deviations along the major axis raise the cost of a constant-velocity track "
-                    f"{ratio:.3g} times its quadratic model{'' if trusted else f'; {_BEYOND_TRUST}{_FAR_OFF}'}")
-    else:  # the smoother's estimate is not that cost's minimum: the process noise moved the track off it
-        straight = (f"3 standard deviations along the major axis lower the cost of a constant-velocity track below "
-                    f"the estimate's (ratio {ratio:.3g} to its quadratic model's rise)")
+    straight = _probe_text(ratio, "the cost of a constant-velocity track")
+    if ratio > 0.0 and not trusted:
+        straight += f"; {_BEYOND_TRUST}{_FAR_OFF}"
     if model.dim == 3 and not bent:
         # in 3-D the profile's finding is always doubtful: on 16 random layouts flown for 120 s it turned two
         # consistent answers (6-D NEES 7.4 and 4.3) into doubtful ones where this probe had found nothing
@@ -747,6 +744,16 @@ def _unsampled_bend(measurements: Measurements, model: TrackingModel, times: Flo
         "misstates the uncertainty (poor observability)"))
     return PosteriorSpread(states=np.asarray(states, dtype=float), covariances=np.asarray(covariances, dtype=float),
                            reason=reason)
+
+
+def _probe_text(ratio: float, cost: str) -> str:
+    """What 3 standard deviations along the major axis do to ``cost`` against its quadratic model (the probe's
+    ``ratio``), in words: a rise so many times the model's, or, where the ratio is not positive, a fall below the
+    estimate's cost (the estimate is not that cost's minimum)."""
+    if ratio > 0.0:
+        return f"3 standard deviations along the major axis raise {cost} {ratio:.3g} times its quadratic model"
+    return (f"3 standard deviations along the major axis lower {cost} below the estimate's (ratio {ratio:.3g} to "
+            "its quadratic model's rise)")
 
 
 def _skewed(post: _Posterior, model: TrackingModel, times: FloatArray, states: FloatArray, laplace: FloatArray,

@@ -1157,3 +1157,17 @@ def test_precise_doppler_keeps_the_smoothers_laplace_covariance(sigma: float) ->
     ratio = np.linalg.eigvals(np.linalg.solve(ekf.primary.covariances[-1], smoother.primary.covariances[-1])).real
     assert 0.99 < ratio.min() and ratio.max() < 1.01, ratio
     assert ekf.status == "ok", ekf.message
+
+
+@pytest.mark.parametrize("ratio", [2.5, 3.1e4, 0.0, -0.62])
+def test_the_probes_ratio_is_said_as_a_rise_or_as_a_fall_and_reads_back(ratio: float) -> None:
+    # A ratio that is not positive is a step along the axis that lowers the cost (the estimate is not that cost's
+    # minimum, as where the process noise moved the smoother's track off a straight one: ratios -2.4 to -0.6 on
+    # 300 s recordings of studies/unsampled_profiles.py), not a rise "-0.62 times" the model's.  Either way the
+    # ratio reads back from the words to the printed precision.
+    said = spread._probe_text(ratio, "the cost")
+    rise = re.search(r"raise the cost (\S+) times its quadratic model", said)
+    fall = re.search(r"lower the cost below the estimate's \(ratio (\S+) to its quadratic model's rise\)", said)
+    assert (rise is not None) == (ratio > 0.0) and (fall is not None) == (ratio <= 0.0)
+    found = rise or fall
+    assert found is not None and float(found.group(1)) == pytest.approx(ratio, rel=1e-3)
