@@ -714,17 +714,17 @@ def _unsampled_bend(measurements: Measurements, model: TrackingModel, times: Flo
     run-averaged NEES of 8-435 for six dimensions with the Laplace covariances and 0.9-12.2 widened, all
     ``"doubtful"``.
     """
-    why = (f"the process noise sets most of the variance along the major axis (the constant-velocity track "
-           f"accounts for {share:.2f} of it), so")
     bent = not 1.0 / CURVATURE_LIMIT <= ratio <= CURVATURE_LIMIT
-    trusted = 1.0 / TRUST_LIMIT <= ratio <= TRUST_LIMIT
-    straight = _probe_text(ratio, "the cost of a constant-velocity track")
-    if ratio > 0.0 and not trusted:
-        straight += f"; {_BEYOND_TRUST}{_FAR_OFF}"
     if model.dim == 3 and not bent:
         # in 3-D the profile's finding is always doubtful: on 16 random layouts flown for 120 s it turned two
         # consistent answers (6-D NEES 7.4 and 4.3) into doubtful ones where this probe had found nothing
         return None
+    why = (f"the process noise sets most of the variance along the major axis (the constant-velocity track "
+           f"accounts for {share:.2f} of it), so")
+    trusted = 1.0 / TRUST_LIMIT <= ratio <= TRUST_LIMIT
+    straight = _probe_text(ratio, "the cost of a constant-velocity track")
+    if ratio > 0.0 and not trusted:
+        straight += f"; {_BEYOND_TRUST}{_FAR_OFF}"
     bend = track_bend(measurements, model, times, states, covariances, limit=SAMPLING_LIMIT, huber_k=huber_k,
                       unsampled=why)
     if bend is not None:

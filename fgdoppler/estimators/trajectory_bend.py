@@ -408,14 +408,11 @@ class TrackBend:
         otherwise.
     widening
         What widened the covariances, in words (for a caller's own finding).
-    failures
-        Why a profile is not to be trusted, one entry per such profile (empty: none).
     """
 
     profiles: tuple[ValleyProfile, ...]
     reason: Reason
     widening: str
-    failures: tuple[str, ...]
 
 
 def track_bend(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
@@ -475,7 +472,7 @@ def track_bend(measurements: Measurements, model: TrackingModel, times: FloatArr
                    f"second moment about the estimate along the valley's floor, {widening}")
     status: Status = "ok" if not failed and model.dim == 2 else "doubtful"
     return TrackBend(profiles=profiles, reason=Reason(code="nonlinear", status=status, message=message),
-                         widening=widening, failures=failed)
+                     widening=widening)
 
 
 def _across_text(profiles: tuple[ValleyProfile, ...], worst: TrackProbe, laplace: FloatArray) -> str:
