@@ -69,7 +69,13 @@ follow the second poorly observed direction, the target's rotation about
 the sensors' near-collinear line: on the 3-D cell of
 ``studies/process_noise_share.py`` (four pairs on masts, 60 s, 20 runs)
 profiles whose every check passed left run-averaged NEES of 68, 73 and 100
-in three runs.  The same profile, with the same finding, serves a shorter
+in three runs.  Since 2026-12-07 (evening) the 3-D position is held on the
+product grid of the rule along its two major axes
+(:func:`valley_profile` with ``across``, 24 points): on that cell the
+smoother's run-averaged NEES went from 35.09 to 18.51 and its runs beyond
+the χ²₆ 99.9 % point from 4 to 2, at about twice the CPU (median 2.4 →
+4.8 s a run; docs/concepts.md, "Two axes in 3-D").  The finding stays
+``"doubtful"`` in 3-D.  The same profile, with the same finding, serves a shorter
 recording that the process noise keeps from being sampled
 (:func:`~fgdoppler.estimators.spread._unsampled_bend`), and widens the
 covariances of one sampled beyond trust
@@ -129,7 +135,7 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
 __all__ = ["HELD", "NODES", "PROBED", "PROFILE_ITERATIONS", "PROFILE_TOLERANCE", "TrackBend", "TrackProbe",
-           "ValleyProfile", "conditional_step", "probe_state", "track_bend", "valley_profile"]
+           "ValleyProfile", "conditional_step", "position_axis", "probe_state", "track_bend", "valley_profile"]
 
 FloatArray = NDArray[np.float64]
 
@@ -152,39 +158,41 @@ _LM_ITERATIONS = 100
 
 
 class _HeldProblem(_Problem):
-    """The smoother's cost without the zone wall, and the same with one state's position held along an axis.
+    """The smoother's cost without the zone wall, and the same with one state's position held along axes.
 
-    :meth:`hold` sets the held state, axis and value; :meth:`cost` and
-    :meth:`system` then carry the hold's residual, :meth:`data_cost` never.
+    :meth:`hold` sets the held state, axes and values; :meth:`cost` and
+    :meth:`system` then carry the hold's residuals, :meth:`data_cost` never.
     """
 
-    _held: tuple[int, FloatArray, float] | None = None
+    _held: tuple[int, FloatArray, FloatArray] | None = None
 
-    def hold(self, k: int, row: FloatArray, target: float) -> None:
-        """Hold ``row @ x_k[:dim]`` (``row``: the axis weighted by :data:`HELD` over its σ) at ``target``."""
-        self._held = (k, np.asarray(row, dtype=float), float(target))
+    def hold(self, k: int, rows: FloatArray, targets: FloatArray) -> None:
+        """Hold ``rows @ x_k[:dim]`` (``rows`` ``(m, dim)``: the axes, each weighted by :data:`HELD` over its σ)
+        at ``targets`` ``(m,)``."""
+        self._held = (k, np.atleast_2d(np.asarray(rows, dtype=float)), np.atleast_1d(np.asarray(targets, dtype=float)))
 
     def release(self) -> None:
         """Back to the smoother's cost."""
         self._held = None
 
-    def _hold_residual(self, states: FloatArray) -> float:
+    def _hold_residual(self, states: FloatArray) -> FloatArray:
         if self._held is None:
-            return 0.0
-        k, row, target = self._held
-        return target - float(row @ states[k, :row.size])
+            return np.zeros(0)
+        k, rows, targets = self._held
+        return np.asarray(targets - rows @ states[k, :rows.shape[1]], dtype=float)
 
     def cost(self, states: FloatArray) -> float:
-        return self.data_cost(states) + self._hold_residual(states) ** 2
+        r = self._hold_residual(states)
+        return self.data_cost(states) + float(r @ r)
 
     def system(self, states: FloatArray, lam: float, *, wall: bool = True) -> gtsam.GaussianFactorGraph:
         gfg = super().system(states, lam, wall=False)
         if self._held is not None:
-            k, row, _ = self._held
-            full = np.zeros((1, self.nx))
-            full[0, :row.size] = row
-            gfg.add(gtsam.JacobianFactor(self.keys[k], full, np.array([self._hold_residual(states)]),
-                                         gtsam.noiseModel.Unit.Create(1)))
+            k, rows, _ = self._held
+            full = np.zeros((rows.shape[0], self.nx))
+            full[:, :rows.shape[1]] = rows
+            gfg.add(gtsam.JacobianFactor(self.keys[k], full, self._hold_residual(states),
+                                         gtsam.noiseModel.Unit.Create(rows.shape[0])))
         return gfg
 
 
@@ -194,9 +202,28 @@ def _problem(measurements: Measurements, model: TrackingModel, times: FloatArray
     return _HeldProblem(model, measurements, huber_k, model.prior(), np.asarray(times, dtype=float))
 
 
-def conditional_step(prob: _Problem, states: FloatArray, covariance: FloatArray, k: int
+def position_axis(P: FloatArray, order: int = 0) -> tuple[FloatArray, float]:
+    r"""The unit step :math:`\boldsymbol\delta` (one standard deviation) along an eigenvector of the position's
+    marginal, and the position σ along it: ``order`` 0 the major axis
+    (:func:`~fgdoppler.estimators.curvature.probe_axis`), 1 the next.
+
+    :math:`\boldsymbol\delta = \mathbf P_{:,p}\mathbf v / \sqrt{\mathbf v^\top\mathbf P_{pp}\mathbf v}`: the other
+    components follow at their conditional means.  The coordinates along two eigenvectors are uncorrelated, so
+    the steps along them are the regressions on each alone and on both together.
+    """
+    if order == 0:
+        return probe_axis(P)
+    k = P.shape[0] // 2
+    Ppp = P[:k, :k]
+    v = np.linalg.eigh(Ppp)[1][:, -1 - order]
+    sd = float(np.sqrt(v @ Ppp @ v))
+    return P[:, :k] @ v / sd, sd
+
+
+def conditional_step(prob: _Problem, states: FloatArray, covariance: FloatArray, k: int, *, order: int = 0
                      ) -> tuple[FloatArray, float, float]:
-    r"""The whole track's step when state ``k`` moves one standard deviation along its position's major axis.
+    r"""The whole track's step when state ``k`` moves one standard deviation along its position's major axis
+    (``order`` 1: along the next axis, :func:`position_axis`).
 
     The linearised system at ``states`` with a zero right-hand side and
     state ``k`` held at :math:`\boldsymbol\delta_k`
@@ -219,7 +246,7 @@ def conditional_step(prob: _Problem, states: FloatArray, covariance: FloatArray,
     """
     A_prev, A_next, b, A0, b0, _ = prob._blocks(states, 0.0, False, prob.meas.doppler)
     gfg = prob._factors(A_prev, A_next, np.zeros_like(b), A0, np.zeros_like(b0))
-    delta, sd = probe_axis(covariance)
+    delta, sd = position_axis(covariance, order)
     hold = HELD * np.linalg.inv(np.linalg.cholesky(covariance))
     gfg.add(gtsam.JacobianFactor(prob.keys[k], hold, hold @ delta, gtsam.noiseModel.Unit.Create(delta.size)))
     step, _ = chain_solve(gfg, prob.keys, covariances=False)
@@ -259,13 +286,15 @@ class TrackProbe:
     step: FloatArray
 
 
-def probe_state(prob: _Problem, states: FloatArray, covariance: FloatArray, k: int) -> TrackProbe:
-    """The probe at state ``k`` of ``states`` (the optimum), ``covariance`` its Laplace marginal."""
-    step, quad, sd = conditional_step(prob, states, covariance, k)
+def probe_state(prob: _Problem, states: FloatArray, covariance: FloatArray, k: int, *, order: int = 0
+                ) -> TrackProbe:
+    """The probe at state ``k`` of ``states`` (the optimum), ``covariance`` its Laplace marginal, along the
+    position's major axis (``order`` 1: the next one, :func:`position_axis`)."""
+    step, quad, sd = conditional_step(prob, states, covariance, k, order=order)
     lo, hi = rises_along(prob.data_cost, np.asarray(states, dtype=float), step)
     predicted = PROBE_SIGMAS**2 * quad
     dim = covariance.shape[0] // 2
-    position = probe_axis(covariance)[0][:dim]  # the major axis times its variance over σ
+    position = position_axis(covariance, order)[0][:dim]  # the axis times its variance over σ
     axis = position / np.linalg.norm(position)
     return TrackProbe(index=k, ratio=min(lo, hi) / predicted, rises=(lo, hi), predicted=predicted, sd=sd,
                       axis=axis, step=step)
@@ -280,9 +309,12 @@ class ValleyProfile:
     index
         The state whose position was held.
     nodes
-        The Gauss–Hermite points :math:`\xi_i` (standard deviations along the axis).
+        The rule's Gauss–Hermite nodes :math:`\xi_i` (standard deviations along an axis).
+    points
+        ``(p, a)`` the points held, in standard deviations along each of the ``a`` axes (1 or 2): the nodes, or
+        their product grid.
     weights
-        Their normalised weights :math:`w_i`.
+        The points' normalised weights :math:`w_i`.
     rises
         The cost's rise :math:`c(\mathbf X_i) - c(\hat{\mathbf X})` at each point (0 at the estimate).
     moments
@@ -296,6 +328,7 @@ class ValleyProfile:
 
     index: int
     nodes: FloatArray
+    points: FloatArray
     weights: FloatArray
     rises: FloatArray
     moments: FloatArray
@@ -325,7 +358,7 @@ def _profile_point(prob: _HeldProblem, start: FloatArray) -> tuple[FloatArray, s
 
 
 def valley_profile(prob: _HeldProblem, states: FloatArray, covariances: FloatArray, probe: TrackProbe, *,
-                   nodes: int = NODES) -> ValleyProfile:
+                   nodes: int = NODES, across: TrackProbe | None = None) -> ValleyProfile:
     r"""The cost profiled along the probe's axis at :attr:`TrackProbe.index`, and its second moments.
 
     At each Gauss–Hermite point :math:`\xi_i` the position of state
@@ -351,45 +384,63 @@ def valley_profile(prob: _HeldProblem, states: FloatArray, covariances: FloatArr
     own variance and the offset of its mean from the estimate.  The
     conditional covariance and the volume of the valley's cross-section are
     taken as the estimate's all along it.
+
+    With ``across`` (the probe of the same state along the next axis of its
+    position, :func:`probe_state` with ``order=1``) the position is held on
+    the product grid of the two rules, :math:`(\xi_{i_1}, \xi_{i_2})`, the
+    start :math:`\hat{\mathbf X} + \xi_{i_1}\boldsymbol\Delta_1 + \xi_{i_2}\boldsymbol\Delta_2`,
+    the weights :math:`\omega_{i_1}\omega_{i_2}e^{\lVert\boldsymbol\xi\rVert^2/2 - r/2}` and
+    :math:`\mathbf P_j - \boldsymbol\Delta_{1,j}\boldsymbol\Delta_{1,j}^\top - \boldsymbol\Delta_{2,j}
+    \boldsymbol\Delta_{2,j}^\top` in place of the first term (the two coordinates are uncorrelated under the
+    Laplace approximation): the floor of a valley that is poorly observed in two directions.
     """
     x = np.asarray(states, dtype=float)
     P = np.asarray(covariances, dtype=float)
-    k, v, sd = probe.index, probe.axis, probe.sd
+    axes = (probe,) if across is None else (probe, across)
+    k = probe.index
     xi, omega = hermegauss(nodes)
+    points = np.stack(np.meshgrid(*([xi] * len(axes)), indexing="ij"), axis=-1).reshape(-1, len(axes))
+    point_weights = np.prod(np.stack(np.meshgrid(*([omega] * len(axes)), indexing="ij"), axis=-1), axis=-1).ravel()
+    rows = np.array([a.axis * (HELD / a.sd) for a in axes])
+    centres = np.array([float(a.axis @ x[k, :a.axis.size]) for a in axes])
+    sds = np.array([a.sd for a in axes])
+    steps = np.array([a.step for a in axes])
     c0 = prob.data_cost(x)
-    offsets = np.zeros((nodes, *x.shape))
-    rises = np.zeros(nodes)
+    offsets = np.zeros((len(points), *x.shape))
+    rises = np.zeros(len(points))
     missed: list[str] = []
-    centre = float(v @ x[k, :v.size])
-    for i, s in enumerate(xi):
-        if s == 0.0:
+    for i, s in enumerate(points):
+        if not np.any(s):
             continue
-        prob.hold(k, v * (HELD / sd), HELD / sd * (centre + s * sd))
+        prob.hold(k, rows, HELD / sds * (centres + s * sds))
         try:
-            found, why = _profile_point(prob, x + s * probe.step)
+            found, why = _profile_point(prob, x + np.tensordot(s, steps, axes=1))
         finally:
             prob.release()
         offsets[i] = found - x
         rises[i] = prob.data_cost(found) - c0
         if why is not None:
             missed.append(why)
-    failures = [f"{len(missed)} of {nodes - 1} points not found ({missed[0]})"] if missed else []
-    log_w = np.log(omega) + 0.5 * xi**2 - 0.5 * rises
+    squared = np.sum(points**2, axis=1)
+    off = squared != 0.0
+    failures = [f"{len(missed)} of {int(np.sum(off))} points not found ({missed[0]})"] if missed else []
+    log_w = np.log(point_weights) + 0.5 * squared - 0.5 * rises
     weights = np.exp(log_w - np.max(log_w))
     weights /= np.sum(weights)
-    off = xi != 0.0
-    rate = rises[off] / xi[off] ** 2
+    rate = rises[off] / squared[off]
     far = ~((1.0 / CURVATURE_LIMIT <= rate) & (rate <= CURVATURE_LIMIT))
     if np.any(far):
         worst = int(np.argmax(np.where(rate > 0.0, np.abs(np.log(np.where(rate > 0.0, rate, 1.0))), np.inf)))
-        at = f"at {xi[off][worst]:+.2f} standard deviations"
+        where = points[off][worst]
+        at = (f"at {where[0]:+.2f} standard deviations" if len(axes) == 1 else
+              f"at ({', '.join(f'{c:+.2f}' for c in where)}) standard deviations along the two axes")
         failures.append(f"the floor rises {rate[worst]:.3g} times the Gaussian's {at}" if rate[worst] > 0.0 else
                         f"the floor lies {-rises[off][worst]:.3g} below the estimate's cost {at}")
-    moments = (P - np.einsum("ni,nj->nij", probe.step, probe.step)
+    moments = (P - np.einsum("ani,anj->nij", steps, steps)
                + np.einsum("q,qni,qnj->nij", weights, offsets, offsets))
     if not np.all(np.isfinite(moments)):
         failures.append("its second moments are not finite")
-    return ValleyProfile(index=k, nodes=xi, weights=weights, rises=rises, moments=moments,
+    return ValleyProfile(index=k, nodes=xi, points=points, weights=weights, rises=rises, moments=moments,
                          failure="; ".join(failures) if failures else None)
 
 
@@ -447,7 +498,8 @@ def track_bend(measurements: Measurements, model: TrackingModel, times: FloatArr
     if not bent:
         return None
     worst = max(bent, key=lambda p: abs(np.log(p.ratio)))
-    profiles = tuple(valley_profile(prob, x, P, p) for p in bent)
+    profiles = tuple(valley_profile(prob, x, P, p, across=_next_axis(prob, x, P, p) if model.dim == 3 else None)
+                     for p in bent)
     failed = tuple(f"t = {time_text(float(prob.times[pr.index]))} s: {pr.failure}" for pr in profiles if pr.failure)
     shape = ("a curved valley, not the straight ellipsoid of the smoother's Laplace covariance" if worst.ratio > 1.0
              else "flatter than the smoother's Laplace covariance says")
@@ -456,8 +508,8 @@ def track_bend(measurements: Measurements, model: TrackingModel, times: FloatArr
              f"major axis, the rest of the track following, raise the cost by {worst.rises[0]:.3g} and "
              f"{worst.rises[1]:.3g} where its quadratic model predicts {worst.predicted:.3g}")
     at = ", ".join(f"{time_text(float(prob.times[pr.index]))}" for pr in profiles)
-    widening = (f"the cost profiled along the valley's floor at {NODES} Gauss-Hermite points along the axis at "
-                f"t = {at} s ({_across_text(profiles, worst, P)})")
+    widening = (f"the cost profiled along the valley's floor {_grid_text(profiles, prob.times)} at t = {at} s "
+                f"({_across_text(profiles, worst, P)})")
     if failed:
         message = (f"{found}; {unsampled} no posterior samples are drawn, and {widening} is not to "
                    f"be trusted ({'; '.join(failed)}): the covariances are widened by what it found and may still "
@@ -465,14 +517,37 @@ def track_bend(measurements: Measurements, model: TrackingModel, times: FloatArr
     elif model.dim == 3:
         message = (f"{found}; {unsampled} no posterior samples are drawn: the covariances are "
                    f"widened to the second moment about the estimate along the valley's floor, {widening}, but in "
-                   "3-D that one axis does not follow the second poorly observed direction (the target's rotation "
-                   "about the sensors' line), and they may still misstate the uncertainty (poor observability)")
+                   "3-D the target's rotation about the sensors' line bends the valley too, and held on two axes its "
+                   "floor has left the truth outside such covariances on some recordings: they may still misstate "
+                   "the uncertainty (poor observability)")
     else:
         message = (f"{found}; {unsampled} no posterior samples are drawn: the covariances are widened to the "
                    f"second moment about the estimate along the valley's floor, {widening}")
     status: Status = "ok" if not failed and model.dim == 2 else "doubtful"
     return TrackBend(profiles=profiles, reason=Reason(code="nonlinear", status=status, message=message),
                      widening=widening)
+
+
+def _grid_text(profiles: tuple[ValleyProfile, ...], times: FloatArray) -> str:
+    """Where the profiles held the position, in words: along the major axis, or on the grid with the next one."""
+    two = [pr for pr in profiles if pr.points.shape[1] == 2]
+    along = f"at {NODES} Gauss-Hermite points along the axis"
+    if not two:
+        return along
+    grid = f"on a grid of {NODES} x {NODES} Gauss-Hermite points along the position's two major axes"
+    if len(two) == len(profiles):
+        return grid
+    return f"{along} ({grid} at t = {', '.join(time_text(float(times[pr.index])) for pr in two)} s)"
+
+
+def _next_axis(prob: _HeldProblem, states: FloatArray, covariances: FloatArray, probe: TrackProbe
+               ) -> TrackProbe | None:
+    """The probe of ``probe``'s state along its position's next axis (:func:`probe_state`, ``order=1``); ``None``
+    where its linear solve fails."""
+    try:
+        return probe_state(prob, states, covariances[probe.index], probe.index, order=1)
+    except (RuntimeError, ValueError, np.linalg.LinAlgError):
+        return None
 
 
 def _across_text(profiles: tuple[ValleyProfile, ...], worst: TrackProbe, laplace: FloatArray) -> str:
