@@ -653,7 +653,7 @@ def _curved(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
     the 3-D cell of ``studies/process_noise_share.py`` (four pairs on masts, 60 s, 20 runs), the twelve sampled
     runs beyond it had a run-averaged NEES of 2.0-569 with the samples alone, 7 of them beyond the χ²₆ 99.9 %
     point (22.5), and 0.9-367 with both, 4 beyond it (docs/concepts.md, "The valley followed"); with the 3-D
-    profile held on two axes (2026-12-07, evening) 0.6-302, 2 beyond it ("Two axes in 3-D")."""
+    profile held on two axes too (2026-12-07, evening) 0.6-303, 2 beyond it ("Two axes in 3-D")."""
     x0, P0 = np.asarray(states[0], dtype=float), laplace[0]
     drawn = _sample_reaching(post, x0, P0, ratio, model.dim, rng)
     if drawn is None:
@@ -713,7 +713,7 @@ def _unsampled_bend(measurements: Measurements, model: TrackingModel, times: Flo
     negative (−2.4 to −0.6), became informational.  On the 3-D cell of ``studies/process_noise_share.py`` (four
     pairs on masts, 60 s, 20 runs) the eight unsampled runs (shares 0.045-0.24, ratios 56-3.0·10⁴) had a
     run-averaged NEES of 8-435 for six dimensions with the Laplace covariances and 0.9-12.2 widened, all
-    ``"doubtful"`` (0.2-4.2 since the 3-D profile holds two axes, 2026-12-07 evening).
+    ``"doubtful"`` (0.2-4.7 since the 3-D profile holds two axes too, 2026-12-07 evening).
     """
     bent = not 1.0 / CURVATURE_LIMIT <= ratio <= CURVATURE_LIMIT
     if model.dim == 3 and not bent:

@@ -69,13 +69,13 @@ follow the second poorly observed direction, the target's rotation about
 the sensors' near-collinear line: on the 3-D cell of
 ``studies/process_noise_share.py`` (four pairs on masts, 60 s, 20 runs)
 profiles whose every check passed left run-averaged NEES of 68, 73 and 100
-in three runs.  Since 2026-12-07 (evening) the 3-D position is held on the
-product grid of the rule along its two major axes
-(:func:`valley_profile` with ``across``, 24 points): on that cell the
-smoother's run-averaged NEES went from 35.09 to 18.51 and its runs beyond
-the χ²₆ 99.9 % point from 4 to 2, at about twice the CPU (median 2.4 →
-4.8 s a run; docs/concepts.md, "Two axes in 3-D").  The finding stays
-``"doubtful"`` in 3-D.  The same profile, with the same finding, serves a shorter
+in three runs.  Since 2026-12-07 (evening) the 3-D position is also held on
+the product grid of the rule along its two major axes at the farthest
+probe's state (:func:`valley_profile` with ``across``, 24 points): on that
+cell the smoother's run-averaged NEES went from 35.09 to 19.18 and its
+runs beyond the χ²₆ 99.9 % point from 4 to 2, for 1.4 times the CPU
+(median 2.6 → 3.6 s a run; docs/concepts.md, "Two axes in 3-D").  The
+finding stays ``"doubtful"`` in 3-D.  The same profile, with the same finding, serves a shorter
 recording that the process noise keeps from being sampled
 (:func:`~fgdoppler.estimators.spread._unsampled_bend`), and widens the
 covariances of one sampled beyond trust
@@ -427,21 +427,31 @@ def valley_profile(prob: _HeldProblem, states: FloatArray, covariances: FloatArr
     log_w = np.log(point_weights) + 0.5 * squared - 0.5 * rises
     weights = np.exp(log_w - np.max(log_w))
     weights /= np.sum(weights)
-    rate = rises[off] / squared[off]
-    far = ~((1.0 / CURVATURE_LIMIT <= rate) & (rate <= CURVATURE_LIMIT))
-    if np.any(far):
-        worst = int(np.argmax(np.where(rate > 0.0, np.abs(np.log(np.where(rate > 0.0, rate, 1.0))), np.inf)))
-        where = points[off][worst]
-        at = (f"at {where[0]:+.2f} standard deviations" if len(axes) == 1 else
-              f"at ({', '.join(f'{c:+.2f}' for c in where)}) standard deviations along the two axes")
-        failures.append(f"the floor rises {rate[worst]:.3g} times the Gaussian's {at}" if rate[worst] > 0.0 else
-                        f"the floor lies {-rises[off][worst]:.3g} below the estimate's cost {at}")
+    steep = _steep_floor(points[off], rises[off])
+    if steep is not None:
+        failures.append(steep)
     moments = (P - np.einsum("ani,anj->nij", steps, steps)
                + np.einsum("q,qni,qnj->nij", weights, offsets, offsets))
     if not np.all(np.isfinite(moments)):
         failures.append("its second moments are not finite")
     return ValleyProfile(index=k, nodes=xi, points=points, weights=weights, rises=rises, moments=moments,
                          failure="; ".join(failures) if failures else None)
+
+
+def _steep_floor(points: FloatArray, rises: FloatArray) -> str | None:
+    r"""Where the floor's rise at a point other than the estimate strays beyond
+    :data:`~fgdoppler.estimators.curvature.CURVATURE_LIMIT` times the Gaussian's :math:`\lVert\xi\rVert^2`
+    (either way, or below the estimate's cost), the farthest such point in words; ``None`` where none does."""
+    rate = rises / np.sum(points**2, axis=1)
+    far = ~((1.0 / CURVATURE_LIMIT <= rate) & (rate <= CURVATURE_LIMIT))
+    if not np.any(far):
+        return None
+    worst = int(np.argmax(np.where(rate > 0.0, np.abs(np.log(np.where(rate > 0.0, rate, 1.0))), np.inf)))
+    where = points[worst]
+    at = (f"at {where[0]:+.2f} standard deviations" if where.size == 1 else
+          f"at ({', '.join(f'{c:+.2f}' for c in where)}) standard deviations along the two axes")
+    return (f"the floor rises {rate[worst]:.3g} times the Gaussian's {at}" if rate[worst] > 0.0 else
+            f"the floor lies {-rises[worst]:.3g} below the estimate's cost {at}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -451,7 +461,9 @@ class TrackBend:
     Attributes
     ----------
     profiles
-        The profiles taken (one per probed state whose ratio is beyond the limit).
+        The profiles taken: one along the axis per probed state whose ratio is beyond the limit, and in 3-D one
+        more on the grid of the position's two major axes at the farthest probe's state (``points`` of two
+        columns).
     reason
         The ``nonlinear`` finding of a recording that is not sampled (beyond
         the sampled span, or where the process noise sets the variance):
@@ -498,17 +510,25 @@ def track_bend(measurements: Measurements, model: TrackingModel, times: FloatArr
     if not bent:
         return None
     worst = max(bent, key=lambda p: abs(np.log(p.ratio)))
-    profiles = tuple(valley_profile(prob, x, P, p, across=_next_axis(prob, x, P, p) if model.dim == 3 else None)
-                     for p in bent)
-    failed = tuple(f"t = {time_text(float(prob.times[pr.index]))} s: {pr.failure}" for pr in profiles if pr.failure)
+    lines = tuple(valley_profile(prob, x, P, p) for p in bent)
+    # in 3-D the grid along both axes follows the rotation about the sensors' line.  The lines are kept, as a line's
+    # floor may reach farther along the second axis than the grid's nodes at the Laplace σ (one of 16 random
+    # layouts: NEES 2.9 with the lines, 105 with grids alone).  One grid, at the farthest probe, did as well as one
+    # at every bent probe on the masts cell (runs beyond the chi-square point 2 either way) for a third of the CPU;
+    # a grid only where the second axis' own probe is bent missed two of the runs it mends (docs/concepts.md).
+    grids = tuple(valley_profile(prob, x, P, p, across=a) for p in (worst,)
+                  if model.dim == 3 and (a := _next_axis(prob, x, P, p)) is not None)
+    profiles = lines + grids
+    failed = tuple(f"t = {time_text(float(prob.times[pr.index]))} s{' (grid)' if pr.points.shape[1] == 2 else ''}: "
+                   f"{pr.failure}" for pr in profiles if pr.failure)
     shape = ("a curved valley, not the straight ellipsoid of the smoother's Laplace covariance" if worst.ratio > 1.0
              else "flatter than the smoother's Laplace covariance says")
     found = (f"the likelihood is {shape}: at t = {time_text(float(prob.times[worst.index]))} s, {PROBE_SIGMAS:g} "
              f"standard deviations ({distance_text(PROBE_SIGMAS * worst.sd, km_decimals=2)}) along the position's "
              f"major axis, the rest of the track following, raise the cost by {worst.rises[0]:.3g} and "
              f"{worst.rises[1]:.3g} where its quadratic model predicts {worst.predicted:.3g}")
-    at = ", ".join(f"{time_text(float(prob.times[pr.index]))}" for pr in profiles)
-    widening = (f"the cost profiled along the valley's floor {_grid_text(profiles, prob.times)} at t = {at} s "
+    widening = (f"the cost profiled along the valley's floor at {NODES} Gauss-Hermite points along the axis at "
+                f"t = {_times_text(lines, prob.times)} s{_grid_text(grids, prob.times)} "
                 f"({_across_text(profiles, worst, P)})")
     if failed:
         message = (f"{found}; {unsampled} no posterior samples are drawn, and {widening} is not to "
@@ -528,16 +548,17 @@ def track_bend(measurements: Measurements, model: TrackingModel, times: FloatArr
                      widening=widening)
 
 
-def _grid_text(profiles: tuple[ValleyProfile, ...], times: FloatArray) -> str:
-    """Where the profiles held the position, in words: along the major axis, or on the grid with the next one."""
-    two = [pr for pr in profiles if pr.points.shape[1] == 2]
-    along = f"at {NODES} Gauss-Hermite points along the axis"
-    if not two:
-        return along
-    grid = f"on a grid of {NODES} x {NODES} Gauss-Hermite points along the position's two major axes"
-    if len(two) == len(profiles):
-        return grid
-    return f"{along} ({grid} at t = {', '.join(time_text(float(times[pr.index])) for pr in two)} s)"
+def _times_text(profiles: tuple[ValleyProfile, ...], times: FloatArray) -> str:
+    """The times of the profiles' states, in words."""
+    return ", ".join(time_text(float(times[pr.index])) for pr in profiles)
+
+
+def _grid_text(grids: tuple[ValleyProfile, ...], times: FloatArray) -> str:
+    """The grids' clause of the widening's words ("" where none was taken)."""
+    if not grids:
+        return ""
+    return (f", and on a grid of {NODES} x {NODES} points along the position's two major axes at "
+            f"t = {_times_text(grids, times)} s")
 
 
 def _next_axis(prob: _HeldProblem, states: FloatArray, covariances: FloatArray, probe: TrackProbe
