@@ -60,17 +60,19 @@ CURVATURE_LIMIT = 10.0
 PROBE_SIGMAS = 3.0
 
 
-def probe_axis(P: FloatArray) -> tuple[FloatArray, float]:
+def probe_axis(P: FloatArray, order: int = 0) -> tuple[FloatArray, float]:
     r"""The probe's unit step :math:`\boldsymbol\delta` (one standard deviation) and the position σ along it.
 
     :math:`\boldsymbol\delta = \mathbf P_{:,p}\mathbf v / \sqrt{\mathbf v^\top\mathbf P_{pp}\mathbf v}` with
-    :math:`\mathbf v` the major eigenvector of the position block: the other components follow at their
-    conditional means, and :math:`\boldsymbol\delta^\top\mathbf P^{-1}\boldsymbol\delta = 1`.
+    :math:`\mathbf v` the major eigenvector of the position block (``order`` 1: the next one): the other
+    components follow at their conditional means, and
+    :math:`\boldsymbol\delta^\top\mathbf P^{-1}\boldsymbol\delta = 1`.  The coordinates along two
+    eigenvectors are uncorrelated, so the steps along them are the regressions on each alone and on both.
     """
     k = P.shape[0] // 2  # position block (2-D or 3-D)
     Ppp = P[:k, :k]
     _, V = np.linalg.eigh(Ppp)
-    v = V[:, -1]
+    v = V[:, -1 - order]
     sd = float(np.sqrt(v @ Ppp @ v))
     return P[:, :k] @ v / sd, sd
 

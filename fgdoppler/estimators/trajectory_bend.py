@@ -135,7 +135,7 @@ from fgdoppler.measurements import Measurements
 from fgdoppler.models.tracking import TrackingModel
 
 __all__ = ["HELD", "NODES", "PROBED", "PROFILE_ITERATIONS", "PROFILE_TOLERANCE", "TrackBend", "TrackProbe",
-           "ValleyProfile", "conditional_step", "position_axis", "probe_state", "track_bend", "valley_profile"]
+           "ValleyProfile", "conditional_step", "probe_state", "track_bend", "valley_profile"]
 
 FloatArray = NDArray[np.float64]
 
@@ -202,28 +202,10 @@ def _problem(measurements: Measurements, model: TrackingModel, times: FloatArray
     return _HeldProblem(model, measurements, huber_k, model.prior(), np.asarray(times, dtype=float))
 
 
-def position_axis(P: FloatArray, order: int = 0) -> tuple[FloatArray, float]:
-    r"""The unit step :math:`\boldsymbol\delta` (one standard deviation) along an eigenvector of the position's
-    marginal, and the position σ along it: ``order`` 0 the major axis
-    (:func:`~fgdoppler.estimators.curvature.probe_axis`), 1 the next.
-
-    :math:`\boldsymbol\delta = \mathbf P_{:,p}\mathbf v / \sqrt{\mathbf v^\top\mathbf P_{pp}\mathbf v}`: the other
-    components follow at their conditional means.  The coordinates along two eigenvectors are uncorrelated, so
-    the steps along them are the regressions on each alone and on both together.
-    """
-    if order == 0:
-        return probe_axis(P)
-    k = P.shape[0] // 2
-    Ppp = P[:k, :k]
-    v = np.linalg.eigh(Ppp)[1][:, -1 - order]
-    sd = float(np.sqrt(v @ Ppp @ v))
-    return P[:, :k] @ v / sd, sd
-
-
 def conditional_step(prob: _Problem, states: FloatArray, covariance: FloatArray, k: int, *, order: int = 0
                      ) -> tuple[FloatArray, float, float]:
     r"""The whole track's step when state ``k`` moves one standard deviation along its position's major axis
-    (``order`` 1: along the next axis, :func:`position_axis`).
+    (``order`` 1: along the next axis, :func:`~fgdoppler.estimators.curvature.probe_axis`).
 
     The linearised system at ``states`` with a zero right-hand side and
     state ``k`` held at :math:`\boldsymbol\delta_k`
@@ -246,7 +228,7 @@ def conditional_step(prob: _Problem, states: FloatArray, covariance: FloatArray,
     """
     A_prev, A_next, b, A0, b0, _ = prob._blocks(states, 0.0, False, prob.meas.doppler)
     gfg = prob._factors(A_prev, A_next, np.zeros_like(b), A0, np.zeros_like(b0))
-    delta, sd = position_axis(covariance, order)
+    delta, sd = probe_axis(covariance, order)
     hold = HELD * np.linalg.inv(np.linalg.cholesky(covariance))
     gfg.add(gtsam.JacobianFactor(prob.keys[k], hold, hold @ delta, gtsam.noiseModel.Unit.Create(delta.size)))
     step, _ = chain_solve(gfg, prob.keys, covariances=False)
@@ -289,12 +271,12 @@ class TrackProbe:
 def probe_state(prob: _Problem, states: FloatArray, covariance: FloatArray, k: int, *, order: int = 0
                 ) -> TrackProbe:
     """The probe at state ``k`` of ``states`` (the optimum), ``covariance`` its Laplace marginal, along the
-    position's major axis (``order`` 1: the next one, :func:`position_axis`)."""
+    position's major axis (``order`` 1: the next one, :func:`~fgdoppler.estimators.curvature.probe_axis`)."""
     step, quad, sd = conditional_step(prob, states, covariance, k, order=order)
     lo, hi = rises_along(prob.data_cost, np.asarray(states, dtype=float), step)
     predicted = PROBE_SIGMAS**2 * quad
     dim = covariance.shape[0] // 2
-    position = position_axis(covariance, order)[0][:dim]  # the axis times its variance over σ
+    position = probe_axis(covariance, order)[0][:dim]  # the axis times its variance over σ
     axis = position / np.linalg.norm(position)
     return TrackProbe(index=k, ratio=min(lo, hi) / predicted, rises=(lo, hi), predicted=predicted, sd=sd,
                       axis=axis, step=step)

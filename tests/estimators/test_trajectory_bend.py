@@ -20,7 +20,6 @@ from fgdoppler.estimators.spread import MAX_SPAN, SAMPLING_LIMIT, _whitened_eige
 from fgdoppler.estimators.trajectory_bend import (
     _problem,
     conditional_step,
-    position_axis,
     probe_state,
     track_bend,
     valley_profile,
@@ -66,7 +65,7 @@ def test_the_conditional_step_is_the_dense_covariances_regression() -> None:
         assert quad == pytest.approx(1.0, rel=1e-6) and sd == sd_axis
         # the next axis (the minor one in 2-D): its own regression, and uncorrelated with the major axis' coordinate
         step2, quad2, sd2 = conditional_step(prob, x, covs[k], k, order=1)
-        delta2, _ = position_axis(covs[k], 1)
+        delta2, _ = probe_axis(covs[k], 1)
         expected2 = blocks[:, :, k, :] @ np.linalg.solve(covs[k], delta2)
         np.testing.assert_allclose(step2, expected2, rtol=1e-5, atol=1e-6 * np.max(np.abs(expected2)))
         assert quad2 == pytest.approx(1.0, rel=1e-6) and sd2 < sd
