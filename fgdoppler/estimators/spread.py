@@ -668,6 +668,8 @@ def _curved(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
         if bend is not None:
             carried = _enclosing_profiles(carried, bend)
             warning += f"; widened further to the second moments of the smoother's own cost, {bend.widening}"
+            if bend.untrusted:
+                warning += f", which is not to be trusted either ({bend.untrusted})"
     pos = slice(0, model.dim)
     sd_laplace, sd_sampled, sd_reported = (_major_sd(M, pos) for M in (P0, sampled, carried[0]))
     bias = float(np.linalg.norm(post.x[:, pos].mean(axis=0) - x0[pos]))

@@ -453,11 +453,15 @@ class TrackBend:
         otherwise.
     widening
         What widened the covariances, in words (for a caller's own finding).
+    untrusted
+        Why the profiles are not to be trusted, in words: each failed profile's time and
+        :attr:`ValleyProfile.failure` (``""`` where every profile is trusted; for a caller's own finding too).
     """
 
     profiles: tuple[ValleyProfile, ...]
     reason: Reason
     widening: str
+    untrusted: str
 
 
 def track_bend(measurements: Measurements, model: TrackingModel, times: FloatArray, states: FloatArray,
@@ -528,7 +532,7 @@ def track_bend(measurements: Measurements, model: TrackingModel, times: FloatArr
                    f"second moment about the estimate along the valley's floor, {widening}")
     status: Status = "ok" if not failed and model.dim == 2 else "doubtful"
     return TrackBend(profiles=profiles, reason=Reason(code="nonlinear", status=status, message=message),
-                     widening=widening)
+                     widening=widening, untrusted="; ".join(failed))
 
 
 def _times_text(profiles: tuple[ValleyProfile, ...], times: FloatArray) -> str:

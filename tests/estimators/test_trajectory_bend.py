@@ -6,6 +6,7 @@ the finding through the registry."""
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -214,3 +215,23 @@ def test_the_smoother_reports_the_widened_covariances_beyond_the_sampled_span() 
     assert "process noise sets most of the variance" in said[0].message and "this long" not in said[0].message
     np.testing.assert_array_equal(cut.primary.states, laplace.primary.states)
     assert _whitened(laplace.primary.covariances, cut.primary.covariances).min() > 1.0 - 1e-9
+
+
+def test_beyond_trust_the_sampled_finding_says_when_the_profile_cannot_be_followed(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # The 3-D recording of the command-line test (case b, 12 s, a probe ratio far beyond TRUST_LIMIT): the sampled
+    # covariances are widened further by the profile; where its points are not found the finding says so.
+    from fgdoppler.cli import main
+
+    assert main(["simulate", "--case", "b", "--altitude", "0", "12000", "--start-x", "5000", "--start-z", "2000",
+                 "--velocity", "10", "-100", "2", "--duration", "12", "--out", str(tmp_path)]) == 0
+    g = fd.resolve_geometry(tmp_path / "geometry.toml")
+    m = fd.Measurements.from_csv(tmp_path / "measurements.csv", geometry=g)
+    init = fd.initiate(m.first_per_pair(10), g)
+    monkeypatch.setattr(trajectory_bend, "_profile_point", lambda prob, start: (start, "not found here"))
+    result = fd.run_estimator("smoother", m, g, init, verify=False)
+    found = next(r for r in result.reasons if r.code == "nonlinear")
+    assert found.status == "doubtful" and "posterior samples" in found.message
+    assert "widened further to the second moments of the smoother's own cost" in found.message
+    assert "which is not to be trusted either (t = " in found.message
+    assert "(grid): 24 of 24 points not found (not found here)" in found.message
