@@ -155,7 +155,7 @@ proposal that leaves fewer than :data:`ESS_MIN` effective samples; or, where
 neither does, a probe from the samples' own spread (:func:`_growth`: 1,024
 draws tempered in from four times their standard deviations, twice) whose
 second moment grows beyond :data:`GROWTH_LIMIT` times theirs, because the
-valley runs on past them.  There (in 2-D) the samples are drawn from a
+valley runs on past them.  There the samples are drawn from a
 broad proposal instead (:func:`_sample_reaching`): tempered into the
 posterior
 (:meth:`~fgdoppler.estimators.particle_posterior._Posterior.sample_from`)
@@ -200,11 +200,22 @@ the probe costs 0.10 s of CPU per sampled track there (median; the
 smoother 0.55 s without it and 0.67 s with it on 15 recordings each of
 case a 5 km and case b 45 km, run alternately), the broad proposal
 1.1-1.5 s where it runs.
-In 3-D the narrow proposal stays: there the paper's sensors flown at
-altitude bend the cost 10⁴-10⁶ times, beyond :data:`TRUST_LIMIT`, and the
-broad proposal was not measured (nor is the exact posterior of a 6-D
-state reliable there: on draws of ``studies/random_layouts_3d.py`` its
-importance sampler kept 2-88 effective samples in 5 of 11).
+In 3-D too since 2026-12-07 (late; until then the narrow proposal stayed
+there, unmeasured, and the exact posterior of a 6-D state is no reliable
+reference: on draws of ``studies/random_layouts_3d.py`` its importance
+sampler kept 2-88 effective samples in 5 of 11).  Measured against the
+narrow proposal alone, the truth's NEES of the 6-D state: the altitude
+table of docs/reproduction.md (``python studies/altitude_study.py --runs
+10``, 1,258 s against 1,141 s) fell in all 24 cells of the smoother's end
+NEES (case a 45 km at ground level 1,620 → 21.2, case b 25 km at 10 km
+1,060 → 4.8, case a 5 km at ground level 45,300 → 358), none rose, every
+other column equal; the masts cell of ``studies/process_noise_share.py``
+(run-averaged over t ≥ 10 s) 19.18 → 11.56, runs beyond the χ²₆ 99.9 %
+point 2 → 1 (run 10: 40.1 → 3.4; run 18: 303 → 200), median smoother CPU
+3.3 → 4.2 s; draws 0-15 of ``studies/random_layouts_3d.py`` flown 120 s
+(the smoother alone): the broad proposal ran on 4, draw 14 went 120 → 11.8,
+the other three 3.2 → 1.0, 1.0 → 0.3 and 1.4 → 2.5, every status the same
+(docs/concepts.md, "The broad proposal in 3-D").
 
 Where the process noise matters
 -------------------------------
@@ -653,9 +664,10 @@ def _curved(post: _Posterior, model: TrackingModel, times: FloatArray, states: F
     the 3-D cell of ``studies/process_noise_share.py`` (four pairs on masts, 60 s, 20 runs), the twelve sampled
     runs beyond it had a run-averaged NEES of 2.0-569 with the samples alone, 7 of them beyond the χ²₆ 99.9 %
     point (22.5), and 0.9-367 with both, 4 beyond it (docs/concepts.md, "The valley followed"); with the 3-D
-    profile held on two axes too (2026-12-07, evening) 0.6-303, 2 beyond it ("Two axes in 3-D")."""
+    profile held on two axes too (2026-12-07, evening) 0.6-303, 2 beyond it ("Two axes in 3-D"); with the broad
+    proposal in 3-D too (2026-12-07, late) 0.3-200, 1 beyond it."""
     x0, P0 = np.asarray(states[0], dtype=float), laplace[0]
-    drawn = _sample_reaching(post, x0, P0, ratio, model.dim, rng)
+    drawn = _sample_reaching(post, x0, P0, ratio, rng)
     if drawn is None:
         return None
     sampled, rate, broad = drawn
@@ -930,19 +942,19 @@ def _posterior(measurements: Measurements, model: TrackingModel, t0: float, hube
     return _Posterior(model, ParticleSettings(huber_k=huber_k, seed=seed, n_particles=samples), t0, data), data
 
 
-def _sample_reaching(post: _Posterior, x0: FloatArray, P0: FloatArray, ratio: float, dim: int,
-                     rng: np.random.Generator) -> tuple[FloatArray, float, str] | None:
-    """:func:`_sample_about` of the smoother's first state, or in 2-D :func:`_sample_broad` where the probe's
+def _sample_reaching(post: _Posterior, x0: FloatArray, P0: FloatArray, ratio: float, rng: np.random.Generator
+                     ) -> tuple[FloatArray, float, str] | None:
+    """:func:`_sample_about` of the smoother's first state, or :func:`_sample_broad` where the probe's
     ``ratio`` lies beyond :data:`BEND_LIMIT`, the narrow draw leaves fewer than :data:`ESS_MIN` effective samples
     or a probe from the narrow samples' spread reaches beyond :data:`GROWTH_LIMIT` times theirs (:func:`_growth`);
     with the words that say which ("" for the narrow proposal), or ``None`` when nothing can be drawn."""
     narrow = None
-    if dim == 2 and not 1.0 / BEND_LIMIT <= ratio <= BEND_LIMIT:
+    if not 1.0 / BEND_LIMIT <= ratio <= BEND_LIMIT:
         why = "the valley bends far"
     else:
         narrow = _sample_about(post, x0, P0, SAMPLES, MOVES, rng)
-        if narrow is None or dim != 2:
-            return None if narrow is None else (*narrow, "")
+        if narrow is None:
+            return None
         if post.proposal_ess < ESS_MIN:
             why = f"a draw about the estimate left only {post.proposal_ess:.0f} effective samples"
         else:
